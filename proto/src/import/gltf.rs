@@ -1,0 +1,936 @@
+//! glTF 2.0 reader (`.gltf` JSON and `.glb` binary).
+//!
+//! The `gltf` crate is used for what it does safely: deserialising the JSON (serde_json, with
+//! its recursion limit) and validating it (every index refers to an existing object, every enum
+//! value is known), which the typed accessors of `gltf::Document` rely on. Everything that
+//! touches bytes is done here instead, because reading `gltf` 1.4.1's source showed:
+//!
+//! - `Glb::from_slice` computes `header.length - 12` unchecked: a GLB whose header length is
+//!   below 12 panics (overflow check) or wraps;
+//! - relative URIs are percent-decoded with `urlencoding::decode(uri).unwrap()`, which panics on
+//!   `%FF` (invalid UTF-8), and `import_slice` also decodes every image (not needed here);
+//! - the accessor iterators compute `stride * (count - 1)` unchecked (a `count` of 0 underflows,
+//!   an absurd count overflows) and only `debug_assert!` that the accessor's element type
+//!   matches the type they read (a `VEC2` `POSITION` is read past its element).
+//!
+//! So this module splits GLB containers itself, resolves buffers itself (`data:` base64 URIs,
+//! the BIN chunk, and, when loading from a path, relative files next to the glTF), and reads
+//! accessors with checked arithmetic against their buffer views, after checking the element
+//! type and that `count` cannot exceed what the file's bytes could hold.
+//!
+//! Geometry taken: every primitive of every mesh instanced by the default scene (or, without
+//! one, by all scenes; without scenes, every mesh once with the identity transform), with node
+//! transforms composed down the hierarchy. Positions are transformed by the world matrix,
+//! normals by its inverse transpose (renormalised), and a mirroring transform (negative
+//! determinant) flips the winding. Modes `TRIANGLES`, `TRIANGLE_STRIP` and `TRIANGLE_FAN` are
+//! read; points and lines are skipped. Positions may be `FLOAT` or (KHR_mesh_quantization)
+//! integer `VEC3`; normals `FLOAT` or normalised `BYTE`/`SHORT`; sparse accessors are applied.
+//! Skins and morph targets are ignored (the bind pose is used). A primitive whose normals are
+//! missing or unusable gets computed normals.
+
+use std::borrow::Cow;
+use std::collections::HashMap;
+use std::path::Path;
+use std::rc::Rc;
+
+use ::gltf::Document;
+use ::gltf::accessor::{Accessor, DataType, Dimensions};
+use ::gltf::buffer::View;
+use ::gltf::mesh::{Mode, Semantic};
+use glam::{Mat3, Mat4, Vec3};
+
+use super::{Limits, finish, is_degenerate, usable_normals};
+use crate::error::MeshError;
+use crate::mesh::Mesh;
+
+fn malformed(message: impl Into<String>) -> MeshError {
+    MeshError::Malformed {
+        format: "glTF",
+        message: message.into(),
+    }
+}
+
+pub(super) fn parse(
+    bytes: &[u8],
+    base_dir: Option<&Path>,
+    limits: &Limits,
+) -> Result<Mesh, MeshError> {
+    let (json, bin) = if bytes.starts_with(b"glTF") {
+        split_glb(bytes)?
+    } else {
+        (bytes, None)
+    };
+    let doc = parse_document(json)?;
+    let (buffers, total_bytes) = load_buffers(&doc, bin, base_dir, limits, bytes.len() as u64)?;
+    if base_dir.is_none() {
+        for image in doc.images() {
+            if let ::gltf::image::Source::Uri { uri, .. } = image.source()
+                && !uri.starts_with("data:")
+            {
+                return Err(malformed(format!(
+                    "image {} refers to the external file {:?}; an uploaded glTF must be \
+                     self-contained (use a .glb, or data: URIs)",
+                    image.index(),
+                    short(uri)
+                )));
+            }
+        }
+    }
+    let mut reader = Builder {
+        buffers,
+        file_bytes: total_bytes,
+        limits,
+        mesh: Mesh::default(),
+        vec3s: HashMap::new(),
+        indices: HashMap::new(),
+        primitives: HashMap::new(),
+        work: 0,
+        work_limit: limits
+            .max_vertices
+            .saturating_add(limits.max_triangles.saturating_mul(3))
+            .saturating_mul(2),
+    };
+    reader.read_scenes(&doc)?;
+    finish(reader.mesh)
+}
+
+fn short(s: &str) -> String {
+    let mut t: String = s.chars().take(80).collect();
+    if t.len() < s.len() {
+        t.push('…');
+    }
+    t
+}
+
+/// Splits a GLB container into its JSON chunk and optional BIN chunk.
+fn split_glb(bytes: &[u8]) -> Result<(&[u8], Option<&[u8]>), MeshError> {
+    let bad = |m: String| MeshError::Malformed {
+        format: "GLB",
+        message: m,
+    };
+    let u32_at = |at: usize| -> Option<u32> {
+        let b = bytes.get(at..at.checked_add(4)?)?;
+        Some(u32::from_le_bytes(b.try_into().ok()?))
+    };
+    let (Some(version), Some(length)) = (u32_at(4), u32_at(8)) else {
+        return Err(bad(format!(
+            "truncated: {} bytes is shorter than the 12-byte GLB header",
+            bytes.len()
+        )));
+    };
+    if version != 2 {
+        return Err(bad(format!(
+            "unsupported GLB version {version} (only glTF 2.0 is read)"
+        )));
+    }
+    let length = length as usize;
+    if length > bytes.len() {
+        return Err(bad(format!(
+            "truncated: the header says the file has {length} bytes, but it has {}",
+            bytes.len()
+        )));
+    }
+    let data = &bytes[..length];
+    let mut pos = 12usize;
+    let mut json = None;
+    let mut bin = None;
+    let mut chunk = 0usize;
+    while pos < data.len() {
+        let (Some(len), Some(kind)) = (
+            u32_at(pos).filter(|_| pos + 8 <= data.len()),
+            u32_at(pos + 4).filter(|_| pos + 8 <= data.len()),
+        ) else {
+            return Err(bad(format!(
+                "chunk {chunk} header is cut off at byte {pos} of {}",
+                data.len()
+            )));
+        };
+        let start = pos + 8;
+        let end = start
+            .checked_add(len as usize)
+            .filter(|&e| e <= data.len())
+            .ok_or_else(|| {
+                bad(format!(
+                    "chunk {chunk} declares {len} bytes, but only {} remain in the file",
+                    data.len() - start
+                ))
+            })?;
+        let body = &data[start..end];
+        match (&kind.to_le_bytes(), chunk) {
+            (b"JSON", 0) => json = Some(body),
+            (_, 0) => return Err(bad("the first chunk is not the JSON chunk".into())),
+            (b"BIN\0", _) if bin.is_none() => bin = Some(body),
+            // Unknown chunks are skipped, as the specification asks.
+            _ => {}
+        }
+        chunk += 1;
+        pos = end;
+    }
+    let json = json.ok_or_else(|| bad("the file has no JSON chunk".into()))?;
+    Ok((json, bin))
+}
+
+fn parse_document(json: &[u8]) -> Result<Document, MeshError> {
+    use ::gltf::json::validation::{Error as VError, Validate};
+
+    let json = json.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(json);
+    let root: ::gltf::json::Root = ::gltf::json::deserialize::from_slice(json)
+        .map_err(|e| malformed(format!("invalid JSON: {e}")))?;
+    // gltf-json's primitive validation hook indexes `root.accessors[POSITION]` before anything
+    // has checked that index: check it here first.
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            for (semantic, index) in &prim.attributes {
+                if index.value() >= root.accessors.len() {
+                    return Err(malformed(format!(
+                        "meshes[{m}].primitives[{p}].attributes[{semantic:?}] refers to \
+                         accessor {}, but there are {}",
+                        index.value(),
+                        root.accessors.len()
+                    )));
+                }
+            }
+        }
+    }
+    // Last line of defence: the rest of the crate's validation is not ours to audit line by
+    // line, so a panic inside it becomes an error rather than taking the server down.
+    let errors = std::panic::catch_unwind(|| {
+        let mut errors: Vec<(String, VError)> = Vec::new();
+        root.validate(&root, ::gltf::json::Path::new, &mut |path, error| {
+            let path = path().as_str().to_string();
+            // Tolerated: POSITION min/max (required by the specification, read by nothing
+            // here and omitted by some exporters), and required extensions that do not change
+            // geometry (materials, textures, lights) or that this module implements.
+            let ignored = path.ends_with("[\"POSITION\"].min")
+                || path.ends_with("[\"POSITION\"].max")
+                || (error == VError::Unsupported
+                    && path
+                        .rsplit_once("= \"")
+                        .is_some_and(|(_, ext)| harmless_extension(ext.trim_end_matches('"'))));
+            if !ignored && errors.len() < 8 {
+                errors.push((path, error));
+            }
+        });
+        errors
+    })
+    .map_err(|_| malformed("the glTF validator failed on this file"))?;
+    if !errors.is_empty() {
+        let list: Vec<String> = errors
+            .iter()
+            .map(|(path, e)| {
+                let what = match e {
+                    VError::IndexOutOfBounds => "index out of bounds",
+                    VError::Invalid => "invalid value",
+                    VError::Missing => "missing",
+                    VError::Oversize => "too large",
+                    VError::Unsupported => "an extension bspvt cannot read",
+                };
+                format!("{path}: {what}")
+            })
+            .collect();
+        return Err(malformed(format!("invalid glTF: {}", list.join("; "))));
+    }
+    Ok(Document::from_json_without_validation(root))
+}
+
+/// Required extensions that can be ignored when only geometry is read.
+fn harmless_extension(name: &str) -> bool {
+    name == "KHR_mesh_quantization"
+        || name == "KHR_lights_punctual"
+        || ["KHR_materials_", "KHR_texture_", "EXT_texture_"]
+            .iter()
+            .any(|p| name.starts_with(p))
+}
+
+/// The bytes of every buffer, in order: borrowed from the input or decoded/read.
+type Buffers<'a> = Vec<Cow<'a, [u8]>>;
+
+/// Resolves every buffer's bytes. Returns them with the total bytes read (file + externals).
+fn load_buffers<'a>(
+    doc: &Document,
+    mut bin: Option<&'a [u8]>,
+    base_dir: Option<&Path>,
+    limits: &Limits,
+    file_bytes: u64,
+) -> Result<(Buffers<'a>, u64), MeshError> {
+    let mut total = file_bytes;
+    let mut out = Vec::new();
+    for buffer in doc.buffers() {
+        let i = buffer.index();
+        let data: Cow<'a, [u8]> = match buffer.source() {
+            ::gltf::buffer::Source::Bin => Cow::Borrowed(bin.take().ok_or_else(|| {
+                malformed(format!(
+                    "buffer {i} refers to the GLB BIN chunk, but the file has none"
+                ))
+            })?),
+            ::gltf::buffer::Source::Uri(uri) => {
+                if let Some(rest) = uri.strip_prefix("data:") {
+                    Cow::Owned(
+                        decode_data_uri(rest).map_err(|m| malformed(format!("buffer {i}: {m}")))?,
+                    )
+                } else if let Some(base) = base_dir {
+                    let bytes = read_external(base, uri, limits, total).map_err(|e| match e {
+                        MeshError::Malformed { message, .. } => {
+                            malformed(format!("buffer {i}: {message}"))
+                        }
+                        e => e,
+                    })?;
+                    total += bytes.len() as u64;
+                    Cow::Owned(bytes)
+                } else {
+                    return Err(malformed(format!(
+                        "buffer {i} refers to the external file {:?}; an uploaded glTF must \
+                         be self-contained (use a .glb, or data: URIs)",
+                        short(uri)
+                    )));
+                }
+            }
+        };
+        if data.len() < buffer.length() {
+            return Err(malformed(format!(
+                "buffer {i} declares {} bytes but only {} are present",
+                buffer.length(),
+                data.len()
+            )));
+        }
+        out.push(data);
+    }
+    Ok((out, total))
+}
+
+/// Reads a relative URI next to the glTF file, refusing what would exceed the byte limit.
+fn read_external(
+    base: &Path,
+    uri: &str,
+    limits: &Limits,
+    read_so_far: u64,
+) -> Result<Vec<u8>, MeshError> {
+    if uri.contains(':') {
+        return Err(malformed(format!(
+            "unsupported URI {:?} (only data: URIs and relative file paths are read)",
+            short(uri)
+        )));
+    }
+    let decoded = percent_decode(uri)
+        .ok_or_else(|| malformed(format!("bad percent-encoding in URI {:?}", short(uri))))?;
+    let path = base.join(decoded);
+    let io = |source| MeshError::Io {
+        path: path.display().to_string(),
+        source,
+    };
+    let len = std::fs::metadata(&path).map_err(io)?.len();
+    limits.check_bytes(read_so_far.saturating_add(len))?;
+    let bytes = std::fs::read(&path).map_err(io)?;
+    limits.check_bytes(read_so_far.saturating_add(bytes.len() as u64))?;
+    Ok(bytes)
+}
+
+fn percent_decode(s: &str) -> Option<String> {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' {
+            let hex = std::str::from_utf8(b.get(i + 1..i + 3)?).ok()?;
+            out.push(u8::from_str_radix(hex, 16).ok()?);
+            i += 3;
+        } else {
+            out.push(b[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8(out).ok()
+}
+
+/// Decodes the part of a `data:` URI after `data:`; only base64 payloads are accepted.
+fn decode_data_uri(rest: &str) -> Result<Vec<u8>, String> {
+    let (meta, payload) = rest.split_once(',').ok_or("a data: URI without a comma")?;
+    if !meta.ends_with(";base64") {
+        return Err("only base64 data: URIs are supported".into());
+    }
+    base64_decode(payload.as_bytes()).ok_or_else(|| "invalid base64 in a data: URI".into())
+}
+
+/// Standard base64 (RFC 4648), padding optional, ASCII whitespace ignored.
+fn base64_decode(input: &[u8]) -> Option<Vec<u8>> {
+    fn value(c: u8) -> Option<u32> {
+        Some(match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' | b'-' => 62,
+            b'/' | b'_' => 63,
+            _ => return None,
+        } as u32)
+    }
+    let mut out = Vec::with_capacity(input.len() / 4 * 3 + 3);
+    let mut acc = 0u32;
+    let mut bits = 0u32;
+    let mut padding = 0usize;
+    for &c in input {
+        if c.is_ascii_whitespace() {
+            continue;
+        }
+        if c == b'=' {
+            padding += 1;
+            continue;
+        }
+        if padding > 0 {
+            return None; // data after padding
+        }
+        acc = (acc << 6) | value(c)?;
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+            acc &= (1 << bits) - 1;
+        }
+    }
+    // Leftover bits must be zero padding of a partial group (2 or 4 bits).
+    if bits >= 6 || acc != 0 || padding > 2 {
+        return None;
+    }
+    Some(out)
+}
+
+struct Builder<'a> {
+    buffers: Buffers<'a>,
+    /// Bytes of input (file plus external buffers): no accessor can hold more elements.
+    file_bytes: u64,
+    limits: &'a Limits,
+    mesh: Mesh,
+    /// Decoded accessors (by index, and whether read as normals) and primitives (by mesh and
+    /// primitive index), so that instancing and shared accessors cost no repeated decoding.
+    vec3s: HashMap<(usize, bool), Rc<Vec<Vec3>>>,
+    indices: HashMap<usize, Rc<Vec<u32>>>,
+    primitives: HashMap<(usize, usize), Option<Rc<Primitive>>>,
+    /// Accessor elements decoded and indices assembled so far, and the most allowed. Output is
+    /// bounded by the limits; this bounds the work spent on input that yields no output (for
+    /// example many primitives sharing one large accessor of degenerate triangles).
+    work: u64,
+    work_limit: u64,
+}
+
+/// A primitive's geometry in its own space.
+struct Primitive {
+    positions: Rc<Vec<Vec3>>,
+    normals: Option<Rc<Vec<Vec3>>>,
+    /// Checked against `positions`, degenerate ones removed; never empty.
+    triangles: Vec<[u32; 3]>,
+}
+
+impl Builder<'_> {
+    fn read_scenes(&mut self, doc: &Document) -> Result<(), MeshError> {
+        let roots: Vec<usize> = match doc.default_scene() {
+            Some(scene) => scene.nodes().map(|n| n.index()).collect(),
+            None => doc
+                .scenes()
+                .flat_map(|s| s.nodes())
+                .map(|n| n.index())
+                .collect(),
+        };
+        if doc.scenes().len() == 0 {
+            for mesh in doc.meshes() {
+                self.add_mesh(&mesh, Mat4::IDENTITY)?;
+            }
+            return Ok(());
+        }
+        let nodes: Vec<::gltf::Node> = doc.nodes().collect();
+        let mut visited = vec![false; nodes.len()];
+        let mut stack: Vec<(usize, Mat4)> = Vec::new();
+        for root in roots {
+            // Scenes may share root nodes; each is instanced once.
+            if visited.get(root).copied().unwrap_or(true) {
+                continue;
+            }
+            visited[root] = true;
+            stack.push((root, Mat4::IDENTITY));
+            while let Some((i, parent)) = stack.pop() {
+                let Some(node) = nodes.get(i) else { continue };
+                let local = Mat4::from_cols_array_2d(&node.transform().matrix());
+                let world = parent * local;
+                if let Some(mesh) = node.mesh() {
+                    self.add_mesh(&mesh, world)?;
+                }
+                let children: Vec<usize> = node.children().map(|c| c.index()).collect();
+                // Reversed so that the first child is read first (depth-first, file order).
+                for &c in children.iter().rev() {
+                    match visited.get_mut(c) {
+                        Some(v) if !*v => *v = true,
+                        _ => {
+                            return Err(malformed(format!(
+                                "node {c} is reached twice (through node {i}); the node \
+                                 hierarchy must be a tree"
+                            )));
+                        }
+                    }
+                    stack.push((c, world));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn add_mesh(&mut self, mesh: &::gltf::Mesh, world: Mat4) -> Result<(), MeshError> {
+        for prim in mesh.primitives() {
+            let Some(p) = self.primitive(mesh, &prim)? else {
+                continue;
+            };
+            let n = p.positions.len();
+            self.limits
+                .check_vertices(self.mesh.positions.len() as u64 + n as u64)?;
+            self.limits
+                .check_triangles(self.mesh.triangles.len() as u64 + p.triangles.len() as u64)?;
+            let linear = Mat3::from_mat4(world);
+            let det = linear.determinant();
+            let mut triangles = p.triangles.clone();
+            // A mirroring transform turns counter-clockwise into clockwise: flip the winding.
+            if det < 0.0 {
+                for t in &mut triangles {
+                    t.swap(1, 2);
+                }
+            }
+            // Normals transform by the inverse transpose, which is the cofactor matrix divided
+            // by the determinant; only its direction matters (normals are renormalised), so the
+            // cofactor matrix times the determinant's sign is used. It needs no division, and a
+            // singular transform gives zero normals, which fall back to computed ones. (glam's
+            // `inverse` and `transform_point3` assert on such input when `glam-assert` is on.)
+            let sign = if det > 0.0 {
+                1.0
+            } else if det < 0.0 {
+                -1.0
+            } else {
+                0.0
+            };
+            let normal_matrix = Mat3::from_cols(
+                linear.y_axis.cross(linear.z_axis),
+                linear.z_axis.cross(linear.x_axis),
+                linear.x_axis.cross(linear.y_axis),
+            ) * sign;
+            let mut piece = Mesh {
+                positions: p
+                    .positions
+                    .iter()
+                    .map(|&v| affine_point(&world, v))
+                    .collect(),
+                normals: p
+                    .normals
+                    .as_ref()
+                    .map(|ns| ns.iter().map(|&v| normal_matrix * v).collect())
+                    .unwrap_or_default(),
+                material_ids: vec![0; triangles.len()],
+                triangles,
+            };
+            if usable_normals(&piece.normals, n) {
+                piece.normals.iter_mut().for_each(|v| *v = v.normalize());
+            } else {
+                piece.compute_normals();
+            }
+            self.mesh.append(&piece, 0);
+        }
+        Ok(())
+    }
+
+    /// Counts `n` units of decoding work against the budget.
+    fn spend(&mut self, n: usize) -> Result<(), MeshError> {
+        self.work = self.work.saturating_add(n as u64);
+        if self.work > self.work_limit {
+            return Err(MeshError::TooLarge {
+                what: "accessor elements read",
+                count: self.work,
+                limit: self.work_limit,
+            });
+        }
+        Ok(())
+    }
+
+    /// The decoded primitive, or `None` when it contributes no triangles.
+    fn primitive(
+        &mut self,
+        mesh: &::gltf::Mesh,
+        prim: &::gltf::Primitive,
+    ) -> Result<Option<Rc<Primitive>>, MeshError> {
+        let key = (mesh.index(), prim.index());
+        if let Some(p) = self.primitives.get(&key) {
+            return Ok(p.clone());
+        }
+        let p = self.decode_primitive(mesh, prim)?.map(Rc::new);
+        self.primitives.insert(key, p.clone());
+        Ok(p)
+    }
+
+    fn decode_primitive(
+        &mut self,
+        mesh: &::gltf::Mesh,
+        prim: &::gltf::Primitive,
+    ) -> Result<Option<Primitive>, MeshError> {
+        let what = |attr: &str| format!("mesh {} primitive {} {attr}", mesh.index(), prim.index());
+        if !matches!(
+            prim.mode(),
+            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+        ) {
+            return Ok(None);
+        }
+        let Some(pos_acc) = prim.get(&Semantic::Positions) else {
+            return Ok(None);
+        };
+        let positions = self.read_vec3(&pos_acc, &what("POSITION"), false)?;
+        let n = positions.len();
+        if n == 0 {
+            return Ok(None);
+        }
+        // Also guarantees that `n` fits in a u32 index.
+        self.limits.check_vertices(n as u64)?;
+        let normals = match prim.get(&Semantic::Normals) {
+            Some(acc) => {
+                let normals = self.read_vec3(&acc, &what("NORMAL"), true)?;
+                if normals.len() != n {
+                    return Err(malformed(format!(
+                        "{} has {} elements but POSITION has {n}",
+                        what("NORMAL"),
+                        normals.len()
+                    )));
+                }
+                Some(normals)
+            }
+            None => None,
+        };
+        let mut triangles = match prim.indices() {
+            Some(acc) => {
+                let indices = self.read_indices(&acc, &what("indices"))?;
+                self.spend(indices.len())?;
+                assemble(prim.mode(), &indices)
+            }
+            None => {
+                self.spend(n)?;
+                assemble(prim.mode(), &(0..n as u32).collect::<Vec<_>>())
+            }
+        };
+        for (t, tri) in triangles.iter().enumerate() {
+            if let Some(&i) = tri.iter().find(|&&i| i as usize >= n) {
+                return Err(MeshError::IndexOutOfRange {
+                    triangle: self.mesh.triangles.len() + t,
+                    index: u64::from(i),
+                    vertices: n,
+                });
+            }
+        }
+        triangles.retain(|t| !is_degenerate(t));
+        if triangles.is_empty() {
+            return Ok(None);
+        }
+        Ok(Some(Primitive {
+            positions,
+            normals,
+            triangles,
+        }))
+    }
+
+    fn read_vec3(
+        &mut self,
+        acc: &Accessor,
+        what: &str,
+        is_normal: bool,
+    ) -> Result<Rc<Vec<Vec3>>, MeshError> {
+        if let Some(v) = self.vec3s.get(&(acc.index(), is_normal)) {
+            return Ok(v.clone());
+        }
+        let dt = acc.data_type();
+        let normalized = acc.normalized();
+        let type_ok = acc.dimensions() == Dimensions::Vec3
+            && match dt {
+                DataType::F32 => true,
+                DataType::I8 | DataType::I16 => !is_normal || normalized,
+                DataType::U8 | DataType::U16 => !is_normal,
+                DataType::U32 => false,
+            };
+        if !type_ok {
+            return Err(malformed(format!(
+                "{what} has type {:?} {:?}{}, which is not a valid {}",
+                acc.dimensions(),
+                dt,
+                if normalized { " (normalized)" } else { "" },
+                if is_normal { "normal" } else { "position" }
+            )));
+        }
+        let size = component_size(dt);
+        let v = Rc::new(self.read_elements(acc, what, 3 * size, Vec3::ZERO, |b| {
+            Vec3::new(
+                component(b, 0, dt, normalized),
+                component(b, size, dt, normalized),
+                component(b, 2 * size, dt, normalized),
+            )
+        })?);
+        self.vec3s.insert((acc.index(), is_normal), v.clone());
+        Ok(v)
+    }
+
+    fn read_indices(&mut self, acc: &Accessor, what: &str) -> Result<Rc<Vec<u32>>, MeshError> {
+        if let Some(v) = self.indices.get(&acc.index()) {
+            return Ok(v.clone());
+        }
+        let dt = acc.data_type();
+        if acc.dimensions() != Dimensions::Scalar
+            || !matches!(dt, DataType::U8 | DataType::U16 | DataType::U32)
+        {
+            return Err(malformed(format!(
+                "{what} has type {:?} {dt:?}; indices must be unsigned integer scalars",
+                acc.dimensions()
+            )));
+        }
+        let v = Rc::new(self.read_elements(acc, what, component_size(dt), 0, |b| uint(b, 0, dt))?);
+        self.indices.insert(acc.index(), v.clone());
+        Ok(v)
+    }
+
+    /// Reads `acc.count()` elements of `elem` bytes each, decoded by `decode`, applying sparse
+    /// substitution. Every offset is checked against its buffer view and buffer.
+    fn read_elements<T: Copy>(
+        &mut self,
+        acc: &Accessor,
+        what: &str,
+        elem: usize,
+        zero: T,
+        decode: impl Fn(&[u8]) -> T,
+    ) -> Result<Vec<T>, MeshError> {
+        let count = acc.count();
+        if (count as u64).saturating_mul(elem as u64) > self.file_bytes {
+            return Err(MeshError::AbsurdCount {
+                what: "accessor elements",
+                declared: count as u64,
+                file_bytes: self.file_bytes,
+            });
+        }
+        self.spend(count)?;
+        if let Some(sparse) = acc.sparse() {
+            self.spend(sparse.count())?;
+        }
+        // Bounded by the input size (checked just above).
+        let mut out = Vec::with_capacity(count);
+        match acc.view() {
+            Some(view) => {
+                let stride = match view.stride() {
+                    Some(s) if s < elem => {
+                        return Err(malformed(format!(
+                            "{what}: buffer view {} has byteStride {s}, smaller than the \
+                             {elem}-byte element",
+                            view.index()
+                        )));
+                    }
+                    Some(s) => s,
+                    None => elem,
+                };
+                let data = self.view_slice(&view, acc.offset(), count, elem, stride, what)?;
+                for k in 0..count {
+                    let e = data
+                        .get(k * stride..k * stride + elem)
+                        .ok_or_else(|| malformed(format!("{what}: element {k} out of bounds")))?;
+                    out.push(decode(e));
+                }
+            }
+            None => out.resize(count, zero),
+        }
+        if let Some(sparse) = acc.sparse() {
+            let n = sparse.count();
+            if n > count {
+                return Err(malformed(format!(
+                    "{what}: {n} sparse substitutions for {count} elements"
+                )));
+            }
+            let idx = sparse.indices();
+            let idx_dt = match idx.index_type() {
+                ::gltf::accessor::sparse::IndexType::U8 => DataType::U8,
+                ::gltf::accessor::sparse::IndexType::U16 => DataType::U16,
+                ::gltf::accessor::sparse::IndexType::U32 => DataType::U32,
+            };
+            let isz = component_size(idx_dt);
+            let idx_data = self.view_slice(&idx.view(), idx.offset(), n, isz, isz, what)?;
+            let values = sparse.values();
+            let val_data = self.view_slice(&values.view(), values.offset(), n, elem, elem, what)?;
+            for k in 0..n {
+                let (Some(ib), Some(vb)) = (
+                    idx_data.get(k * isz..(k + 1) * isz),
+                    val_data.get(k * elem..(k + 1) * elem),
+                ) else {
+                    return Err(malformed(format!("{what}: sparse entry {k} out of bounds")));
+                };
+                let i = uint(ib, 0, idx_dt) as usize;
+                let slot = out.get_mut(i).ok_or_else(|| {
+                    malformed(format!(
+                        "{what}: sparse index {i} is outside the accessor's {count} elements"
+                    ))
+                })?;
+                *slot = decode(vb);
+            }
+        }
+        Ok(out)
+    }
+
+    /// The bytes of `count` elements of `elem` bytes, `stride` apart, starting `offset` bytes
+    /// into `view`; checked against the view and its buffer.
+    fn view_slice(
+        &self,
+        view: &View,
+        offset: usize,
+        count: usize,
+        elem: usize,
+        stride: usize,
+        what: &str,
+    ) -> Result<&[u8], MeshError> {
+        if count == 0 {
+            return Ok(&[]);
+        }
+        let b = view.buffer().index();
+        let buffer = self
+            .buffers
+            .get(b)
+            .ok_or_else(|| malformed(format!("{what}: buffer {b} is missing")))?;
+        let vstart = view.offset();
+        let vend = vstart
+            .checked_add(view.length())
+            .filter(|&e| e <= buffer.len())
+            .ok_or_else(|| {
+                malformed(format!(
+                    "{what}: buffer view {} (offset {vstart}, length {}) lies outside buffer \
+                     {b} ({} bytes)",
+                    view.index(),
+                    view.length(),
+                    buffer.len()
+                ))
+            })?;
+        let needed = stride
+            .checked_mul(count - 1)
+            .and_then(|x| x.checked_add(elem))
+            .and_then(|x| x.checked_add(offset));
+        match needed {
+            Some(needed) if needed <= vend - vstart => {
+                Ok(&buffer[vstart + offset..vstart + needed])
+            }
+            _ => Err(malformed(format!(
+                "{what}: {count} elements of {elem} bytes (stride {stride}) from offset \
+                 {offset} do not fit in buffer view {} ({} bytes)",
+                view.index(),
+                view.length()
+            ))),
+        }
+    }
+}
+
+/// `m` applied to the point `p`, as an affine transform (glTF node matrices are affine; a
+/// projective last row is ignored rather than asserted on).
+fn affine_point(m: &Mat4, p: Vec3) -> Vec3 {
+    (m.x_axis * p.x + m.y_axis * p.y + m.z_axis * p.z + m.w_axis).truncate()
+}
+
+/// Triangles of a primitive from its index list (strip and fan as in the glTF specification).
+fn assemble(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
+    match mode {
+        Mode::Triangles => idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        Mode::TriangleStrip => idx
+            .windows(3)
+            .enumerate()
+            .map(|(i, w)| {
+                if i % 2 == 0 {
+                    [w[0], w[1], w[2]]
+                } else {
+                    [w[0], w[2], w[1]]
+                }
+            })
+            .collect(),
+        Mode::TriangleFan => match idx.split_first() {
+            Some((&first, rest)) => rest.windows(2).map(|w| [w[0], w[1], first]).collect(),
+            None => Vec::new(),
+        },
+        _ => Vec::new(),
+    }
+}
+
+fn component_size(dt: DataType) -> usize {
+    match dt {
+        DataType::I8 | DataType::U8 => 1,
+        DataType::I16 | DataType::U16 => 2,
+        DataType::U32 | DataType::F32 => 4,
+    }
+}
+
+fn bytes_at<const N: usize>(b: &[u8], at: usize) -> [u8; N] {
+    b.get(at..at + N)
+        .and_then(|s| s.try_into().ok())
+        .unwrap_or([0; N])
+}
+
+/// An unsigned integer component (callers pass slices of the right size).
+fn uint(b: &[u8], at: usize, dt: DataType) -> u32 {
+    match dt {
+        DataType::U8 => u32::from(bytes_at::<1>(b, at)[0]),
+        DataType::U16 => u32::from(u16::from_le_bytes(bytes_at(b, at))),
+        _ => u32::from_le_bytes(bytes_at(b, at)),
+    }
+}
+
+/// A component as a float, applying glTF's normalisation rules when `normalized`.
+fn component(b: &[u8], at: usize, dt: DataType, normalized: bool) -> f32 {
+    match dt {
+        DataType::F32 => f32::from_le_bytes(bytes_at(b, at)),
+        DataType::I8 => {
+            let v = f32::from(i8::from_le_bytes(bytes_at(b, at)));
+            if normalized { (v / 127.0).max(-1.0) } else { v }
+        }
+        DataType::U8 => {
+            let v = f32::from(bytes_at::<1>(b, at)[0]);
+            if normalized { v / 255.0 } else { v }
+        }
+        DataType::I16 => {
+            let v = f32::from(i16::from_le_bytes(bytes_at(b, at)));
+            if normalized {
+                (v / 32767.0).max(-1.0)
+            } else {
+                v
+            }
+        }
+        DataType::U16 => {
+            let v = f32::from(u16::from_le_bytes(bytes_at(b, at)));
+            if normalized { v / 65535.0 } else { v }
+        }
+        DataType::U32 => u32::from_le_bytes(bytes_at(b, at)) as f32,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_round_trip() {
+        assert_eq!(base64_decode(b"").as_deref(), Some(&b""[..]));
+        assert_eq!(base64_decode(b"TWFu").as_deref(), Some(&b"Man"[..]));
+        assert_eq!(base64_decode(b"TWE=").as_deref(), Some(&b"Ma"[..]));
+        assert_eq!(base64_decode(b"TWE").as_deref(), Some(&b"Ma"[..]));
+        assert_eq!(base64_decode(b"TQ==").as_deref(), Some(&b"M"[..]));
+        assert_eq!(base64_decode(b"AAAAAA==").as_deref(), Some(&[0u8; 4][..]));
+        assert!(base64_decode(b"T").is_none());
+        assert!(base64_decode(b"TQ==TQ").is_none());
+        assert!(base64_decode(b"T*==").is_none());
+    }
+
+    #[test]
+    fn percent() {
+        assert_eq!(percent_decode("a%20b.bin").as_deref(), Some("a b.bin"));
+        assert_eq!(percent_decode("%FF"), None);
+        assert_eq!(percent_decode("%4"), None);
+        assert_eq!(percent_decode("%zz"), None);
+    }
+
+    #[test]
+    fn strips_and_fans() {
+        assert_eq!(
+            assemble(Mode::TriangleStrip, &[0, 1, 2, 3]),
+            vec![[0, 1, 2], [1, 3, 2]]
+        );
+        assert_eq!(
+            assemble(Mode::TriangleFan, &[0, 1, 2, 3]),
+            vec![[1, 2, 0], [2, 3, 0]]
+        );
+        assert_eq!(assemble(Mode::Triangles, &[0, 1, 2, 3]), vec![[0, 1, 2]]);
+    }
+}

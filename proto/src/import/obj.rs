@@ -1,0 +1,269 @@
+//! Wavefront OBJ reader, written by hand.
+//!
+//! Why not `tobj` (which the workspace declares)? Reading tobj 4.0.5's source showed:
+//!
+//! - relative indices are computed as `pos_count as isize + index` and texture/normal bounds as
+//!   `vt * 2 + 1`: a face index such as `-9223372036854775808`, or a far out-of-range relative
+//!   texture index, overflows, which panics in builds with overflow checks (our test and dev
+//!   profiles) and silently wraps otherwise;
+//! - with `single_index` it splits the file into one model per `o`/`g` group and de-duplicates
+//!   vertices per model, so a vertex shared by two groups becomes two vertices (a seam in the
+//!   computed normals, and an extra visibility sample) when the groups are merged back;
+//! - a file where only some faces name normals produces a normals array shorter than the
+//!   positions, which callers must detect.
+//!
+//! OBJ is a simple line format, so this module reads it directly: `v` (x y z, any further
+//! numbers ignored), `vn`, and `f` with corners `v`, `v/vt`, `v//vn` or `v/vt/vn`, 1-based or
+//! negative (relative to the elements defined so far). Polygons are fan-triangulated. Groups,
+//! objects, smoothing groups, materials, texture coordinates, lines and points are ignored, so
+//! every group lands in one mesh. Lines may end in `\n` or `\r\n`, a trailing `\` continues a
+//! line, and `#` starts a comment.
+//!
+//! Vertices: without complete normals (some face corner names none), a mesh vertex is an OBJ
+//! `v`, in file order. When every corner names a `vn`, a mesh vertex is a distinct
+//! (`v`, `vn`) pair, ordered by `v` then `vn`, so hard edges keep their normals.
+
+use glam::Vec3;
+
+use super::{Limits, finish, is_degenerate};
+use crate::error::MeshError;
+use crate::mesh::Mesh;
+
+fn malformed(line: usize, message: impl std::fmt::Display) -> MeshError {
+    MeshError::Malformed {
+        format: "OBJ",
+        message: format!("line {line}: {message}"),
+    }
+}
+
+/// "No normal" in a corner.
+const NONE: u32 = u32::MAX;
+
+pub(super) fn parse(bytes: &[u8], limits: &Limits) -> Result<Mesh, MeshError> {
+    let mut positions: Vec<Vec3> = Vec::new();
+    let mut normals: Vec<Vec3> = Vec::new();
+    // Triangles as (v, vn) corners; positive indices are checked once the file is read (OBJ
+    // readers conventionally accept forward references), relative ones when met.
+    let mut corners: Vec<[(u32, u32); 3]> = Vec::new();
+    let mut all_have_normals = true;
+
+    let mut poly: Vec<(u32, u32)> = Vec::new();
+    let mut joined: Vec<u8> = Vec::new();
+    let mut line_no = 0usize;
+    let mut rest = bytes;
+    while !rest.is_empty() {
+        // One logical line: physical lines joined while they end in a backslash.
+        let first_line_no = line_no + 1;
+        joined.clear();
+        let mut continued = false;
+        let line: &[u8] = loop {
+            let (raw, next) = match rest.iter().position(|&b| b == b'\n') {
+                Some(i) => (&rest[..i], &rest[i + 1..]),
+                None => (rest, &rest[rest.len()..]),
+            };
+            rest = next;
+            line_no += 1;
+            let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
+            match raw.trim_ascii_end().strip_suffix(b"\\") {
+                Some(head) if !rest.is_empty() => {
+                    joined.extend_from_slice(head);
+                    joined.push(b' ');
+                    continued = true;
+                }
+                _ if continued => {
+                    joined.extend_from_slice(raw);
+                    break &joined;
+                }
+                _ => break raw,
+            }
+        };
+        let line = match line.iter().position(|&b| b == b'#') {
+            Some(i) => &line[..i],
+            None => line,
+        };
+        let mut words = line
+            .split(|b| b.is_ascii_whitespace())
+            .filter(|w| !w.is_empty());
+        let Some(keyword) = words.next() else {
+            continue;
+        };
+        let n = first_line_no;
+        match keyword {
+            b"v" => {
+                let p = read_vec3(&mut words)
+                    .ok_or_else(|| malformed(n, "a vertex needs three numbers (`v x y z`)"))?;
+                if !p.is_finite() {
+                    return Err(MeshError::NonFinitePosition {
+                        vertex: positions.len(),
+                    });
+                }
+                limits.check_vertices(positions.len() as u64 + 1)?;
+                positions.push(p);
+            }
+            b"vn" => {
+                let p = read_vec3(&mut words)
+                    .ok_or_else(|| malformed(n, "a normal needs three numbers (`vn x y z`)"))?;
+                limits.check_vertices(normals.len() as u64 + 1)?;
+                normals.push(p);
+            }
+            b"f" | b"fo" => {
+                poly.clear();
+                for w in words {
+                    let c = match parse_corner(w, positions.len(), normals.len()) {
+                        Ok(c) => c,
+                        Err(CornerError::OutOfRange(index)) => {
+                            return Err(MeshError::IndexOutOfRange {
+                                triangle: corners.len(),
+                                index,
+                                vertices: positions.len(),
+                            });
+                        }
+                        Err(CornerError::Bad(m)) => return Err(malformed(n, m)),
+                    };
+                    if c.1 == NONE {
+                        all_have_normals = false;
+                    }
+                    poly.push(c);
+                }
+                if poly.len() < 3 {
+                    return Err(malformed(
+                        n,
+                        format!(
+                            "a face needs at least 3 vertices, this one has {}",
+                            poly.len()
+                        ),
+                    ));
+                }
+                // Fan triangulation; a triangle repeating a position is dropped.
+                let first = poly[0];
+                for w in poly.windows(2).skip(1) {
+                    let t = [first, w[0], w[1]];
+                    if !is_degenerate(&t.map(|c| c.0)) {
+                        limits.check_triangles(corners.len() as u64 + 1)?;
+                        corners.push(t);
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    let n = positions.len();
+    for (t, tri) in corners.iter().enumerate() {
+        for &(v, vn) in tri {
+            if v as usize >= n {
+                return Err(MeshError::IndexOutOfRange {
+                    triangle: t,
+                    index: u64::from(v),
+                    vertices: n,
+                });
+            }
+            if vn != NONE && vn as usize >= normals.len() {
+                return Err(MeshError::Malformed {
+                    format: "OBJ",
+                    message: format!(
+                        "triangle {t} uses normal index {} (1-based), but the file has {} normals",
+                        u64::from(vn) + 1,
+                        normals.len()
+                    ),
+                });
+            }
+        }
+    }
+    if corners.is_empty() {
+        return Err(MeshError::NoTriangles);
+    }
+
+    let mesh = if all_have_normals {
+        // One vertex per distinct (v, vn) pair, ordered by v then vn.
+        let mut pairs: Vec<(u32, u32)> = corners.iter().flatten().copied().collect();
+        pairs.sort_unstable();
+        pairs.dedup();
+        let index = |c: &(u32, u32)| pairs.binary_search(c).map_or(0, |i| i as u32);
+        let triangles = corners.iter().map(|t| t.map(|c| index(&c))).collect();
+        Mesh {
+            positions: pairs.iter().map(|&(v, _)| positions[v as usize]).collect(),
+            normals: pairs.iter().map(|&(_, vn)| normals[vn as usize]).collect(),
+            triangles,
+            material_ids: Vec::new(),
+        }
+    } else {
+        Mesh {
+            positions,
+            normals: Vec::new(),
+            triangles: corners.iter().map(|t| t.map(|c| c.0)).collect(),
+            material_ids: Vec::new(),
+        }
+    };
+    finish(mesh)
+}
+
+fn read_vec3<'a>(words: &mut impl Iterator<Item = &'a [u8]>) -> Option<Vec3> {
+    let mut v = [0f32; 3];
+    for x in &mut v {
+        *x = std::str::from_utf8(words.next()?).ok()?.parse().ok()?;
+    }
+    Some(Vec3::from(v))
+}
+
+enum CornerError {
+    /// A positive position index too large for any mesh (0-based).
+    OutOfRange(u64),
+    Bad(String),
+}
+
+/// One face corner `v[/vt[/vn]]` as 0-based (position, normal or [`NONE`]).
+fn parse_corner(word: &[u8], positions: usize, normals: usize) -> Result<(u32, u32), CornerError> {
+    let text = std::str::from_utf8(word)
+        .map_err(|_| CornerError::Bad("a face corner is not text".into()))?;
+    let mut parts = text.split('/');
+    let v = parts.next().unwrap_or("");
+    let _vt = parts.next();
+    let vn = parts.next();
+    if parts.next().is_some() {
+        return Err(CornerError::Bad(format!(
+            "bad face corner {:?} (expected v, v/vt, v//vn or v/vt/vn)",
+            truncate(text)
+        )));
+    }
+    let v = resolve(v, positions, "vertex")?;
+    let vn = match vn {
+        None | Some("") => NONE,
+        Some(s) => resolve(s, normals, "normal")?,
+    };
+    Ok((v, vn))
+}
+
+/// A 1-based or negative (relative) OBJ index as a 0-based index.
+fn resolve(s: &str, defined: usize, what: &str) -> Result<u32, CornerError> {
+    let i: i64 = s
+        .parse()
+        .map_err(|_| CornerError::Bad(format!("bad {what} index {:?} in a face", truncate(s))))?;
+    let zero_based = if i > 0 {
+        i - 1
+    } else if i < 0 {
+        let r = (defined as i64).saturating_add(i);
+        if r < 0 {
+            return Err(CornerError::Bad(format!(
+                "relative {what} index {i} reaches before the first {what} ({defined} defined so far)"
+            )));
+        }
+        r
+    } else {
+        return Err(CornerError::Bad(format!(
+            "{what} index 0 (OBJ indices start at 1)"
+        )));
+    };
+    // NONE (u32::MAX) is reserved; no mesh can have that many vertices anyway.
+    match u32::try_from(zero_based) {
+        Ok(x) if x != NONE => Ok(x),
+        _ if what == "vertex" => Err(CornerError::OutOfRange(zero_based as u64)),
+        _ => Err(CornerError::Bad(format!(
+            "{what} index {i} is out of range"
+        ))),
+    }
+}
+
+fn truncate(s: &str) -> String {
+    s.chars().take(40).collect()
+}

@@ -1,0 +1,28 @@
+//! # bspvt-proto
+//!
+//! The shared language of the bspvt baking server and its streaming client:
+//!
+//! - [`scene`]: the scene model and its JSON file format; [`mesh`] and [`import`] (glTF, OBJ,
+//!   PLY) for geometry; [`builtin`] procedural scenes that need no download.
+//! - [`cubemap`]: the world-aligned cube-map layout every vertex's visibility is sampled on.
+//! - [`bspvt`]: Binary Space Partitioning Visibility Trees — quantised split lines, the per-face
+//!   tree, the point query and the split of a spherical polygon into pieces with leaf values.
+//! - [`sphere`]: spherical polygons (great-circle clipping, solid angle).
+//! - [`encoding`]: the compact, versioned, checksummed chunk encoding of trees.
+//!
+//! Math kernels here do no I/O; only [`import`] and [`scene`] loaders touch files.
+
+pub mod bspvt;
+pub mod builtin;
+pub mod cubemap;
+pub mod encoding;
+pub mod error;
+mod hash;
+pub mod import;
+pub mod mesh;
+pub mod scene;
+pub mod sphere;
+
+pub use error::{DecodeError, MeshError, SceneError};
+pub use mesh::{Aabb, Mesh};
+pub use scene::{BakeSettings, Scene, SplitMethod};

@@ -1,0 +1,210 @@
+//! Indexed triangle meshes: the geometry every other part of bspvt works on.
+//!
+//! Vertex order is tree order: the bake produces one set of visibility trees per vertex, in the
+//! order of [`Mesh::positions`].
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::error::MeshError;
+
+/// An indexed triangle mesh with per-vertex normals and a material per triangle.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Mesh {
+    pub positions: Vec<Vec3>,
+    /// Unit normals, one per position.
+    pub normals: Vec<Vec3>,
+    pub triangles: Vec<[u32; 3]>,
+    /// Index into the scene's materials, one per triangle.
+    pub material_ids: Vec<u32>,
+}
+
+/// An axis-aligned box.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Aabb {
+    pub min: Vec3,
+    pub max: Vec3,
+}
+
+impl Aabb {
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3::splat(f32::INFINITY),
+        max: Vec3::splat(f32::NEG_INFINITY),
+    };
+
+    pub fn from_points(points: &[Vec3]) -> Aabb {
+        points.iter().fold(Aabb::EMPTY, |b, &p| b.grow(p))
+    }
+
+    pub fn grow(self, p: Vec3) -> Aabb {
+        Aabb {
+            min: self.min.min(p),
+            max: self.max.max(p),
+        }
+    }
+
+    pub fn union(self, o: Aabb) -> Aabb {
+        Aabb {
+            min: self.min.min(o.min),
+            max: self.max.max(o.max),
+        }
+    }
+
+    pub fn center(&self) -> Vec3 {
+        0.5 * (self.min + self.max)
+    }
+
+    pub fn diagonal(&self) -> f32 {
+        (self.max - self.min).length()
+    }
+
+    pub fn is_valid(&self) -> bool {
+        self.min.is_finite() && self.max.is_finite() && self.min.cmple(self.max).all()
+    }
+
+    /// Whether the ray `origin + t·dir`, t ≥ 0, meets the box (slab test).
+    pub fn hit_by_ray(&self, origin: Vec3, dir: Vec3) -> bool {
+        let inv = dir.recip();
+        let t0 = (self.min - origin) * inv;
+        let t1 = (self.max - origin) * inv;
+        // NaN (0 · ∞ when the origin lies on a slab plane) is treated as "inside the slab".
+        let tmin = t0.min(t1);
+        let tmax = t0.max(t1);
+        let enter = tmin.x.max(tmin.y).max(tmin.z).max(0.0);
+        let exit = tmax.x.min(tmax.y).min(tmax.z);
+        enter <= exit
+    }
+}
+
+impl Mesh {
+    pub fn vertex_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    pub fn bounds(&self) -> Aabb {
+        Aabb::from_points(&self.positions)
+    }
+
+    /// Checks the invariants every consumer relies on; importers call it before returning.
+    pub fn validate(&self) -> Result<(), MeshError> {
+        if self.triangles.is_empty() {
+            return Err(MeshError::NoTriangles);
+        }
+        if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
+            return Err(MeshError::NonFinitePosition { vertex: i });
+        }
+        if self.normals.len() != self.positions.len() {
+            return Err(MeshError::Invalid(format!(
+                "{} normals for {} positions",
+                self.normals.len(),
+                self.positions.len()
+            )));
+        }
+        if self.material_ids.len() != self.triangles.len() {
+            return Err(MeshError::Invalid(format!(
+                "{} material ids for {} triangles",
+                self.material_ids.len(),
+                self.triangles.len()
+            )));
+        }
+        let n = self.positions.len();
+        for (t, tri) in self.triangles.iter().enumerate() {
+            if let Some(&i) = tri.iter().find(|&&i| i as usize >= n) {
+                return Err(MeshError::IndexOutOfRange {
+                    triangle: t,
+                    index: i as u64,
+                    vertices: n,
+                });
+            }
+        }
+        if let Some(i) = self.normals.iter().position(|p| !p.is_finite()) {
+            return Err(MeshError::Invalid(format!("normal {i} is not finite")));
+        }
+        Ok(())
+    }
+
+    /// Area-and-angle weighted vertex normals from the triangles (used when a file has none).
+    /// Vertices with no usable neighbouring triangle get +Y.
+    pub fn compute_normals(&mut self) {
+        let mut acc = vec![Vec3::ZERO; self.positions.len()];
+        for tri in &self.triangles {
+            let p = tri.map(|i| self.positions[i as usize]);
+            // Face normal with length = 2·area; weighting by it favours large triangles.
+            let n = (p[1] - p[0]).cross(p[2] - p[0]);
+            if !n.is_finite() {
+                continue;
+            }
+            for &i in tri {
+                acc[i as usize] += n;
+            }
+        }
+        self.normals = acc
+            .into_iter()
+            .map(|n| n.try_normalize().unwrap_or(Vec3::Y))
+            .collect();
+    }
+
+    /// Drops vertices no triangle uses, keeping the order of the rest.
+    pub fn drop_unused_vertices(&mut self) {
+        let mut used = vec![false; self.positions.len()];
+        for tri in &self.triangles {
+            for &i in tri {
+                used[i as usize] = true;
+            }
+        }
+        if used.iter().all(|&u| u) {
+            return;
+        }
+        let mut remap = vec![u32::MAX; used.len()];
+        let mut next = 0u32;
+        for (i, &u) in used.iter().enumerate() {
+            if u {
+                remap[i] = next;
+                next += 1;
+            }
+        }
+        let keep = |v: &Vec<Vec3>| -> Vec<Vec3> {
+            v.iter()
+                .zip(&used)
+                .filter(|(_, u)| **u)
+                .map(|(p, _)| *p)
+                .collect()
+        };
+        self.positions = keep(&self.positions);
+        if self.normals.len() == used.len() {
+            self.normals = keep(&self.normals);
+        }
+        for tri in &mut self.triangles {
+            *tri = tri.map(|i| remap[i as usize]);
+        }
+    }
+
+    /// Appends `other`, offsetting its indices and material ids by `material_offset`.
+    pub fn append(&mut self, other: &Mesh, material_offset: u32) {
+        let base = self.positions.len() as u32;
+        self.positions.extend_from_slice(&other.positions);
+        self.normals.extend_from_slice(&other.normals);
+        self.triangles
+            .extend(other.triangles.iter().map(|t| t.map(|i| i + base)));
+        self.material_ids
+            .extend(other.material_ids.iter().map(|m| m + material_offset));
+    }
+
+    /// A stable 64-bit content hash (FNV-1a over the little-endian bytes), used to tie a bake
+    /// file to the mesh it was baked from.
+    pub fn content_hash(&self) -> u64 {
+        let mut h = crate::hash::Fnv1a::default();
+        for p in &self.positions {
+            h.write_f32s(&p.to_array());
+        }
+        for n in &self.normals {
+            h.write_f32s(&n.to_array());
+        }
+        for t in &self.triangles {
+            for i in t {
+                h.write(&i.to_le_bytes());
+            }
+        }
+        h.finish()
+    }
+}

@@ -1,0 +1,590 @@
+//! The BSPVT builder (paper 000, Algorithm 1).
+//!
+//! A node holding pixel set P becomes a leaf when its own squared deviation Σ (V − v̄)² is at
+//! most `ε · res²`; otherwise it is split by the line l minimising
+//! E(P, l) = Σ_p (H0(d(p)) − V(p))² (eq. 3). Visibility is kept as integer escape counts
+//! k ∈ 0..=S per pixel (V = k / S), so every sum below is exact and the bake is deterministic.
+//!
+//! Split searches ([`SplitMethod`]):
+//! - `Exhaustive`: for every quantised angle θ in [0, π), a histogram of the pixels over the
+//!   quantised offsets and one prefix sweep give E for every offset at once, for both
+//!   orientations (left→0/right→1 and its mirror); O(n + O) per angle, exact over the stored
+//!   line set.
+//! - `Default`: the same exact line search over a coarse-to-fine angle set (every 4th angle,
+//!   then ±3 around the two best).
+//! - `NelderMead`: the paper's baseline — Nelder–Mead over continuous (θ, c), E evaluated on
+//!   the quantised line.
+
+use bspvt_proto::SplitMethod;
+use bspvt_proto::bspvt::{FaceTree, LineCodec, MAX_DEPTH, Node, QLine, quantise};
+use glam::Vec2;
+
+/// Builder settings for one bake.
+pub struct Fitter<'a> {
+    pub codec: &'a LineCodec,
+    /// Face resolution in pixels.
+    pub res: u32,
+    /// Pixel-centre face coordinates, index `j·res + i`.
+    pub uv: &'a [Vec2],
+    /// Escape count of a fully visible pixel (rays per pixel).
+    pub samples: u32,
+    /// Leaf threshold on Σ (V − v̄)² in pixels.
+    pub epsilon_pixels: f64,
+    pub method: SplitMethod,
+}
+
+/// Per-face fit statistics against the cube map.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FitStats {
+    pub pixels: u64,
+    /// Σ |V(p) − v̄_q(leaf(p))| over the pixels (v̄ after 8-bit quantisation).
+    pub abs_error: f64,
+    /// Pixels whose leaf rounds to the other binary value (|V − v̄| > 0.5).
+    pub misclassified: u64,
+    pub leaves: u64,
+    /// Cells the split search visited (its cost).
+    pub cell_visits: u64,
+}
+
+impl std::ops::AddAssign for FitStats {
+    fn add_assign(&mut self, o: FitStats) {
+        self.pixels += o.pixels;
+        self.abs_error += o.abs_error;
+        self.misclassified += o.misclassified;
+        self.leaves += o.leaves;
+        self.cell_visits += o.cell_visits;
+    }
+}
+
+/// Largest uniform block merged into one cell.
+const MAX_CELL: u16 = 16;
+
+/// A square block of pixels `[i, i+size) × [j, j+size)` that all matter and share escape count
+/// `k`. Uniform blocks are merged (quadtree) so the search visits the boundary, not the area;
+/// the search scores a cell at its centre, but partitions are always exact per pixel: a cell a
+/// line crosses is split until every part lies on one side ([`Fitter::partition`]).
+#[derive(Clone, Copy, Debug)]
+struct Cell {
+    i: u16,
+    j: u16,
+    size: u16,
+    k: u16,
+}
+
+/// Sums over a pixel set: count, Σk, Σk².
+#[derive(Clone, Copy, Default)]
+struct Moments {
+    n: u64,
+    s1: u64,
+    s2: u64,
+}
+
+impl Moments {
+    #[inline]
+    fn add(&mut self, k: u32, w: u64) {
+        let k = k as u64;
+        self.n += w;
+        self.s1 += w * k;
+        self.s2 += w * k * k;
+    }
+    fn plus(self, o: Moments) -> Moments {
+        Moments {
+            n: self.n + o.n,
+            s1: self.s1 + o.s1,
+            s2: self.s2 + o.s2,
+        }
+    }
+    fn minus(self, o: Moments) -> Moments {
+        Moments {
+            n: self.n - o.n,
+            s1: self.s1 - o.s1,
+            s2: self.s2 - o.s2,
+        }
+    }
+    /// S² · Σ (H − V)² with H ≡ 0 over the set: Σ k².
+    fn err_as_zero(&self) -> u64 {
+        self.s2
+    }
+    /// S² · Σ (H − V)² with H ≡ 1: Σ (S − k)² = n S² − 2 S Σk + Σk².
+    fn err_as_one(&self, s: u64) -> u64 {
+        self.n * s * s + self.s2 - 2 * s * self.s1
+    }
+    /// S² · Σ (V − v̄)² = Σk² − (Σk)²/n.
+    fn ssd_scaled(&self) -> f64 {
+        if self.n == 0 {
+            return 0.0;
+        }
+        self.s2 as f64 - (self.s1 as f64).powi(2) / self.n as f64
+    }
+}
+
+impl Fitter<'_> {
+    /// Builds the tree of one face from its pixels that matter (`index`, escape counts).
+    pub fn fit(&self, index: &[u32], visible: &[u16]) -> (FaceTree, FitStats) {
+        let cells = self.cells(index, visible);
+        let mut nodes = Vec::new();
+        let mut stats = FitStats::default();
+        let mut hist = vec![Moments::default(); self.codec.offsets() as usize + 1];
+        self.build(cells, 0, &mut nodes, &mut stats, &mut hist);
+        (FaceTree { nodes }, stats)
+    }
+
+    /// Quadtree-merges uniform blocks (up to [`MAX_CELL`]²) of pixels that matter.
+    fn cells(&self, index: &[u32], visible: &[u16]) -> Vec<Cell> {
+        let res = self.res as usize;
+        let mut grid = vec![-1i32; res * res];
+        for (&i, &k) in index.iter().zip(visible) {
+            grid[i as usize] = k as i32;
+        }
+        let mut out = Vec::new();
+        let top = MAX_CELL.min(self.res as u16).max(1);
+        let mut j = 0;
+        while j < res as u16 {
+            let mut i = 0;
+            while i < res as u16 {
+                self.merge(
+                    &grid,
+                    i,
+                    j,
+                    top.min(res as u16 - i).min(res as u16 - j),
+                    &mut out,
+                );
+                i += top;
+            }
+            j += top;
+        }
+        out
+    }
+
+    /// Emits block (i, j, size) as one cell when uniform, else its quadrants; returns the
+    /// block's uniform value (−1 for none).
+    fn merge(&self, grid: &[i32], i: u16, j: u16, size: u16, out: &mut Vec<Cell>) -> i32 {
+        let res = self.res as usize;
+        if size == 1 {
+            let k = grid[j as usize * res + i as usize];
+            if k >= 0 {
+                out.push(Cell {
+                    i,
+                    j,
+                    size,
+                    k: k as u16,
+                });
+            }
+            return k;
+        }
+        let mark = out.len();
+        let h = size / 2;
+        let mut vals = [0i32; 4];
+        let quads = [(i, j), (i + h, j), (i, j + h), (i + h, j + h)];
+        if !size.is_multiple_of(2) {
+            // Odd sizes only happen at a face's edge for odd resolutions: emit pixels.
+            for jj in j..j + size {
+                for ii in i..i + size {
+                    self.merge(grid, ii, jj, 1, out);
+                }
+            }
+            return -1;
+        }
+        for (q, &(qi, qj)) in quads.iter().enumerate() {
+            vals[q] = self.merge(grid, qi, qj, h, out);
+        }
+        let uniform = vals[0] >= 0 && vals.iter().all(|&v| v == vals[0]);
+        if uniform {
+            out.truncate(mark);
+            out.push(Cell {
+                i,
+                j,
+                size,
+                k: vals[0] as u16,
+            });
+            vals[0]
+        } else {
+            -1
+        }
+    }
+
+    #[inline]
+    fn centre(&self, c: &Cell) -> Vec2 {
+        if c.size == 1 {
+            return self.uv[c.j as usize * self.res as usize + c.i as usize];
+        }
+        let r = self.res as f32;
+        Vec2::new(
+            (2 * c.i + c.size) as f32 / r - 1.0,
+            (2 * c.j + c.size) as f32 / r - 1.0,
+        )
+    }
+
+    fn moments(cells: &[Cell]) -> Moments {
+        let mut m = Moments::default();
+        for c in cells {
+            m.add(c.k as u32, (c.size as u64).pow(2));
+        }
+        m
+    }
+
+    fn build(
+        &self,
+        cells: Vec<Cell>,
+        depth: usize,
+        nodes: &mut Vec<Node>,
+        stats: &mut FitStats,
+        hist: &mut [Moments],
+    ) {
+        let m = Self::moments(&cells);
+        let s = self.samples as f64;
+        let is_leaf = m.ssd_scaled() <= self.epsilon_pixels * s * s || depth >= MAX_DEPTH;
+        let split = if is_leaf {
+            None
+        } else {
+            self.best_line(&cells, m, stats, hist)
+        };
+        let Some(line) = split else {
+            self.leaf(&cells, m, nodes, stats);
+            return;
+        };
+        let (left, right) = self.partition(&cells, line);
+        if left.is_empty() || right.is_empty() {
+            self.leaf(&cells, m, nodes, stats);
+            return;
+        }
+        let at = nodes.len();
+        nodes.push(Node::Split { line, right: 0 });
+        self.build(left, depth + 1, nodes, stats, hist);
+        let r = nodes.len() as u32;
+        nodes[at] = Node::Split { line, right: r };
+        self.build(right, depth + 1, nodes, stats, hist);
+    }
+
+    /// Splits cells by the shared side test, exactly per pixel: a cell whose corner pixel
+    /// centres are not all clearly on one side is split into quadrants down to pixels.
+    fn partition(&self, cells: &[Cell], line: QLine) -> (Vec<Cell>, Vec<Cell>) {
+        let (mut left, mut right) = (Vec::new(), Vec::new());
+        let mut stack: Vec<Cell> = Vec::new();
+        let res = self.res as usize;
+        let px = |i: u16, j: u16| self.uv[j as usize * res + i as usize];
+        for &c in cells {
+            stack.push(c);
+            while let Some(c) = stack.pop() {
+                if c.size == 1 {
+                    if self.codec.side(line, px(c.i, c.j)) {
+                        right.push(c);
+                    } else {
+                        left.push(c);
+                    }
+                    continue;
+                }
+                let e = c.size - 1;
+                let d = [(0, 0), (e, 0), (0, e), (e, e)]
+                    .map(|(di, dj)| self.codec.distance(line, px(c.i + di, c.j + dj)));
+                // A half-plane is convex: if all four corner centres are clearly on one side,
+                // so is every pixel centre between them. The margin keeps rounding out of it.
+                const MARGIN: f32 = 1e-5;
+                if d.iter().all(|&x| x >= MARGIN) {
+                    right.push(c);
+                } else if d.iter().all(|&x| x < -MARGIN) {
+                    left.push(c);
+                } else {
+                    let h = c.size / 2;
+                    for (qi, qj) in [
+                        (c.i, c.j),
+                        (c.i + h, c.j),
+                        (c.i, c.j + h),
+                        (c.i + h, c.j + h),
+                    ] {
+                        stack.push(Cell {
+                            i: qi,
+                            j: qj,
+                            size: h,
+                            k: c.k,
+                        });
+                    }
+                }
+            }
+        }
+        (left, right)
+    }
+
+    fn leaf(&self, cells: &[Cell], m: Moments, nodes: &mut Vec<Node>, stats: &mut FitStats) {
+        let s = self.samples as f64;
+        let mean = if m.n > 0 {
+            m.s1 as f64 / (m.n as f64 * s)
+        } else {
+            1.0
+        };
+        let value = quantise(mean);
+        let vq = value as f64 / 255.0;
+        for c in cells {
+            let w = (c.size as u64).pow(2);
+            let err = (c.k as f64 / s - vq).abs();
+            stats.abs_error += err * w as f64;
+            if err > 0.5 {
+                stats.misclassified += w;
+            }
+        }
+        stats.pixels += m.n;
+        stats.leaves += 1;
+        nodes.push(Node::Leaf { value });
+    }
+
+    fn best_line(
+        &self,
+        cells: &[Cell],
+        total: Moments,
+        stats: &mut FitStats,
+        hist: &mut [Moments],
+    ) -> Option<QLine> {
+        match self.method {
+            SplitMethod::Exhaustive => {
+                let half = self.codec.angles() / 2;
+                let mut best = Best::default();
+                for a in 0..half {
+                    self.sweep(cells, total, a as u16, &mut best, stats, hist);
+                }
+                best.choose(total, self.samples as u64)
+            }
+            SplitMethod::Default => self.coarse_to_fine(cells, total, stats, hist),
+            SplitMethod::NelderMead => self.nelder_mead(cells, stats),
+        }
+    }
+
+    fn coarse_to_fine(
+        &self,
+        cells: &[Cell],
+        total: Moments,
+        stats: &mut FitStats,
+        hist: &mut [Moments],
+    ) -> Option<QLine> {
+        const STEP: u32 = 8;
+        let half = self.codec.angles() / 2;
+        let s = self.samples as u64;
+        let constant = total.err_as_zero().min(total.err_as_one(s));
+        // Rank an angle by E where E improves on a constant, else by the children's deviation.
+        let score = |b: &Best| -> (u64, u64) {
+            if b.err < constant {
+                (0, b.err)
+            } else {
+                (1, (b.ssd * 1024.0) as u64)
+            }
+        };
+        let mut best = Best::default();
+        let mut coarse: Vec<((u64, u64), u32)> = Vec::with_capacity((half / STEP) as usize);
+        for a in (0..half).step_by(STEP as usize) {
+            let mut b = Best::default();
+            self.sweep(cells, total, a as u16, &mut b, stats, hist);
+            coarse.push((score(&b), a));
+            best.take(b);
+        }
+        coarse.sort_unstable();
+        // Refine the two best angles by bisection: ±4, ±2, ±1 around the current best.
+        for &(sc, a0) in coarse.iter().take(2) {
+            let (mut centre, mut centre_score) = (a0, sc);
+            let mut step = STEP / 2;
+            while step > 0 {
+                for a in [centre + step, centre + half - step] {
+                    let a = a % half;
+                    let mut b = Best::default();
+                    self.sweep(cells, total, a as u16, &mut b, stats, hist);
+                    let sc = score(&b);
+                    if sc < centre_score {
+                        (centre, centre_score) = (a, sc);
+                    }
+                    best.take(b);
+                }
+                step /= 2;
+            }
+        }
+        best.choose(total, s)
+    }
+
+    /// Evaluates E for every quantised offset at angle `a` (and its mirror) with one
+    /// histogram pass and one prefix sweep; keeps the best line that splits the set.
+    fn sweep(
+        &self,
+        cells: &[Cell],
+        total: Moments,
+        a: u16,
+        best: &mut Best,
+        stats: &mut FitStats,
+        hist: &mut [Moments],
+    ) {
+        let n = self.codec.normal(a);
+        let (mut lo, mut hi) = (u32::MAX, 0);
+        for c in cells {
+            let p = self.centre(c);
+            let bin = self.codec.offsets_below(n.x * p.x + n.y * p.y);
+            hist[bin as usize].add(c.k as u32, (c.size as u64).pow(2));
+            lo = lo.min(bin);
+            hi = hi.max(bin);
+        }
+        stats.cell_visits += cells.len() as u64;
+        let s = self.samples as u64;
+        // Line o: left = bins ≤ o, right = bins > o. Only o in [lo, hi) splits the set.
+        let mut left = Moments::default();
+        for o in lo..hi {
+            left = left.plus(hist[o as usize]);
+            let right = total.minus(left);
+            let e1 = left.err_as_zero() + right.err_as_one(s);
+            let e2 = left.err_as_one(s) + right.err_as_zero();
+            let line = QLine {
+                angle: a,
+                offset: o as u16,
+            };
+            best.offer(e1, line);
+            best.offer(e2, self.codec.mirror(line));
+            best.offer_ssd(left.ssd_scaled() + right.ssd_scaled(), line);
+        }
+        for h in &mut hist[lo as usize..=hi as usize] {
+            *h = Moments::default();
+        }
+    }
+
+    /// E(P, l) for a quantised line, by a direct pass (cells scored at their centres).
+    fn energy(&self, cells: &[Cell], line: QLine) -> (u64, usize) {
+        let s = self.samples as u64;
+        let mut e = 0;
+        let mut right = 0;
+        for c in cells {
+            let k = c.k as u64;
+            let w = (c.size as u64).pow(2);
+            if self.codec.side(line, self.centre(c)) {
+                right += 1;
+                e += w * (s - k) * (s - k);
+            } else {
+                e += w * k * k;
+            }
+        }
+        (e, right)
+    }
+
+    /// The paper's baseline: Nelder–Mead over (θ, c) from a fixed start (θ = 0, c = 0, steps
+    /// π/2 and 0.5), standard coefficients (1, 2, ½, ½), at most 100 evaluations.
+    fn nelder_mead(&self, cells: &[Cell], stats: &mut FitStats) -> Option<QLine> {
+        let quant = |x: [f64; 2]| -> QLine {
+            let a = self.codec.angles() as f64;
+            let angle = ((x[0] / std::f64::consts::TAU * a).round().rem_euclid(a)) as u16;
+            let o = self.codec.offsets() as f64;
+            let h = bspvt_proto::bspvt::line::MAX_OFFSET as f64 / o;
+            let offset = ((x[1] / h + o - 1.0) * 0.5).round().clamp(0.0, o - 1.0) as u16;
+            QLine { angle, offset }
+        };
+        let evals = std::cell::Cell::new(0u32);
+        let mut f = |x: [f64; 2]| -> f64 {
+            evals.set(evals.get() + 1);
+            stats.cell_visits += cells.len() as u64;
+            let (e, right) = self.energy(cells, quant(x));
+            // A line that does not split the set is no split at all.
+            if right == 0 || right == cells.len() {
+                f64::INFINITY
+            } else {
+                e as f64
+            }
+        };
+        let mut simplex = [[0.0, 0.0], [std::f64::consts::FRAC_PI_2, 0.0], [0.0, 0.5]];
+        let mut fx = simplex.map(&mut f);
+        while evals.get() < 100 {
+            // Order: best, worst.
+            let mut idx = [0usize, 1, 2];
+            idx.sort_by(|&i, &j| fx[i].total_cmp(&fx[j]));
+            simplex = idx.map(|i| simplex[i]);
+            fx = idx.map(|i| fx[i]);
+            let c = [
+                0.5 * (simplex[0][0] + simplex[1][0]),
+                0.5 * (simplex[0][1] + simplex[1][1]),
+            ];
+            let along = |t: f64| {
+                [
+                    c[0] + t * (simplex[2][0] - c[0]),
+                    c[1] + t * (simplex[2][1] - c[1]),
+                ]
+            };
+            let xr = along(-1.0);
+            let fr = f(xr);
+            if fr < fx[0] {
+                let xe = along(-2.0);
+                let fe = f(xe);
+                (simplex[2], fx[2]) = if fe < fr { (xe, fe) } else { (xr, fr) };
+            } else if fr < fx[1] {
+                (simplex[2], fx[2]) = (xr, fr);
+            } else {
+                let xc = along(0.5);
+                let fc = f(xc);
+                if fc < fx[2] {
+                    (simplex[2], fx[2]) = (xc, fc);
+                } else {
+                    for i in 1..3 {
+                        simplex[i] = [
+                            0.5 * (simplex[0][0] + simplex[i][0]),
+                            0.5 * (simplex[0][1] + simplex[i][1]),
+                        ];
+                        fx[i] = f(simplex[i]);
+                    }
+                }
+            }
+        }
+        let (i, e) = fx
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, e)| (i, *e))?;
+        e.is_finite().then(|| quant(simplex[i]))
+    }
+}
+
+/// The best lines seen so far by E and by the children's squared deviation (ties keep the
+/// first, so the search order fixes the result).
+struct Best {
+    err: u64,
+    line: Option<QLine>,
+    ssd: f64,
+    ssd_line: Option<QLine>,
+}
+
+impl Default for Best {
+    fn default() -> Self {
+        Best {
+            err: u64::MAX,
+            line: None,
+            ssd: f64::INFINITY,
+            ssd_line: None,
+        }
+    }
+}
+
+impl Best {
+    #[inline]
+    fn offer(&mut self, err: u64, line: QLine) {
+        if err < self.err {
+            self.err = err;
+            self.line = Some(line);
+        }
+    }
+    #[inline]
+    fn offer_ssd(&mut self, ssd: f64, line: QLine) {
+        if ssd < self.ssd {
+            self.ssd = ssd;
+            self.ssd_line = Some(line);
+        }
+    }
+    fn take(&mut self, o: Best) {
+        if let Some(l) = o.line {
+            self.offer(o.err, l);
+        }
+        if let Some(l) = o.ssd_line {
+            self.offer_ssd(o.ssd, l);
+        }
+    }
+
+    /// The E-minimising line when it beats predicting the whole node with one binary value;
+    /// otherwise (E cannot improve: e.g. a small occluded blob inside a visible region, where
+    /// the E-optimal line only peels off a sliver) the line that minimises the children's
+    /// squared deviation Σ_L (V − v̄_L)² + Σ_R (V − v̄_R)².
+    fn choose(&self, total: Moments, samples: u64) -> Option<QLine> {
+        let constant = total.err_as_zero().min(total.err_as_one(samples));
+        if self.err < constant {
+            self.line
+        } else {
+            self.ssd_line
+        }
+    }
+}

@@ -1,0 +1,63 @@
+//! Occlusion rays against a mesh: one CWBVH (obvhs) per mesh, any-hit queries.
+
+use std::time::Duration;
+
+use bspvt_proto::Mesh;
+use glam::{Vec3, Vec3A};
+use obvhs::{BvhBuildParams, cwbvh::CwBvh, ray::Ray, rt_triangle::RtTriangle, triangle::Triangle};
+
+/// A mesh prepared for occlusion queries.
+pub struct Occluder {
+    bvh: CwBvh,
+    /// Triangles in BVH primitive order.
+    tris: Vec<RtTriangle>,
+    /// Vertex indices of each triangle, in BVH primitive order.
+    indices: Vec<[u32; 3]>,
+}
+
+impl Occluder {
+    pub fn new(mesh: &Mesh) -> Occluder {
+        let tris: Vec<Triangle> = mesh
+            .triangles
+            .iter()
+            .map(|t| {
+                let p = t.map(|i| Vec3A::from(mesh.positions[i as usize]));
+                Triangle {
+                    v0: p[0],
+                    v1: p[1],
+                    v2: p[2],
+                }
+            })
+            .collect();
+        let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
+            &tris,
+            BvhBuildParams::very_slow_build(),
+            &mut Duration::default(),
+        );
+        let order = &bvh.primitive_indices;
+        let rt = order
+            .iter()
+            .map(|&i| RtTriangle::from(&tris[i as usize]))
+            .collect();
+        let indices = order.iter().map(|&i| mesh.triangles[i as usize]).collect();
+        Occluder {
+            bvh,
+            tris: rt,
+            indices,
+        }
+    }
+
+    /// True when the ray from `origin` along `dir` hits any triangle that does not use vertex
+    /// `skip` (the vertex the ray starts from: its own triangles cannot shadow it).
+    #[inline]
+    pub fn occluded(&self, origin: Vec3, dir: Vec3, skip: u32) -> bool {
+        let ray = Ray::new(origin.into(), dir.into(), 0.0, f32::INFINITY);
+        !self.bvh.ray_traverse_miss(ray, |ray, id| {
+            if self.indices[id].contains(&skip) {
+                f32::INFINITY
+            } else {
+                self.tris[id].intersect(ray)
+            }
+        })
+    }
+}

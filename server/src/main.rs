@@ -1,0 +1,137 @@
+//! `bspvt-server`: the bake engine's command line.
+
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+
+use anyhow::{Context, Result};
+use bspvt_proto::SplitMethod;
+use bspvt_proto::scene::open_scene;
+use bspvt_server::bake::Baker;
+use bspvt_server::bench::{self, BenchArgs};
+use bspvt_server::stats::BakeStats;
+use clap::{Parser, Subcommand, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+
+#[derive(Parser)]
+#[command(name = "bspvt-server", version, about = "bspvt bake engine")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Bake a scene's visibility trees to a file.
+    Bake(BakeArgs),
+    /// Measure the bake on real meshes: rays and fit separately, every split method.
+    Bench(BenchArgs),
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SplitArg {
+    Default,
+    Exhaustive,
+    NelderMead,
+}
+
+#[derive(clap::Args)]
+struct BakeArgs {
+    /// Scene file (JSON) or `builtin:NAME` (e.g. builtin:plate).
+    scene: Option<String>,
+    /// Bake a bare mesh (.glb/.gltf/.obj/.ply) with the default scene around it.
+    #[arg(long)]
+    mesh: Option<PathBuf>,
+    /// Output bake file.
+    #[arg(long)]
+    out: PathBuf,
+    #[arg(long)]
+    face_res: Option<u32>,
+    #[arg(long)]
+    epsilon: Option<f32>,
+    #[arg(long)]
+    supersampling: Option<u32>,
+    #[arg(long, value_enum)]
+    split: Option<SplitArg>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Write bake statistics (JSON) here.
+    #[arg(long)]
+    stats: Option<PathBuf>,
+}
+
+fn main() -> Result<()> {
+    match Cli::parse().command {
+        Command::Bake(a) => bake(a),
+        Command::Bench(a) => bench::run(&a),
+    }
+}
+
+fn bake(a: BakeArgs) -> Result<()> {
+    let mut scene = open_scene(a.scene.as_deref(), a.mesh.as_deref())?;
+    let b = &mut scene.bake;
+    if let Some(r) = a.face_res {
+        b.face_res = r;
+    }
+    if let Some(e) = a.epsilon {
+        b.epsilon = e;
+    }
+    if let Some(s) = a.supersampling {
+        b.supersampling = s;
+    }
+    if let Some(s) = a.split {
+        b.split = match s {
+            SplitArg::Default => SplitMethod::Default,
+            SplitArg::Exhaustive => SplitMethod::Exhaustive,
+            SplitArg::NelderMead => SplitMethod::NelderMead,
+        };
+    }
+    scene.validate()?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()
+        .context("cannot start the worker threads")?;
+    let threads = pool.current_num_threads();
+    let baker = Baker::new(&scene);
+    let n = baker.header().vertex_count as u64;
+    eprintln!(
+        "baking {n} vertices, {} triangles, {}² faces, ε = {}, {} thread(s)",
+        scene.mesh.triangles.len(),
+        scene.bake.face_res,
+        scene.bake.epsilon,
+        threads
+    );
+    let bar = ProgressBar::new(n).with_style(
+        ProgressStyle::with_template(
+            "{bar:40} {pos}/{len} vertices  {per_sec}  elapsed {elapsed_precise}  ETA {eta_precise}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let cancel = AtomicBool::new(false);
+    let out = pool.install(|| baker.bake_all(&|done, _| bar.set_position(done), &cancel))?;
+    bar.finish();
+    if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    std::fs::write(&a.out, &out.bytes)
+        .with_context(|| format!("cannot write {}", a.out.display()))?;
+    let stats = BakeStats::new(&out, threads);
+    eprintln!(
+        "wrote {} ({} bytes, {:.1} B/vertex, {:.1} leaves/vertex) in {:.2} s; {:.3} ms/vertex/thread (rays {:.3}, fit {:.3}); mean |ΔV| {:.5}, misclassified {:.5}",
+        a.out.display(),
+        stats.bytes,
+        stats.bytes_per_vertex,
+        stats.leaves_per_vertex,
+        stats.seconds,
+        stats.thread_seconds_per_vertex * 1e3,
+        stats.ray_thread_seconds_per_vertex * 1e3,
+        stats.fit_thread_seconds_per_vertex * 1e3,
+        stats.mean_abs_visibility_error,
+        stats.misclassified_pixel_fraction,
+    );
+    if let Some(p) = &a.stats {
+        std::fs::write(p, serde_json::to_string_pretty(&stats)?)
+            .with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    Ok(())
+}

@@ -506,8 +506,14 @@ pub fn decode_header(data: &[u8]) -> Result<(BakeHeader, usize), DecodeError> {
             supported: FORMAT_VERSION,
         });
     }
-    let header: BakeHeader = postcard::from_bytes(&body[2..])
+    let (header, rest) = postcard::take_from_bytes::<BakeHeader>(&body[2..])
         .map_err(|e| DecodeError::Corrupt(format!("bake header: {e}")))?;
+    if !rest.is_empty() {
+        return Err(DecodeError::Corrupt(format!(
+            "{} trailing bytes after the bake header",
+            rest.len()
+        )));
+    }
     header.check()?;
     Ok((header, used))
 }

@@ -79,3 +79,18 @@ pub enum DecodeError {
     #[error("corrupt data: {0}")]
     Corrupt(String),
 }
+
+/// One line for a user: the error and each cause whose text it does not already contain.
+pub fn chain_message(err: &(dyn std::error::Error + 'static)) -> String {
+    let mut msg = err.to_string();
+    let mut cur = err.source();
+    while let Some(e) = cur {
+        let s = e.to_string();
+        if !msg.contains(&s) {
+            msg.push_str(": ");
+            msg.push_str(&s);
+        }
+        cur = e.source();
+    }
+    msg
+}

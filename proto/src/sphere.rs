@@ -16,11 +16,12 @@ pub const MAX_VERTS: usize = 64;
 pub type SphPoly = ArrayVec<DVec3, MAX_VERTS>;
 
 /// Keeps the part of `poly` with `n·d ≥ 0` (Sutherland–Hodgman). Returns an empty polygon
-/// when fewer than three vertices remain.
+/// when fewer than three vertices remain or no vertex lies strictly on the kept side (what
+/// remains then lies in the plane: zero solid angle).
 pub fn clip(poly: &[DVec3], n: DVec3) -> SphPoly {
     let mut out = SphPoly::new();
     let len = poly.len();
-    if len < 3 {
+    if len < 3 || !poly.iter().any(|p| n.dot(*p) > 0.0) {
         return out;
     }
     for i in 0..len {

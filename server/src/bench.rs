@@ -92,7 +92,11 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         .unwrap_or_else(|| default_assets_dir().join("meshes"));
     let mut scenes: Vec<(String, Scene)> = Vec::new();
     if let Some(s) = bspvt_proto::builtin::scene("plate").filter(|_| a.builtin) {
+        // The same scene without its declared light region: what "don't care" saves.
+        let mut free = s.clone();
+        free.lights.iter_mut().for_each(|l| l.region = None);
         scenes.push(("builtin:plate".into(), s));
+        scenes.push(("builtin:plate, no light region".into(), free));
     }
     for m in &a.meshes {
         let p = dir.join(m);

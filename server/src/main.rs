@@ -60,10 +60,17 @@ struct BakeArgs {
     stats: Option<PathBuf>,
 }
 
-fn main() -> Result<()> {
-    match Cli::parse().command {
+fn main() -> std::process::ExitCode {
+    let result = match Cli::parse().command {
         Command::Bake(a) => bake(a),
         Command::Bench(a) => bench::run(&a),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", bspvt_proto::error::chain_message(e.as_ref()));
+            std::process::ExitCode::FAILURE
+        }
     }
 }
 

@@ -425,11 +425,6 @@ pub fn check_split(
     Ok(rep)
 }
 
-/// The directions from `p` to a light polygon's vertices.
-pub fn directions_from(p: DVec3, light: &[DVec3]) -> Vec<DVec3> {
-    light.iter().map(|q| *q - p).collect()
-}
-
 /// Pre-order structure check: every split's `right` is where its left subtree ends; returns the
 /// depth of every node, or a message.
 pub fn node_depths(nodes: &[Node]) -> Result<Vec<usize>, String> {

@@ -78,6 +78,14 @@ pub struct VertexRays<'a> {
 }
 
 impl VertexRays<'_> {
+    /// Sub-pixel rays below the horizon (of a pixel whose centre is above it) are counted as
+    /// escaping without casting: the cosine term clips those directions at shading time, and
+    /// casting them would shadow the pixel with the vertex's own surface.
+    #[inline]
+    fn escapes_below_horizon(&self, d: Vec3) -> bool {
+        d.dot(self.normal) <= 0.0
+    }
+
     /// Whether direction `d` can matter: above the horizon and toward a light region.
     #[inline]
     fn matters(&self, origin: Vec3, d: Vec3) -> bool {
@@ -140,6 +148,34 @@ impl VertexRays<'_> {
             Some(px)
         });
         (faces, rays)
+    }
+}
+
+impl VertexRays<'_> {
+    /// Every ray of every pixel that matters, against the BVH: the reference for [`Self::cast`].
+    pub fn cast_brute_force(
+        &self,
+        occ: &Occluder,
+        table: &RayTable,
+    ) -> [Option<FacePixels>; FACES] {
+        let origin = self.position + self.normal * self.offset;
+        let s = table.samples as usize;
+        std::array::from_fn(|f| {
+            let mut px = FacePixels::default();
+            for (p, &d) in table.centre[f].iter().enumerate() {
+                if self.matters(origin, d) {
+                    let k = table.sub[f][p * s..(p + 1) * s]
+                        .iter()
+                        .filter(|&&sd| {
+                            self.escapes_below_horizon(sd) || !occ.occluded(origin, sd, self.vertex)
+                        })
+                        .count();
+                    px.index.push(p as u32);
+                    px.visible.push(k as u16);
+                }
+            }
+            (!px.index.is_empty()).then_some(px)
+        })
     }
 }
 
@@ -248,7 +284,9 @@ impl BlockWalk<'_> {
             self.vis[p] = subs
                 .iter()
                 .filter(|&&d| {
-                    if direct {
+                    if self.rays.escapes_below_horizon(d) {
+                        true
+                    } else if direct {
                         !self.culler.ray_hits_any(self.origin, d, &list)
                     } else {
                         !self.occ.occluded(self.origin, d, self.rays.vertex)

@@ -9,11 +9,18 @@
 //! - `Exhaustive`: for every quantised angle θ in [0, π), a histogram of the pixels over the
 //!   quantised offsets and one prefix sweep give E for every offset at once, for both
 //!   orientations (left→0/right→1 and its mirror); O(n + O) per angle, exact over the stored
-//!   line set.
-//! - `Default`: the same exact line search over a coarse-to-fine angle set (every 4th angle,
-//!   then ±3 around the two best).
+//!   line set. Slow: the quality reference.
+//! - `Default`: the same line search over a coarse-to-fine angle set (every 8th angle, then
+//!   bisection ±4, ±2, ±1 around the two best), on pixels merged into uniform blocks (cells,
+//!   scored at their centres; partitions stay exact per pixel).
+//!
+//! Where E cannot improve on predicting the whole node with one binary value (E's blind spot:
+//! a small blob of one value inside the other), the line minimising the children's squared
+//! deviation is used instead ([`Best::choose`]).
 //! - `NelderMead`: the paper's baseline — Nelder–Mead over continuous (θ, c), E evaluated on
-//!   the quantised line.
+//!   the quantised line. When its search ends on no line that splits the node, the node
+//!   becomes a leaf even if it exceeds ε (the paper's algorithm has no fallback): part of why
+//!   the baseline's trees are less accurate.
 
 use bspvt_proto::SplitMethod;
 use bspvt_proto::bspvt::{FaceTree, LineCodec, MAX_DEPTH, Node, QLine, quantise};
@@ -130,8 +137,21 @@ impl Fitter<'_> {
     }
 
     /// Quadtree-merges uniform blocks (up to [`MAX_CELL`]²) of pixels that matter.
+    /// `Exhaustive` keeps single pixels, so its search is exact over the stored lines.
     fn cells(&self, index: &[u32], visible: &[u16]) -> Vec<Cell> {
         let res = self.res as usize;
+        if self.method == SplitMethod::Exhaustive {
+            return index
+                .iter()
+                .zip(visible)
+                .map(|(&p, &k)| Cell {
+                    i: (p as usize % res) as u16,
+                    j: (p as usize / res) as u16,
+                    size: 1,
+                    k,
+                })
+                .collect();
+        }
         let mut grid = vec![-1i32; res * res];
         for (&i, &k) in index.iter().zip(visible) {
             grid[i as usize] = k as i32;
@@ -419,20 +439,29 @@ impl Fitter<'_> {
         }
         stats.cell_visits += cells.len() as u64;
         let s = self.samples as u64;
-        // Line o: left = bins ≤ o, right = bins > o. Only o in [lo, hi) splits the set.
+        // Line o: left = bins ≤ o, right = bins > o. The partition changes only at non-empty
+        // bins: "left = bins ≤ b" holds for every o in [b, b′ − 1], b′ the next non-empty bin,
+        // and the line is placed mid-gap, so an edge between two pixel rows is not pulled
+        // toward one of them (mirror-image inputs get mirror-image lines).
         let mut left = Moments::default();
-        for o in lo..hi {
-            left = left.plus(hist[o as usize]);
+        let mut b = lo;
+        while b < hi {
+            left = left.plus(hist[b as usize]);
+            let mut next = b + 1;
+            while hist[next as usize].n == 0 {
+                next += 1;
+            }
             let right = total.minus(left);
             let e1 = left.err_as_zero() + right.err_as_one(s);
             let e2 = left.err_as_one(s) + right.err_as_zero();
             let line = QLine {
                 angle: a,
-                offset: o as u16,
+                offset: ((b + next - 1) / 2) as u16,
             };
             best.offer(e1, line);
             best.offer(e2, self.codec.mirror(line));
             best.offer_ssd(left.ssd_scaled() + right.ssd_scaled(), line);
+            b = next;
         }
         for h in &mut hist[lo as usize..=hi as usize] {
             *h = Moments::default();

@@ -59,13 +59,7 @@ fn main() -> std::process::ExitCode {
         Command::Inspect(a) => inspect(a),
         Command::Demo(a) => demo(a),
     };
-    match result {
-        Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {}", bspvt_proto::error::chain_message(e.as_ref()));
-            std::process::ExitCode::FAILURE
-        }
-    }
+    bspvt_proto::error::exit_code(result)
 }
 
 fn inspect(a: InspectArgs) -> Result<()> {

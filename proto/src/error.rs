@@ -94,3 +94,18 @@ pub fn chain_message(err: &(dyn std::error::Error + 'static)) -> String {
     }
     msg
 }
+
+/// The exit status of a command-line tool, printing `error: …` (one line, see
+/// [`chain_message`]) for a failure.
+pub fn exit_code<E>(result: Result<(), E>) -> std::process::ExitCode
+where
+    E: AsRef<dyn std::error::Error + Send + Sync + 'static>,
+{
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {}", chain_message(e.as_ref()));
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -65,13 +65,7 @@ fn main() -> std::process::ExitCode {
         Command::Bake(a) => bake(a),
         Command::Bench(a) => bench::run(&a),
     };
-    match result {
-        Ok(()) => std::process::ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {}", bspvt_proto::error::chain_message(e.as_ref()));
-            std::process::ExitCode::FAILURE
-        }
-    }
+    bspvt_proto::error::exit_code(result)
 }
 
 fn bake(a: BakeArgs) -> Result<()> {

@@ -24,17 +24,7 @@ impl RayTable {
     pub fn new(res: u32, supersampling: u32) -> RayTable {
         let uv = pixel_centres(res);
         let s = supersampling.max(1);
-        let h = 1.0 / res as f32; // half a pixel in face coordinates
-        let offsets: Vec<Vec2> = (0..s)
-            .flat_map(|y| {
-                (0..s).map(move |x| {
-                    Vec2::new(
-                        (2 * x + 1) as f32 / s as f32 - 1.0,
-                        (2 * y + 1) as f32 / s as f32 - 1.0,
-                    ) * h
-                })
-            })
-            .collect();
+        let offsets = subpixel_offsets(res, s);
         let centre = std::array::from_fn(|f| {
             let fr = FaceFrame::of(f);
             uv.iter().map(|&p| fr.direction(p).normalize()).collect()
@@ -57,6 +47,22 @@ impl RayTable {
             sub,
         }
     }
+}
+
+/// Offsets from a pixel's centre (face coordinates) of its s×s sub-pixel ray centres, row by
+/// row: a regular grid, so the bake is deterministic.
+pub fn subpixel_offsets(res: u32, s: u32) -> Vec<Vec2> {
+    let h = 1.0 / res as f32; // half a pixel in face coordinates
+    (0..s)
+        .flat_map(|y| {
+            (0..s).map(move |x| {
+                Vec2::new(
+                    (2 * x + 1) as f32 / s as f32 - 1.0,
+                    (2 * y + 1) as f32 / s as f32 - 1.0,
+                ) * h
+            })
+        })
+        .collect()
 }
 
 /// The pixels of one face that matter, with the number of their rays that escape (0..=samples).
@@ -240,7 +246,7 @@ impl BlockWalk<'_> {
                 self.culler.filter(&pyr, from, &mut list);
                 true
             }
-            None if size > COLLECT_BLOCK => {
+            None if size > COLLECT_BLOCK && !leaf => {
                 let empty = self
                     .culler
                     .collect(&pyr, self.rays.vertex, 0, &mut list, self.stack);

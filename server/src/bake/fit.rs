@@ -157,21 +157,21 @@ impl Fitter<'_> {
             grid[i as usize] = k as i32;
         }
         let mut out = Vec::new();
-        let top = MAX_CELL.min(self.res as u16).max(1);
-        let mut j = 0;
-        while j < res as u16 {
-            let mut i = 0;
-            while i < res as u16 {
-                self.merge(
-                    &grid,
-                    i,
-                    j,
-                    top.min(res as u16 - i).min(res as u16 - j),
-                    &mut out,
-                );
-                i += top;
+        let r = self.res as u16;
+        let top = MAX_CELL.min(r).max(1);
+        for j in (0..r).step_by(top as usize) {
+            for i in (0..r).step_by(top as usize) {
+                if i + top <= r && j + top <= r {
+                    self.merge(&grid, i, j, top, &mut out);
+                } else {
+                    // A partial block at the face's edge (res not a multiple of MAX_CELL).
+                    for jj in j..(j + top).min(r) {
+                        for ii in i..(i + top).min(r) {
+                            self.merge(&grid, ii, jj, 1, &mut out);
+                        }
+                    }
+                }
             }
-            j += top;
         }
         out
     }
@@ -614,6 +614,54 @@ impl Best {
             self.line
         } else {
             self.ssd_line
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bspvt_proto::cubemap::pixel_centres;
+
+    /// Every pixel that matters reaches exactly one leaf, at resolutions that are not multiples
+    /// of the largest cell (16) too.
+    #[test]
+    fn every_pixel_is_fitted_at_any_resolution() {
+        for res in [8u32, 24, 50, 64, 100] {
+            let codec = LineCodec::for_resolution(res);
+            let uv = pixel_centres(res);
+            // A disc of occluded pixels, and a quarter of the face that does not matter.
+            let (index, visible): (Vec<u32>, Vec<u16>) = uv
+                .iter()
+                .enumerate()
+                .filter(|(_, p)| p.x < 0.5 || p.y < 0.5)
+                .map(|(i, p)| {
+                    (
+                        i as u32,
+                        u16::from((*p - Vec2::new(-0.2, 0.1)).length() > 0.4),
+                    )
+                })
+                .unzip();
+            for method in [SplitMethod::Default, SplitMethod::Exhaustive] {
+                let f = Fitter {
+                    codec: &codec,
+                    res,
+                    uv: &uv,
+                    samples: 1,
+                    epsilon_pixels: 0.0,
+                    method,
+                };
+                let (tree, stats) = f.fit(&index, &visible);
+                assert_eq!(stats.pixels, index.len() as u64, "{res}² {method:?}");
+                for (&i, &k) in index.iter().zip(&visible) {
+                    let v = tree.query(&codec, uv[i as usize]);
+                    assert_eq!(
+                        v,
+                        if k == 1 { 255 } else { 0 },
+                        "{res}² {method:?} pixel {i}"
+                    );
+                }
+            }
         }
     }
 }

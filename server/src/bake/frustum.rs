@@ -10,7 +10,7 @@
 //! strictly inside the pyramid.
 
 use bspvt_proto::Mesh;
-use glam::{Vec3, Vec3A};
+use glam::Vec3;
 use obvhs::{BvhBuildParams, bvh2::Bvh2, ray::Ray, rt_triangle::RtTriangle, triangle::Triangle};
 
 /// A BVH2 (obvhs) over the triangles, for pyramid queries.
@@ -49,23 +49,11 @@ impl Pyramid {
 }
 
 impl FrustumCuller {
-    pub fn new(mesh: &Mesh) -> FrustumCuller {
-        let tris: Vec<Triangle> = mesh
-            .triangles
-            .iter()
-            .map(|t| {
-                let p = t.map(|i| Vec3A::from(mesh.positions[i as usize]));
-                Triangle {
-                    v0: p[0],
-                    v1: p[1],
-                    v2: p[2],
-                }
-            })
-            .collect();
+    /// `tris`: [`super::raycast::mesh_triangles`] of `mesh`.
+    pub fn new(mesh: &Mesh, tris: &[Triangle]) -> FrustumCuller {
         let mut params = BvhBuildParams::medium_build();
         params.pre_split = false;
-        let bvh =
-            obvhs::bvh2::builder::build_bvh2_from_tris(&tris, params, &mut Default::default());
+        let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(tris, params, &mut Default::default());
         let prims = bvh
             .primitive_indices
             .iter()

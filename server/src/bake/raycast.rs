@@ -15,22 +15,26 @@ pub struct Occluder {
     indices: Vec<[u32; 3]>,
 }
 
+/// The mesh's triangles as obvhs primitives, in mesh order.
+pub fn mesh_triangles(mesh: &Mesh) -> Vec<Triangle> {
+    mesh.triangles
+        .iter()
+        .map(|t| {
+            let p = t.map(|i| Vec3A::from(mesh.positions[i as usize]));
+            Triangle {
+                v0: p[0],
+                v1: p[1],
+                v2: p[2],
+            }
+        })
+        .collect()
+}
+
 impl Occluder {
-    pub fn new(mesh: &Mesh) -> Occluder {
-        let tris: Vec<Triangle> = mesh
-            .triangles
-            .iter()
-            .map(|t| {
-                let p = t.map(|i| Vec3A::from(mesh.positions[i as usize]));
-                Triangle {
-                    v0: p[0],
-                    v1: p[1],
-                    v2: p[2],
-                }
-            })
-            .collect();
+    /// `tris`: [`mesh_triangles`] of `mesh`.
+    pub fn new(mesh: &Mesh, tris: &[Triangle]) -> Occluder {
         let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
-            &tris,
+            tris,
             BvhBuildParams::very_slow_build(),
             &mut Duration::default(),
         );

@@ -1,11 +1,13 @@
-//! Shared helpers for the end-to-end tests: a seeded random generator, random visibility cube
-//! maps, and a checker for the split of a spherical polygon by a vertex's trees.
+//! Shared helpers for the tests of this crate: a seeded random generator, random leaf values,
+//! random visibility cube maps, and a checker for the split of a spherical polygon by a
+//! vertex's trees.
 
 use bspvt_proto::bspvt::{
     ABSENT_FACE_VALUE, FaceTree, LineCodec, Node, QLine, VertexTrees, unquantise,
 };
 use bspvt_proto::cubemap::FaceFrame;
 use bspvt_proto::sphere::solid_angle;
+use bspvt_server::bake::cubemap::subpixel_offsets;
 use glam::{DVec3, Vec2};
 
 // ---------------------------------------------------------------------------------------------
@@ -43,6 +45,15 @@ impl Rng {
         let phi = self.range(0.0, std::f64::consts::TAU);
         let r = (1.0 - z * z).max(0.0).sqrt();
         DVec3::new(r * phi.cos(), r * phi.sin(), z)
+    }
+}
+
+/// A random leaf value: fully hidden or fully visible half the time, anything otherwise.
+pub fn random_value(rng: &mut Rng) -> u8 {
+    match rng.below(4) {
+        0 => 0,
+        1 => 255,
+        _ => rng.below(256) as u8,
     }
 }
 
@@ -183,17 +194,8 @@ pub fn random_face(rng: &mut Rng, res: u32, s: u32) -> (Vec<u32>, Vec<u16>, Face
         _ => "single pixel",
     };
     let uv = bspvt_proto::cubemap::pixel_centres(res);
-    let h = 1.0 / res as f32;
-    let offsets: Vec<Vec2> = (0..s)
-        .flat_map(|y| {
-            (0..s).map(move |x| {
-                Vec2::new(
-                    (2 * x + 1) as f32 / s as f32 - 1.0,
-                    (2 * y + 1) as f32 / s as f32 - 1.0,
-                ) * h
-            })
-        })
-        .collect();
+    // The bake's own sub-pixel ray layout, so a face's counts are what the bake would give.
+    let offsets = subpixel_offsets(res, s);
     let mut index = Vec::new();
     let mut visible = Vec::new();
     for (i, &p) in uv.iter().enumerate() {
@@ -396,7 +398,10 @@ pub fn check_split(
             None => (ABSENT_FACE_VALUE, f64::INFINITY),
         };
         if om > 0.0 && line_margin > 1e-12 && face_margin > 1e-12 && v64 != piece.value {
-            return Err(format!("{}: f64 walk at the centroid gives {v64}", ctx()));
+            return Err(format!(
+                "{}: f64 walk at the centroid gives {v64} (margin {line_margin:e})",
+                ctx()
+            ));
         }
         if line_margin > QUERY_MARGIN && face_margin > QUERY_MARGIN {
             rep.query_checked += 1;
@@ -414,8 +419,9 @@ pub fn check_split(
     rep.rel_sum_error = (sum - total).abs() / total;
     if rep.rel_sum_error > 1e-6 {
         return Err(format!(
-            "pieces sum to {sum:e} sr, polygon is {total:e} sr (relative error {:e})",
-            rep.rel_sum_error
+            "pieces sum to {sum:e} sr, polygon is {total:e} sr (relative error {:e}); {} pieces",
+            rep.rel_sum_error,
+            pieces.len()
         ));
     }
     let vf = trees.visible_fraction(codec, poly);

@@ -33,6 +33,15 @@ fn light() -> [DVec3; 4] {
     ]
 }
 
+/// The region the baker culls against: the light's bounding box grown by 0.2.
+fn light_region() -> Aabb {
+    let region = Aabb::from_points(&light().map(|p| p.as_vec3()));
+    Aabb {
+        min: region.min - Vec3::splat(0.2),
+        max: region.max + Vec3::splat(0.2),
+    }
+}
+
 /// Whether the segment p → q meets the box (slab test, f64).
 fn segment_hits_box(p: DVec3, q: DVec3) -> bool {
     let d = q - p;
@@ -139,11 +148,7 @@ fn run(supersampling: u32, epsilon: f32) -> Errors {
     let mesh = scene_mesh();
     let positions = mesh.positions.clone();
     let lb = light();
-    let region = Aabb::from_points(&lb.map(|p| p.as_vec3()));
-    let region = Aabb {
-        min: region.min - Vec3::splat(0.2),
-        max: region.max + Vec3::splat(0.2),
-    };
+    let region = light_region();
     let settings = BakeSettings {
         face_res: 64,
         epsilon,
@@ -333,11 +338,7 @@ fn mirror_image_receivers_agree() {
     let mesh = scene_mesh();
     let positions = mesh.positions.clone();
     let lb = light();
-    let region = Aabb::from_points(&lb.map(|p| p.as_vec3()));
-    let region = Aabb {
-        min: region.min - Vec3::splat(0.2),
-        max: region.max + Vec3::splat(0.2),
-    };
+    let region = light_region();
     let mut worst = (0.0f64, String::new());
     for s in [1u32, 4] {
         let settings = BakeSettings {

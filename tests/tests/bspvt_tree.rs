@@ -13,57 +13,21 @@
 //!   where the centroid is not within 1e-5 of a line) gives the piece's value;
 //! - nothing is NaN, and `visible_fraction` is in [0, 1].
 //!
-//! The fitted-tree variant of the same property lives in `tests/tests/fit_properties.rs`.
+//! The checker ([`check_split`]) and the random generator are shared with the fitted-tree
+//! variant of the same property in `fit_properties.rs` (see `src/lib.rs`).
 
 use bspvt_proto::bspvt::tree::clip_to_face;
 use bspvt_proto::bspvt::{FaceTree, LineCodec, MAX_DEPTH, Node, QLine, VertexTrees, unquantise};
 use bspvt_proto::cubemap::{FACES, FaceFrame, face_uv, pixel_centres};
 use bspvt_proto::sphere::{self, solid_angle};
+use bspvt_tests::{QUERY_MARGIN, Rng, SplitReport, check_split, node_depths, random_value, walk64};
 use glam::{DVec2, DVec3, Vec2};
 use proptest::prelude::*;
 
 // ---------------------------------------------------------------------------------------------
-// Random generation (a seeded SplitMix64, so a failing proptest seed reproduces).
+// Random generation (the seeded SplitMix64 `Rng` of the lib, so a failing proptest seed
+// reproduces).
 // ---------------------------------------------------------------------------------------------
-
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn f64(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.f64()
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next_u64() % n.max(1)
-    }
-    fn chance(&mut self, p: f64) -> bool {
-        self.f64() < p
-    }
-    fn unit(&mut self) -> DVec3 {
-        let z = self.range(-1.0, 1.0);
-        let phi = self.range(0.0, std::f64::consts::TAU);
-        let r = (1.0 - z * z).max(0.0).sqrt();
-        DVec3::new(r * phi.cos(), r * phi.sin(), z)
-    }
-}
-
-fn random_value(rng: &mut Rng) -> u8 {
-    match rng.below(4) {
-        0 => 0,
-        1 => 255,
-        _ => rng.below(256) as u8,
-    }
-}
 
 /// A random line; offsets mostly inside the face (|c| ≤ 1.1), sometimes anywhere.
 fn random_line(rng: &mut Rng, codec: &LineCodec) -> QLine {
@@ -280,201 +244,8 @@ fn random_light_polygon(rng: &mut Rng) -> Vec<DVec3> {
 }
 
 // ---------------------------------------------------------------------------------------------
-// The checker.
+// Figures over all cases (the checker itself is `check_split` in the lib).
 // ---------------------------------------------------------------------------------------------
-
-/// Angular tolerance for "on the correct side" (normalised directions, normalised planes).
-const SIDE_TOL: f64 = 1e-9;
-/// Centroids closer than this (radians) to a line or a face edge skip the f32 query check.
-const QUERY_MARGIN: f64 = 1e-5;
-
-#[derive(Default, Debug)]
-struct SplitReport {
-    pieces: usize,
-    zero_area_pieces: usize,
-    query_checked: usize,
-    query_skipped: usize,
-    worst_rel_sum_error: f64,
-}
-
-/// The unit plane normal of a line on face `frame`.
-fn unit_plane(codec: &LineCodec, line: QLine, frame: &FaceFrame) -> DVec3 {
-    codec.plane(line, frame).normalize()
-}
-
-/// Leaves of `tree` that could hold the piece `verts` (unit directions): every vertex on the
-/// right side (within tolerance) of every line above the leaf. A piece lying along a line
-/// (within tolerance) follows both children; a branch whose line it straddles is no candidate.
-/// Returns the candidate leaves and the straddled lines met on the way (for the message).
-fn containing_leaves(
-    tree: &FaceTree,
-    codec: &LineCodec,
-    frame: &FaceFrame,
-    verts: &[DVec3],
-) -> (Vec<(usize, u8)>, Vec<String>) {
-    let mut out = Vec::new();
-    let mut straddled = Vec::new();
-    let mut stack = vec![0usize];
-    while let Some(i) = stack.pop() {
-        match tree.nodes[i] {
-            Node::Leaf { value } => out.push((i, value)),
-            Node::Split { line, right } => {
-                let n = unit_plane(codec, line, frame);
-                let (lo, hi) =
-                    verts
-                        .iter()
-                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), d| {
-                            let x = n.dot(*d);
-                            (lo.min(x), hi.max(x))
-                        });
-                let right_ok = lo >= -SIDE_TOL;
-                let left_ok = hi <= SIDE_TOL;
-                if !right_ok && !left_ok {
-                    straddled.push(format!("node {i} ({line:?}): n·d in [{lo:e}, {hi:e}]"));
-                }
-                if right_ok {
-                    stack.push(right as usize);
-                }
-                if left_ok {
-                    stack.push(i + 1);
-                }
-            }
-        }
-    }
-    (out, straddled)
-}
-
-/// f64 walk of the tree for direction `d`, returning the leaf value and the smallest distance
-/// (radians) of `d` to a line on its path.
-fn walk64(tree: &FaceTree, codec: &LineCodec, frame: &FaceFrame, d: DVec3) -> (u8, f64) {
-    let mut i = 0;
-    let mut margin = f64::INFINITY;
-    loop {
-        match tree.nodes[i] {
-            Node::Leaf { value } => return (value, margin),
-            Node::Split { line, right } => {
-                let x = unit_plane(codec, line, frame).dot(d);
-                margin = margin.min(x.abs());
-                i = if x >= 0.0 { right as usize } else { i + 1 };
-            }
-        }
-    }
-}
-
-/// Splits `poly` with `trees` and checks every property; returns figures for the report.
-fn check_split(
-    trees: &VertexTrees,
-    codec: &LineCodec,
-    poly: &[DVec3],
-) -> Result<SplitReport, String> {
-    let mut rep = SplitReport::default();
-    let total = solid_angle(poly);
-    if !total.is_finite() || total <= 0.0 {
-        return Err(format!("input polygon has solid angle {total}"));
-    }
-    let pieces = trees.pieces(codec, poly);
-    let mut sum = 0.0;
-    for (k, piece) in pieces.iter().enumerate() {
-        rep.pieces += 1;
-        let ctx = || {
-            format!(
-                "piece {k} (face {}, value {}, {:?})",
-                piece.face, piece.value, piece.verts
-            )
-        };
-        if piece.verts.len() < 3 {
-            return Err(format!("{}: fewer than 3 vertices", ctx()));
-        }
-        if piece
-            .verts
-            .iter()
-            .any(|d| !d.is_finite() || d.length() == 0.0)
-        {
-            return Err(format!("{}: non-finite or zero vertex", ctx()));
-        }
-        let om = solid_angle(&piece.verts);
-        if !om.is_finite() {
-            return Err(format!("{}: solid angle {om}", ctx()));
-        }
-        sum += om;
-        if om == 0.0 {
-            rep.zero_area_pieces += 1;
-        }
-        let frame = FaceFrame::of(piece.face);
-        let (w, a, b) = (frame.w64(), frame.a64(), frame.b64());
-        let unit: Vec<DVec3> = piece.verts.iter().map(|d| d.normalize()).collect();
-        let face_planes = [w - a, w + a, w - b, w + b].map(|n| n.normalize());
-        for d in &unit {
-            for n in &face_planes {
-                if n.dot(*d) < -SIDE_TOL {
-                    return Err(format!(
-                        "{}: vertex {d} outside face {} (n·d = {:e})",
-                        ctx(),
-                        piece.face,
-                        n.dot(*d)
-                    ));
-                }
-            }
-        }
-        match &trees.faces[piece.face] {
-            None => {
-                if piece.value != bspvt_proto::bspvt::ABSENT_FACE_VALUE {
-                    return Err(format!("{}: absent face gave value {}", ctx(), piece.value));
-                }
-            }
-            Some(tree) => {
-                let (leaves, straddled) = containing_leaves(tree, codec, &frame, &unit);
-                if !leaves.iter().any(|&(_, v)| v == piece.value) {
-                    return Err(format!(
-                        "{}: lies in no leaf of its value; candidate leaves {leaves:?}, straddled lines {straddled:?}",
-                        ctx()
-                    ));
-                }
-            }
-        }
-        // The centroid query.
-        let c = unit.iter().copied().sum::<DVec3>().normalize();
-        let face_margin = face_planes
-            .iter()
-            .map(|n| n.dot(c))
-            .fold(f64::INFINITY, f64::min);
-        let (v64, line_margin) = match &trees.faces[piece.face] {
-            Some(tree) => walk64(tree, codec, &frame, c),
-            None => (bspvt_proto::bspvt::ABSENT_FACE_VALUE, f64::INFINITY),
-        };
-        if om > 0.0 && line_margin > 1e-12 && face_margin > 1e-12 && v64 != piece.value {
-            return Err(format!(
-                "{}: f64 walk at the centroid gives {v64} (margin {line_margin:e})",
-                ctx()
-            ));
-        }
-        if line_margin > QUERY_MARGIN && face_margin > QUERY_MARGIN {
-            rep.query_checked += 1;
-            let q = trees.visibility(codec, c.as_vec3());
-            if q != unquantise(piece.value) {
-                return Err(format!(
-                    "{}: f32 query at the centroid {c} gives {q}",
-                    ctx()
-                ));
-            }
-        } else {
-            rep.query_skipped += 1;
-        }
-    }
-    let rel = (sum - total).abs() / total;
-    rep.worst_rel_sum_error = rel;
-    if rel > 1e-6 {
-        return Err(format!(
-            "pieces sum to {sum:e} sr, polygon is {total:e} sr (relative error {rel:e}); {} pieces",
-            pieces.len()
-        ));
-    }
-    let vf = trees.visible_fraction(codec, poly);
-    if !(vf.is_finite() && (0.0..=1.0 + 1e-12).contains(&vf)) {
-        return Err(format!("visible_fraction = {vf}"));
-    }
-    Ok(rep)
-}
 
 #[derive(Default)]
 struct Totals {
@@ -498,7 +269,7 @@ impl Totals {
         self.zero_area += r.zero_area_pieces;
         self.checked += r.query_checked;
         self.skipped += r.query_skipped;
-        self.worst_rel = self.worst_rel.max(r.worst_rel_sum_error);
+        self.worst_rel = self.worst_rel.max(r.rel_sum_error);
         self.min_sr = self.min_sr.min(sr);
         self.max_sr = self.max_sr.max(sr);
     }
@@ -738,22 +509,13 @@ fn point_query_matches_the_planes() {
 /// generator this file relies on).
 #[test]
 fn generated_trees_are_well_formed() {
-    fn check(nodes: &[Node], i: usize, depth: usize) -> usize {
-        assert!(depth <= MAX_DEPTH);
-        match nodes[i] {
-            Node::Leaf { .. } => i + 1,
-            Node::Split { right, .. } => {
-                let end_left = check(nodes, i + 1, depth + 1);
-                assert_eq!(right as usize, end_left);
-                check(nodes, end_left, depth + 1)
-            }
-        }
-    }
     let mut rng = Rng(17);
-    for _ in 0..200 {
+    for case in 0..200 {
         let codec = random_codec(&mut rng);
         let t = random_tree(&mut rng, &codec, 12);
-        assert_eq!(check(&t.nodes, 0, 0), t.nodes.len());
+        let depths = node_depths(&t.nodes).unwrap_or_else(|e| panic!("tree {case}: {e}"));
+        let deepest = depths.iter().copied().max().unwrap_or(0);
+        assert!(deepest <= MAX_DEPTH, "tree {case}: depth {deepest}");
     }
     // Splitting by a single line through the face centre halves the face.
     let codec = LineCodec::for_resolution(64);

@@ -18,37 +18,12 @@ use bspvt_proto::encoding::{
     encode_header, encode_vertex, peek_chunk,
 };
 use bspvt_proto::{BakeSettings, DecodeError, SplitMethod};
+use bspvt_tests::{Rng, random_value};
 use proptest::prelude::*;
 
 // ---------------------------------------------------------------------------------------------
 // Random trees.
 // ---------------------------------------------------------------------------------------------
-
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next_u64() % n.max(1)
-    }
-    fn chance(&mut self, p: f64) -> bool {
-        ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64) < p
-    }
-}
-
-fn random_value(rng: &mut Rng) -> u8 {
-    match rng.below(4) {
-        0 => 0,
-        1 => 255,
-        _ => rng.below(256) as u8,
-    }
-}
 
 /// A random pre-order tree: depth ≤ `max_depth`, at most `max_nodes` nodes (odd, ≥ 1), lines
 /// anywhere in the codec's range; sometimes a comb straight down to `max_depth`.

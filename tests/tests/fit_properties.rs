@@ -430,8 +430,8 @@ fn exhaustive_root_line_is_optimal() {
     );
 }
 
-/// Trees fitted to random cube maps split random light polygons correctly (the proto test
-/// `bspvt_tree.rs` does the same with random node arrays).
+/// Trees fitted to random cube maps split random light polygons correctly
+/// (`tests/tests/bspvt_tree.rs` does the same with random node arrays).
 #[test]
 fn fitted_trees_split_polygons() {
     let mut rng = Rng(0xF17);

@@ -92,6 +92,14 @@ impl VertexRays<'_> {
         d.dot(self.normal) <= 0.0
     }
 
+    /// How many of a pixel's sub-rays escape, given `hit(d)`: the occlusion test to use.
+    #[inline]
+    fn escaping(&self, subs: &[Vec3], hit: impl Fn(Vec3) -> bool) -> u16 {
+        subs.iter()
+            .filter(|&&d| self.escapes_below_horizon(d) || !hit(d))
+            .count() as u16
+    }
+
     /// Whether direction `d` can matter: above the horizon and toward a light region.
     #[inline]
     fn matters(&self, origin: Vec3, d: Vec3) -> bool {
@@ -155,9 +163,7 @@ impl VertexRays<'_> {
         });
         (faces, rays)
     }
-}
 
-impl VertexRays<'_> {
     /// Every ray of every pixel that matters, against the BVH: the reference for [`Self::cast`].
     pub fn cast_brute_force(
         &self,
@@ -170,14 +176,10 @@ impl VertexRays<'_> {
             let mut px = FacePixels::default();
             for (p, &d) in table.centre[f].iter().enumerate() {
                 if self.matters(origin, d) {
-                    let k = table.sub[f][p * s..(p + 1) * s]
-                        .iter()
-                        .filter(|&&sd| {
-                            self.escapes_below_horizon(sd) || !occ.occluded(origin, sd, self.vertex)
-                        })
-                        .count();
+                    let subs = &table.sub[f][p * s..(p + 1) * s];
                     px.index.push(p as u32);
-                    px.visible.push(k as u16);
+                    px.visible
+                        .push(self.escaping(subs, |d| occ.occluded(origin, d, self.vertex)));
                 }
             }
             (!px.index.is_empty()).then_some(px)
@@ -185,12 +187,11 @@ impl VertexRays<'_> {
     }
 }
 
-/// Candidate lists longer than this are not kept (the block's rays traverse the BVH).
+/// Candidate lists longer than this are not kept (the block's rays traverse the BVH);
+/// kept lists are short enough to test a block's rays against directly.
 const MAX_CANDIDATES: usize = 32;
 /// Blocks of this size or smaller gather candidate lists; larger ones only test for any.
 const COLLECT_BLOCK: u32 = 8;
-/// Rays of a block are tested directly against a candidate list at most this long.
-const DIRECT_TEST_CANDIDATES: usize = 32;
 
 /// The quadtree walk over one face of one vertex's cube map.
 struct BlockWalk<'a> {
@@ -279,7 +280,6 @@ impl BlockWalk<'_> {
             }
             return;
         }
-        let direct = kept && list.len() <= DIRECT_TEST_CANDIDATES;
         let f = self.face;
         for p in self.pixels(i0, j0, size) {
             if !self.matters[p] {
@@ -287,18 +287,14 @@ impl BlockWalk<'_> {
             }
             self.rays_cast += s as u64;
             let subs = &self.table.sub[f][p * s..(p + 1) * s];
-            self.vis[p] = subs
-                .iter()
-                .filter(|&&d| {
-                    if self.rays.escapes_below_horizon(d) {
-                        true
-                    } else if direct {
-                        !self.culler.ray_hits_any(self.origin, d, &list)
-                    } else {
-                        !self.occ.occluded(self.origin, d, self.rays.vertex)
-                    }
+            self.vis[p] = if kept {
+                self.rays
+                    .escaping(subs, |d| self.culler.ray_hits_any(self.origin, d, &list))
+            } else {
+                self.rays.escaping(subs, |d| {
+                    self.occ.occluded(self.origin, d, self.rays.vertex)
                 })
-                .count() as u16;
+            };
         }
     }
 }

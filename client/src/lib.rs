@@ -1,7 +1,17 @@
 //! # bspvt (client)
 //!
-//! Reads baked BSPVT trees and evaluates light visibility from them. Today: the visible
-//! fraction of each light polygon from each vertex ([`visibility`]), which is eq. 2 of paper
-//! 000 with f_r = 1 — the shadow term the LTC shading (next issue) weights per piece.
+//! Reads baked BSPVT trees and shades with them. [`visibility`]: the visible fraction of each
+//! light polygon from each vertex (eq. 2 of paper 000 with f_r = 1). [`ggx`]: the reference
+//! GGX BRDF.
 
+pub mod bench;
+pub mod frame;
+pub mod ggx;
+pub mod groundtruth;
+pub mod light;
+pub mod ltc;
+pub mod mitsuba;
+pub mod render;
+pub mod shade;
+pub mod texture;
 pub mod visibility;

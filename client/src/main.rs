@@ -4,7 +4,10 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use bspvt_proto::encoding::decode_bake;
+use bspvt::render::image::Image;
+use bspvt::render::renderer::{Mode, Trees};
+use bspvt::render::sequence::{Method, Options, render_sequence};
+use bspvt_proto::encoding::{Bake, decode_bake};
 use bspvt_proto::scene::open_scene;
 use clap::{Parser, Subcommand};
 
@@ -19,9 +22,18 @@ struct Cli {
 enum Command {
     /// Decode a bake file, check it against its scene, and report (or export) light visibility.
     Inspect(InspectArgs),
-    /// The main job on the built-in scene: bake it, read the trees back from disk, and
-    /// evaluate the light's visibility at every vertex while the light moves.
+    /// The main job on the built-in scene: bake it, read the trees back from disk, and shade
+    /// frames (BSPVT × LTC GGX) while the light moves.
     Demo(DemoArgs),
+    /// Render images of a scene (one frame, or a sequence while the light moves) with BSPVT
+    /// shadows, unshadowed LTC or the Monte Carlo references.
+    Render(RenderArgs),
+    /// Measure shading speed on real meshes (kernel µs/vertex and frame times).
+    Bench(bspvt::bench::BenchArgs),
+    /// Fit the LTC table of GGX (regenerates `assets/ltc/ggx.json`).
+    LtcFit(bspvt::ltc::fit::FitArgs),
+    /// Write a Mitsuba 3 scene that renders the same image (independent cross-check).
+    ExportMitsuba(bspvt::mitsuba::ExportArgs),
 }
 
 #[derive(clap::Args)]
@@ -32,11 +44,60 @@ struct DemoArgs {
     /// Scene to bake (scene file or builtin:NAME).
     #[arg(long, default_value = "builtin:plate")]
     scene: String,
-    /// Light positions to evaluate (frames).
+    /// Frames to shade while the light moves.
     #[arg(long, default_value_t = 24)]
     frames: usize,
+    /// Frame size in pixels (square).
+    #[arg(long, default_value_t = 512)]
+    size: u32,
     #[arg(long)]
     face_res: Option<u32>,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum ModeArg {
+    Vertex,
+    Pixel,
+    /// Both, side by side (vertex left, pixel right).
+    Both,
+}
+
+#[derive(clap::Args)]
+struct RenderArgs {
+    /// Scene file (JSON) or `builtin:NAME`.
+    scene: Option<String>,
+    /// A bare mesh (.glb/.gltf/.obj/.ply) with the default scene around it.
+    #[arg(long)]
+    mesh: Option<PathBuf>,
+    /// Bake file of this scene (`bspvt-server bake`); required for `--method bspvt`.
+    #[arg(long)]
+    trees: Option<PathBuf>,
+    #[arg(long, value_enum, default_value = "bspvt")]
+    method: Method,
+    #[arg(long, value_enum, default_value = "vertex")]
+    mode: ModeArg,
+    /// Samples per pixel (mc, ltc-exact).
+    #[arg(long, default_value_t = 64)]
+    spp: u32,
+    #[arg(long, default_value_t = 512)]
+    width: u32,
+    #[arg(long, default_value_t = 512)]
+    height: u32,
+    /// Frames along the light path; more than one writes OUT-000.png, OUT-001.png, …
+    #[arg(long, default_value_t = 1)]
+    frames: usize,
+    /// Output image: .png (tone-mapped) or .exr (linear).
+    #[arg(long)]
+    out: PathBuf,
+    /// Exposure applied before tone mapping (PNG only).
+    #[arg(long, default_value_t = 1.0)]
+    exposure: f32,
+    /// Write timings as JSON here.
+    #[arg(long)]
+    stats: Option<PathBuf>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
 }
 
 #[derive(clap::Args)]
@@ -58,8 +119,131 @@ fn main() -> std::process::ExitCode {
     let result = match Cli::parse().command {
         Command::Inspect(a) => inspect(a),
         Command::Demo(a) => demo(a),
+        Command::Render(a) => render(a),
+        Command::Bench(a) => bspvt::bench::run(&a),
+        Command::LtcFit(a) => bspvt::ltc::fit::run(&a),
+        Command::ExportMitsuba(a) => bspvt::mitsuba::run(&a),
     };
     bspvt_proto::error::exit_code(result)
+}
+
+/// Reads a bake file and checks it belongs to `scene`.
+fn load_trees(path: &std::path::Path, scene: &bspvt_proto::Scene) -> Result<Bake> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let bake =
+        decode_bake(&bytes).with_context(|| format!("{} is not a valid bake", path.display()))?;
+    if bake.header.mesh_hash != scene.mesh.content_hash()
+        || bake.trees.len() != scene.mesh.vertex_count()
+    {
+        bail!(
+            "{} was baked from a different mesh than this scene's ({} vertices in the bake, {} in the scene)",
+            path.display(),
+            bake.trees.len(),
+            scene.mesh.vertex_count()
+        );
+    }
+    Ok(bake)
+}
+
+/// `OUT` for one frame, `OUT-NNN.ext` for a sequence.
+fn frame_path(out: &std::path::Path, k: usize, frames: usize) -> PathBuf {
+    if frames <= 1 {
+        return out.to_path_buf();
+    }
+    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("frame");
+    let ext = out.extension().and_then(|s| s.to_str()).unwrap_or("png");
+    out.with_file_name(format!("{stem}-{k:03}.{ext}"))
+}
+
+fn render(a: RenderArgs) -> Result<()> {
+    let scene = open_scene(a.scene.as_deref(), a.mesh.as_deref())?;
+    let bake = match &a.trees {
+        Some(p) => Some(load_trees(p, &scene)?),
+        None => None,
+    };
+    let trees = bake.as_ref().map(|b| Trees {
+        trees: &b.trees,
+        codec: b.header.codec(),
+    });
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()
+        .context("cannot start the worker threads")?;
+    let modes: &[Mode] = match a.mode {
+        ModeArg::Vertex => &[Mode::Vertex],
+        ModeArg::Pixel => &[Mode::Pixel],
+        ModeArg::Both => &[Mode::Vertex, Mode::Pixel],
+    };
+    let mut all_stats = Vec::new();
+    let mut images: Vec<Vec<Image>> = Vec::new();
+    for &mode in modes {
+        let opts = Options {
+            method: a.method,
+            mode,
+            spp: a.spp,
+            width: a.width,
+            height: a.height,
+            frames: a.frames,
+            light: 0,
+        };
+        let mut frames = Vec::new();
+        let stats = pool.install(|| {
+            render_sequence(&scene, trees.as_ref(), &opts, |k, img| {
+                if modes.len() == 1 {
+                    img.save(&frame_path(&a.out, k, a.frames), a.exposure)
+                } else {
+                    frames.push(img.clone());
+                    Ok(())
+                }
+            })
+        })?;
+        println!(
+            "{:?} {:?}: {} frame(s) at {}×{}, {:.2} ms/frame ({:.1} fps), {:.3} µs/vertex ({:.3} per core, {} threads), {} vertices shaded",
+            stats.method,
+            stats.mode,
+            stats.frames,
+            stats.width,
+            stats.height,
+            stats.ms_per_frame,
+            stats.fps,
+            stats.us_per_vertex,
+            stats.us_per_vertex_per_core,
+            stats.threads,
+            stats.vertices_shaded
+        );
+        all_stats.push(stats);
+        images.push(frames);
+    }
+    if modes.len() == 2 {
+        for (k, (v, p)) in images[0].iter().zip(&images[1]).enumerate() {
+            side_by_side(v, p).save(&frame_path(&a.out, k, a.frames), a.exposure)?;
+        }
+    }
+    println!("wrote {}", frame_path(&a.out, 0, a.frames).display());
+    if let Some(p) = &a.stats {
+        let json = if all_stats.len() == 1 {
+            serde_json::to_string_pretty(&all_stats[0])?
+        } else {
+            serde_json::to_string_pretty(&all_stats)?
+        };
+        std::fs::write(p, json).with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    Ok(())
+}
+
+fn side_by_side(a: &Image, b: &Image) -> Image {
+    let mut out = Image::new(a.width + b.width, a.height.max(b.height));
+    for y in 0..out.height as usize {
+        for (img, x0) in [(a, 0usize), (b, a.width as usize)] {
+            if y < img.height as usize {
+                let w = img.width as usize;
+                let row = &img.pixels[y * w..(y + 1) * w];
+                let o = y * out.width as usize + x0;
+                out.pixels[o..o + w].copy_from_slice(row);
+            }
+        }
+    }
+    out
 }
 
 fn inspect(a: InspectArgs) -> Result<()> {
@@ -142,7 +326,7 @@ fn demo(a: DemoArgs) -> Result<()> {
         file.display()
     );
 
-    // Read the trees back as a client would, then move the light through its region.
+    // Read the trees back as a client would, then shade frames while the light moves.
     let t = Instant::now();
     let bytes = std::fs::read(&file)?;
     let bake = decode_bake(&bytes)?;
@@ -151,47 +335,33 @@ fn demo(a: DemoArgs) -> Result<()> {
         bake.trees.len(),
         t.elapsed().as_secs_f64() * 1e3
     );
-    let codec = bake.header.codec();
-    let base = scene.lights[0].clone();
-    let (lo, hi) = match base.region {
-        Some(r) => (glam::Vec3::from(r.min), glam::Vec3::from(r.max)),
-        None => {
-            let c = glam::Vec3::from(base.vertices[0]);
-            (c - glam::Vec3::ONE, c + glam::Vec3::ONE)
-        }
+    let trees = Trees {
+        trees: &bake.trees,
+        codec: bake.header.codec(),
     };
-    let centre: glam::Vec3 = base.points().iter().sum::<glam::Vec3>() / base.vertices.len() as f32;
-    let mut ms = Vec::new();
-    for f in 0..a.frames.max(1) {
-        // A circle through the region at the light's height, staying inside the region.
-        let phase = std::f32::consts::TAU * f as f32 / a.frames.max(1) as f32;
-        let radius = 0.35 * (hi - lo).x.min((hi - lo).z);
-        let target = glam::Vec3::new(
-            0.5 * (lo.x + hi.x) + radius * phase.cos(),
-            centre.y,
-            0.5 * (lo.z + hi.z) + radius * phase.sin(),
-        );
-        let shift = target - centre;
-        scene.lights[0].vertices = base
-            .vertices
-            .iter()
-            .map(|v| (glam::Vec3::from(*v) + shift).to_array())
-            .collect();
-        let t = Instant::now();
-        let frac = bspvt::visibility::visible_fractions(&scene, 0, &codec, &bake.trees);
-        ms.push(t.elapsed().as_secs_f64() * 1e3);
-        if f == 0 || f + 1 == a.frames {
-            let p = a.out.join(format!("visibility-{f:03}.ply"));
-            write_ply(&p, &scene.mesh, &frac)?;
-        }
-    }
-    ms.sort_by(f64::total_cmp);
+    let opts = Options {
+        method: Method::Bspvt,
+        mode: Mode::Vertex,
+        spp: 1,
+        width: a.size,
+        height: a.size,
+        frames: a.frames.max(1),
+        light: 0,
+    };
+    let frames_dir = a.out.join("frames");
+    let stats = render_sequence(&scene, Some(&trees), &opts, |k, img| {
+        img.save(&frames_dir.join(format!("frame-{k:03}.png")), 1.0)
+    })?;
     println!(
-        "light visibility for {} frames: median {:.1} ms/frame ({:.2} µs/vertex), PLYs in {}",
-        ms.len(),
-        ms[ms.len() / 2],
-        ms[ms.len() / 2] * 1e3 / n.max(1) as f64,
-        a.out.display()
+        "shaded {} frames at {}×{} while the light moves: median {:.2} ms/frame ({:.0} fps), {:.2} µs/vertex on {} threads; frames in {}",
+        stats.frames,
+        stats.width,
+        stats.height,
+        stats.ms_per_frame,
+        stats.fps,
+        stats.us_per_vertex,
+        stats.threads,
+        frames_dir.display()
     );
     Ok(())
 }

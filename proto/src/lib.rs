@@ -17,7 +17,7 @@ pub mod builtin;
 pub mod cubemap;
 pub mod encoding;
 pub mod error;
-mod hash;
+pub mod hash;
 pub mod import;
 pub mod mesh;
 pub mod scene;

@@ -6,4 +6,6 @@
 
 pub mod bake;
 pub mod bench;
+#[cfg(feature = "service")]
+pub mod service;
 pub mod stats;

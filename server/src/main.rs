@@ -25,6 +25,9 @@ enum Command {
     Bake(BakeArgs),
     /// Measure the bake on real meshes: rays and fit separately, every split method.
     Bench(BenchArgs),
+    /// Run the HTTP baking service (docs/service.md).
+    #[cfg(feature = "service")]
+    Serve(Box<bspvt_server::service::ServeArgs>),
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -64,6 +67,8 @@ fn main() -> std::process::ExitCode {
     let result = match Cli::parse().command {
         Command::Bake(a) => bake(a),
         Command::Bench(a) => bench::run(&a),
+        #[cfg(feature = "service")]
+        Command::Serve(a) => bspvt_server::service::serve_command(&a),
     };
     bspvt_proto::error::exit_code(result)
 }

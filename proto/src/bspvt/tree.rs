@@ -5,7 +5,7 @@ use glam::{DVec3, Vec2, Vec3};
 use super::line::{LineCodec, QLine};
 use super::{ABSENT_FACE_VALUE, unquantise};
 use crate::cubemap::{FACES, FaceFrame, face_uv};
-use crate::sphere::{self, SphPoly};
+use crate::sphere::{self, Sides, SphPoly};
 
 /// A tree node. Nodes are stored in pre-order: the left child of a split at index `i` is
 /// `i + 1`, its right child is at `right`.
@@ -97,23 +97,31 @@ impl FaceTree {
         poly: &[DVec3],
         visit: &mut impl FnMut(&[DVec3], u8),
     ) {
-        let mut cur: SphPoly = poly.iter().copied().collect();
         loop {
             match self.nodes[i] {
                 Node::Leaf { value } => {
-                    visit(&cur, value);
+                    visit(poly, value);
                     return;
                 }
                 Node::Split { line, right } => {
-                    let (left, rest) = sphere::split(&cur, codec.plane(line, frame));
-                    if !left.is_empty() {
-                        self.split_from(i + 1, codec, frame, &left, visit);
+                    let n = codec.plane(line, frame);
+                    // Most lines miss a small light: walk on without copying anything.
+                    match sphere::sides(poly, n) {
+                        Sides::None => return,
+                        Sides::Negative => i += 1,
+                        Sides::Positive => i = right as usize,
+                        Sides::Both => {
+                            let (mut left, mut rest) = (SphPoly::new(), SphPoly::new());
+                            sphere::cut_into(poly, n, &mut left, &mut rest);
+                            if !left.is_empty() {
+                                self.split_from(i + 1, codec, frame, &left, visit);
+                            }
+                            if !rest.is_empty() {
+                                self.split_from(right as usize, codec, frame, &rest, visit);
+                            }
+                            return;
+                        }
                     }
-                    if rest.is_empty() {
-                        return;
-                    }
-                    cur = rest;
-                    i = right as usize;
                 }
             }
         }
@@ -194,11 +202,18 @@ impl VertexTrees {
 /// The part of `poly` inside face `frame`'s pyramid (|d·a| ≤ d·w, |d·b| ≤ d·w).
 pub fn clip_to_face(poly: &[DVec3], frame: &FaceFrame) -> Option<SphPoly> {
     let (w, a, b) = (frame.w64(), frame.a64(), frame.b64());
-    let mut cur: SphPoly = poly.iter().copied().collect();
+    let (mut cur, mut next) = (SphPoly::new(), SphPoly::new());
+    cur.extend(poly.iter().copied().take(sphere::MAX_VERTS));
     for n in [w - a, w + a, w - b, w + b] {
-        cur = sphere::clip(&cur, n);
-        if cur.is_empty() {
-            return None;
+        match sphere::sides(&cur, n) {
+            Sides::Positive => continue,
+            Sides::None | Sides::Negative => return None,
+            Sides::Both => {
+                if !sphere::clip_into(&cur, n, &mut next) {
+                    return None;
+                }
+                std::mem::swap(&mut cur, &mut next);
+            }
         }
     }
     Some(cur)

@@ -64,4 +64,14 @@ impl Occluder {
             }
         })
     }
+
+    /// True when the segment from `origin` along unit `dir` up to distance `t_max` hits any
+    /// triangle (shadow rays from surface points; the caller offsets `origin`).
+    #[inline]
+    pub fn occluded_segment(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
+        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
+        !self
+            .bvh
+            .ray_traverse_miss(ray, |ray, id| self.tris[id].intersect(ray))
+    }
 }

@@ -1,0 +1,103 @@
+//! Closest-hit primary rays for box-filtered (jittered) pixels: the surface seen along any
+//! camera ray, not only through pixel centres (the G-buffer's job). Used by
+//! [`super::render_mc_box`], whose pixels integrate over their whole footprint like an
+//! independent renderer's box reconstruction filter.
+
+use std::time::Duration;
+
+use bspvt_proto::Mesh;
+use bspvt_server::bake::raycast::mesh_triangles;
+use glam::{DVec3, Vec3A};
+use obvhs::{
+    BvhBuildParams,
+    cwbvh::CwBvh,
+    ray::{Ray, RayHit},
+    rt_triangle::RtTriangle,
+};
+
+use crate::render::gbuffer::Surface;
+
+/// A mesh prepared for closest-hit queries.
+pub struct Tracer {
+    bvh: CwBvh,
+    /// Triangles in BVH primitive order.
+    tris: Vec<RtTriangle>,
+    /// Mesh triangle index of each BVH primitive.
+    ids: Vec<u32>,
+}
+
+impl Tracer {
+    pub fn new(mesh: &Mesh) -> Tracer {
+        let tris = mesh_triangles(mesh);
+        let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
+            &tris,
+            BvhBuildParams::medium_build(),
+            &mut Duration::default(),
+        );
+        let ids = bvh.primitive_indices.clone();
+        let rt = ids
+            .iter()
+            .map(|&i| RtTriangle::from(&tris[i as usize]))
+            .collect();
+        Tracer { bvh, tris: rt, ids }
+    }
+
+    /// The surface hit first by the ray from `eye` along unit `dir`, shaded like
+    /// [`crate::render::gbuffer::GBuffer::surface`] (interpolated normal facing the viewer).
+    pub fn surface(&self, mesh: &Mesh, eye: DVec3, dir: DVec3) -> Option<Surface> {
+        let ray = Ray::new(
+            Vec3A::from(eye.as_vec3()),
+            Vec3A::from(dir.as_vec3()),
+            0.0,
+            f32::INFINITY,
+        );
+        let mut hit = RayHit::none();
+        if !self
+            .bvh
+            .ray_traverse(ray, &mut hit, |r, id| self.tris[id].intersect(r))
+        {
+            return None;
+        }
+        let t = *self.ids.get(hit.primitive_id as usize)?;
+        let idx = *mesh.triangles.get(t as usize)?;
+        let p = idx.map(|v| mesh.positions[v as usize].as_dvec3());
+        let (b1, b2) = barycentrics(eye, dir, p);
+        let weights = [1.0 - b1 - b2, b1, b2];
+        let position = weights[0] * p[0] + weights[1] * p[1] + weights[2] * p[2];
+        let mut geometric = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or(DVec3::Z);
+        if geometric.dot(eye - position) < 0.0 {
+            geometric = -geometric;
+        }
+        let n = idx.map(|v| mesh.normals[v as usize].as_dvec3());
+        let mut normal =
+            (weights[0] * n[0] + weights[1] * n[1] + weights[2] * n[2]).normalize_or(geometric);
+        if normal.dot(geometric) < 0.0 {
+            normal = -normal;
+        }
+        Some(Surface {
+            tri: t,
+            weights,
+            position,
+            normal,
+            geometric,
+        })
+    }
+}
+
+/// Barycentrics (b1, b2) of the ray's intersection with the plane of `p`, in f64, clamped into
+/// the triangle (the f32 traversal already chose it).
+fn barycentrics(o: DVec3, d: DVec3, p: [DVec3; 3]) -> (f64, f64) {
+    let e1 = p[1] - p[0];
+    let e2 = p[2] - p[0];
+    let pv = d.cross(e2);
+    let det = e1.dot(pv);
+    if det.is_nan() || det.abs() <= 1e-300 {
+        return (1.0 / 3.0, 1.0 / 3.0);
+    }
+    let inv = 1.0 / det;
+    let tv = o - p[0];
+    let u = (tv.dot(pv) * inv).clamp(0.0, 1.0);
+    let v = (d.dot(tv.cross(e1)) * inv).clamp(0.0, 1.0);
+    let s = u + v;
+    if s > 1.0 { (u / s, v / s) } else { (u, v) }
+}

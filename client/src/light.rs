@@ -1,0 +1,93 @@
+//! A polygonal light placed in the world for one frame: the scene's light moved by a rigid
+//! transform (translate + rotate), in f64.
+
+use std::sync::Arc;
+
+use anyhow::Result;
+use bspvt_proto::scene::PolygonLight;
+use glam::{DAffine3, DVec3};
+
+use crate::texture::{LightFrame, LightTexture};
+
+#[derive(Clone, Debug)]
+pub struct Light {
+    /// Convex polygon, counter-clockwise seen from the emitting side.
+    pub vertices: Vec<DVec3>,
+    /// Unit normal of the emitting side.
+    pub normal: DVec3,
+    /// Linear RGB radiance.
+    pub radiance: DVec3,
+    pub two_sided: bool,
+    /// Prefiltered texture modulating the radiance (shared between frames).
+    pub texture: Option<Arc<LightTexture>>,
+}
+
+impl Light {
+    pub fn from_scene(l: &PolygonLight) -> Light {
+        Light {
+            vertices: l.points().iter().map(|p| p.as_dvec3()).collect(),
+            normal: l.normal().as_dvec3(),
+            radiance: glam::Vec3::from(l.radiance).as_dvec3(),
+            two_sided: l.two_sided,
+            texture: None,
+        }
+    }
+
+    /// [`Self::from_scene`] with the light's texture loaded (paths are resolved by the scene
+    /// loader).
+    pub fn load(l: &PolygonLight) -> Result<Light> {
+        let mut light = Light::from_scene(l);
+        if let Some(t) = &l.texture {
+            light.texture = Some(Arc::new(LightTexture::load(std::path::Path::new(t))?));
+        }
+        Ok(light)
+    }
+
+    /// This light moved by a rigid transform.
+    pub fn transformed(&self, m: &DAffine3) -> Light {
+        Light {
+            vertices: self
+                .vertices
+                .iter()
+                .map(|&p| m.transform_point3(p))
+                .collect(),
+            normal: m.transform_vector3(self.normal).normalize_or(self.normal),
+            radiance: self.radiance,
+            two_sided: self.two_sided,
+            texture: self.texture.clone(),
+        }
+    }
+
+    pub fn centroid(&self) -> DVec3 {
+        self.vertices.iter().sum::<DVec3>() / self.vertices.len().max(1) as f64
+    }
+
+    /// True when a point at `p` receives light from the emitting side(s).
+    #[inline]
+    pub fn faces(&self, p: DVec3) -> bool {
+        self.two_sided || self.normal.dot(p - self.vertices[0]) > 0.0
+    }
+
+    /// Radiance emitted at light point `q` toward the receiver: the radiance times the
+    /// texture's finest level at q's (u, v) (see [`crate::texture`]).
+    #[inline]
+    pub fn radiance_at(&self, q: DVec3) -> DVec3 {
+        match &self.texture {
+            None => self.radiance,
+            Some(t) => {
+                let f = LightFrame::new(&self.vertices, DVec3::ZERO);
+                self.radiance * t.sample(f.uv(q - self.vertices[0]), 0.0)
+            }
+        }
+    }
+
+    /// Area of the polygon.
+    pub fn area(&self) -> f64 {
+        let v = &self.vertices;
+        let mut a = DVec3::ZERO;
+        for i in 1..v.len().saturating_sub(1) {
+            a += (v[i] - v[0]).cross(v[i + 1] - v[0]);
+        }
+        0.5 * a.length()
+    }
+}

@@ -1,0 +1,257 @@
+//! One camera, many frames: the G-buffer is rasterised once, then every frame shades the
+//! vertices the camera sees (per-vertex mode) or the pixels (per-pixel mode) for the light's
+//! current pose.
+//!
+//! - Per vertex (paper 000): BSPVT-shaded radiance at each visible vertex, interpolated over
+//!   the triangles.
+//! - Per pixel: unshadowed LTC evaluated at every pixel, times the per-vertex shadow ratios
+//!   (shadowed / unshadowed, one for the diffuse and one for the specular lobe) interpolated —
+//!   highlights as sharp as per-pixel LTC, shadows as smooth as the mesh.
+
+use bspvt_proto::Scene;
+use bspvt_proto::bspvt::{LineCodec, VertexTrees};
+use glam::DVec3;
+use rayon::prelude::*;
+
+use super::camera::View;
+use super::gbuffer::{GBuffer, NONE};
+use super::image::Image;
+use crate::light::Light;
+use crate::ltc::table::LtcTable;
+use crate::shade::bspvt::shade_vertex;
+use crate::shade::{Lobes, unshadowed};
+
+/// Where shading is evaluated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Mode {
+    /// Per vertex, interpolated over triangles (the paper's).
+    Vertex,
+    /// Unshadowed LTC per pixel × interpolated per-vertex shadow ratios.
+    Pixel,
+}
+
+/// Baked visibility for the BSPVT method.
+pub struct Trees<'a> {
+    pub trees: &'a [VertexTrees],
+    pub codec: LineCodec,
+}
+
+/// Counters of one frame.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct FrameCounts {
+    pub vertices_shaded: usize,
+    pub pixels_shaded: usize,
+    pub pieces: u64,
+    pub pieces_dropped: u64,
+}
+
+pub struct Renderer<'a> {
+    pub scene: &'a Scene,
+    pub view: View,
+    pub gbuffer: GBuffer,
+    /// Vertices of the triangles the camera sees.
+    pub visible_vertices: Vec<u32>,
+    /// Material of each vertex (that of the first triangle using it).
+    pub vertex_material: Vec<u32>,
+    pub table: &'static LtcTable,
+}
+
+impl<'a> Renderer<'a> {
+    pub fn new(scene: &'a Scene, width: u32, height: u32) -> Renderer<'a> {
+        let view = View::new(&scene.camera, width, height);
+        let gbuffer = GBuffer::rasterize(&scene.mesh, &view);
+        let visible_vertices = gbuffer
+            .visible_vertices(&scene.mesh)
+            .iter()
+            .enumerate()
+            .filter_map(|(v, &s)| s.then_some(v as u32))
+            .collect();
+        let mesh = &scene.mesh;
+        let mut vertex_material = vec![u32::MAX; mesh.vertex_count()];
+        for (t, tri) in mesh.triangles.iter().enumerate() {
+            for &v in tri {
+                let m = &mut vertex_material[v as usize];
+                if *m == u32::MAX {
+                    *m = mesh.material_ids.get(t).copied().unwrap_or(0);
+                }
+            }
+        }
+        Renderer {
+            scene,
+            view,
+            gbuffer,
+            visible_vertices,
+            vertex_material,
+            table: LtcTable::builtin(),
+        }
+    }
+
+    fn material(&self, id: u32) -> &bspvt_proto::scene::Material {
+        let m = &self.scene.materials;
+        &m[(id as usize).min(m.len() - 1)]
+    }
+
+    fn vertex_lobes(&self, v: u32) -> (Lobes, DVec3, DVec3) {
+        let p = self.scene.mesh.positions[v as usize].as_dvec3();
+        let n = self.scene.mesh.normals[v as usize]
+            .as_dvec3()
+            .normalize_or(DVec3::Y);
+        let wo = (self.view.eye - p).normalize_or(n);
+        let m = self.material(self.vertex_material[v as usize]);
+        (Lobes::new(self.table, m, n, wo), p, n)
+    }
+
+    /// BSPVT per vertex: for every visible vertex, (shadowed radiance, shadow ratios).
+    /// Vertices the camera does not see are left at zero.
+    pub fn shade_vertices(
+        &self,
+        light: &Light,
+        trees: &Trees,
+    ) -> (Vec<[f32; 3]>, Vec<[f32; 2]>, FrameCounts) {
+        let n = self.scene.mesh.vertex_count();
+        // (vertex, radiance, shadow ratios, pieces, dropped)
+        type Shaded = (u32, [f32; 3], [f32; 2], u32, u32);
+        let shaded: Vec<Shaded> = self
+            .visible_vertices
+            .par_iter()
+            .map(|&v| {
+                let (lobes, p, nrm) = self.vertex_lobes(v);
+                let r = shade_vertex(
+                    &lobes,
+                    light,
+                    p,
+                    nrm,
+                    &trees.trees[v as usize],
+                    &trees.codec,
+                );
+                let c = lobes.radiance(light.radiance, &r.shadowed);
+                (
+                    v,
+                    c.as_vec3().to_array(),
+                    r.shadowed.integrals.ratio(&r.unshadowed.integrals),
+                    r.pieces,
+                    r.dropped,
+                )
+            })
+            .collect();
+        let mut colour = vec![[0.0; 3]; n];
+        let mut ratio = vec![[1.0; 2]; n];
+        let mut counts = FrameCounts {
+            vertices_shaded: shaded.len(),
+            ..FrameCounts::default()
+        };
+        for (v, c, r, pieces, dropped) in shaded {
+            colour[v as usize] = c;
+            ratio[v as usize] = r;
+            counts.pieces += u64::from(pieces);
+            counts.pieces_dropped += u64::from(dropped);
+        }
+        (colour, ratio, counts)
+    }
+
+    /// Unshadowed LTC per vertex (the "ltc" method in vertex mode).
+    pub fn shade_vertices_unshadowed(&self, light: &Light) -> Vec<[f32; 3]> {
+        let n = self.scene.mesh.vertex_count();
+        let shaded: Vec<(u32, [f32; 3])> = self
+            .visible_vertices
+            .par_iter()
+            .map(|&v| {
+                let (lobes, p, nrm) = self.vertex_lobes(v);
+                let i = unshadowed(&lobes, light, p, nrm);
+                (v, lobes.radiance(light.radiance, &i).as_vec3().to_array())
+            })
+            .collect();
+        let mut colour = vec![[0.0; 3]; n];
+        for (v, c) in shaded {
+            colour[v as usize] = c;
+        }
+        colour
+    }
+
+    /// Interpolates per-vertex colours over the visible triangles.
+    pub fn interpolate(&self, colour: &[[f32; 3]]) -> Image {
+        let mesh = &self.scene.mesh;
+        let g = &self.gbuffer;
+        let mut img = Image::new(g.width, g.height);
+        img.pixels
+            .par_iter_mut()
+            .zip(g.tri.par_iter().zip(g.bary.par_iter()))
+            .for_each(|(px, (&t, &[b1, b2]))| {
+                if t == NONE {
+                    return;
+                }
+                let [a, b, c] = mesh.triangles[t as usize].map(|v| colour[v as usize]);
+                let b0 = 1.0 - b1 - b2;
+                *px = std::array::from_fn(|k| b0 * a[k] + b1 * b[k] + b2 * c[k]);
+            });
+        img
+    }
+
+    /// Per-pixel LTC times interpolated shadow ratios (`None`: unshadowed).
+    pub fn shade_pixels(&self, light: &Light, ratio: Option<&[[f32; 2]]>) -> Image {
+        let mesh = &self.scene.mesh;
+        let g = &self.gbuffer;
+        let mut img = Image::new(g.width, g.height);
+        img.pixels.par_iter_mut().enumerate().for_each(|(i, px)| {
+            let Some(s) = g.surface(mesh, &self.view, i) else {
+                return;
+            };
+            let wo = (self.view.eye - s.position).normalize_or(s.normal);
+            let m = self.material(mesh.material_ids.get(s.tri as usize).copied().unwrap_or(0));
+            let lobes = Lobes::new(self.table, m, s.normal, wo);
+            let integrals = unshadowed(&lobes, light, s.position, s.normal);
+            let r = match ratio {
+                Some(r) => {
+                    let idx = mesh.triangles[s.tri as usize];
+                    let w = s.weights;
+                    let f = |k: usize| {
+                        (w[0] * f64::from(r[idx[0] as usize][k])
+                            + w[1] * f64::from(r[idx[1] as usize][k])
+                            + w[2] * f64::from(r[idx[2] as usize][k]))
+                            as f32
+                    };
+                    [f(0), f(1)]
+                }
+                None => [1.0, 1.0],
+            };
+            *px = lobes
+                .radiance_scaled(light.radiance, &integrals, r)
+                .as_vec3()
+                .to_array();
+        });
+        img
+    }
+
+    /// One BSPVT frame in `mode`.
+    pub fn bspvt(&self, light: &Light, trees: &Trees, mode: Mode) -> (Image, FrameCounts) {
+        let (colour, ratio, mut counts) = self.shade_vertices(light, trees);
+        match mode {
+            Mode::Vertex => (self.interpolate(&colour), counts),
+            Mode::Pixel => {
+                counts.pixels_shaded = self.gbuffer.covered();
+                (self.shade_pixels(light, Some(&ratio)), counts)
+            }
+        }
+    }
+
+    /// One unshadowed-LTC frame in `mode`.
+    pub fn ltc(&self, light: &Light, mode: Mode) -> (Image, FrameCounts) {
+        match mode {
+            Mode::Vertex => (
+                self.interpolate(&self.shade_vertices_unshadowed(light)),
+                FrameCounts {
+                    vertices_shaded: self.visible_vertices.len(),
+                    ..FrameCounts::default()
+                },
+            ),
+            Mode::Pixel => (
+                self.shade_pixels(light, None),
+                FrameCounts {
+                    pixels_shaded: self.gbuffer.covered(),
+                    ..FrameCounts::default()
+                },
+            ),
+        }
+    }
+}

@@ -1,0 +1,172 @@
+//! Rendering a frame sequence while the light moves, with timings: what `bspvt render`,
+//! `bspvt demo` and the benchmarks share.
+
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use bspvt_proto::Scene;
+use serde::Serialize;
+
+use super::image::Image;
+use super::path::LightPath;
+use super::renderer::{FrameCounts, Mode, Renderer, Trees};
+use crate::groundtruth;
+
+/// Shading method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Baked BSPVT visibility × LTC GGX (paper 000).
+    Bspvt,
+    /// Unshadowed LTC GGX (no visibility).
+    Ltc,
+    /// Monte Carlo ground truth: exact GGX, shadow rays, MIS.
+    Mc,
+    /// LTC BRDF with visibility by many shadow rays (separates LTC-fit and visibility error).
+    LtcExact,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Options {
+    pub method: Method,
+    pub mode: Mode,
+    pub spp: u32,
+    pub width: u32,
+    pub height: u32,
+    /// Frames along the light path (1: the light at rest).
+    pub frames: usize,
+    pub light: usize,
+}
+
+/// Timings and counters of a sequence (STATS.json of `bspvt render`).
+#[derive(Clone, Debug, Serialize)]
+pub struct Stats {
+    pub method: Method,
+    pub mode: Mode,
+    pub width: u32,
+    pub height: u32,
+    pub frames: usize,
+    pub threads: usize,
+    /// Whole run: setup + all frames (excluding image writing).
+    pub seconds: f64,
+    /// Rasterising the G-buffer (once per camera).
+    pub setup_seconds: f64,
+    /// Median and mean shading time per frame.
+    pub ms_per_frame: f64,
+    pub ms_per_frame_mean: f64,
+    pub fps: f64,
+    /// Median frame time per vertex shaded (µs, wall clock on `threads` threads).
+    pub us_per_vertex: f64,
+    /// The same per core: `us_per_vertex × threads`.
+    pub us_per_vertex_per_core: f64,
+    pub vertices_shaded: usize,
+    pub pixels_covered: usize,
+    /// BSPVT pieces integrated (v̄ > 0) and dropped (v̄ = 0) per shaded vertex.
+    pub pieces_per_vertex: f64,
+    pub dropped_per_vertex: f64,
+    pub spp: Option<u32>,
+    /// Monte Carlo: mean relative standard error per covered pixel (last frame).
+    pub mean_rel_stderr: Option<f64>,
+}
+
+/// Renders `opts.frames` frames along the scene light's default path, handing each image to
+/// `sink` (frame index, image). `trees` is required for [`Method::Bspvt`].
+pub fn render_sequence(
+    scene: &Scene,
+    trees: Option<&Trees>,
+    opts: &Options,
+    mut sink: impl FnMut(usize, &Image) -> Result<()>,
+) -> Result<Stats> {
+    let Some(light) = scene.lights.get(opts.light) else {
+        bail!("the scene has no light {}", opts.light);
+    };
+    if opts.method == Method::Bspvt && trees.is_none() {
+        bail!("--method bspvt needs baked trees (--trees FILE)");
+    }
+    let start = Instant::now();
+    let r = Renderer::new(scene, opts.width, opts.height);
+    // Shadow rays for the references: one BVH per scene, built before the clock starts.
+    let occluder = matches!(opts.method, Method::Mc | Method::LtcExact).then(|| {
+        let tris = bspvt_server::bake::raycast::mesh_triangles(&scene.mesh);
+        bspvt_server::bake::raycast::Occluder::new(&scene.mesh, &tris)
+    });
+    let setup_seconds = start.elapsed().as_secs_f64();
+    let mut noise = None;
+    let rest = crate::light::Light::load(light)?;
+    let path = LightPath::new(light, rest.clone());
+    let frames = opts.frames.max(1);
+    let mut ms = Vec::with_capacity(frames);
+    let mut counts = FrameCounts::default();
+    let mut shading_seconds = 0.0;
+    for k in 0..frames {
+        let l = if frames == 1 {
+            rest.clone()
+        } else {
+            path.frame(k, frames)
+        };
+        let t = Instant::now();
+        let (img, c) = match (opts.method, trees) {
+            (Method::Bspvt, Some(trees)) => r.bspvt(&l, trees, opts.mode),
+            (Method::Bspvt, None) => unreachable!("checked above"),
+            (Method::Ltc, _) => r.ltc(&l, opts.mode),
+            (Method::Mc, _) => {
+                let occ = occluder.as_ref().context("occluder")?;
+                let (img, report) =
+                    groundtruth::render_mc(scene, &r.view, &r.gbuffer, &l, occ, opts.spp, k as u64);
+                noise = Some(report.mean_rel_stderr);
+                (img, FrameCounts::default())
+            }
+            (Method::LtcExact, _) => {
+                let occ = occluder.as_ref().context("occluder")?;
+                let img = groundtruth::ltcvis::render_ltc_exact_visibility(
+                    scene,
+                    &r.view,
+                    &r.gbuffer,
+                    &l,
+                    occ,
+                    &groundtruth::ltcvis::builtin_lookup,
+                    opts.spp,
+                    k as u64,
+                );
+                (img, FrameCounts::default())
+            }
+        };
+        let dt = t.elapsed().as_secs_f64();
+        shading_seconds += dt;
+        ms.push(dt * 1e3);
+        counts = c;
+        sink(k, &img)?;
+    }
+    let seconds = setup_seconds + shading_seconds;
+    let mean = ms.iter().sum::<f64>() / ms.len() as f64;
+    ms.sort_by(f64::total_cmp);
+    let median = ms[ms.len() / 2];
+    let threads = rayon::current_num_threads();
+    let nv = counts.vertices_shaded.max(1) as f64;
+    let us_per_vertex = if counts.vertices_shaded > 0 {
+        median * 1e3 / nv
+    } else {
+        0.0
+    };
+    Ok(Stats {
+        method: opts.method,
+        mode: opts.mode,
+        width: opts.width,
+        height: opts.height,
+        frames,
+        threads,
+        seconds,
+        setup_seconds,
+        ms_per_frame: median,
+        ms_per_frame_mean: mean,
+        fps: 1e3 / median.max(1e-9),
+        us_per_vertex,
+        us_per_vertex_per_core: us_per_vertex * threads as f64,
+        vertices_shaded: counts.vertices_shaded,
+        pixels_covered: r.gbuffer.covered(),
+        pieces_per_vertex: counts.pieces as f64 / nv,
+        dropped_per_vertex: counts.pieces_dropped as f64 / nv,
+        spp: matches!(opts.method, Method::Mc | Method::LtcExact).then_some(opts.spp),
+        mean_rel_stderr: noise,
+    })
+}

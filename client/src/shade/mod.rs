@@ -1,0 +1,208 @@
+//! Direct light from one polygonal light at one shading point, in the LTC form
+//! (Heitz et al. 2016, §4; paper 000, eq. 2):
+//!
+//! ```text
+//! L_o = L ⊙ ( albedo · D  +  (F0 · magnitude + (1 − F0) · fresnel) · S )
+//! D = Σᵢ v̄ᵢ ∫_{Ωᵢ} cos θ / π dω,    S = Σᵢ v̄ᵢ ∫_{Ωᵢ} D_ltc dω
+//! ```
+//!
+//! Ωᵢ are the pieces of the light polygon (seen from the point, above its horizon) and v̄ᵢ their
+//! visibility: one piece with v̄ = 1 for unshadowed LTC ([`unshadowed`]), the BSPVT leaves for
+//! the baked shadows ([`bspvt`]).
+
+pub mod bspvt;
+
+use bspvt_proto::scene::Material;
+use bspvt_proto::sphere::{self, SphPoly};
+use glam::{DMat3, DVec3};
+
+use crate::frame::ShadingFrame;
+use crate::ggx;
+use crate::light::Light;
+use crate::ltc::polygon::{integrate, vector_form_factor};
+use crate::ltc::table::LtcTable;
+use crate::texture::LightFrame;
+
+/// The two integrals of a light at a point: diffuse D = ∫ V cos/π and specular S = ∫ V D_ltc.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Integrals {
+    pub diffuse: f64,
+    pub specular: f64,
+}
+
+impl std::ops::AddAssign for Integrals {
+    fn add_assign(&mut self, o: Integrals) {
+        self.diffuse += o.diffuse;
+        self.specular += o.specular;
+    }
+}
+
+impl std::ops::Mul<f64> for Integrals {
+    type Output = Integrals;
+    fn mul(self, k: f64) -> Integrals {
+        Integrals {
+            diffuse: self.diffuse * k,
+            specular: self.specular * k,
+        }
+    }
+}
+
+/// Integrals with the light's colour: `diffuse_rgb` = Σ v̄ᵢ Dᵢ · texᵢ (texᵢ = 1 for untextured
+/// lights), likewise `specular_rgb`. The scalar `integrals` give the shadow ratios.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Shaded {
+    pub integrals: Integrals,
+    pub diffuse_rgb: DVec3,
+    pub specular_rgb: DVec3,
+}
+
+impl Shaded {
+    /// Adds `v` × one piece.
+    #[inline]
+    pub fn add_weighted(&mut self, piece: &Shaded, v: f64) {
+        self.integrals += piece.integrals * v;
+        self.diffuse_rgb += piece.diffuse_rgb * v;
+        self.specular_rgb += piece.specular_rgb * v;
+    }
+}
+
+impl Integrals {
+    /// Shadowed / unshadowed per lobe, 1 where the unshadowed integral is zero (the ratio
+    /// then multiplies nothing).
+    pub fn ratio(&self, unshadowed: &Integrals) -> [f32; 2] {
+        let r = |s: f64, u: f64| {
+            if u > 0.0 {
+                (s / u).clamp(0.0, 1.0) as f32
+            } else {
+                1.0
+            }
+        };
+        [
+            r(self.diffuse, unshadowed.diffuse),
+            r(self.specular, unshadowed.specular),
+        ]
+    }
+}
+
+/// The material's lobes at one point and view: the world → LTC-space matrices of the diffuse
+/// (cosine) and specular (LTC) lobes, and the specular scale per channel.
+#[derive(Clone, Copy, Debug)]
+pub struct Lobes {
+    /// World direction → local frame (rows: tangent, bitangent, normal).
+    pub to_local: DMat3,
+    /// World direction → the specular LTC's cosine space: M⁻¹ · to_local.
+    pub to_ltc: DMat3,
+    /// Albedo (diffuse weight).
+    pub albedo: DVec3,
+    /// F0 · magnitude + (1 − F0) · fresnel, per channel.
+    pub specular: DVec3,
+}
+
+impl Lobes {
+    /// `n`: unit normal; `wo`: unit direction to the viewer.
+    pub fn new(table: &LtcTable, material: &Material, n: DVec3, wo: DVec3) -> Lobes {
+        let frame = ShadingFrame::new(n, wo);
+        let alpha = ggx::clamp_alpha(f64::from(material.roughness));
+        let ltc = table.lookup(alpha, frame.cos_view(wo));
+        let to_local = DMat3::from_cols(frame.x, frame.y, frame.z).transpose();
+        let f0 = glam::Vec3::from(material.specular).as_dvec3();
+        Lobes {
+            to_local,
+            to_ltc: ltc.m_inv * to_local,
+            albedo: glam::Vec3::from(material.albedo).as_dvec3(),
+            specular: f0 * ltc.magnitude + (DVec3::ONE - f0) * ltc.fresnel,
+        }
+    }
+
+    /// Both integrals over one spherical polygon of world directions (from the point).
+    #[inline]
+    pub fn integrate(&self, poly: &[DVec3]) -> Integrals {
+        Integrals {
+            diffuse: integrate(&self.to_local, poly),
+            specular: integrate(&self.to_ltc, poly),
+        }
+    }
+
+    /// Both integrals over one polygon, with the light's texture fetched per lobe where its
+    /// vector form factor points (Heitz et al. 2016, §5.3).
+    #[inline]
+    pub fn shade(&self, poly: &[DVec3], emitter: &Emitter) -> Shaded {
+        match emitter.texture {
+            None => {
+                let i = self.integrate(poly);
+                Shaded {
+                    integrals: i,
+                    diffuse_rgb: DVec3::splat(i.diffuse),
+                    specular_rgb: DVec3::splat(i.specular),
+                }
+            }
+            Some(tex) => {
+                let mut out = Shaded::default();
+                if let Some(f) = vector_form_factor(&self.to_local, poly) {
+                    out.integrals.diffuse = f.z.min(1.0);
+                    out.diffuse_rgb = emitter.frame.lookup(&self.to_local, f, tex) * f.z.min(1.0);
+                }
+                if let Some(f) = vector_form_factor(&self.to_ltc, poly) {
+                    out.integrals.specular = f.z.min(1.0);
+                    out.specular_rgb = emitter.frame.lookup(&self.to_ltc, f, tex) * f.z.min(1.0);
+                }
+                out
+            }
+        }
+    }
+
+    /// Outgoing radiance for light radiance `l`.
+    #[inline]
+    pub fn radiance(&self, l: DVec3, s: &Shaded) -> DVec3 {
+        l * (self.albedo * s.diffuse_rgb + self.specular * s.specular_rgb)
+    }
+
+    /// Outgoing radiance with separate shadow ratios [diffuse, specular] (per-pixel mode).
+    #[inline]
+    pub fn radiance_scaled(&self, l: DVec3, s: &Shaded, ratio: [f32; 2]) -> DVec3 {
+        l * (self.albedo * s.diffuse_rgb * f64::from(ratio[0])
+            + self.specular * s.specular_rgb * f64::from(ratio[1]))
+    }
+}
+
+/// What a shading point needs of the light beyond its polygon: its plane frame and texture.
+pub struct Emitter<'a> {
+    pub frame: LightFrame,
+    pub texture: Option<&'a crate::texture::LightTexture>,
+}
+
+impl<'a> Emitter<'a> {
+    pub fn new(light: &'a Light, p: DVec3) -> Emitter<'a> {
+        Emitter {
+            frame: LightFrame::new(&light.vertices, p),
+            texture: light.texture.as_deref(),
+        }
+    }
+}
+
+/// The light polygon as directions from `p`, clipped to the upper hemisphere of `n`; empty
+/// when the light is wholly below the horizon or `p` is behind a one-sided light.
+pub fn light_directions(light: &Light, p: DVec3, n: DVec3) -> SphPoly {
+    if !light.faces(p) || !p.is_finite() || !n.is_finite() {
+        return SphPoly::new();
+    }
+    let mut dirs = SphPoly::new();
+    for &q in &light.vertices {
+        let d = q - p;
+        // A vertex at the point itself (or a non-finite one): the light is seen edge-on or
+        // is garbage; either way it sends nothing.
+        if !(d.length_squared() > 0.0) || !d.is_finite() || dirs.try_push(d).is_err() {
+            return SphPoly::new();
+        }
+    }
+    sphere::clip(&dirs, n)
+}
+
+/// Unshadowed LTC at a point: the whole (horizon-clipped) polygon with V = 1.
+pub fn unshadowed(lobes: &Lobes, light: &Light, p: DVec3, n: DVec3) -> Shaded {
+    let dirs = light_directions(light, p, n);
+    if dirs.len() < 3 {
+        return Shaded::default();
+    }
+    lobes.shade(&dirs, &Emitter::new(light, p))
+}

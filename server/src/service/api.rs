@@ -1,0 +1,726 @@
+//! HTTP handlers for scenes, meshes, health, metrics and the OpenAPI document. They are thin:
+//! they parse and check the request, call `input`, `jobs` or `store`, and shape the answer.
+//!
+//! Guarantees: writes (`POST`, `DELETE`) need `Authorization: Bearer KEY` when a key is
+//! configured (compared in constant time) and are checked before any body byte is read; an
+//! upload is refused before it is read when the queue is full, too many uploads are in
+//! progress or its declared length is over the limit; blocking work (mesh parsing, file and
+//! database I/O) runs on tokio's blocking pool, never on the executor; ids are 128 random bits.
+
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+use axum::Json;
+use axum::extract::multipart::{Field, MultipartError, MultipartRejection};
+use axum::extract::{FromRequestParts, Multipart, Path, RawQuery, State};
+use axum::http::request::Parts;
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use bspvt_proto::encoding::{BakeHeader, encode_header};
+use serde::Serialize;
+use utoipa::ToSchema;
+
+use super::db::{JobState, SceneRow, now_ms};
+use super::error::{ApiError, ApiResult, ErrorBody};
+use super::input::{self, Upload};
+use super::jobs::{Live, SubmitError};
+use super::{Shared, blocking};
+
+/// Largest `scene` field (scene JSON).
+pub const MAX_SCENE_JSON_BYTES: u64 = 1 << 20;
+/// Largest `settings` field.
+pub const MAX_SETTINGS_JSON_BYTES: u64 = 64 << 10;
+
+/// Answer to a submission.
+#[derive(Serialize, ToSchema)]
+pub struct Submitted {
+    /// The scene's id: 32 hex digits (128 random bits). Whoever knows it can read the scene.
+    pub id: String,
+    pub state: JobState,
+    pub links: Links,
+}
+
+/// Where to find a scene's parts.
+#[derive(Serialize, ToSchema)]
+pub struct Links {
+    #[serde(rename = "self")]
+    pub status: String,
+    pub events: String,
+    pub mesh: String,
+    pub trees: String,
+}
+
+impl Links {
+    fn of(id: &str) -> Links {
+        Links {
+            status: format!("/v1/scenes/{id}"),
+            events: format!("/v1/scenes/{id}/events"),
+            mesh: format!("/v1/scenes/{id}/mesh"),
+            trees: format!("/v1/scenes/{id}/trees"),
+        }
+    }
+}
+
+/// Sizes of a scene.
+#[derive(Serialize, ToSchema)]
+pub struct Sizes {
+    pub mesh_vertices: u32,
+    pub mesh_triangles: u64,
+    /// Bytes uploaded (mesh file as sent, scene and settings JSON).
+    pub upload_bytes: u64,
+    /// Bytes of the bake stored so far: header frame + durable chunk frames. When `done`, the
+    /// size of the whole tree stream (= the offline bake file).
+    pub stored_bytes: u64,
+}
+
+/// A scene's status.
+#[derive(Serialize, ToSchema)]
+pub struct SceneStatus {
+    pub id: String,
+    pub state: JobState,
+    /// Why the bake failed (`failed`) or stopped (`cancelled`).
+    pub reason: Option<String>,
+    pub vertices_done: u64,
+    pub vertices_total: u32,
+    pub chunks_done: u32,
+    pub chunks_total: u32,
+    /// `vertices_done / vertices_total`.
+    pub progress: f64,
+    /// Vertices per second baked by this server process (while baking).
+    pub rate_vertices_per_s: Option<f64>,
+    /// Estimated seconds to completion (while baking).
+    pub eta_s: Option<f64>,
+    /// Scenes ahead of this one (while queued).
+    pub queue_position: Option<usize>,
+    /// The bake settings (`face_res`, `epsilon`, `supersampling`, `split`, `chunk_vertices`).
+    #[schema(value_type = Object)]
+    pub settings: serde_json::Value,
+    pub sizes: Sizes,
+    /// The baked mesh's content hash (hex), as in the bake header.
+    pub mesh_hash: String,
+    /// How the scene was submitted.
+    pub source: String,
+    pub created_ms: i64,
+    pub started_ms: Option<i64>,
+    pub finished_ms: Option<i64>,
+    /// Chunks baked by this server process (a restarted server never re-bakes durable chunks).
+    pub chunks_baked_this_process: u32,
+    /// Chunks baked over all runs, re-bakes included.
+    pub chunks_baked_total: u64,
+    /// Stored chunks found corrupt or missing and baked again.
+    pub chunks_corrupt: u64,
+    pub links: Links,
+}
+
+/// Builds a scene's status document.
+pub fn status_of(st: &Shared, live: &Live) -> SceneStatus {
+    let s = live.snapshot();
+    let r = &live.row;
+    SceneStatus {
+        id: r.id.clone(),
+        state: s.state,
+        reason: s.reason,
+        vertices_done: s.vertices_done,
+        vertices_total: r.vertex_count,
+        chunks_done: s.chunks_done,
+        chunks_total: r.chunk_count,
+        progress: s.vertices_done as f64 / (r.vertex_count.max(1)) as f64,
+        rate_vertices_per_s: s.rate,
+        eta_s: s.eta_s,
+        queue_position: match s.state {
+            JobState::Queued => st.jobs.queue_position(&r.id),
+            _ => None,
+        },
+        settings: serde_json::from_str(&r.settings_json).unwrap_or(serde_json::Value::Null),
+        sizes: Sizes {
+            mesh_vertices: r.vertex_count,
+            mesh_triangles: r.triangle_count,
+            upload_bytes: r.upload_bytes,
+            stored_bytes: s.stored_bytes,
+        },
+        mesh_hash: format!("{:016x}", r.mesh_hash),
+        source: r.source.clone(),
+        created_ms: r.created_ms,
+        started_ms: s.started_ms,
+        finished_ms: s.finished_ms,
+        chunks_baked_this_process: st.jobs.baked_this_process(&r.id),
+        chunks_baked_total: s.chunks_baked_total,
+        chunks_corrupt: s.chunks_corrupt,
+        links: Links::of(&r.id),
+    }
+}
+
+/// Scene ids are 32 lowercase hex digits; anything else is unknown without a lookup.
+pub fn check_id(id: &str) -> ApiResult<()> {
+    if id.len() == 32
+        && id
+            .bytes()
+            .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+    {
+        Ok(())
+    } else {
+        Err(ApiError::not_found(id))
+    }
+}
+
+/// The scene `id` (live or from the database), or 404.
+pub async fn lookup(st: &Shared, id: &str) -> ApiResult<Arc<Live>> {
+    check_id(id)?;
+    let jobs = st.jobs.clone();
+    let key = id.to_string();
+    blocking(move || jobs.lookup(&key))
+        .await?
+        .ok_or_else(|| ApiError::not_found(id))
+}
+
+/// A new unguessable id: 128 bits from the operating system's generator.
+fn new_id() -> ApiResult<String> {
+    let mut b = [0u8; 16];
+    getrandom::fill(&mut b).map_err(|e| ApiError::internal(format!("no randomness: {e}")))?;
+    Ok(b.iter().map(|x| format!("{x:02x}")).collect())
+}
+
+/// Proof that a write request carries the API key (when one is configured).
+pub struct WriteAccess;
+
+impl FromRequestParts<Shared> for WriteAccess {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, st: &Shared) -> ApiResult<WriteAccess> {
+        let Some(key) = &st.cfg.api_key else {
+            return Ok(WriteAccess);
+        };
+        let unauthorized =
+            |d: &str| ApiError::new(StatusCode::UNAUTHORIZED, "unauthorized", d.to_string());
+        let given = parts
+            .headers
+            .get(header::AUTHORIZATION)
+            .ok_or_else(|| {
+                unauthorized("this server needs `Authorization: Bearer KEY` for writes")
+            })?
+            .to_str()
+            .map_err(|_| unauthorized("the Authorization header is not ASCII"))?;
+        let token = given
+            .strip_prefix("Bearer ")
+            .ok_or_else(|| unauthorized("the Authorization header must be `Bearer KEY`"))?;
+        if constant_time_eq(token.trim().as_bytes(), key.as_bytes()) {
+            Ok(WriteAccess)
+        } else {
+            Err(unauthorized("wrong API key"))
+        }
+    }
+}
+
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+fn multipart_error(e: MultipartError) -> ApiError {
+    let status = e.status();
+    let code = if status == StatusCode::PAYLOAD_TOO_LARGE {
+        "body_too_large"
+    } else {
+        "invalid_multipart"
+    };
+    ApiError::new(status, code, e.body_text())
+}
+
+/// Reads one form field, refusing it past `max` bytes.
+async fn read_field(mut field: Field<'_>, max: u64, what: &str) -> ApiResult<Vec<u8>> {
+    let mut buf = Vec::new();
+    while let Some(chunk) = field.chunk().await.map_err(multipart_error)? {
+        if (buf.len() + chunk.len()) as u64 > max {
+            return Err(ApiError::too_large(
+                "field_too_large",
+                format!("the `{what}` field is larger than the limit of {max} bytes"),
+            ));
+        }
+        buf.extend_from_slice(&chunk);
+    }
+    Ok(buf)
+}
+
+async fn read_upload(mut mp: Multipart, max_mesh: u64) -> ApiResult<Upload> {
+    let mut up = Upload {
+        mesh: None,
+        scene: None,
+        settings: None,
+    };
+    let text = |b: Vec<u8>, what: &str| {
+        String::from_utf8(b).map_err(|_| {
+            ApiError::bad_request("invalid_field", format!("the `{what}` field is not UTF-8"))
+        })
+    };
+    let duplicate = |what: &str| {
+        ApiError::bad_request(
+            "duplicate_field",
+            format!("the form has more than one `{what}` field"),
+        )
+    };
+    while let Some(field) = mp.next_field().await.map_err(multipart_error)? {
+        let name = field.name().unwrap_or_default().to_string();
+        match name.as_str() {
+            "mesh" => {
+                if up.mesh.is_some() {
+                    return Err(duplicate("mesh"));
+                }
+                let file_name = field.file_name().unwrap_or_default().to_string();
+                if file_name.is_empty() {
+                    return Err(ApiError::bad_request(
+                        "missing_file_name",
+                        "the `mesh` field must be a file with a name such as model.glb (the extension picks the format)",
+                    ));
+                }
+                // The compressed size is bounded too: no upload is larger than the mesh limit.
+                let bytes = read_field(field, max_mesh, "mesh").await?;
+                up.mesh = Some((file_name, bytes));
+            }
+            "scene" => {
+                if up.scene.is_some() {
+                    return Err(duplicate("scene"));
+                }
+                up.scene = Some(text(
+                    read_field(field, MAX_SCENE_JSON_BYTES, "scene").await?,
+                    "scene",
+                )?);
+            }
+            "settings" => {
+                if up.settings.is_some() {
+                    return Err(duplicate("settings"));
+                }
+                up.settings = Some(text(
+                    read_field(field, MAX_SETTINGS_JSON_BYTES, "settings").await?,
+                    "settings",
+                )?);
+            }
+            other => {
+                return Err(ApiError::bad_request(
+                    "unknown_field",
+                    format!(
+                        "unknown form field {:?} (expected mesh, scene, settings)",
+                        super::error::truncate(other, 100)
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(up)
+}
+
+/// Parses, stores and queues an upload (blocking: runs on the blocking pool).
+fn accept(st: &Shared, up: Upload) -> ApiResult<Arc<Live>> {
+    let p = input::prepare(up, &st.input_limits())?;
+    let id = new_id()?;
+    let scene = &p.scene;
+    let vertex_count = scene.mesh.vertex_count() as u32;
+    let header = BakeHeader::new(&scene.bake, vertex_count, scene.mesh.content_hash());
+    st.store
+        .create_scene(&id, &input::encode_scene(scene))
+        .map_err(|e| ApiError::internal(format!("cannot store the scene: {e}")))?;
+    let row = SceneRow {
+        id: id.clone(),
+        seq: 0,
+        state: JobState::Queued,
+        reason: None,
+        created_ms: now_ms(),
+        started_ms: None,
+        finished_ms: None,
+        vertex_count,
+        triangle_count: scene.mesh.triangles.len() as u64,
+        chunk_count: header.chunk_count(),
+        chunk_vertices: header.chunk_vertices,
+        settings_json: serde_json::to_string(&scene.bake).unwrap_or_default(),
+        mesh_hash: header.mesh_hash,
+        header: encode_header(&header),
+        upload_bytes: p.upload_bytes,
+        source: p.source,
+        chunks_baked: 0,
+        chunks_corrupt: 0,
+    };
+    match st.jobs.submit(row) {
+        Ok(live) => {
+            tracing::info!(
+                scene = %id,
+                vertices = vertex_count,
+                chunks = live.row.chunk_count,
+                source = %live.row.source,
+                "scene accepted"
+            );
+            Ok(live)
+        }
+        Err(e) => {
+            let _ = st.store.remove_scene(&id);
+            Err(match e {
+                SubmitError::QueueFull(n) => queue_full(n),
+                SubmitError::Db(e) => ApiError::internal(format!("cannot record the scene: {e}")),
+            })
+        }
+    }
+}
+
+fn queue_full(n: usize) -> ApiError {
+    ApiError {
+        retry_after: Some(10),
+        ..ApiError::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            "queue_full",
+            format!("{n} scenes are queued or baking, the most this server accepts; retry later"),
+        )
+    }
+}
+
+/// Multipart form of a submission (for the OpenAPI document).
+#[derive(ToSchema)]
+#[allow(dead_code)]
+pub struct SubmitForm {
+    /// The mesh file (`.glb`, `.gltf`, `.obj`, `.ply`, each optionally compressed as `.zst`).
+    /// Required unless the scene names only `builtin:` meshes.
+    #[schema(value_type = String, format = Binary)]
+    mesh: Option<Vec<u8>>,
+    /// Scene JSON (docs/scene-format.md). Its non-builtin mesh paths must equal the uploaded
+    /// file's name. Without it the mesh gets the default scene (ground plane, quad light).
+    scene: Option<String>,
+    /// Bake settings JSON replacing the scene's `bake` (`face_res`, `epsilon`,
+    /// `supersampling`, `split`, `chunk_vertices`).
+    settings: Option<String>,
+}
+
+/// Submit a scene for baking.
+#[utoipa::path(
+    post,
+    path = "/v1/scenes",
+    tag = "scenes",
+    request_body(content = SubmitForm, content_type = "multipart/form-data"),
+    responses(
+        (status = 202, description = "Accepted and queued", body = Submitted),
+        (status = 400, description = "Malformed form or scene JSON", body = ErrorBody),
+        (status = 401, description = "Missing or wrong API key", body = ErrorBody),
+        (status = 413, description = "Body, field, mesh or scene over a limit", body = ErrorBody),
+        (status = 415, description = "Not a multipart form, or unsupported mesh format", body = ErrorBody),
+        (status = 422, description = "Invalid mesh, scene or settings", body = ErrorBody),
+        (status = 429, description = "Queue full or too many uploads at once", body = ErrorBody),
+    ),
+    security(("api_key" = []))
+)]
+pub async fn submit(
+    State(st): State<Shared>,
+    _auth: WriteAccess,
+    headers: HeaderMap,
+    mp: Result<Multipart, MultipartRejection>,
+) -> ApiResult<Response> {
+    let declared = headers
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    if let Some(n) = declared
+        && n > st.cfg.max_body_bytes
+    {
+        return Err(ApiError::too_large(
+            "body_too_large",
+            format!(
+                "the request body is {n} bytes; the limit is {}",
+                st.cfg.max_body_bytes
+            ),
+        ));
+    }
+    if !st.jobs.has_room() {
+        return Err(queue_full(st.cfg.max_queued_scenes));
+    }
+    let _permit = st
+        .uploads
+        .clone()
+        .try_acquire_owned()
+        .map_err(|_| ApiError::too_many("too many uploads in progress; retry shortly"))?;
+    let mp = mp.map_err(|r| {
+        let status = r.status();
+        ApiError::new(
+            if status == StatusCode::BAD_REQUEST {
+                StatusCode::UNSUPPORTED_MEDIA_TYPE
+            } else {
+                status
+            },
+            "not_multipart",
+            format!(
+                "{} (send multipart/form-data with a `mesh` file and/or a `scene` field)",
+                r.body_text()
+            ),
+        )
+    })?;
+    let up = read_upload(mp, st.cfg.max_mesh_bytes).await?;
+    let st2 = st.clone();
+    let live = blocking(move || Ok::<_, anyhow::Error>(accept(&st2, up))).await??;
+    let id = live.row.id.clone();
+    let mut r = (
+        StatusCode::ACCEPTED,
+        Json(Submitted {
+            id: id.clone(),
+            state: JobState::Queued,
+            links: Links::of(&id),
+        }),
+    )
+        .into_response();
+    if let Ok(v) = HeaderValue::from_str(&format!("/v1/scenes/{id}")) {
+        r.headers_mut().insert(header::LOCATION, v);
+    }
+    Ok(r)
+}
+
+/// A scene's status.
+#[utoipa::path(
+    get,
+    path = "/v1/scenes/{id}",
+    tag = "scenes",
+    params(("id" = String, Path, description = "Scene id")),
+    responses(
+        (status = 200, description = "Status", body = SceneStatus),
+        (status = 404, description = "Unknown id", body = ErrorBody),
+    )
+)]
+pub async fn get_scene(State(st): State<Shared>, Path(id): Path<String>) -> ApiResult<Response> {
+    let live = lookup(&st, &id).await?;
+    let mut r = Json(status_of(&st, &live)).into_response();
+    r.headers_mut()
+        .insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    Ok(r)
+}
+
+/// Cancel a scene's bake and delete its data (a `cancelled` tombstone remains).
+#[utoipa::path(
+    delete,
+    path = "/v1/scenes/{id}",
+    tag = "scenes",
+    params(("id" = String, Path, description = "Scene id")),
+    responses(
+        (status = 200, description = "Cancelled and deleted; the final status", body = SceneStatus),
+        (status = 401, description = "Missing or wrong API key", body = ErrorBody),
+        (status = 404, description = "Unknown id", body = ErrorBody),
+    ),
+    security(("api_key" = []))
+)]
+pub async fn delete_scene(
+    State(st): State<Shared>,
+    _auth: WriteAccess,
+    Path(id): Path<String>,
+) -> ApiResult<Response> {
+    check_id(&id)?;
+    let jobs = st.jobs.clone();
+    let key = id.clone();
+    blocking(move || jobs.delete(&key))
+        .await?
+        .ok_or_else(|| ApiError::not_found(&id))?;
+    let live = lookup(&st, &id).await?;
+    Ok(Json(status_of(&st, &live)).into_response())
+}
+
+/// `If-None-Match` contains `etag` (or `*`).
+pub fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
+    headers
+        .get_all(header::IF_NONE_MATCH)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(','))
+        .map(|t| t.trim().trim_start_matches("W/"))
+        .any(|t| t == etag || t == "*")
+}
+
+pub fn not_modified_response(etag: &str) -> Response {
+    let mut r = StatusCode::NOT_MODIFIED.into_response();
+    if let Ok(v) = HeaderValue::from_str(etag) {
+        r.headers_mut().insert(header::ETAG, v);
+    }
+    r
+}
+
+/// The mesh as baked (vertex order = tree order).
+#[utoipa::path(
+    get,
+    path = "/v1/scenes/{id}/mesh",
+    tag = "scenes",
+    params(
+        ("id" = String, Path, description = "Scene id"),
+        ("format" = Option<String>, Query, description = "`json` (default: the `Mesh` as JSON: positions, normals, triangles, material_ids) or `ply` (binary little-endian PLY, exact floats)"),
+    ),
+    responses(
+        (status = 200, description = "The mesh", content_type = "application/json"),
+        (status = 304, description = "Not modified (If-None-Match)"),
+        (status = 400, description = "Unknown format", body = ErrorBody),
+        (status = 404, description = "Unknown id", body = ErrorBody),
+        (status = 410, description = "Deleted", body = ErrorBody),
+    )
+)]
+pub async fn get_mesh(
+    State(st): State<Shared>,
+    Path(id): Path<String>,
+    RawQuery(q): RawQuery,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
+    let live = lookup(&st, &id).await?;
+    if live.state() == JobState::Cancelled {
+        return Err(gone(&id));
+    }
+    let mut format = "json";
+    for (k, v) in super::stream::query_pairs(q.as_deref())? {
+        match (k.as_str(), v.as_str()) {
+            ("format", "json") => format = "json",
+            ("format", "ply") => format = "ply",
+            ("format", other) => {
+                return Err(ApiError::bad_request(
+                    "invalid_query",
+                    format!("format {other:?} is neither json nor ply"),
+                ));
+            }
+            (other, _) => {
+                return Err(ApiError::bad_request(
+                    "invalid_query",
+                    format!("unknown query parameter {other:?} (expected format)"),
+                ));
+            }
+        }
+    }
+    let etag = format!("\"mesh-{:016x}-{format}\"", live.row.mesh_hash);
+    if not_modified(&headers, &etag) {
+        return Ok(not_modified_response(&etag));
+    }
+    let store = st.store.clone();
+    let key = id.clone();
+    let body = blocking(move || {
+        let bytes = store
+            .read_scene(&key)
+            .map_err(|e| anyhow::anyhow!("cannot read the stored scene: {e}"))?;
+        let scene = input::decode_scene(&bytes).map_err(|e| anyhow::anyhow!(e))?;
+        Ok(match format {
+            "ply" => ply_bytes(&scene.mesh),
+            _ => serde_json::to_vec(&scene.mesh)?,
+        })
+    })
+    .await?;
+    st.metrics
+        .other_bytes_served
+        .fetch_add(body.len() as u64, Ordering::Relaxed);
+    let content_type = if format == "ply" {
+        "application/octet-stream"
+    } else {
+        "application/json"
+    };
+    let mut r = body.into_response();
+    let h = r.headers_mut();
+    h.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
+    if let Ok(v) = HeaderValue::from_str(&etag) {
+        h.insert(header::ETAG, v);
+    }
+    if let Ok(v) = HeaderValue::from_str(&format!("{:016x}", live.row.mesh_hash)) {
+        h.insert("x-bspvt-mesh-hash", v);
+    }
+    Ok(r)
+}
+
+pub fn gone(id: &str) -> ApiError {
+    ApiError::new(
+        StatusCode::GONE,
+        "deleted",
+        format!("scene {id} was deleted"),
+    )
+}
+
+/// A binary little-endian PLY of the mesh: float x y z nx ny nz per vertex, then per triangle
+/// a `uchar`-counted `uint` index list and its material id.
+pub fn ply_bytes(m: &bspvt_proto::Mesh) -> Vec<u8> {
+    let mut out = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment bspvt baked mesh {:016x}; vertex order = tree order\n\
+         element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
+         property float nx\nproperty float ny\nproperty float nz\n\
+         element face {}\nproperty list uchar uint vertex_indices\nproperty uint material\nend_header\n",
+        m.content_hash(),
+        m.positions.len(),
+        m.triangles.len()
+    )
+    .into_bytes();
+    out.reserve(m.positions.len() * 24 + m.triangles.len() * 17);
+    for (p, n) in m.positions.iter().zip(&m.normals) {
+        for x in p.to_array().into_iter().chain(n.to_array()) {
+            out.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+    for (t, mat) in m.triangles.iter().zip(&m.material_ids) {
+        out.push(3);
+        for i in t {
+            out.extend_from_slice(&i.to_le_bytes());
+        }
+        out.extend_from_slice(&mat.to_le_bytes());
+    }
+    out
+}
+
+/// Health.
+#[derive(Serialize, ToSchema)]
+pub struct Health {
+    /// `ok`.
+    pub status: String,
+    pub generation: i64,
+    pub uptime_s: f64,
+    pub scenes_queued: u64,
+    pub scenes_baking: u64,
+}
+
+/// Liveness and readiness (the database answers).
+#[utoipa::path(
+    get,
+    path = "/healthz",
+    tag = "service",
+    responses(
+        (status = 200, description = "Healthy", body = Health),
+        (status = 503, description = "The database does not answer", body = ErrorBody),
+    )
+)]
+pub async fn healthz(State(st): State<Shared>) -> ApiResult<Json<Health>> {
+    let db = st.db.clone();
+    blocking(move || db.ping())
+        .await
+        .map_err(|e| ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "unhealthy", e.detail))?;
+    let g = st.jobs.gauges();
+    Ok(Json(Health {
+        status: "ok".into(),
+        generation: g.generation,
+        uptime_s: st.started.elapsed().as_secs_f64(),
+        scenes_queued: g.scenes_queued,
+        scenes_baking: g.scenes_baking,
+    }))
+}
+
+/// Prometheus metrics (text exposition format 0.0.4).
+#[utoipa::path(
+    get,
+    path = "/metrics",
+    tag = "service",
+    responses((status = 200, description = "Metrics", content_type = "text/plain"))
+)]
+pub async fn metrics(State(st): State<Shared>) -> Response {
+    let text = st.metrics.render(&st.jobs.gauges());
+    let mut r = text.into_response();
+    r.headers_mut().insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("text/plain; version=0.0.4; charset=utf-8"),
+    );
+    r
+}
+
+/// The OpenAPI 3 document of this API.
+#[utoipa::path(
+    get,
+    path = "/v1/openapi.json",
+    tag = "service",
+    responses((status = 200, description = "OpenAPI document", content_type = "application/json"))
+)]
+pub async fn openapi() -> Response {
+    Json(super::openapi::document()).into_response()
+}
+
+/// Unknown routes.
+pub async fn not_found() -> ApiError {
+    ApiError::new(
+        StatusCode::NOT_FOUND,
+        "not_found",
+        "no such endpoint (see /v1/openapi.json)",
+    )
+}

@@ -1,0 +1,341 @@
+//! Service configuration: command-line flags, `BSPVT_*` environment variables and an optional
+//! TOML file, merged in that order of precedence over the built-in defaults.
+//!
+//! Guarantees: every limit the service enforces is a field of [`Config`], has a default that
+//! is safe on a small machine, and is checked for sanity ([`Config::resolve`] refuses zero
+//! workers, zero limits and an unparsable address before anything is opened).
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use serde::Deserialize;
+
+/// `bspvt-server serve` flags. Each flag can also come from the environment variable named
+/// beside it, or from the `--config` file (same names, snake_case); flags win over the
+/// environment, which wins over the file.
+#[derive(clap::Args, Debug, Default, Clone)]
+pub struct ServeArgs {
+    /// TOML configuration file (keys as the flags below, snake_case).
+    #[arg(long, env = "BSPVT_CONFIG")]
+    pub config: Option<PathBuf>,
+    /// Directory holding everything the service stores (database, scenes, chunks).
+    #[arg(long, env = "BSPVT_DATA_DIR")]
+    pub data_dir: Option<PathBuf>,
+    /// Address to listen on (`HOST:PORT`; port 0 picks a free port, printed on stdout).
+    #[arg(long, env = "BSPVT_ADDR")]
+    pub addr: Option<String>,
+    /// When set, `Authorization: Bearer KEY` is required for writes (POST, DELETE).
+    #[arg(long, env = "BSPVT_API_KEY", hide_env_values = true)]
+    pub api_key: Option<String>,
+    /// Bake workers: chunks baked at the same time, taken round-robin across scenes.
+    #[arg(long, env = "BSPVT_WORKERS")]
+    pub workers: Option<usize>,
+    /// Threads of the shared bake pool (0 = one per core).
+    #[arg(long, env = "BSPVT_THREADS")]
+    pub threads: Option<usize>,
+    /// Largest request body in bytes (uploads).
+    #[arg(long, env = "BSPVT_MAX_BODY_BYTES")]
+    pub max_body_bytes: Option<u64>,
+    /// Largest mesh file in bytes, after zstd decompression.
+    #[arg(long, env = "BSPVT_MAX_MESH_BYTES")]
+    pub max_mesh_bytes: Option<u64>,
+    /// Most vertices of a submitted scene.
+    #[arg(long, env = "BSPVT_MAX_MESH_VERTICES")]
+    pub max_mesh_vertices: Option<u64>,
+    /// Most triangles of a submitted mesh.
+    #[arg(long, env = "BSPVT_MAX_MESH_TRIANGLES")]
+    pub max_mesh_triangles: Option<u64>,
+    /// Largest cube-map face resolution a submitted scene may ask for.
+    #[arg(long, env = "BSPVT_MAX_FACE_RES")]
+    pub max_face_res: Option<u32>,
+    /// Largest supersampling a submitted scene may ask for.
+    #[arg(long, env = "BSPVT_MAX_SUPERSAMPLING")]
+    pub max_supersampling: Option<u32>,
+    /// Most scenes queued or baking; further submissions get 429.
+    #[arg(long, env = "BSPVT_MAX_QUEUED_SCENES")]
+    pub max_queued_scenes: Option<usize>,
+    /// Most scenes baking at once (the rest wait in submission order).
+    #[arg(long, env = "BSPVT_MAX_ACTIVE_SCENES")]
+    pub max_active_scenes: Option<usize>,
+    /// Most requests being handled at once (a stream counts until its headers are sent;
+    /// open streams are limited by max_streams).
+    #[arg(long, env = "BSPVT_MAX_CONCURRENT_REQUESTS")]
+    pub max_concurrent_requests: Option<usize>,
+    /// Most open tree and event streams.
+    #[arg(long, env = "BSPVT_MAX_STREAMS")]
+    pub max_streams: Option<usize>,
+    /// Most uploads being read and parsed at once.
+    #[arg(long, env = "BSPVT_MAX_UPLOADS")]
+    pub max_uploads: Option<usize>,
+    /// Seconds a non-streaming request (including an upload) may take.
+    #[arg(long, env = "BSPVT_REQUEST_TIMEOUT_S")]
+    pub request_timeout_s: Option<u64>,
+    /// Most open client connections; further connections are closed at once.
+    #[arg(long, env = "BSPVT_MAX_CONNECTIONS")]
+    pub max_connections: Option<usize>,
+    /// Seconds a client may take to send a request's headers (slow clients are cut off).
+    #[arg(long, env = "BSPVT_HEADER_READ_TIMEOUT_S")]
+    pub header_read_timeout_s: Option<u64>,
+    /// Log format on stderr: `text` or `json`.
+    #[arg(long, env = "BSPVT_LOG_FORMAT")]
+    pub log_format: Option<String>,
+}
+
+/// The same settings as a TOML file.
+#[derive(Deserialize, Debug, Default)]
+#[serde(deny_unknown_fields)]
+struct FileConfig {
+    data_dir: Option<PathBuf>,
+    addr: Option<String>,
+    api_key: Option<String>,
+    workers: Option<usize>,
+    threads: Option<usize>,
+    max_body_bytes: Option<u64>,
+    max_mesh_bytes: Option<u64>,
+    max_mesh_vertices: Option<u64>,
+    max_mesh_triangles: Option<u64>,
+    max_face_res: Option<u32>,
+    max_supersampling: Option<u32>,
+    max_queued_scenes: Option<usize>,
+    max_active_scenes: Option<usize>,
+    max_concurrent_requests: Option<usize>,
+    max_streams: Option<usize>,
+    max_uploads: Option<usize>,
+    request_timeout_s: Option<u64>,
+    max_connections: Option<usize>,
+    header_read_timeout_s: Option<u64>,
+    log_format: Option<String>,
+}
+
+/// Log output format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LogFormat {
+    Text,
+    Json,
+}
+
+/// The resolved configuration of a running service.
+#[derive(Clone, Debug)]
+pub struct Config {
+    pub data_dir: PathBuf,
+    pub addr: SocketAddr,
+    pub api_key: Option<String>,
+    pub workers: usize,
+    pub threads: usize,
+    pub max_body_bytes: u64,
+    pub max_mesh_bytes: u64,
+    pub max_mesh_vertices: u64,
+    pub max_mesh_triangles: u64,
+    pub max_face_res: u32,
+    pub max_supersampling: u32,
+    pub max_queued_scenes: usize,
+    pub max_active_scenes: usize,
+    pub max_concurrent_requests: usize,
+    pub max_streams: usize,
+    pub max_uploads: usize,
+    pub request_timeout_s: u64,
+    pub max_connections: usize,
+    pub header_read_timeout_s: u64,
+    pub log_format: LogFormat,
+}
+
+impl Config {
+    /// Defaults for everything but the data directory.
+    pub fn with_data_dir(data_dir: impl Into<PathBuf>) -> Config {
+        Config {
+            data_dir: data_dir.into(),
+            addr: SocketAddr::from(([127, 0, 0, 1], 8080)),
+            api_key: None,
+            workers: 2,
+            threads: 0,
+            max_body_bytes: 256 << 20,
+            max_mesh_bytes: 256 << 20,
+            max_mesh_vertices: 5_000_000,
+            max_mesh_triangles: 10_000_000,
+            max_face_res: 256,
+            max_supersampling: 4,
+            max_queued_scenes: 64,
+            max_active_scenes: 4,
+            max_concurrent_requests: 1024,
+            max_streams: 512,
+            max_uploads: 4,
+            request_timeout_s: 300,
+            max_connections: 4096,
+            header_read_timeout_s: 30,
+            log_format: LogFormat::Text,
+        }
+    }
+
+    /// Merges flags/environment (already merged by clap), the `--config` file and defaults,
+    /// then checks the result.
+    pub fn resolve(args: &ServeArgs) -> Result<Config> {
+        let file = match &args.config {
+            Some(p) => read_file(p)?,
+            None => FileConfig::default(),
+        };
+        let data_dir = args.data_dir.clone().or(file.data_dir).context(
+            "no data directory: give --data-dir, BSPVT_DATA_DIR or data_dir in the config file",
+        )?;
+        let mut c = Config::with_data_dir(data_dir);
+        if let Some(a) = args.addr.clone().or(file.addr) {
+            c.addr = a
+                .parse()
+                .with_context(|| format!("address {a:?} is not HOST:PORT (e.g. 0.0.0.0:8080)"))?;
+        }
+        c.api_key = args.api_key.clone().or(file.api_key);
+        macro_rules! take {
+            ($($f:ident),*) => {$(
+                if let Some(v) = args.$f.or(file.$f) {
+                    c.$f = v;
+                }
+            )*};
+        }
+        take!(
+            workers,
+            threads,
+            max_body_bytes,
+            max_mesh_bytes,
+            max_mesh_vertices,
+            max_mesh_triangles,
+            max_face_res,
+            max_supersampling,
+            max_queued_scenes,
+            max_active_scenes,
+            max_concurrent_requests,
+            max_streams,
+            max_uploads,
+            request_timeout_s,
+            max_connections,
+            header_read_timeout_s
+        );
+        if let Some(f) = args.log_format.clone().or(file.log_format) {
+            c.log_format = match f.as_str() {
+                "text" => LogFormat::Text,
+                "json" => LogFormat::Json,
+                _ => bail!("log format {f:?} is neither `text` nor `json`"),
+            };
+        }
+        c.check()?;
+        Ok(c)
+    }
+
+    /// Refuses settings the service cannot run with.
+    pub fn check(&mut self) -> Result<()> {
+        if matches!(&self.api_key, Some(k) if k.is_empty()) {
+            bail!("the API key is empty");
+        }
+        let positive = [
+            ("workers", self.workers as u64),
+            ("max_body_bytes", self.max_body_bytes),
+            ("max_mesh_bytes", self.max_mesh_bytes),
+            ("max_mesh_vertices", self.max_mesh_vertices),
+            ("max_mesh_triangles", self.max_mesh_triangles),
+            ("max_queued_scenes", self.max_queued_scenes as u64),
+            (
+                "max_concurrent_requests",
+                self.max_concurrent_requests as u64,
+            ),
+            ("max_streams", self.max_streams as u64),
+            ("max_uploads", self.max_uploads as u64),
+            ("request_timeout_s", self.request_timeout_s),
+            ("max_connections", self.max_connections as u64),
+            ("header_read_timeout_s", self.header_read_timeout_s),
+        ];
+        for (name, v) in positive {
+            if v == 0 {
+                bail!("{name} must be at least 1");
+            }
+        }
+        if self.workers > 256 {
+            bail!("workers = {} is more than 256", self.workers);
+        }
+        if !(4..=bspvt_proto::BakeSettings::MAX_FACE_RES).contains(&self.max_face_res) {
+            bail!(
+                "max_face_res = {} is outside 4..={}",
+                self.max_face_res,
+                bspvt_proto::BakeSettings::MAX_FACE_RES
+            );
+        }
+        if !(1..=bspvt_proto::BakeSettings::MAX_SUPERSAMPLING).contains(&self.max_supersampling) {
+            bail!(
+                "max_supersampling = {} is outside 1..={}",
+                self.max_supersampling,
+                bspvt_proto::BakeSettings::MAX_SUPERSAMPLING
+            );
+        }
+        // With fewer active scenes than workers a worker could idle while scenes wait.
+        self.max_active_scenes = self.max_active_scenes.max(self.workers);
+        Ok(())
+    }
+
+    /// The database file.
+    pub fn db_path(&self) -> PathBuf {
+        self.data_dir.join("bspvt.sqlite")
+    }
+}
+
+fn read_file(path: &Path) -> Result<FileConfig> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read config file {}", path.display()))?;
+    toml::from_str(&text).with_context(|| format!("bad config file {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flags_win_over_file_and_defaults_fill_the_rest() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let file = dir.path().join("bspvt.toml");
+        std::fs::write(
+            &file,
+            "data_dir = \"/srv/bspvt\"\naddr = \"0.0.0.0:9000\"\nworkers = 3\nmax_streams = 7\n",
+        )
+        .expect("write config");
+        let args = ServeArgs {
+            config: Some(file),
+            workers: Some(5),
+            ..ServeArgs::default()
+        };
+        let c = Config::resolve(&args).expect("valid config");
+        assert_eq!(c.data_dir, PathBuf::from("/srv/bspvt"));
+        assert_eq!(c.addr.port(), 9000);
+        assert_eq!(c.workers, 5);
+        assert_eq!(c.max_streams, 7);
+        assert_eq!(c.max_uploads, 4);
+        assert!(c.max_active_scenes >= c.workers);
+    }
+
+    #[test]
+    fn bad_settings_are_refused() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let file = dir.path().join("bad.toml");
+        std::fs::write(&file, "data_dir = \"/x\"\nwrokers = 3\n").expect("write config");
+        let args = ServeArgs {
+            config: Some(file),
+            ..ServeArgs::default()
+        };
+        assert!(Config::resolve(&args).is_err(), "unknown key accepted");
+        let args = ServeArgs {
+            data_dir: Some("/x".into()),
+            workers: Some(0),
+            ..ServeArgs::default()
+        };
+        assert!(Config::resolve(&args).is_err(), "zero workers accepted");
+        let args = ServeArgs {
+            data_dir: Some("/x".into()),
+            addr: Some("localhost".into()),
+            ..ServeArgs::default()
+        };
+        assert!(
+            Config::resolve(&args).is_err(),
+            "address without port accepted"
+        );
+        assert!(
+            Config::resolve(&ServeArgs::default()).is_err(),
+            "no data dir"
+        );
+    }
+}

@@ -1,0 +1,485 @@
+//! The embedded database (SQLite through rusqlite, bundled, WAL, `synchronous = FULL`): one row
+//! per scene (state, sizes, settings, the bake header) and one row per durable chunk (length,
+//! CRC-32, the process generation that baked it).
+//!
+//! Guarantees:
+//! - a chunk row is only inserted after its file is durable (see `store`), and only while its
+//!   scene is queued or baking — a chunk finishing after its scene was deleted is refused;
+//! - every commit is synced (`synchronous = FULL`), so what a response reported survives a
+//!   crash or a power cut;
+//! - each process start bumps `generation`, so a chunk row tells which run baked it;
+//! - foreign keys are enforced: chunk rows never outlive their scene row.
+
+use std::path::Path;
+use std::sync::{Mutex, MutexGuard};
+
+use anyhow::{Context, Result};
+use rusqlite::{Connection, OptionalExtension, params};
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+/// Where a scene's bake stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum JobState {
+    /// Accepted, waiting for a bake slot.
+    Queued,
+    /// Chunks are being baked.
+    Baking,
+    /// Every chunk is durable.
+    Done,
+    /// The bake stopped; `reason` says why.
+    Failed,
+    /// Deleted by a client; its data is gone.
+    Cancelled,
+}
+
+impl JobState {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobState::Queued => "queued",
+            JobState::Baking => "baking",
+            JobState::Done => "done",
+            JobState::Failed => "failed",
+            JobState::Cancelled => "cancelled",
+        }
+    }
+
+    fn parse(s: &str) -> Result<JobState> {
+        Ok(match s {
+            "queued" => JobState::Queued,
+            "baking" => JobState::Baking,
+            "done" => JobState::Done,
+            "failed" => JobState::Failed,
+            "cancelled" => JobState::Cancelled,
+            _ => anyhow::bail!("unknown scene state {s:?} in the database"),
+        })
+    }
+
+    /// Whether the state can no longer change by baking.
+    pub fn is_terminal(self) -> bool {
+        matches!(
+            self,
+            JobState::Done | JobState::Failed | JobState::Cancelled
+        )
+    }
+}
+
+/// What the database records of a durable chunk.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ChunkMeta {
+    /// Length of the chunk frame in bytes.
+    pub bytes: u32,
+    /// CRC-32 of the whole frame file.
+    pub crc32: u32,
+}
+
+/// A scene's row.
+#[derive(Clone, Debug)]
+pub struct SceneRow {
+    pub id: String,
+    pub seq: i64,
+    pub state: JobState,
+    pub reason: Option<String>,
+    pub created_ms: i64,
+    pub started_ms: Option<i64>,
+    pub finished_ms: Option<i64>,
+    pub vertex_count: u32,
+    pub triangle_count: u64,
+    pub chunk_count: u32,
+    pub chunk_vertices: u32,
+    /// The bake settings as JSON (for display; the bake reads the stored scene).
+    pub settings_json: String,
+    pub mesh_hash: u64,
+    /// The encoded bake header frame, sent first on every tree stream.
+    pub header: Vec<u8>,
+    pub upload_bytes: u64,
+    /// How the scene was submitted, in words.
+    pub source: String,
+    /// Chunks baked for this scene over all runs (re-bakes included).
+    pub chunks_baked: u64,
+    /// Stored chunks found corrupt and re-baked.
+    pub chunks_corrupt: u64,
+}
+
+const SCHEMA_VERSION: i64 = 1;
+
+const SCHEMA: &str = "
+CREATE TABLE IF NOT EXISTS meta (
+    key TEXT PRIMARY KEY,
+    value INTEGER NOT NULL
+);
+CREATE TABLE IF NOT EXISTS scenes (
+    seq INTEGER PRIMARY KEY AUTOINCREMENT,
+    id TEXT NOT NULL UNIQUE,
+    state TEXT NOT NULL,
+    reason TEXT,
+    created_ms INTEGER NOT NULL,
+    started_ms INTEGER,
+    finished_ms INTEGER,
+    vertex_count INTEGER NOT NULL,
+    triangle_count INTEGER NOT NULL,
+    chunk_count INTEGER NOT NULL,
+    chunk_vertices INTEGER NOT NULL,
+    settings TEXT NOT NULL,
+    mesh_hash INTEGER NOT NULL,
+    header BLOB NOT NULL,
+    upload_bytes INTEGER NOT NULL,
+    source TEXT NOT NULL,
+    chunks_baked INTEGER NOT NULL DEFAULT 0,
+    chunks_corrupt INTEGER NOT NULL DEFAULT 0
+);
+CREATE INDEX IF NOT EXISTS scenes_state ON scenes(state);
+CREATE TABLE IF NOT EXISTS chunks (
+    scene_id TEXT NOT NULL REFERENCES scenes(id) ON DELETE CASCADE,
+    idx INTEGER NOT NULL,
+    bytes INTEGER NOT NULL,
+    crc32 INTEGER NOT NULL,
+    generation INTEGER NOT NULL,
+    baked_ms INTEGER NOT NULL,
+    PRIMARY KEY (scene_id, idx)
+) WITHOUT ROWID;
+";
+
+const SCENE_COLUMNS: &str = "id, seq, state, reason, created_ms, started_ms, finished_ms, \
+    vertex_count, triangle_count, chunk_count, chunk_vertices, settings, mesh_hash, header, \
+    upload_bytes, source, chunks_baked, chunks_corrupt";
+
+/// The database: one connection behind a mutex (every statement is short).
+pub struct Db {
+    conn: Mutex<Connection>,
+    /// This process's generation (1 for the first start of a data directory).
+    pub generation: i64,
+}
+
+/// Milliseconds since the Unix epoch.
+pub fn now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_millis() as i64)
+        .unwrap_or(0)
+}
+
+impl Db {
+    /// Opens (creating if needed) the database and starts a new generation.
+    pub fn open(path: &Path) -> Result<Db> {
+        let conn = Connection::open(path)
+            .with_context(|| format!("cannot open database {}", path.display()))?;
+        // One process per data directory: the exclusive lock is taken by the first write below
+        // and held until the process ends (the OS drops it on a crash).
+        conn.busy_timeout(std::time::Duration::from_secs(2))?;
+        conn.pragma_update(None, "locking_mode", "EXCLUSIVE")?;
+        conn.pragma_update(None, "journal_mode", "WAL")?;
+        conn.pragma_update(None, "synchronous", "FULL")?;
+        conn.pragma_update(None, "foreign_keys", true)?;
+        let version: i64 = conn.pragma_query_value(None, "user_version", |r| r.get(0))?;
+        if version > SCHEMA_VERSION {
+            anyhow::bail!(
+                "database {} has schema version {version}; this build knows {SCHEMA_VERSION}",
+                path.display()
+            );
+        }
+        conn.execute_batch(SCHEMA).with_context(|| {
+            format!(
+                "cannot use database {} (is another bspvt-server using this data directory?)",
+                path.display()
+            )
+        })?;
+        conn.pragma_update(None, "user_version", SCHEMA_VERSION)?;
+        conn.execute(
+            "INSERT INTO meta(key, value) VALUES('generation', 1)
+             ON CONFLICT(key) DO UPDATE SET value = value + 1",
+            [],
+        )?;
+        let generation =
+            conn.query_row("SELECT value FROM meta WHERE key = 'generation'", [], |r| {
+                r.get(0)
+            })?;
+        Ok(Db {
+            conn: Mutex::new(conn),
+            generation,
+        })
+    }
+
+    fn conn(&self) -> MutexGuard<'_, Connection> {
+        // A panic while holding the connection leaves SQLite consistent (each statement is
+        // atomic), so a poisoned lock is still usable.
+        self.conn.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Checks that the database answers.
+    pub fn ping(&self) -> Result<()> {
+        self.conn().query_row("SELECT 1", [], |_| Ok(()))?;
+        Ok(())
+    }
+
+    /// Records a newly accepted scene (state `queued`); returns its submission sequence number.
+    pub fn insert_scene(&self, r: &SceneRow) -> Result<i64> {
+        let c = self.conn();
+        c.execute(
+            "INSERT INTO scenes(id, state, reason, created_ms, vertex_count, triangle_count,
+                 chunk_count, chunk_vertices, settings, mesh_hash, header, upload_bytes, source)
+             VALUES(?1, ?2, NULL, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)",
+            params![
+                r.id,
+                JobState::Queued.as_str(),
+                r.created_ms,
+                r.vertex_count,
+                r.triangle_count as i64,
+                r.chunk_count,
+                r.chunk_vertices,
+                r.settings_json,
+                r.mesh_hash as i64,
+                r.header,
+                r.upload_bytes as i64,
+                r.source,
+            ],
+        )?;
+        Ok(c.last_insert_rowid())
+    }
+
+    fn row(r: &rusqlite::Row<'_>) -> rusqlite::Result<(SceneRow, String)> {
+        let state: String = r.get(2)?;
+        Ok((
+            SceneRow {
+                id: r.get(0)?,
+                seq: r.get(1)?,
+                state: JobState::Queued,
+                reason: r.get(3)?,
+                created_ms: r.get(4)?,
+                started_ms: r.get(5)?,
+                finished_ms: r.get(6)?,
+                vertex_count: r.get(7)?,
+                triangle_count: r.get::<_, i64>(8)? as u64,
+                chunk_count: r.get(9)?,
+                chunk_vertices: r.get(10)?,
+                settings_json: r.get(11)?,
+                mesh_hash: r.get::<_, i64>(12)? as u64,
+                header: r.get(13)?,
+                upload_bytes: r.get::<_, i64>(14)? as u64,
+                source: r.get(15)?,
+                chunks_baked: r.get::<_, i64>(16)? as u64,
+                chunks_corrupt: r.get::<_, i64>(17)? as u64,
+            },
+            state,
+        ))
+    }
+
+    fn finish_row((mut row, state): (SceneRow, String)) -> Result<SceneRow> {
+        row.state = JobState::parse(&state)?;
+        Ok(row)
+    }
+
+    /// A scene's row.
+    pub fn scene(&self, id: &str) -> Result<Option<SceneRow>> {
+        let c = self.conn();
+        let r = c
+            .query_row(
+                &format!("SELECT {SCENE_COLUMNS} FROM scenes WHERE id = ?1"),
+                [id],
+                Db::row,
+            )
+            .optional()?;
+        r.map(Db::finish_row).transpose()
+    }
+
+    /// Scenes still to bake, those already baking first, then in submission order.
+    pub fn unfinished_scenes(&self) -> Result<Vec<SceneRow>> {
+        let c = self.conn();
+        let mut st = c.prepare(&format!(
+            "SELECT {SCENE_COLUMNS} FROM scenes WHERE state IN ('queued', 'baking')
+             ORDER BY state = 'queued', seq"
+        ))?;
+        let rows = st
+            .query_map([], Db::row)?
+            .collect::<rusqlite::Result<Vec<_>>>()?;
+        rows.into_iter().map(Db::finish_row).collect()
+    }
+
+    /// Ids of every scene that still owns files (not cancelled).
+    pub fn scene_ids_with_data(&self) -> Result<std::collections::HashSet<String>> {
+        let c = self.conn();
+        let mut st = c.prepare("SELECT id FROM scenes WHERE state != 'cancelled'")?;
+        let ids = st
+            .query_map([], |r| r.get(0))?
+            .collect::<rusqlite::Result<_>>()?;
+        Ok(ids)
+    }
+
+    /// The durable chunks of a scene, by index.
+    pub fn chunks(&self, id: &str) -> Result<Vec<(u32, ChunkMeta)>> {
+        let c = self.conn();
+        let mut st =
+            c.prepare("SELECT idx, bytes, crc32 FROM chunks WHERE scene_id = ?1 ORDER BY idx")?;
+        let rows = st
+            .query_map([id], |r| {
+                Ok((
+                    r.get::<_, u32>(0)?,
+                    ChunkMeta {
+                        bytes: r.get(1)?,
+                        crc32: r.get(2)?,
+                    },
+                ))
+            })?
+            .collect::<rusqlite::Result<_>>()?;
+        Ok(rows)
+    }
+
+    /// Number of durable chunks of a scene and their total size.
+    pub fn chunk_totals(&self, id: &str) -> Result<(u32, u64)> {
+        let c = self.conn();
+        Ok(c.query_row(
+            "SELECT COUNT(*), COALESCE(SUM(bytes), 0) FROM chunks WHERE scene_id = ?1",
+            [id],
+            |r| Ok((r.get(0)?, r.get::<_, i64>(1)? as u64)),
+        )?)
+    }
+
+    /// Records a durable chunk, if its scene is still queued or baking; returns whether it was
+    /// recorded.
+    pub fn insert_chunk(&self, id: &str, idx: u32, m: ChunkMeta) -> Result<bool> {
+        let mut c = self.conn();
+        let tx = c.transaction()?;
+        let n = tx.execute(
+            "INSERT OR REPLACE INTO chunks(scene_id, idx, bytes, crc32, generation, baked_ms)
+             SELECT ?1, ?2, ?3, ?4, ?5, ?6 FROM scenes
+             WHERE id = ?1 AND state IN ('queued', 'baking')",
+            params![id, idx, m.bytes, m.crc32, self.generation, now_ms()],
+        )?;
+        if n == 1 {
+            tx.execute(
+                "UPDATE scenes SET chunks_baked = chunks_baked + 1 WHERE id = ?1",
+                [id],
+            )?;
+        }
+        tx.commit()?;
+        Ok(n == 1)
+    }
+
+    /// Forgets a chunk (its file is missing or corrupt) so that it is baked again; a finished
+    /// scene goes back to `baking`. Returns false when the row was already gone or differed.
+    pub fn drop_chunk(&self, id: &str, idx: u32, seen: ChunkMeta, corrupt: bool) -> Result<bool> {
+        let mut c = self.conn();
+        let tx = c.transaction()?;
+        let n = tx.execute(
+            "DELETE FROM chunks WHERE scene_id = ?1 AND idx = ?2 AND bytes = ?3 AND crc32 = ?4",
+            params![id, idx, seen.bytes, seen.crc32],
+        )?;
+        if n == 1 {
+            tx.execute(
+                "UPDATE scenes SET chunks_corrupt = chunks_corrupt + ?2,
+                     state = CASE WHEN state = 'done' THEN 'baking' ELSE state END,
+                     finished_ms = CASE WHEN state = 'done' THEN NULL ELSE finished_ms END
+                 WHERE id = ?1",
+                params![id, corrupt as i64],
+            )?;
+        }
+        tx.commit()?;
+        Ok(n == 1)
+    }
+
+    /// Moves a scene to `state` (with a reason for `failed`); stamps start and finish times.
+    pub fn set_state(&self, id: &str, state: JobState, reason: Option<&str>) -> Result<()> {
+        let now = now_ms();
+        self.conn().execute(
+            "UPDATE scenes SET state = ?2, reason = ?3,
+                 started_ms = CASE WHEN ?2 = 'baking' THEN COALESCE(started_ms, ?4) ELSE started_ms END,
+                 finished_ms = CASE WHEN ?2 IN ('done', 'failed', 'cancelled') THEN ?4 ELSE NULL END
+             WHERE id = ?1",
+            params![id, state.as_str(), reason, now],
+        )?;
+        Ok(())
+    }
+
+    /// Cancels a scene: drops its chunk rows and keeps a `cancelled` tombstone. Returns the
+    /// state it had, or `None` for an unknown id.
+    pub fn cancel(&self, id: &str) -> Result<Option<JobState>> {
+        let mut c = self.conn();
+        let tx = c.transaction()?;
+        let before: Option<String> = tx
+            .query_row("SELECT state FROM scenes WHERE id = ?1", [id], |r| r.get(0))
+            .optional()?;
+        let Some(before) = before else {
+            return Ok(None);
+        };
+        tx.execute("DELETE FROM chunks WHERE scene_id = ?1", [id])?;
+        tx.execute(
+            "UPDATE scenes SET state = 'cancelled', reason = 'deleted by a client',
+                 finished_ms = COALESCE(finished_ms, ?2) WHERE id = ?1",
+            params![id, now_ms()],
+        )?;
+        tx.commit()?;
+        Ok(Some(JobState::parse(&before)?))
+    }
+
+    /// Scenes per state (for metrics).
+    pub fn state_counts(&self) -> Result<Vec<(JobState, u64)>> {
+        let c = self.conn();
+        let mut st = c.prepare("SELECT state, COUNT(*) FROM scenes GROUP BY state")?;
+        let rows = st
+            .query_map([], |r| Ok((r.get::<_, String>(0)?, r.get::<_, i64>(1)?)))?
+            .collect::<rusqlite::Result<Vec<_>>>()?;
+        rows.into_iter()
+            .map(|(s, n)| Ok((JobState::parse(&s)?, n as u64)))
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(id: &str) -> SceneRow {
+        SceneRow {
+            id: id.into(),
+            seq: 0,
+            state: JobState::Queued,
+            reason: None,
+            created_ms: now_ms(),
+            started_ms: None,
+            finished_ms: None,
+            vertex_count: 100,
+            triangle_count: 150,
+            chunk_count: 4,
+            chunk_vertices: 32,
+            settings_json: "{}".into(),
+            mesh_hash: u64::MAX - 3,
+            header: vec![1, 2, 3],
+            upload_bytes: 10,
+            source: "test".into(),
+            chunks_baked: 0,
+            chunks_corrupt: 0,
+        }
+    }
+
+    #[test]
+    fn chunks_only_for_live_scenes_and_generations_grow() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("db.sqlite");
+        let db = Db::open(&path).expect("open");
+        assert_eq!(db.generation, 1);
+        db.insert_scene(&row("a")).expect("insert");
+        let m = ChunkMeta {
+            bytes: 10,
+            crc32: u32::MAX,
+        };
+        assert!(db.insert_chunk("a", 0, m).expect("chunk"));
+        assert!(
+            !db.insert_chunk("nope", 0, m)
+                .expect("chunk of unknown scene")
+        );
+        let r = db.scene("a").expect("query").expect("row");
+        assert_eq!(r.mesh_hash, u64::MAX - 3);
+        assert_eq!(r.chunks_baked, 1);
+        assert_eq!(db.chunks("a").expect("chunks"), vec![(0, m)]);
+        db.set_state("a", JobState::Done, None).expect("done");
+        assert!(db.drop_chunk("a", 0, m, true).expect("drop"));
+        let r = db.scene("a").expect("query").expect("row");
+        assert_eq!((r.state, r.chunks_corrupt), (JobState::Baking, 1));
+        assert_eq!(db.cancel("a").expect("cancel"), Some(JobState::Baking));
+        assert!(!db.insert_chunk("a", 1, m).expect("chunk after cancel"));
+        assert_eq!(db.cancel("zzz").expect("cancel unknown"), None);
+        drop(db);
+        assert_eq!(Db::open(&path).expect("reopen").generation, 2);
+    }
+}

@@ -1,0 +1,419 @@
+//! Turning an upload (a mesh file, an optional scene JSON, optional bake settings) into the
+//! [`Scene`] the service bakes, and storing that scene.
+//!
+//! Guarantees:
+//! - the mesh is parsed from memory by `bspvt_proto::import` under the service's [`Limits`]
+//!   (no panic, no allocation from an unchecked count, glTF external URIs refused); a `.zst`
+//!   mesh is decompressed to at most `max_mesh_bytes` with a bounded zstd window, so a
+//!   decompression bomb is refused after reading at most that many bytes;
+//! - a scene JSON may only name `builtin:` meshes and the uploaded file (by its file name): it
+//!   can never make the server read a path of its own choosing;
+//! - the scene is composed exactly as [`Scene::from_file`] composes a scene file on disk
+//!   (tested below), so the service bakes what the offline `bspvt-server bake` bakes;
+//! - the stored form ([`encode_scene`]) round-trips every bit (postcard, no JSON floats).
+
+use std::io::Read;
+
+use bspvt_proto::import::{Format, Limits, load_mesh_bytes};
+use bspvt_proto::scene::{Camera, Material, PolygonLight, Region, SceneFile};
+use bspvt_proto::{BakeSettings, Mesh, Scene, SceneError};
+use serde::{Deserialize, Serialize};
+
+use super::error::{ApiError, ApiResult};
+
+/// What a submission may contain.
+pub struct Upload {
+    /// The `mesh` field: its file name and bytes as received.
+    pub mesh: Option<(String, Vec<u8>)>,
+    /// The `scene` field (scene JSON).
+    pub scene: Option<String>,
+    /// The `settings` field (bake settings JSON, replaces the scene's `bake`).
+    pub settings: Option<String>,
+}
+
+/// Limits applied while preparing a scene.
+#[derive(Clone, Copy, Debug)]
+pub struct InputLimits {
+    pub mesh: Limits,
+    pub max_face_res: u32,
+    pub max_supersampling: u32,
+}
+
+/// A scene ready to be stored and baked.
+pub struct Prepared {
+    pub scene: Scene,
+    /// How it was submitted, in words (for the status document).
+    pub source: String,
+    /// Bytes uploaded (mesh as received + scene + settings).
+    pub upload_bytes: u64,
+}
+
+/// Longest zstd window accepted for a compressed mesh (2^24 = 16 MiB of decoder memory).
+const ZSTD_WINDOW_LOG_MAX: u32 = 24;
+
+/// Builds the scene of an upload, applying every limit.
+pub fn prepare(up: Upload, lim: &InputLimits) -> ApiResult<Prepared> {
+    let upload_bytes = up.mesh.as_ref().map_or(0, |m| m.1.len() as u64)
+        + up.scene.as_ref().map_or(0, |s| s.len() as u64)
+        + up.settings.as_ref().map_or(0, |s| s.len() as u64);
+    let mesh = match up.mesh {
+        Some((name, bytes)) => Some(load_upload(&name, bytes, &lim.mesh)?),
+        None => None,
+    };
+    let (mut scene, mut source) = match (up.scene, mesh) {
+        (Some(json), mesh) => {
+            let file: SceneFile = serde_json::from_str(&json).map_err(SceneError::from)?;
+            let source = match &mesh {
+                Some((name, m)) => format!(
+                    "scene JSON with mesh {name} ({} vertices)",
+                    m.vertex_count()
+                ),
+                None => "scene JSON".to_string(),
+            };
+            (compose(file, mesh.as_ref())?, source)
+        }
+        (None, Some((name, m))) => {
+            let source = format!("mesh {name} ({} vertices), default scene", m.vertex_count());
+            (Scene::from_mesh(m)?, source)
+        }
+        (None, None) => {
+            return Err(ApiError::bad_request(
+                "missing_field",
+                "the form has neither a `mesh` file nor a `scene` field",
+            ));
+        }
+    };
+    if let Some(json) = up.settings {
+        scene.bake = serde_json::from_str::<BakeSettings>(&json).map_err(|e| {
+            ApiError::unprocessable("invalid_settings", format!("`settings` field: {e}"))
+        })?;
+        source.push_str(", settings overridden");
+        scene.validate()?;
+    }
+    check_limits(&scene, lim)?;
+    Ok(Prepared {
+        scene,
+        source,
+        upload_bytes,
+    })
+}
+
+/// Decompresses (`.zst`) and parses an uploaded mesh; returns its file name and the mesh.
+fn load_upload(name: &str, bytes: Vec<u8>, lim: &Limits) -> ApiResult<(String, Mesh)> {
+    // Only the last path component of a client-supplied file name means anything.
+    let name = name
+        .rsplit(['/', '\\'])
+        .next()
+        .unwrap_or_default()
+        .to_string();
+    if name.is_empty() {
+        return Err(ApiError::bad_request(
+            "missing_file_name",
+            "the `mesh` field needs a file name with an extension (.glb, .gltf, .obj, .ply, optionally + .zst)",
+        ));
+    }
+    let lower = name.to_ascii_lowercase();
+    let (inner, bytes) = match lower.strip_suffix(".zst") {
+        Some(_) => {
+            let inner = name[..name.len() - 4].to_string();
+            (inner, decompress(&bytes, lim.max_bytes)?)
+        }
+        None => (name.clone(), bytes),
+    };
+    let format = Format::from_name(&inner)?;
+    let mesh = load_mesh_bytes(&bytes, format, lim)?;
+    Ok((inner, mesh))
+}
+
+/// zstd decompression that stops at `max` bytes of output.
+fn decompress(data: &[u8], max: u64) -> ApiResult<Vec<u8>> {
+    let bad = |e: std::io::Error| {
+        ApiError::unprocessable("invalid_compression", format!("bad zstd data: {e}"))
+    };
+    let mut dec = zstd::stream::read::Decoder::new(data).map_err(bad)?;
+    dec.window_log_max(ZSTD_WINDOW_LOG_MAX).map_err(bad)?;
+    let mut out = Vec::new();
+    dec.take(max + 1).read_to_end(&mut out).map_err(bad)?;
+    if out.len() as u64 > max {
+        return Err(ApiError::too_large(
+            "mesh_too_large",
+            format!("the decompressed mesh is larger than the limit of {max} bytes"),
+        ));
+    }
+    Ok(out)
+}
+
+/// [`Scene::from_file`] for an upload: `builtin:` meshes and the uploaded mesh only.
+fn compose(file: SceneFile, upload: Option<&(String, Mesh)>) -> ApiResult<Scene> {
+    if file.meshes.is_empty() {
+        return Err(ApiError::unprocessable(
+            "invalid_scene",
+            "invalid scene: scene names no meshes",
+        ));
+    }
+    let mut mesh = Mesh::default();
+    for m in &file.meshes {
+        if let Some(name) = m.path.strip_prefix("builtin:") {
+            let part = bspvt_proto::builtin::mesh(name).ok_or_else(|| {
+                ApiError::unprocessable(
+                    "invalid_scene",
+                    format!(
+                        "unknown built-in mesh {name:?} (known: {})",
+                        bspvt_proto::builtin::NAMES.join(", ")
+                    ),
+                )
+            })?;
+            mesh.append(&part, m.material);
+        } else {
+            match upload {
+                Some((uploaded, part)) if *uploaded == m.path => mesh.append(part, m.material),
+                Some((uploaded, _)) => {
+                    return Err(ApiError::unprocessable(
+                        "invalid_scene",
+                        format!(
+                            "the scene names mesh {:?}, but the uploaded mesh is {uploaded:?}: a scene may name only `builtin:` meshes and the uploaded file",
+                            super::error::truncate(&m.path, 200)
+                        ),
+                    ));
+                }
+                None => {
+                    return Err(ApiError::bad_request(
+                        "missing_field",
+                        format!(
+                            "the scene names mesh {:?}, but no `mesh` file was uploaded",
+                            super::error::truncate(&m.path, 200)
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    if file.ground_plane {
+        let ground = bspvt_proto::builtin::ground_under(&mesh.bounds(), file.ground_material);
+        mesh.append(&ground, 0);
+    }
+    let camera = file
+        .camera
+        .unwrap_or_else(|| Camera::framing(&mesh.bounds()));
+    let scene = Scene {
+        mesh,
+        materials: file.materials,
+        lights: file.lights,
+        camera,
+        bake: file.bake,
+    };
+    scene.validate()?;
+    Ok(scene)
+}
+
+/// The service's own caps on top of [`Scene::validate`].
+fn check_limits(scene: &Scene, lim: &InputLimits) -> ApiResult<()> {
+    let too_large = |what: &str, n: u64, limit: u64| {
+        Err(ApiError::too_large(
+            "scene_too_large",
+            format!("the scene has {n} {what}; this server accepts at most {limit}"),
+        ))
+    };
+    let v = scene.mesh.vertex_count() as u64;
+    if v > lim.mesh.max_vertices {
+        return too_large("vertices", v, lim.mesh.max_vertices);
+    }
+    let t = scene.mesh.triangles.len() as u64;
+    if t > lim.mesh.max_triangles {
+        return too_large("triangles", t, lim.mesh.max_triangles);
+    }
+    let b = &scene.bake;
+    if b.face_res > lim.max_face_res {
+        return Err(ApiError::unprocessable(
+            "invalid_settings",
+            format!(
+                "bake.face_res = {} is above this server's limit of {}",
+                b.face_res, lim.max_face_res
+            ),
+        ));
+    }
+    if b.supersampling > lim.max_supersampling {
+        return Err(ApiError::unprocessable(
+            "invalid_settings",
+            format!(
+                "bake.supersampling = {} is above this server's limit of {}",
+                b.supersampling, lim.max_supersampling
+            ),
+        ));
+    }
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// The stored form of a scene.
+
+const STORED_VERSION: u16 = 1;
+
+#[derive(Serialize, Deserialize)]
+struct StoredScene {
+    version: u16,
+    mesh: Mesh,
+    materials: Vec<Material>,
+    lights: Vec<StoredLight>,
+    camera: Camera,
+    bake: BakeSettings,
+}
+
+/// [`PolygonLight`] without serde's skipped fields, which postcard cannot carry.
+#[derive(Serialize, Deserialize)]
+struct StoredLight {
+    vertices: Vec<[f32; 3]>,
+    radiance: [f32; 3],
+    two_sided: bool,
+    texture: Option<String>,
+    region: Option<Region>,
+}
+
+/// The scene as stored in `scene.bin` (postcard; exact floats).
+pub fn encode_scene(s: &Scene) -> Vec<u8> {
+    let stored = StoredScene {
+        version: STORED_VERSION,
+        mesh: s.mesh.clone(),
+        materials: s.materials.clone(),
+        lights: s
+            .lights
+            .iter()
+            .map(|l| StoredLight {
+                vertices: l.vertices.clone(),
+                radiance: l.radiance,
+                two_sided: l.two_sided,
+                texture: l.texture.clone(),
+                region: l.region,
+            })
+            .collect(),
+        camera: s.camera.clone(),
+        bake: s.bake.clone(),
+    };
+    postcard::to_stdvec(&stored).unwrap_or_default()
+}
+
+/// Reads back [`encode_scene`]'s bytes.
+pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
+    let s: StoredScene =
+        postcard::from_bytes(bytes).map_err(|e| format!("stored scene does not decode: {e}"))?;
+    if s.version != STORED_VERSION {
+        return Err(format!("stored scene has version {}", s.version));
+    }
+    Ok(Scene {
+        mesh: s.mesh,
+        materials: s.materials,
+        lights: s
+            .lights
+            .into_iter()
+            .map(|l| PolygonLight {
+                vertices: l.vertices,
+                radiance: l.radiance,
+                two_sided: l.two_sided,
+                texture: l.texture,
+                region: l.region,
+            })
+            .collect(),
+        camera: s.camera,
+        bake: s.bake,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn limits() -> InputLimits {
+        InputLimits {
+            mesh: Limits::default(),
+            max_face_res: 512,
+            max_supersampling: 8,
+        }
+    }
+
+    const OBJ: &str = "v 0 0 0\nv 1 0 0\nv 0 0 1\nv 1 0.5 1\nf 1 3 2\nf 2 3 4\n";
+
+    /// An uploaded mesh + scene JSON gives exactly the scene `Scene::load` reads from disk.
+    #[test]
+    fn upload_composes_like_a_scene_file_on_disk() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let json = r#"{
+            "meshes": [{"path": "tri.obj"}, {"path": "builtin:plate-small", "material": 1},
+                       {"path": "tri.obj", "material": 1}],
+            "ground_plane": true, "ground_material": 1,
+            "materials": [{"name": "a"}, {"name": "b", "roughness": 0.5}, {}, {}],
+            "lights": [{"vertices": [[-1,3,-1],[1,3,-1],[1,3,1],[-1,3,1]],
+                        "radiance": [1,1,1], "region": {"min": [-2,2,-2], "max": [2,4,2]}}],
+            "bake": {"face_res": 16, "chunk_vertices": 100}
+        }"#;
+        std::fs::write(dir.path().join("tri.obj"), OBJ).expect("write obj");
+        std::fs::write(dir.path().join("s.json"), json).expect("write scene");
+        let disk = Scene::load(&dir.path().join("s.json")).expect("scene from disk");
+        let up = prepare(
+            Upload {
+                mesh: Some(("some/dir/tri.obj".into(), OBJ.as_bytes().to_vec())),
+                scene: Some(json.into()),
+                settings: None,
+            },
+            &limits(),
+        )
+        .unwrap_or_else(|e| panic!("prepare: {e:?}"));
+        assert_eq!(up.scene, disk);
+        assert_eq!(decode_scene(&encode_scene(&up.scene)), Ok(disk));
+    }
+
+    #[test]
+    fn builtin_scene_survives_storage_and_bare_meshes_get_the_default_scene() {
+        let s = bspvt_proto::builtin::scene("plate-small").expect("builtin");
+        assert_eq!(decode_scene(&encode_scene(&s)).as_ref(), Ok(&s));
+        let z = zstd::bulk::compress(OBJ.as_bytes(), 3).expect("compress");
+        let up = prepare(
+            Upload {
+                mesh: Some(("tri.OBJ.zst".into(), z)),
+                scene: None,
+                settings: Some(r#"{"face_res": 8}"#.into()),
+            },
+            &limits(),
+        )
+        .unwrap_or_else(|e| panic!("prepare: {e:?}"));
+        let mut expect = Scene::from_mesh(
+            load_mesh_bytes(OBJ.as_bytes(), Format::Obj, &Limits::default()).expect("mesh"),
+        )
+        .expect("scene");
+        expect.bake.face_res = 8;
+        assert_eq!(up.scene, expect);
+    }
+
+    #[test]
+    fn scenes_cannot_name_server_paths_and_bombs_stop_at_the_limit() {
+        let err = prepare(
+            Upload {
+                mesh: None,
+                scene: Some(r#"{"meshes": [{"path": "/etc/passwd.obj"}], "lights": []}"#.into()),
+                settings: None,
+            },
+            &limits(),
+        )
+        .err()
+        .expect("refused");
+        assert_eq!(err.code, "missing_field");
+        let bomb = zstd::bulk::compress(&vec![b' '; 1 << 20], 3).expect("compress");
+        let lim = InputLimits {
+            mesh: Limits {
+                max_bytes: 1000,
+                ..Limits::default()
+            },
+            ..limits()
+        };
+        let err = prepare(
+            Upload {
+                mesh: Some(("x.obj.zst".into(), bomb)),
+                scene: None,
+                settings: None,
+            },
+            &lim,
+        )
+        .err()
+        .expect("refused");
+        assert_eq!(err.status, axum::http::StatusCode::PAYLOAD_TOO_LARGE);
+    }
+}

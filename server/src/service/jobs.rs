@@ -1,0 +1,783 @@
+//! The bake scheduler: scenes split into chunks of vertices, baked by N worker threads on one
+//! shared rayon pool, each chunk made durable before anyone hears of it.
+//!
+//! Guarantees:
+//! - **durable before reported**: a chunk is written and synced (`store`), then recorded in
+//!   the database (`db`), and only then marked done in memory and announced to streams, event
+//!   subscribers and the status document;
+//! - **resume without recomputation**: at start, every scene still `queued` or `baking` is
+//!   re-queued with exactly the chunks the database does not record (a recorded chunk whose
+//!   file is missing or has the wrong size is dropped and baked again); recorded chunks are
+//!   never baked again, which `chunks_baked_this_process` makes visible;
+//! - **fairness**: workers take one chunk at a time, round-robin over the scenes being baked
+//!   (at most `max_active_scenes`, the others wait in submission order), so a big scene does
+//!   not starve a small one;
+//! - **no blocking of the async runtime**: baking and its file and database writes run on the
+//!   worker threads and the rayon pool, never on tokio's executor;
+//! - **determinism**: each chunk is [`Baker::bake_chunk`], so the stored frames are exactly the
+//!   offline bake's, whatever the worker count, order or restarts;
+//! - a corrupt stored chunk ([`Jobs::rebake`]) is forgotten and baked again, never served; a
+//!   failing scene (unreadable stored scene, storage error, panic) becomes `failed` with a
+//!   reason and does not stop the workers.
+
+use std::collections::{BTreeSet, HashMap, VecDeque};
+use std::panic::AssertUnwindSafe;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use bspvt_proto::encoding::encode_header;
+use tokio::sync::watch;
+
+use super::db::{ChunkMeta, Db, JobState, SceneRow, now_ms};
+use super::metrics::{Gauges, Metrics};
+use super::store::Store;
+use crate::bake::Baker;
+
+/// Locks a mutex, ignoring poisoning: every critical section here leaves its data consistent
+/// at each step, and a panic is caught around the bake, not inside these sections.
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// The scheduler and its workers.
+pub struct Jobs {
+    db: Arc<Db>,
+    store: Arc<Store>,
+    metrics: Arc<Metrics>,
+    pool: rayon::ThreadPool,
+    sched: Mutex<Sched>,
+    work: Condvar,
+    workers: usize,
+    max_active: usize,
+    max_queued: usize,
+    handles: Mutex<Vec<JoinHandle<()>>>,
+    /// Chunks baked by this process, per scene (the proof that a restart recomputes nothing
+    /// that was durable; kept for the process's lifetime, a few bytes per scene).
+    baked_here: Mutex<HashMap<String, u32>>,
+}
+
+#[derive(Default)]
+struct Sched {
+    /// Every scene queued or baking.
+    live: HashMap<String, Arc<Live>>,
+    /// Scenes waiting for a bake slot, in submission order.
+    queue: VecDeque<Arc<Live>>,
+    /// Scenes being baked, in round-robin order.
+    active: VecDeque<Arc<Live>>,
+    stop: bool,
+}
+
+/// A scene as the scheduler and the streams see it.
+pub struct Live {
+    /// Metadata (its `state` field is the state when loaded; see [`Live::snapshot`]).
+    pub row: SceneRow,
+    progress: Mutex<Progress>,
+    /// Bumped on every change of `progress`.
+    tx: watch::Sender<u64>,
+    cancel: AtomicBool,
+    baker: Mutex<Option<Arc<Baker>>>,
+}
+
+struct Progress {
+    state: JobState,
+    reason: Option<String>,
+    chunks: Vec<Option<ChunkMeta>>,
+    pending: BTreeSet<u32>,
+    in_flight: BTreeSet<u32>,
+    chunks_done: u32,
+    vertices_done: u64,
+    stored_bytes: u64,
+    started_ms: Option<i64>,
+    finished_ms: Option<i64>,
+    chunks_baked_total: u64,
+    chunks_corrupt: u64,
+    vertices_this_process: u64,
+    first_start: Option<Instant>,
+}
+
+/// A consistent copy of a scene's progress.
+#[derive(Clone, Debug)]
+pub struct Snapshot {
+    pub state: JobState,
+    pub reason: Option<String>,
+    pub chunks_done: u32,
+    pub vertices_done: u64,
+    pub stored_bytes: u64,
+    pub started_ms: Option<i64>,
+    pub finished_ms: Option<i64>,
+    pub chunks_baked_total: u64,
+    pub chunks_corrupt: u64,
+    /// Vertices per second baked by this process (while baking).
+    pub rate: Option<f64>,
+    pub eta_s: Option<f64>,
+}
+
+/// What a stream sees of one chunk.
+pub enum ChunkState {
+    Durable(ChunkMeta),
+    /// Not baked yet; the scene is queued or baking.
+    Waiting,
+    /// It will never come: the scene failed or was deleted.
+    Never(JobState, Option<String>),
+}
+
+/// Why a submission was not queued.
+pub enum SubmitError {
+    QueueFull(usize),
+    Db(anyhow::Error),
+}
+
+/// Vertices of chunk `c`.
+pub fn chunk_len(row: &SceneRow, c: u32) -> u64 {
+    let start = c as u64 * row.chunk_vertices as u64;
+    (row.vertex_count as u64)
+        .saturating_sub(start)
+        .min(row.chunk_vertices as u64)
+}
+
+impl Live {
+    fn new(row: SceneRow, durable: Vec<(u32, ChunkMeta)>) -> Live {
+        let n = row.chunk_count;
+        let mut chunks = vec![None; n as usize];
+        let (mut done, mut verts, mut bytes) = (0, 0, row.header.len() as u64);
+        for (i, m) in durable {
+            if let Some(slot) = chunks.get_mut(i as usize)
+                && slot.is_none()
+            {
+                *slot = Some(m);
+                done += 1;
+                verts += chunk_len(&row, i);
+                bytes += m.bytes as u64;
+            }
+        }
+        let pending = if row.state.is_terminal() {
+            BTreeSet::new()
+        } else {
+            (0..n).filter(|&i| chunks[i as usize].is_none()).collect()
+        };
+        let progress = Progress {
+            state: row.state,
+            reason: row.reason.clone(),
+            chunks,
+            pending,
+            in_flight: BTreeSet::new(),
+            chunks_done: done,
+            vertices_done: verts,
+            stored_bytes: bytes,
+            started_ms: row.started_ms,
+            finished_ms: row.finished_ms,
+            chunks_baked_total: row.chunks_baked,
+            chunks_corrupt: row.chunks_corrupt,
+            vertices_this_process: 0,
+            first_start: None,
+        };
+        Live {
+            row,
+            progress: Mutex::new(progress),
+            tx: watch::channel(0).0,
+            cancel: AtomicBool::new(false),
+            baker: Mutex::new(None),
+        }
+    }
+
+    pub fn id(&self) -> &str {
+        &self.row.id
+    }
+
+    /// A receiver that wakes on every change (subscribe before reading, to miss nothing).
+    pub fn subscribe(&self) -> watch::Receiver<u64> {
+        self.tx.subscribe()
+    }
+
+    fn bump(&self) {
+        self.tx.send_modify(|v| *v = v.wrapping_add(1));
+    }
+
+    fn cancelled(&self) -> bool {
+        self.cancel.load(Ordering::Acquire)
+    }
+
+    /// Where chunk `c` stands.
+    pub fn chunk(&self, c: u32) -> ChunkState {
+        let p = lock(&self.progress);
+        match p.chunks.get(c as usize).copied().flatten() {
+            Some(m) => ChunkState::Durable(m),
+            None if matches!(p.state, JobState::Failed | JobState::Cancelled) => {
+                ChunkState::Never(p.state, p.reason.clone())
+            }
+            None => ChunkState::Waiting,
+        }
+    }
+
+    /// The metadata of chunks `range` if every one of them is durable.
+    pub fn durable(&self, range: std::ops::Range<u32>) -> Option<Vec<ChunkMeta>> {
+        let p = lock(&self.progress);
+        range
+            .map(|c| p.chunks.get(c as usize).copied().flatten())
+            .collect()
+    }
+
+    pub fn state(&self) -> JobState {
+        lock(&self.progress).state
+    }
+
+    pub fn snapshot(&self) -> Snapshot {
+        let p = lock(&self.progress);
+        let rate = match (p.state, p.first_start) {
+            (JobState::Baking, Some(t)) if p.vertices_this_process > 0 => {
+                Some(p.vertices_this_process as f64 / t.elapsed().as_secs_f64().max(1e-3))
+            }
+            _ => None,
+        };
+        let remaining = (self.row.vertex_count as u64).saturating_sub(p.vertices_done);
+        Snapshot {
+            state: p.state,
+            reason: p.reason.clone(),
+            chunks_done: p.chunks_done,
+            vertices_done: p.vertices_done,
+            stored_bytes: p.stored_bytes,
+            started_ms: p.started_ms,
+            finished_ms: p.finished_ms,
+            chunks_baked_total: p.chunks_baked_total,
+            chunks_corrupt: p.chunks_corrupt,
+            rate,
+            eta_s: rate.map(|r| remaining as f64 / r.max(1e-9)),
+        }
+    }
+}
+
+impl Jobs {
+    /// Resumes unfinished scenes from the database, cleans the store and starts the workers.
+    pub fn start(
+        db: Arc<Db>,
+        store: Arc<Store>,
+        metrics: Arc<Metrics>,
+        workers: usize,
+        threads: usize,
+        max_active: usize,
+        max_queued: usize,
+    ) -> Result<Arc<Jobs>> {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(|i| format!("bake-pool-{i}"))
+            .build()
+            .context("cannot start the bake thread pool")?;
+        let jobs = Arc::new(Jobs {
+            db,
+            store,
+            metrics,
+            pool,
+            sched: Mutex::new(Sched::default()),
+            work: Condvar::new(),
+            workers,
+            max_active,
+            max_queued,
+            handles: Mutex::new(Vec::new()),
+            baked_here: Mutex::new(HashMap::new()),
+        });
+        jobs.collect_garbage()?;
+        jobs.resume()?;
+        let mut handles = lock(&jobs.handles);
+        for w in 0..workers {
+            let j = jobs.clone();
+            handles.push(
+                std::thread::Builder::new()
+                    .name(format!("bake-worker-{w}"))
+                    .spawn(move || j.worker())
+                    .context("cannot start a bake worker")?,
+            );
+        }
+        drop(handles);
+        Ok(jobs)
+    }
+
+    /// Removes scene directories the database does not know (a crash between writing a new
+    /// scene's files and recording it) or no longer owns (a crash while deleting).
+    fn collect_garbage(&self) -> Result<()> {
+        let keep = self.db.scene_ids_with_data()?;
+        for id in self.store.scene_ids()? {
+            if !keep.contains(&id) {
+                tracing::info!(scene = %id, "removing files of an unrecorded or deleted scene");
+                if let Err(e) = self.store.remove_scene(&id) {
+                    tracing::warn!(scene = %id, error = %e, "cannot remove scene files");
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Re-queues the scenes a previous run left queued or baking.
+    fn resume(&self) -> Result<()> {
+        let rows = self.db.unfinished_scenes()?;
+        let mut s = lock(&self.sched);
+        for row in rows {
+            let id = row.id.clone();
+            let recorded = self.db.chunks(&id)?;
+            let on_disk = match self.store.list_chunks(&id) {
+                Ok(files) => {
+                    for p in files.stray {
+                        let _ = std::fs::remove_file(p);
+                    }
+                    files.chunks.into_iter().collect::<HashMap<u32, u64>>()
+                }
+                Err(e) => {
+                    let reason = format!("the scene's files are missing: {e}");
+                    tracing::error!(scene = %id, %reason, "cannot resume");
+                    self.db.set_state(&id, JobState::Failed, Some(&reason))?;
+                    continue;
+                }
+            };
+            let mut kept = Vec::new();
+            for (c, m) in recorded {
+                if on_disk.get(&c) == Some(&(m.bytes as u64)) {
+                    kept.push((c, m));
+                } else {
+                    tracing::warn!(scene = %id, chunk = c, "recorded chunk missing or truncated on disk; baking it again");
+                    self.metrics.chunks_corrupt.fetch_add(1, Ordering::Relaxed);
+                    self.db.drop_chunk(&id, c, m, true)?;
+                    self.store.remove_chunk(&id, c);
+                }
+            }
+            // Files without a record were never reported: bake them again.
+            let recorded: std::collections::HashSet<u32> = kept.iter().map(|(c, _)| *c).collect();
+            for &c in on_disk.keys() {
+                if !recorded.contains(&c) {
+                    self.store.remove_chunk(&id, c);
+                }
+            }
+            // Re-read: dropping chunks above changed its counters.
+            let row = self.db.scene(&id)?.unwrap_or(row);
+            let live = Arc::new(Live::new(row, kept));
+            let missing = lock(&live.progress).pending.len();
+            tracing::info!(
+                scene = %id,
+                chunks_missing = missing,
+                chunks_total = live.row.chunk_count,
+                "resuming scene"
+            );
+            s.live.insert(id, live.clone());
+            s.queue.push_back(live);
+        }
+        // Scenes with nothing left to bake are finished by the first worker that looks.
+        drop(s);
+        self.work.notify_all();
+        Ok(())
+    }
+
+    /// Records and queues a new scene (its files are already durable).
+    pub fn submit(&self, row: SceneRow) -> Result<Arc<Live>, SubmitError> {
+        let mut s = lock(&self.sched);
+        if s.live.len() >= self.max_queued {
+            return Err(SubmitError::QueueFull(self.max_queued));
+        }
+        let mut row = row;
+        row.seq = self.db.insert_scene(&row).map_err(SubmitError::Db)?;
+        let live = Arc::new(Live::new(row, Vec::new()));
+        s.live.insert(live.row.id.clone(), live.clone());
+        s.queue.push_back(live.clone());
+        drop(s);
+        self.metrics
+            .scenes_submitted
+            .fetch_add(1, Ordering::Relaxed);
+        self.work.notify_one();
+        Ok(live)
+    }
+
+    /// Whether a submission would be queued now.
+    pub fn has_room(&self) -> bool {
+        lock(&self.sched).live.len() < self.max_queued
+    }
+
+    /// The scene `id`: the live one if queued or baking, else loaded from the database.
+    pub fn lookup(&self, id: &str) -> Result<Option<Arc<Live>>> {
+        if let Some(l) = lock(&self.sched).live.get(id) {
+            return Ok(Some(l.clone()));
+        }
+        let Some(row) = self.db.scene(id)? else {
+            return Ok(None);
+        };
+        if !row.state.is_terminal() {
+            // It became live (a re-bake) between the two looks.
+            if let Some(l) = lock(&self.sched).live.get(id) {
+                return Ok(Some(l.clone()));
+            }
+        }
+        let chunks = match row.state {
+            JobState::Cancelled => Vec::new(),
+            _ => self.db.chunks(id)?,
+        };
+        Ok(Some(Arc::new(Live::new(row, chunks))))
+    }
+
+    /// Chunks of scene `id` baked by this process.
+    pub fn baked_this_process(&self, id: &str) -> u32 {
+        lock(&self.baked_here).get(id).copied().unwrap_or(0)
+    }
+
+    /// Position in the waiting queue (0 = next), if queued.
+    pub fn queue_position(&self, id: &str) -> Option<usize> {
+        lock(&self.sched).queue.iter().position(|l| l.id() == id)
+    }
+
+    /// Cancels a scene and deletes its data. Returns its previous state, `None` if unknown.
+    pub fn delete(&self, id: &str) -> Result<Option<JobState>> {
+        let mut s = lock(&self.sched);
+        let live = s.live.remove(id);
+        s.queue.retain(|l| l.id() != id);
+        s.active.retain(|l| l.id() != id);
+        let before = self.db.cancel(id)?;
+        drop(s);
+        if let Some(l) = &live {
+            l.cancel.store(true, Ordering::Release);
+            {
+                let mut p = lock(&l.progress);
+                p.state = JobState::Cancelled;
+                p.reason = Some("deleted by a client".into());
+                p.pending.clear();
+                p.finished_ms = Some(now_ms());
+            }
+            *lock(&l.baker) = None;
+            l.bump();
+        }
+        if matches!(before, Some(b) if b != JobState::Cancelled) {
+            self.metrics
+                .scenes_cancelled
+                .fetch_add(1, Ordering::Relaxed);
+            // Leftovers are removed at the next start (a cancelled scene owns no files).
+            if let Err(e) = self.store.remove_scene(id) {
+                tracing::warn!(scene = %id, error = %e, "cannot remove the files of a deleted scene");
+            }
+            tracing::info!(scene = %id, "scene cancelled and deleted");
+        }
+        Ok(before)
+    }
+
+    /// Chunk `c` of scene `id`, recorded as `seen`, failed verification on read: forget it,
+    /// bake it again, and return the live scene to wait on (`None` if the scene is gone).
+    pub fn rebake(
+        &self,
+        id: &str,
+        c: u32,
+        seen: ChunkMeta,
+        why: &str,
+    ) -> Result<Option<Arc<Live>>> {
+        let mut s = lock(&self.sched);
+        if let Some(live) = s.live.get(id).cloned() {
+            let mut p = lock(&live.progress);
+            if p.chunks.get(c as usize).copied().flatten() == Some(seen) {
+                tracing::error!(scene = %id, chunk = c, %why, "stored chunk is corrupt; baking it again");
+                self.metrics.chunks_corrupt.fetch_add(1, Ordering::Relaxed);
+                self.db.drop_chunk(id, c, seen, true)?;
+                self.store.remove_chunk(id, c);
+                p.chunks[c as usize] = None;
+                p.chunks_done -= 1;
+                p.vertices_done -= chunk_len(&live.row, c);
+                p.stored_bytes -= seen.bytes as u64;
+                p.chunks_corrupt += 1;
+                p.pending.insert(c);
+            }
+            drop(p);
+            drop(s);
+            live.bump();
+            self.work.notify_one();
+            return Ok(Some(live));
+        }
+        // A finished scene: back to baking with this one chunk missing.
+        let Some(row) = self.db.scene(id)? else {
+            return Ok(None);
+        };
+        if row.state != JobState::Done {
+            return Ok(None);
+        }
+        tracing::error!(scene = %id, chunk = c, %why, "stored chunk is corrupt; baking it again");
+        self.metrics.chunks_corrupt.fetch_add(1, Ordering::Relaxed);
+        self.db.drop_chunk(id, c, seen, true)?;
+        self.store.remove_chunk(id, c);
+        let Some(row) = self.db.scene(id)? else {
+            return Ok(None);
+        };
+        let live = Arc::new(Live::new(row, self.db.chunks(id)?));
+        s.live.insert(id.to_string(), live.clone());
+        s.queue.push_front(live.clone());
+        drop(s);
+        self.work.notify_one();
+        Ok(Some(live))
+    }
+
+    /// Queue and bake gauges.
+    pub fn gauges(&self) -> Gauges {
+        let s = lock(&self.sched);
+        let mut g = Gauges {
+            scenes_queued: s.queue.len() as u64,
+            scenes_baking: s.active.len() as u64,
+            workers: self.workers as u64,
+            generation: self.db.generation,
+            ..Gauges::default()
+        };
+        for l in s.live.values() {
+            let p = lock(&l.progress);
+            g.chunks_pending += p.pending.len() as u64;
+            g.chunks_in_flight += p.in_flight.len() as u64;
+        }
+        g
+    }
+
+    /// Stops handing out work and waits (up to `wait`) for chunks being baked to be stored.
+    pub fn shutdown(&self, wait: Duration) {
+        lock(&self.sched).stop = true;
+        self.work.notify_all();
+        let deadline = Instant::now() + wait;
+        let handles = std::mem::take(&mut *lock(&self.handles));
+        for h in handles {
+            while !h.is_finished() && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            if h.is_finished() {
+                let _ = h.join();
+            }
+        }
+    }
+
+    // -----------------------------------------------------------------------------------------
+    // Workers.
+
+    fn worker(self: Arc<Self>) {
+        while let Some((live, c)) = self.next_work() {
+            let span = tracing::info_span!("chunk", scene = %live.row.id, chunk = c);
+            let _enter = span.enter();
+            self.bake_one(&live, c);
+        }
+    }
+
+    /// The next (scene, chunk), round-robin over active scenes; blocks until there is one.
+    fn next_work(&self) -> Option<(Arc<Live>, u32)> {
+        let mut s = lock(&self.sched);
+        loop {
+            if s.stop {
+                return None;
+            }
+            while s.active.len() < self.max_active {
+                let Some(l) = s.queue.pop_front() else { break };
+                self.activate(&l);
+                s.active.push_back(l);
+            }
+            let mut finished = Vec::new();
+            let mut found = None;
+            for (i, l) in s.active.iter().enumerate() {
+                let mut p = lock(&l.progress);
+                if let Some(c) = p.pending.pop_first() {
+                    p.in_flight.insert(c);
+                    if p.first_start.is_none() {
+                        p.first_start = Some(Instant::now());
+                    }
+                    found = Some((i, c));
+                    break;
+                }
+                if p.in_flight.is_empty() {
+                    finished.push(l.clone());
+                }
+            }
+            if let Some((i, c)) = found {
+                let l = s.active.remove(i)?;
+                s.active.push_back(l.clone());
+                drop(s);
+                for f in finished {
+                    self.finish(&f);
+                }
+                return Some((l, c));
+            }
+            if !finished.is_empty() {
+                // Scenes resumed with every chunk already durable.
+                drop(s);
+                for f in finished {
+                    self.finish(&f);
+                }
+                s = lock(&self.sched);
+                continue;
+            }
+            s = self.work.wait(s).unwrap_or_else(|p| p.into_inner());
+        }
+    }
+
+    fn activate(&self, l: &Live) {
+        let mut p = lock(&l.progress);
+        if p.state == JobState::Queued {
+            p.state = JobState::Baking;
+            p.started_ms.get_or_insert_with(now_ms);
+            drop(p);
+            if let Err(e) = self.db.set_state(l.id(), JobState::Baking, None) {
+                tracing::error!(scene = %l.id(), error = %e, "cannot record the start of a bake");
+            }
+            tracing::info!(scene = %l.id(), "bake started");
+            l.bump();
+        }
+    }
+
+    fn bake_one(&self, live: &Arc<Live>, c: u32) {
+        if live.cancelled() {
+            return;
+        }
+        let baker = match self.baker(live) {
+            Ok(b) => b,
+            Err(reason) => return self.fail(live, reason),
+        };
+        let t0 = Instant::now();
+        let result = std::panic::catch_unwind(AssertUnwindSafe(|| {
+            self.pool.install(|| baker.bake_chunk(c))
+        }));
+        drop(baker);
+        let (frame, totals) = match result {
+            Ok(r) => r,
+            Err(panic) => {
+                let msg = panic
+                    .downcast_ref::<String>()
+                    .map(String::as_str)
+                    .or_else(|| panic.downcast_ref::<&str>().copied())
+                    .unwrap_or("unknown panic");
+                return self.fail(
+                    live,
+                    format!("internal error: baking chunk {c} panicked: {msg}"),
+                );
+            }
+        };
+        if live.cancelled() {
+            return;
+        }
+        let meta = ChunkMeta {
+            bytes: frame.len() as u32,
+            crc32: crc32fast::hash(&frame),
+        };
+        if let Err(e) = self.store.write_chunk(live.id(), c, &frame) {
+            if !live.cancelled() {
+                self.fail(live, format!("storage error writing chunk {c}: {e}"));
+            }
+            return;
+        }
+        match self.db.insert_chunk(live.id(), c, meta) {
+            Ok(true) => {}
+            Ok(false) => return, // deleted meanwhile
+            Err(e) => {
+                return self.fail(live, format!("database error recording chunk {c}: {e}"));
+            }
+        }
+        let took = t0.elapsed();
+        tracing::debug!(
+            vertices = totals.vertices,
+            bytes = meta.bytes,
+            ms = took.as_secs_f64() * 1e3,
+            "chunk durable"
+        );
+        let len = chunk_len(&live.row, c);
+        self.metrics.chunk_baked(len, took);
+        *lock(&self.baked_here)
+            .entry(live.id().to_string())
+            .or_default() += 1;
+        let finished = {
+            let mut p = lock(&live.progress);
+            p.in_flight.remove(&c);
+            if p.chunks[c as usize].is_none() {
+                p.chunks_done += 1;
+                p.vertices_done += len;
+                p.stored_bytes += meta.bytes as u64;
+            }
+            p.chunks[c as usize] = Some(meta);
+            p.chunks_baked_total += 1;
+            p.vertices_this_process += len;
+            p.pending.is_empty() && p.in_flight.is_empty()
+        };
+        live.bump();
+        if finished {
+            self.finish(live);
+        }
+    }
+
+    /// The scene's baker, built (BVH and all) on first use from the stored scene.
+    fn baker(&self, live: &Live) -> Result<Arc<Baker>, String> {
+        let mut slot = lock(&live.baker);
+        if let Some(b) = slot.as_ref() {
+            return Ok(b.clone());
+        }
+        let bytes = self.store.read_scene(live.id())?;
+        let scene = super::input::decode_scene(&bytes)?;
+        if scene.mesh.content_hash() != live.row.mesh_hash {
+            return Err("the stored scene's mesh does not match its recorded hash".into());
+        }
+        let t0 = Instant::now();
+        let baker = Arc::new(self.pool.install(|| Baker::new(&scene)));
+        if encode_header(baker.header()) != live.row.header {
+            return Err("the stored scene does not match its recorded bake header".into());
+        }
+        tracing::debug!(ms = t0.elapsed().as_secs_f64() * 1e3, "baker ready");
+        *slot = Some(baker.clone());
+        Ok(baker)
+    }
+
+    /// Marks a scene done if every chunk is durable (a scene with nothing left to bake but
+    /// chunks missing would be a bug: it fails instead of waiting forever).
+    fn finish(&self, live: &Arc<Live>) {
+        let mut s = lock(&self.sched);
+        {
+            let mut p = lock(&live.progress);
+            if p.state.is_terminal() || !p.pending.is_empty() || !p.in_flight.is_empty() {
+                return;
+            }
+            if p.chunks_done != live.row.chunk_count {
+                let missing = live.row.chunk_count - p.chunks_done;
+                drop(p);
+                drop(s);
+                return self.fail(
+                    live,
+                    format!("internal error: nothing left to bake but {missing} chunks missing"),
+                );
+            }
+            if let Err(e) = self.db.set_state(live.id(), JobState::Done, None) {
+                tracing::error!(scene = %live.id(), error = %e, "cannot record a finished bake");
+                return;
+            }
+            p.state = JobState::Done;
+            p.finished_ms = Some(now_ms());
+        }
+        s.live.remove(live.id());
+        s.active.retain(|l| !Arc::ptr_eq(l, live));
+        s.queue.retain(|l| !Arc::ptr_eq(l, live));
+        drop(s);
+        *lock(&live.baker) = None;
+        live.bump();
+        self.metrics.scenes_done.fetch_add(1, Ordering::Relaxed);
+        tracing::info!(scene = %live.id(), "bake done");
+        self.work.notify_all();
+    }
+
+    fn fail(&self, live: &Arc<Live>, reason: String) {
+        let mut s = lock(&self.sched);
+        {
+            let mut p = lock(&live.progress);
+            if p.state.is_terminal() {
+                return;
+            }
+            p.state = JobState::Failed;
+            p.reason = Some(reason.clone());
+            p.pending.clear();
+            p.finished_ms = Some(now_ms());
+        }
+        if let Err(e) = self
+            .db
+            .set_state(live.id(), JobState::Failed, Some(&reason))
+        {
+            tracing::error!(scene = %live.id(), error = %e, "cannot record a failed bake");
+        }
+        s.live.remove(live.id());
+        s.active.retain(|l| !Arc::ptr_eq(l, live));
+        s.queue.retain(|l| !Arc::ptr_eq(l, live));
+        drop(s);
+        *lock(&live.baker) = None;
+        live.bump();
+        self.metrics.scenes_failed.fetch_add(1, Ordering::Relaxed);
+        self.metrics.bake_errors.fetch_add(1, Ordering::Relaxed);
+        tracing::error!(scene = %live.id(), %reason, "bake failed");
+        self.work.notify_all();
+    }
+}

@@ -1,0 +1,435 @@
+//! The HTTP baking service (`bspvt-server serve`): axum on tokio, an embedded SQLite database
+//! for jobs and metadata, chunk files for the trees, all under one data directory.
+//!
+//! Modules: [`config`] (flags, environment, TOML), [`api`] (handlers), [`stream`] (tree
+//! streaming), [`sse`] (status events), [`jobs`] (scheduler and workers), [`store`] (files),
+//! [`db`] (SQLite), [`input`] (uploads → scenes), [`metrics`], [`error`], [`openapi`].
+//! docs/service.md describes the API, the storage layout and the invariants.
+//!
+//! Guarantees of this module: every request runs in a tracing span (id, method, path) and is
+//! logged with its status and latency; requests beyond `max_concurrent_requests` get 429;
+//! non-streaming requests are cut at `request_timeout_s` (408); every error response is JSON
+//! ([`error::json_errors`]); on SIGINT/SIGTERM the server stops accepting, ends open streams,
+//! lets the workers store the chunks they are baking, and exits (a SIGKILL instead loses
+//! nothing durable: see `jobs`).
+
+pub mod api;
+pub mod config;
+pub mod db;
+pub mod error;
+pub mod input;
+pub mod jobs;
+pub mod metrics;
+pub mod openapi;
+pub mod sse;
+pub mod store;
+pub mod stream;
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use axum::Router;
+use axum::extract::{DefaultBodyLimit, Request, State};
+use axum::http::StatusCode;
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use bspvt_proto::import::Limits;
+use tokio::sync::{Semaphore, watch};
+use tracing::Instrument;
+
+pub use config::{Config, ServeArgs};
+use db::Db;
+use error::{ApiError, ApiResult};
+use input::InputLimits;
+use jobs::Jobs;
+use metrics::Metrics;
+use store::Store;
+
+/// Everything a handler can reach.
+pub struct AppState {
+    pub cfg: Config,
+    pub db: Arc<Db>,
+    pub store: Arc<Store>,
+    pub jobs: Arc<Jobs>,
+    pub metrics: Arc<Metrics>,
+    /// Uploads being read or parsed.
+    pub uploads: Arc<Semaphore>,
+    /// Open tree and event streams.
+    pub streams: Arc<Semaphore>,
+    /// Requests being handled (streams count until their headers are sent).
+    pub requests: Arc<Semaphore>,
+    /// Face-filter re-encodes running at once.
+    pub reencode: Semaphore,
+    /// Becomes true when the server shuts down.
+    pub shutdown: watch::Receiver<bool>,
+    pub started: Instant,
+    next_request: AtomicU64,
+}
+
+pub type Shared = Arc<AppState>;
+
+impl AppState {
+    pub fn input_limits(&self) -> InputLimits {
+        InputLimits {
+            mesh: Limits {
+                max_vertices: self.cfg.max_mesh_vertices,
+                max_triangles: self.cfg.max_mesh_triangles,
+                max_bytes: self.cfg.max_mesh_bytes,
+            },
+            max_face_res: self.cfg.max_face_res,
+            max_supersampling: self.cfg.max_supersampling,
+        }
+    }
+}
+
+/// Runs blocking work (database, files, parsing) on tokio's blocking pool.
+pub async fn blocking<T, F>(f: F) -> ApiResult<T>
+where
+    F: FnOnce() -> Result<T> + Send + 'static,
+    T: Send + 'static,
+{
+    match tokio::task::spawn_blocking(f).await {
+        Ok(Ok(v)) => Ok(v),
+        Ok(Err(e)) => Err(ApiError::internal(format!("{e:#}"))),
+        Err(e) => Err(ApiError::internal(format!("background task failed: {e}"))),
+    }
+}
+
+/// The router with its middleware.
+pub fn router(state: Shared) -> Router {
+    let body_limit = usize::try_from(state.cfg.max_body_bytes).unwrap_or(usize::MAX);
+    Router::new()
+        .route("/v1/scenes", post(api::submit))
+        .route(
+            "/v1/scenes/{id}",
+            get(api::get_scene).delete(api::delete_scene),
+        )
+        .route("/v1/scenes/{id}/events", get(sse::get_events))
+        .route("/v1/scenes/{id}/mesh", get(api::get_mesh))
+        .route("/v1/scenes/{id}/trees", get(stream::get_trees))
+        .route("/v1/openapi.json", get(api::openapi))
+        .route("/healthz", get(api::healthz))
+        .route("/metrics", get(api::metrics))
+        .fallback(api::not_found)
+        .layer(DefaultBodyLimit::max(body_limit))
+        .layer(middleware::from_fn_with_state(state.clone(), observe))
+        .layer(middleware::map_response(error::json_errors))
+        .with_state(state)
+}
+
+/// Per-request span, log line, metrics, concurrency limit and timeout.
+async fn observe(State(st): State<Shared>, req: Request, next: Next) -> Response {
+    let n = st.next_request.fetch_add(1, Ordering::Relaxed);
+    let method = req.method().clone();
+    let path = error::truncate(req.uri().path(), 200);
+    let span = tracing::info_span!("request", id = n, method = %method, path = %path);
+    async move {
+        let t0 = Instant::now();
+        let exempt = path == "/healthz" || path == "/metrics";
+        let permit = if exempt {
+            None
+        } else {
+            match st.requests.clone().try_acquire_owned() {
+                Ok(p) => Some(p),
+                Err(_) => {
+                    st.metrics.response(429);
+                    tracing::warn!("too many concurrent requests");
+                    return ApiError::too_many("too many concurrent requests; retry shortly")
+                        .into_response();
+                }
+            }
+        };
+        let timeout = Duration::from_secs(st.cfg.request_timeout_s);
+        let response = match tokio::time::timeout(timeout, next.run(req)).await {
+            Ok(r) => r,
+            Err(_) => ApiError::new(
+                StatusCode::REQUEST_TIMEOUT,
+                "timeout",
+                format!("the request took longer than {} s", timeout.as_secs()),
+            )
+            .into_response(),
+        };
+        drop(permit);
+        let status = response.status();
+        st.metrics.response(status.as_u16());
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        if status.is_server_error() {
+            tracing::error!(status = status.as_u16(), ms, "request failed");
+        } else if status.is_client_error() {
+            tracing::info!(status = status.as_u16(), ms, "request rejected");
+        } else {
+            tracing::info!(status = status.as_u16(), ms, "request");
+        }
+        response
+    }
+    .instrument(span)
+    .await
+}
+
+/// A service that is running.
+pub struct Service {
+    pub state: Shared,
+    pub addr: SocketAddr,
+    listener: tokio::net::TcpListener,
+    stop_tx: watch::Sender<bool>,
+}
+
+impl Service {
+    /// Opens the data directory (database, store), resumes unfinished bakes, starts the
+    /// workers and binds the listener.
+    pub async fn open(cfg: Config) -> Result<Service> {
+        std::fs::create_dir_all(&cfg.data_dir)
+            .with_context(|| format!("cannot create data dir {}", cfg.data_dir.display()))?;
+        let db = Arc::new(Db::open(&cfg.db_path())?);
+        let store = Arc::new(
+            Store::open(&cfg.data_dir)
+                .with_context(|| format!("cannot open the store in {}", cfg.data_dir.display()))?,
+        );
+        let metrics = Arc::new(Metrics::default());
+        let jobs = {
+            let (db, store, metrics, c) = (db.clone(), store.clone(), metrics.clone(), cfg.clone());
+            tokio::task::spawn_blocking(move || {
+                Jobs::start(
+                    db,
+                    store,
+                    metrics,
+                    c.workers,
+                    c.threads,
+                    c.max_active_scenes,
+                    c.max_queued_scenes,
+                )
+            })
+            .await??
+        };
+        let listener = tokio::net::TcpListener::bind(cfg.addr)
+            .await
+            .with_context(|| format!("cannot listen on {}", cfg.addr))?;
+        let addr = listener.local_addr()?;
+        let (stop_tx, stop_rx) = watch::channel(false);
+        let state = Arc::new(AppState {
+            uploads: Arc::new(Semaphore::new(cfg.max_uploads)),
+            streams: Arc::new(Semaphore::new(cfg.max_streams)),
+            requests: Arc::new(Semaphore::new(cfg.max_concurrent_requests)),
+            reencode: Semaphore::new(std::thread::available_parallelism().map_or(2, |n| n.get())),
+            cfg,
+            db,
+            store,
+            jobs,
+            metrics,
+            shutdown: stop_rx,
+            started: Instant::now(),
+            next_request: AtomicU64::new(0),
+        });
+        Ok(Service {
+            state,
+            addr,
+            listener,
+            stop_tx,
+        })
+    }
+
+    /// Serves until `stop` resolves, then shuts down: streams end, connections get 10 s to
+    /// finish, workers get 30 s to store the chunks they are baking.
+    pub async fn run(
+        self,
+        stop: impl std::future::Future<Output = ()> + Send + 'static,
+    ) -> Result<()> {
+        let Service {
+            state,
+            addr,
+            listener,
+            stop_tx,
+        } = self;
+        let jobs = state.jobs.clone();
+        let limits = ConnLimits {
+            max: state.cfg.max_connections,
+            header_timeout: Duration::from_secs(state.cfg.header_read_timeout_s),
+        };
+        let app = router(state);
+        let stopped = stop_tx.subscribe();
+        tokio::spawn(async move {
+            stop.await;
+            tracing::info!("shutting down");
+            let _ = stop_tx.send(true);
+        });
+        tracing::info!(%addr, "serving");
+        accept_loop(listener, app, stopped, limits).await;
+        tokio::task::spawn_blocking(move || jobs.shutdown(Duration::from_secs(30))).await?;
+        Ok(())
+    }
+}
+
+struct ConnLimits {
+    max: usize,
+    header_timeout: Duration,
+}
+
+/// Accepts HTTP/1.1 connections (hyper, with a header-read timeout against slow clients and a
+/// cap on open connections) until `stop` turns true, then shuts them down gracefully.
+async fn accept_loop(
+    listener: tokio::net::TcpListener,
+    app: Router,
+    mut stop: watch::Receiver<bool>,
+    limits: ConnLimits,
+) {
+    use hyper_util::rt::{TokioIo, TokioTimer};
+    let graceful = hyper_util::server::graceful::GracefulShutdown::new();
+    let open = Arc::new(Semaphore::new(limits.max));
+    loop {
+        let (socket, peer) = tokio::select! {
+            r = listener.accept() => match r {
+                Ok(c) => c,
+                Err(e) => {
+                    // Out of file descriptors and the like: back off instead of spinning.
+                    tracing::warn!(error = %e, "accept failed");
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                    continue;
+                }
+            },
+            _ = stop.wait_for(|s| *s) => break,
+        };
+        let Ok(permit) = open.clone().try_acquire_owned() else {
+            tracing::warn!(%peer, "connection limit reached; closing a new connection");
+            continue;
+        };
+        let _ = socket.set_nodelay(true);
+        let service = hyper_util::service::TowerToHyperService::new(app.clone());
+        let conn = hyper::server::conn::http1::Builder::new()
+            .timer(TokioTimer::new())
+            .header_read_timeout(limits.header_timeout)
+            .serve_connection(TokioIo::new(socket), service);
+        let conn = graceful.watch(conn);
+        tokio::spawn(async move {
+            if let Err(e) = conn.await {
+                tracing::debug!(%peer, error = %e, "connection ended with an error");
+            }
+            drop(permit);
+        });
+    }
+    tokio::select! {
+        _ = graceful.shutdown() => {}
+        _ = tokio::time::sleep(Duration::from_secs(10)) => {
+            tracing::warn!("connections still open 10 s after shutdown; closing them");
+        }
+    }
+}
+
+/// SIGINT or SIGTERM.
+async fn signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {},
+        _ = term => {},
+    }
+}
+
+/// Sets up logging on stderr (`RUST_LOG` filters; default `info`).
+pub fn init_logging(format: config::LogFormat) {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_writer(std::io::stderr);
+    let _ = match format {
+        config::LogFormat::Json => builder.json().try_init(),
+        config::LogFormat::Text => builder.try_init(),
+    };
+}
+
+/// `bspvt-server serve`: runs until SIGINT/SIGTERM. Prints `listening on http://ADDR` on
+/// stdout once the socket is bound.
+pub fn serve_command(args: &ServeArgs) -> Result<()> {
+    let cfg = Config::resolve(args)?;
+    init_logging(cfg.log_format);
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .thread_name("bspvt-http")
+        .build()
+        .context("cannot start the async runtime")?;
+    rt.block_on(async move {
+        let svc = Service::open(cfg).await?;
+        {
+            use std::io::Write;
+            let mut out = std::io::stdout().lock();
+            writeln!(out, "listening on http://{}", svc.addr)?;
+            out.flush()?;
+        }
+        svc.run(signal()).await
+    })
+}
+
+/// A service running on its own runtime thread (benchmarks, embedding).
+pub struct Background {
+    pub addr: SocketAddr,
+    pub state: Shared,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<std::thread::JoinHandle<Result<()>>>,
+}
+
+impl Background {
+    /// Starts a service in the background and returns once it listens.
+    pub fn start(cfg: Config) -> Result<Background> {
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .enable_all()
+            .thread_name("bspvt-http")
+            .build()
+            .context("cannot start the async runtime")?;
+        let svc = rt.block_on(Service::open(cfg))?;
+        let (addr, state) = (svc.addr, svc.state.clone());
+        let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+        let thread = std::thread::Builder::new()
+            .name("bspvt-service".into())
+            .spawn(move || {
+                rt.block_on(svc.run(async {
+                    let _ = rx.await;
+                }))
+            })?;
+        Ok(Background {
+            addr,
+            state,
+            stop: Some(tx),
+            thread: Some(thread),
+        })
+    }
+
+    /// Shuts the service down and waits for it.
+    pub fn stop(mut self) -> Result<()> {
+        self.shutdown()
+    }
+
+    fn shutdown(&mut self) -> Result<()> {
+        if let Some(tx) = self.stop.take() {
+            let _ = tx.send(());
+        }
+        match self.thread.take() {
+            Some(t) => t
+                .join()
+                .map_err(|_| anyhow::anyhow!("the service thread panicked"))?,
+            None => Ok(()),
+        }
+    }
+}
+
+impl Drop for Background {
+    fn drop(&mut self) {
+        let _ = self.shutdown();
+    }
+}

@@ -1,0 +1,307 @@
+//! On-disk storage of scenes and tree chunks under the data directory:
+//!
+//! ```text
+//! DIR/bspvt.sqlite                 the database (see `db`)
+//! DIR/scenes/<id>/scene.bin        the scene as baked (mesh, lights, settings), framed + CRC-32
+//! DIR/scenes/<id>/chunks/<n>.bvck  chunk n's frame, exactly as in a bake file
+//! DIR/trash/                       scene directories being deleted
+//! ```
+//!
+//! Guarantees:
+//! - **durable before visible**: a file is written to a temporary name, synced, renamed into
+//!   place and its directory synced; only then does the caller record it in the database;
+//! - **verified on read**: a chunk is served only if its length and whole-file CRC-32 match the
+//!   database and its frame parses (magic, frame CRC, the expected first vertex);
+//!   anything else is [`ChunkRead::Corrupt`] and is never served;
+//! - deleting a scene renames its directory into `trash/` first, so a half-deleted scene never
+//!   looks like a live one.
+
+use std::fs::{self, File};
+use std::io::{self, Write};
+use std::path::{Path, PathBuf};
+
+use bspvt_proto::encoding::peek_chunk;
+
+use super::db::ChunkMeta;
+
+/// The store rooted at the data directory.
+pub struct Store {
+    root: PathBuf,
+}
+
+/// The result of reading a stored chunk.
+pub enum ChunkRead {
+    Ok(Vec<u8>),
+    /// The file is missing.
+    Missing,
+    /// The file is there but is not the chunk the database describes.
+    Corrupt(String),
+}
+
+/// What [`Store::list_chunks`] finds.
+pub struct ChunkFiles {
+    /// (chunk index, file length).
+    pub chunks: Vec<(u32, u64)>,
+    pub stray: Vec<PathBuf>,
+}
+
+const SCENE_MAGIC: &[u8; 4] = b"BSCN";
+
+impl Store {
+    /// Opens the store, creating its directories, and empties the trash.
+    pub fn open(root: &Path) -> io::Result<Store> {
+        fs::create_dir_all(root.join("scenes"))?;
+        fs::create_dir_all(root.join("trash"))?;
+        let s = Store {
+            root: root.to_path_buf(),
+        };
+        s.empty_trash();
+        Ok(s)
+    }
+
+    pub fn scene_dir(&self, id: &str) -> PathBuf {
+        self.root.join("scenes").join(id)
+    }
+
+    pub fn chunk_path(&self, id: &str, chunk: u32) -> PathBuf {
+        self.scene_dir(id)
+            .join("chunks")
+            .join(format!("{chunk}.bvck"))
+    }
+
+    /// Writes a new scene's directory (its `scene.bin` and an empty `chunks/`) atomically:
+    /// built under a temporary name, synced, then renamed into place.
+    pub fn create_scene(&self, id: &str, scene_bin: &[u8]) -> io::Result<()> {
+        let scenes = self.root.join("scenes");
+        let tmp = scenes.join(format!("{id}.tmp"));
+        if tmp.exists() {
+            fs::remove_dir_all(&tmp)?;
+        }
+        fs::create_dir_all(tmp.join("chunks"))?;
+        let mut body = Vec::with_capacity(scene_bin.len() + 12);
+        body.extend_from_slice(SCENE_MAGIC);
+        body.extend_from_slice(&(scene_bin.len() as u64).to_le_bytes());
+        body.extend_from_slice(scene_bin);
+        body.extend_from_slice(&crc32fast::hash(scene_bin).to_le_bytes());
+        write_synced(&tmp.join("scene.bin"), &body)?;
+        sync_dir(&tmp.join("chunks"))?;
+        sync_dir(&tmp)?;
+        fs::rename(&tmp, scenes.join(id))?;
+        sync_dir(&scenes)
+    }
+
+    /// Reads a scene's `scene.bin` payload, checking its frame and CRC.
+    pub fn read_scene(&self, id: &str) -> Result<Vec<u8>, String> {
+        let path = self.scene_dir(id).join("scene.bin");
+        let data = fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        let bad = |what: &str| format!("{} is corrupt: {what}", path.display());
+        if data.len() < 16 || &data[..4] != SCENE_MAGIC {
+            return Err(bad("bad header"));
+        }
+        let mut len = [0u8; 8];
+        len.copy_from_slice(&data[4..12]);
+        let len = u64::from_le_bytes(len);
+        if len != (data.len() - 16) as u64 {
+            return Err(bad("length mismatch"));
+        }
+        let body = &data[12..data.len() - 4];
+        let mut crc = [0u8; 4];
+        crc.copy_from_slice(&data[data.len() - 4..]);
+        if u32::from_le_bytes(crc) != crc32fast::hash(body) {
+            return Err(bad("checksum mismatch"));
+        }
+        Ok(body.to_vec())
+    }
+
+    /// Makes chunk `chunk`'s frame durable at its final path (temp file, fsync, rename, fsync
+    /// of the directory). Fails, writing nothing, when the scene directory is gone (deleted).
+    pub fn write_chunk(&self, id: &str, chunk: u32, frame: &[u8]) -> io::Result<()> {
+        let path = self.chunk_path(id, chunk);
+        let dir = path
+            .parent()
+            .ok_or_else(|| io::Error::other("chunk path has no directory"))?;
+        let tmp = dir.join(format!("{chunk}.bvck.tmp"));
+        write_synced(&tmp, frame)?;
+        fs::rename(&tmp, &path)?;
+        sync_dir(dir)
+    }
+
+    /// Reads and verifies chunk `chunk` against what the database recorded.
+    pub async fn read_chunk(
+        &self,
+        id: &str,
+        chunk: u32,
+        meta: ChunkMeta,
+        first_vertex: u32,
+    ) -> ChunkRead {
+        let path = self.chunk_path(id, chunk);
+        match tokio::fs::read(&path).await {
+            Ok(data) => match verify_chunk(&data, meta, first_vertex) {
+                Ok(()) => ChunkRead::Ok(data),
+                Err(why) => ChunkRead::Corrupt(why),
+            },
+            Err(e) if e.kind() == io::ErrorKind::NotFound => ChunkRead::Missing,
+            Err(e) => ChunkRead::Corrupt(format!("cannot read {}: {e}", path.display())),
+        }
+    }
+
+    /// Removes a chunk file (after it was found corrupt); a missing file is fine.
+    pub fn remove_chunk(&self, id: &str, chunk: u32) {
+        let _ = fs::remove_file(self.chunk_path(id, chunk));
+    }
+
+    /// The chunk files present for a scene and stray files (temporary or unknown names) that
+    /// no reader will ever use.
+    pub fn list_chunks(&self, id: &str) -> io::Result<ChunkFiles> {
+        let mut chunks = Vec::new();
+        let mut stray = Vec::new();
+        for e in fs::read_dir(self.scene_dir(id).join("chunks"))? {
+            let e = e?;
+            let name = e.file_name();
+            let idx = name
+                .to_str()
+                .and_then(|n| n.strip_suffix(".bvck"))
+                .and_then(|n| n.parse::<u32>().ok());
+            match idx {
+                Some(i) => chunks.push((i, e.metadata()?.len())),
+                None => stray.push(e.path()),
+            }
+        }
+        Ok(ChunkFiles { chunks, stray })
+    }
+
+    /// Ids of the scene directories present (temporary ones are removed).
+    pub fn scene_ids(&self) -> io::Result<Vec<String>> {
+        let mut ids = Vec::new();
+        for e in fs::read_dir(self.root.join("scenes"))? {
+            let e = e?;
+            let Some(name) = e.file_name().to_str().map(str::to_string) else {
+                continue;
+            };
+            if name.ends_with(".tmp") {
+                let _ = fs::remove_dir_all(e.path());
+            } else {
+                ids.push(name);
+            }
+        }
+        Ok(ids)
+    }
+
+    /// Deletes a scene's directory: renamed into the trash (atomic), then removed.
+    pub fn remove_scene(&self, id: &str) -> io::Result<()> {
+        let dir = self.scene_dir(id);
+        if !dir.exists() {
+            return Ok(());
+        }
+        let trash = self
+            .root
+            .join("trash")
+            .join(format!("{id}-{}", super::db::now_ms()));
+        fs::rename(&dir, &trash)?;
+        sync_dir(&self.root.join("scenes"))?;
+        fs::remove_dir_all(&trash)
+    }
+
+    fn empty_trash(&self) {
+        if let Ok(rd) = fs::read_dir(self.root.join("trash")) {
+            for e in rd.flatten() {
+                let _ = fs::remove_dir_all(e.path());
+            }
+        }
+    }
+}
+
+/// Checks a chunk file against its database record and its own framing.
+pub fn verify_chunk(data: &[u8], meta: ChunkMeta, first_vertex: u32) -> Result<(), String> {
+    if data.len() as u64 != meta.bytes as u64 {
+        return Err(format!(
+            "chunk file is {} bytes, the database says {}",
+            data.len(),
+            meta.bytes
+        ));
+    }
+    let crc = crc32fast::hash(data);
+    if crc != meta.crc32 {
+        return Err(format!(
+            "chunk file CRC-32 {crc:#010x}, the database says {:#010x}",
+            meta.crc32
+        ));
+    }
+    let (h, used) = peek_chunk(data).map_err(|e| format!("chunk frame: {e}"))?;
+    if used != data.len() || h.first_vertex != first_vertex {
+        return Err(format!(
+            "chunk frame covers vertex {} and {used} bytes; expected vertex {first_vertex} and {} bytes",
+            h.first_vertex,
+            data.len()
+        ));
+    }
+    Ok(())
+}
+
+fn write_synced(path: &Path, data: &[u8]) -> io::Result<()> {
+    let mut f = File::create(path)?;
+    f.write_all(data)?;
+    f.sync_all()
+}
+
+fn sync_dir(dir: &Path) -> io::Result<()> {
+    File::open(dir)?.sync_all()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scenes_and_chunks_round_trip_and_corruption_is_caught() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let s = Store::open(dir.path()).expect("open");
+        s.create_scene("abc", b"scene bytes").expect("create");
+        assert_eq!(s.read_scene("abc").expect("read"), b"scene bytes");
+        let frame = bspvt_proto::encoding::encode_chunk(
+            64,
+            &[bspvt_proto::bspvt::VertexTrees::default()],
+            &bspvt_proto::bspvt::LineCodec::for_resolution(16),
+        );
+        s.write_chunk("abc", 2, &frame).expect("write chunk");
+        let meta = ChunkMeta {
+            bytes: frame.len() as u32,
+            crc32: crc32fast::hash(&frame),
+        };
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .build()
+            .expect("runtime");
+        assert!(matches!(
+            rt.block_on(s.read_chunk("abc", 2, meta, 64)),
+            ChunkRead::Ok(d) if d == frame
+        ));
+        assert!(matches!(
+            rt.block_on(s.read_chunk("abc", 2, meta, 0)),
+            ChunkRead::Corrupt(_)
+        ));
+        assert!(matches!(
+            rt.block_on(s.read_chunk("abc", 3, meta, 64)),
+            ChunkRead::Missing
+        ));
+        let mut bad = frame.clone();
+        let last = bad.len() - 5;
+        bad[last] ^= 1;
+        std::fs::write(s.chunk_path("abc", 2), &bad).expect("corrupt");
+        assert!(matches!(
+            rt.block_on(s.read_chunk("abc", 2, meta, 64)),
+            ChunkRead::Corrupt(_)
+        ));
+        let files = s.list_chunks("abc").expect("list");
+        assert_eq!(files.chunks, vec![(2, frame.len() as u64)]);
+        assert!(files.stray.is_empty());
+        std::fs::write(
+            s.scene_dir("abc").join("scene.bin"),
+            b"BSCNxxxxxxxxxxxxxxxx",
+        )
+        .expect("corrupt scene");
+        assert!(s.read_scene("abc").is_err());
+        s.remove_scene("abc").expect("remove");
+        assert!(!s.scene_dir("abc").exists());
+        assert_eq!(s.scene_ids().expect("ids"), Vec::<String>::new());
+    }
+}

@@ -125,10 +125,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         let bake_path = cached_bake(name, scene, &a.cache)?;
         let bytes = std::fs::read(&bake_path)?;
         let bake = decode_bake(&bytes)?;
-        let trees = Trees {
-            trees: &bake.trees,
-            codec: bake.header.codec(),
-        };
+        let trees = Trees::full(&bake.trees, bake.header.codec());
         let k = kernel(name, scene, &trees);
         println!(
             "{name}: boundary experiment: {:.1} edges/lit vertex piece by piece ({:.3} µs) vs {:.1} boundary edges ({:.3} µs incl. cancelling), results differ by ≤ {:.1e}",

@@ -22,9 +22,20 @@ struct Cli {
 enum Command {
     /// Decode a bake file, check it against its scene, and report (or export) light visibility.
     Inspect(InspectArgs),
-    /// The main job on the built-in scene: bake it, read the trees back from disk, and shade
-    /// frames (BSPVT × LTC GGX) while the light moves.
-    Demo(DemoArgs),
+    /// The main job: an embedded service bakes the built-in scene, the client streams its trees
+    /// and shades while the light moves (a window if there is a display, else frames + GIF).
+    Demo(bspvt::play::demo::DemoArgs),
+    /// Open a window on a scene from a service (URL or id) or a local scene (baked by an
+    /// embedded service), shading while its trees stream in.
+    View(bspvt::play::view::ViewArgs),
+    /// Headless: stream a scene and render the light moving along its path (PNG frames, GIF,
+    /// stats.json), through the viewer's own code path.
+    Animate(bspvt::play::animate::AnimateArgs),
+    /// Measure a viewer's start on a finished bake served on loopback: time to the first
+    /// frame and to full quality, bytes fetched, fps while the light moves.
+    BenchView(bspvt::play::bench::BenchViewArgs),
+    /// Run the baking service (the same as `bspvt-server serve`).
+    Serve(bspvt_server::service::config::ServeArgs),
     /// Render images of a scene (one frame, or a sequence while the light moves) with BSPVT
     /// shadows, unshadowed LTC or the Monte Carlo references.
     Render(RenderArgs),
@@ -34,24 +45,6 @@ enum Command {
     LtcFit(bspvt::ltc::fit::FitArgs),
     /// Write a Mitsuba 3 scene that renders the same image (independent cross-check).
     ExportMitsuba(bspvt::mitsuba::ExportArgs),
-}
-
-#[derive(clap::Args)]
-struct DemoArgs {
-    /// Output folder.
-    #[arg(long, default_value = "out/demo")]
-    out: PathBuf,
-    /// Scene to bake (scene file or builtin:NAME).
-    #[arg(long, default_value = "builtin:plate")]
-    scene: String,
-    /// Frames to shade while the light moves.
-    #[arg(long, default_value_t = 24)]
-    frames: usize,
-    /// Frame size in pixels (square).
-    #[arg(long, default_value_t = 512)]
-    size: u32,
-    #[arg(long)]
-    face_res: Option<u32>,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -118,7 +111,11 @@ struct InspectArgs {
 fn main() -> std::process::ExitCode {
     let result = match Cli::parse().command {
         Command::Inspect(a) => inspect(a),
-        Command::Demo(a) => demo(a),
+        Command::Demo(a) => bspvt::play::demo::run(&a),
+        Command::View(a) => bspvt::play::view::run(&a),
+        Command::Animate(a) => bspvt::play::animate::run(&a),
+        Command::BenchView(a) => bspvt::play::bench::run(&a),
+        Command::Serve(a) => bspvt_server::service::serve_command(&a),
         Command::Render(a) => render(a),
         Command::Bench(a) => bspvt::bench::run(&a),
         Command::LtcFit(a) => bspvt::ltc::fit::run(&a),
@@ -161,10 +158,9 @@ fn render(a: RenderArgs) -> Result<()> {
         Some(p) => Some(load_trees(p, &scene)?),
         None => None,
     };
-    let trees = bake.as_ref().map(|b| Trees {
-        trees: &b.trees,
-        codec: b.header.codec(),
-    });
+    let trees = bake
+        .as_ref()
+        .map(|b| Trees::full(&b.trees, b.header.codec()));
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))
         .build()
@@ -285,84 +281,6 @@ fn inspect(a: InspectArgs) -> Result<()> {
         write_ply(p, &scene.mesh, &frac)?;
         println!("wrote {}", p.display());
     }
-    Ok(())
-}
-
-fn demo(a: DemoArgs) -> Result<()> {
-    use std::sync::atomic::AtomicBool;
-    use std::time::Instant;
-
-    let mut scene = open_scene(Some(&a.scene), None)?;
-    if let Some(r) = a.face_res {
-        scene.bake.face_res = r;
-    }
-    scene.validate()?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create {}", a.out.display()))?;
-    let baker = bspvt_server::bake::Baker::new(&scene);
-    let n = baker.header().vertex_count as u64;
-    println!(
-        "baking {} ({n} vertices, {}² faces) on {} thread(s)",
-        a.scene,
-        scene.bake.face_res,
-        rayon::current_num_threads()
-    );
-    let bar = indicatif::ProgressBar::new(n).with_style(
-        indicatif::ProgressStyle::with_template(
-            "{bar:40} {pos}/{len} vertices  {per_sec}  ETA {eta}",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
-    let out = baker.bake_all(&|done, _| bar.set_position(done), &AtomicBool::new(false))?;
-    bar.finish();
-    let file = a.out.join("trees.bspvt");
-    std::fs::write(&file, &out.bytes)
-        .with_context(|| format!("cannot write {}", file.display()))?;
-    println!(
-        "baked in {:.1} s: {} bytes ({:.1} B/vertex) -> {}",
-        out.seconds,
-        out.bytes.len(),
-        out.bytes.len() as f64 / n.max(1) as f64,
-        file.display()
-    );
-
-    // Read the trees back as a client would, then shade frames while the light moves.
-    let t = Instant::now();
-    let bytes = std::fs::read(&file)?;
-    let bake = decode_bake(&bytes)?;
-    println!(
-        "decoded {} vertices in {:.1} ms",
-        bake.trees.len(),
-        t.elapsed().as_secs_f64() * 1e3
-    );
-    let trees = Trees {
-        trees: &bake.trees,
-        codec: bake.header.codec(),
-    };
-    let opts = Options {
-        method: Method::Bspvt,
-        mode: Mode::Vertex,
-        spp: 1,
-        width: a.size,
-        height: a.size,
-        frames: a.frames.max(1),
-        light: 0,
-    };
-    let frames_dir = a.out.join("frames");
-    let stats = render_sequence(&scene, Some(&trees), &opts, |k, img| {
-        img.save(&frames_dir.join(format!("frame-{k:03}.png")), 1.0)
-    })?;
-    println!(
-        "shaded {} frames at {}×{} while the light moves: median {:.2} ms/frame ({:.0} fps), {:.2} µs/vertex on {} threads; frames in {}",
-        stats.frames,
-        stats.width,
-        stats.height,
-        stats.ms_per_frame,
-        stats.fps,
-        stats.us_per_vertex,
-        stats.threads,
-        frames_dir.display()
-    );
     Ok(())
 }
 

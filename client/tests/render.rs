@@ -41,10 +41,7 @@ fn bspvt_matches_exact_visibility_and_has_shadows() {
     let scene = scene();
     let bytes = bake(&scene);
     let b = decode_bake(&bytes).expect("decode");
-    let trees = Trees {
-        trees: &b.trees,
-        codec: b.header.codec(),
-    };
+    let trees = Trees::full(&b.trees, b.header.codec());
     let r = Renderer::new(&scene, 96, 72);
     let light = Light::from_scene(&scene.lights[0]);
     let (vertex, c) = r.bspvt(&light, &trees, Mode::Vertex);

@@ -10,6 +10,7 @@
 
 use bspvt_proto::Scene;
 use bspvt_proto::bspvt::{LineCodec, VertexTrees};
+use bspvt_proto::scene::{Camera, Material};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -35,6 +36,26 @@ pub enum Mode {
 pub struct Trees<'a> {
     pub trees: &'a [VertexTrees],
     pub codec: LineCodec,
+    /// While trees stream in: which vertices have theirs. The others are shaded unshadowed
+    /// (shadow ratio 1) until they arrive. `None`: all are present.
+    pub present: Option<&'a [bool]>,
+}
+
+impl<'a> Trees<'a> {
+    /// A complete bake.
+    pub fn full(trees: &'a [VertexTrees], codec: LineCodec) -> Trees<'a> {
+        Trees {
+            trees,
+            codec,
+            present: None,
+        }
+    }
+
+    fn has(&self, v: u32) -> bool {
+        self.present
+            .is_none_or(|p| p.get(v as usize).copied().unwrap_or(false))
+            && (v as usize) < self.trees.len()
+    }
 }
 
 /// Counters of one frame.
@@ -55,11 +76,18 @@ pub struct Renderer<'a> {
     /// Material of each vertex (that of the first triangle using it).
     pub vertex_material: Vec<u32>,
     pub table: &'static LtcTable,
+    /// The scene's materials, with the roughness override applied.
+    materials: Vec<Material>,
 }
 
 impl<'a> Renderer<'a> {
     pub fn new(scene: &'a Scene, width: u32, height: u32) -> Renderer<'a> {
-        let view = View::new(&scene.camera, width, height);
+        Renderer::with_camera(scene, &scene.camera, width, height)
+    }
+
+    /// A renderer looking through `camera` instead of the scene's.
+    pub fn with_camera(scene: &'a Scene, camera: &Camera, width: u32, height: u32) -> Renderer<'a> {
+        let view = View::new(camera, width, height);
         let gbuffer = GBuffer::rasterize(&scene.mesh, &view);
         let visible_vertices = gbuffer
             .visible_vertices(&scene.mesh)
@@ -84,12 +112,37 @@ impl<'a> Renderer<'a> {
             visible_vertices,
             vertex_material,
             table: LtcTable::builtin(),
+            materials: scene.materials.clone(),
         }
     }
 
-    fn material(&self, id: u32) -> &bspvt_proto::scene::Material {
-        let m = &self.scene.materials;
-        &m[(id as usize).min(m.len() - 1)]
+    /// Moves the camera: the G-buffer and the visible vertices follow.
+    pub fn set_camera(&mut self, camera: &Camera) {
+        let (w, h) = (self.gbuffer.width, self.gbuffer.height);
+        self.view = View::new(camera, w, h);
+        self.gbuffer = GBuffer::rasterize(&self.scene.mesh, &self.view);
+        self.visible_vertices = self
+            .gbuffer
+            .visible_vertices(&self.scene.mesh)
+            .iter()
+            .enumerate()
+            .filter_map(|(v, &s)| s.then_some(v as u32))
+            .collect();
+    }
+
+    /// Overrides every material's GGX roughness α (`None`: the scene's own).
+    pub fn set_roughness(&mut self, alpha: Option<f32>) {
+        self.materials = self.scene.materials.clone();
+        if let Some(a) = alpha {
+            for m in &mut self.materials {
+                m.roughness = a;
+            }
+        }
+    }
+
+    fn material(&self, id: u32) -> &Material {
+        let m = &self.materials;
+        &m[(id as usize).min(m.len().saturating_sub(1))]
     }
 
     fn vertex_lobes(&self, v: u32) -> (Lobes, DVec3, DVec3) {
@@ -117,6 +170,11 @@ impl<'a> Renderer<'a> {
             .par_iter()
             .map(|&v| {
                 let (lobes, p, nrm) = self.vertex_lobes(v);
+                if !trees.has(v) {
+                    let i = unshadowed(&lobes, light, p, nrm);
+                    let c = lobes.radiance(light.radiance, &i);
+                    return (v, c.as_vec3().to_array(), [1.0, 1.0], 0, 0);
+                }
                 let r = shade_vertex(
                     &lobes,
                     light,

@@ -17,7 +17,7 @@ use axum::http::request::Parts;
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use bspvt_proto::encoding::{BakeHeader, encode_header};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::db::{JobState, SceneRow, now_ms};
@@ -41,12 +41,15 @@ pub struct Submitted {
 }
 
 /// Where to find a scene's parts.
-#[derive(Serialize, ToSchema)]
+#[derive(Clone, Debug, Serialize, Deserialize, ToSchema)]
 pub struct Links {
     #[serde(rename = "self")]
     pub status: String,
     pub events: String,
     pub mesh: String,
+    /// The scene as baked (`GET /v1/scenes/{id}/scene`).
+    #[serde(default)]
+    pub scene: String,
     pub trees: String,
 }
 
@@ -56,13 +59,14 @@ impl Links {
             status: format!("/v1/scenes/{id}"),
             events: format!("/v1/scenes/{id}/events"),
             mesh: format!("/v1/scenes/{id}/mesh"),
+            scene: format!("/v1/scenes/{id}/scene"),
             trees: format!("/v1/scenes/{id}/trees"),
         }
     }
 }
 
 /// Sizes of a scene.
-#[derive(Serialize, ToSchema)]
+#[derive(Clone, Debug, Serialize, Deserialize, ToSchema)]
 pub struct Sizes {
     pub mesh_vertices: u32,
     pub mesh_triangles: u64,
@@ -74,7 +78,7 @@ pub struct Sizes {
 }
 
 /// A scene's status.
-#[derive(Serialize, ToSchema)]
+#[derive(Clone, Debug, Serialize, Deserialize, ToSchema)]
 pub struct SceneStatus {
     pub id: String,
     pub state: JobState,
@@ -611,6 +615,59 @@ pub async fn get_mesh(
     }
     if let Ok(v) = HeaderValue::from_str(&format!("{:016x}", live.row.mesh_hash)) {
         h.insert("x-bspvt-mesh-hash", v);
+    }
+    Ok(r)
+}
+
+/// The scene exactly as baked (mesh, materials, lights, camera, bake settings), in the
+/// service's stored encoding: postcard with exact floats, read back with
+/// [`input::decode_scene`]. One request gives a client everything it needs to shade.
+#[utoipa::path(
+    get,
+    path = "/v1/scenes/{id}/scene",
+    tag = "scenes",
+    params(("id" = String, Path, description = "Scene id")),
+    responses(
+        (status = 200, description = "The scene (postcard, version-tagged; `bspvt_server::service::input::decode_scene`)", content_type = "application/octet-stream"),
+        (status = 304, description = "Not modified (If-None-Match)"),
+        (status = 404, description = "Unknown id", body = ErrorBody),
+        (status = 410, description = "Deleted", body = ErrorBody),
+    )
+)]
+pub async fn get_scene_file(
+    State(st): State<Shared>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
+    let live = lookup(&st, &id).await?;
+    if live.state() == JobState::Cancelled {
+        return Err(gone(&id));
+    }
+    // A scene never changes after submission: its id and mesh hash name its bytes.
+    let etag = format!("\"scene-{id}-{:016x}\"", live.row.mesh_hash);
+    if not_modified(&headers, &etag) {
+        return Ok(not_modified_response(&etag));
+    }
+    let store = st.store.clone();
+    let key = id.clone();
+    let body = blocking(move || {
+        store
+            .read_scene(&key)
+            .map_err(|e| anyhow::anyhow!("cannot read the stored scene: {e}"))
+    })
+    .await?;
+    st.metrics
+        .other_bytes_served
+        .fetch_add(body.len() as u64, Ordering::Relaxed);
+    let mut r = body.into_response();
+    let h = r.headers_mut();
+    h.insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/octet-stream"),
+    );
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
+    if let Ok(v) = HeaderValue::from_str(&etag) {
+        h.insert(header::ETAG, v);
     }
     Ok(r)
 }

@@ -110,6 +110,7 @@ pub fn router(state: Shared) -> Router {
         )
         .route("/v1/scenes/{id}/events", get(sse::get_events))
         .route("/v1/scenes/{id}/mesh", get(api::get_mesh))
+        .route("/v1/scenes/{id}/scene", get(api::get_scene_file))
         .route("/v1/scenes/{id}/trees", get(stream::get_trees))
         .route("/v1/openapi.json", get(api::openapi))
         .route("/healthz", get(api::healthz))

@@ -23,6 +23,7 @@ use super::{api, sse, stream};
         api::delete_scene,
         sse::get_events,
         api::get_mesh,
+        api::get_scene_file,
         stream::get_trees,
         api::healthz,
         api::metrics,

@@ -1,0 +1,67 @@
+//! `bspvt view`: the interactive window on a streamed scene.
+
+use std::time::Instant;
+
+use anyhow::Result;
+
+use super::ModeArg;
+use crate::session::ViewMethod;
+use crate::stream::connect::{ConnectArgs, connect};
+use crate::viewer::{self, ViewerOptions};
+
+#[derive(clap::Args, Debug)]
+pub struct ViewArgs {
+    #[command(flatten)]
+    pub connect: ConnectArgs,
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+    #[arg(long, default_value_t = 512)]
+    pub height: u32,
+    #[arg(long, value_enum, default_value = "bspvt")]
+    pub method: ViewMethod,
+    #[arg(long, value_enum, default_value = "vertex")]
+    pub mode: ModeArg,
+    /// Start with the light moving along its path (P toggles).
+    #[arg(long)]
+    pub moving: bool,
+    /// Close the window after this many frames (scripted runs).
+    #[arg(long)]
+    pub max_frames: Option<u64>,
+}
+
+pub fn run(a: &ViewArgs) -> Result<()> {
+    let started = Instant::now();
+    let connected = connect(&a.connect)?;
+    let mut session = connected.session(&a.connect, a.width, a.height)?;
+    session.method = a.method;
+    session.mode = a.mode.into();
+    if a.moving {
+        session.path_t = Some(0.0);
+    }
+    let report = viewer::run(
+        &mut session,
+        &ViewerOptions {
+            title: format!("bspvt — {}", connected.served.id),
+            max_frames: a.max_frames,
+            note: connected
+                .served
+                .embedded
+                .as_ref()
+                .map(|b| format!("embedded service on {}", b.addr)),
+        },
+        started,
+    )?;
+    println!(
+        "{} frames, {:.1} fps{}",
+        report.frames,
+        report.mean_fps,
+        report
+            .first_full_frame
+            .map(|t| format!(
+                "; first full-quality frame after {:.0} ms",
+                t.as_secs_f64() * 1e3
+            ))
+            .unwrap_or_default()
+    );
+    Ok(())
+}

@@ -1,0 +1,197 @@
+//! What a user names — a scene URL, a scene id, a scene file or `builtin:NAME`, a bare mesh —
+//! turned into a scene on a service. Local scenes go to an embedded service (in this process,
+//! on loopback, data in a local folder) unless `--server` names one; a local scene submitted
+//! before (same content) is not baked again: its id is remembered next to the data.
+
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use bspvt_proto::hash::Fnv1a;
+use bspvt_server::service::Background;
+use bspvt_server::service::config::Config;
+use bspvt_server::service::db::JobState;
+
+use super::remote::Remote;
+
+/// What the user asked to view.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Source {
+    /// `http://HOST:PORT/v1/scenes/ID`.
+    Url { base: String, id: String },
+    /// A scene id on `--server`.
+    Id(String),
+    /// A scene file, `builtin:NAME`, or a bare mesh: submitted, then streamed.
+    Local {
+        scene: Option<String>,
+        mesh: Option<PathBuf>,
+    },
+}
+
+impl Source {
+    pub fn parse(arg: Option<&str>, mesh: Option<&Path>) -> Result<Source> {
+        match (arg, mesh) {
+            (Some(_), Some(_)) => bail!("give either a scene (URL, id, file) or --mesh, not both"),
+            (None, Some(m)) => Ok(Source::Local {
+                scene: None,
+                mesh: Some(m.to_path_buf()),
+            }),
+            (None, None) => bail!(
+                "nothing to view: give URL, SCENE_ID, SCENE.json, builtin:NAME or --mesh PATH"
+            ),
+            (Some(a), None) => {
+                if a.starts_with("http://") || a.starts_with("https://") {
+                    let (base, id) = a
+                        .trim_end_matches('/')
+                        .split_once("/v1/scenes/")
+                        .with_context(|| format!("{a} is not a scene URL (…/v1/scenes/ID)"))?;
+                    let id = id.split('/').next().unwrap_or_default();
+                    if !is_id(id) {
+                        bail!("{a}: {id:?} is not a scene id");
+                    }
+                    Ok(Source::Url {
+                        base: base.to_string(),
+                        id: id.to_string(),
+                    })
+                } else if is_id(a) && !Path::new(a).exists() {
+                    Ok(Source::Id(a.to_string()))
+                } else {
+                    Ok(Source::Local {
+                        scene: Some(a.to_string()),
+                        mesh: None,
+                    })
+                }
+            }
+        }
+    }
+}
+
+/// A scene id: 32 hex digits.
+fn is_id(s: &str) -> bool {
+    s.len() == 32 && s.bytes().all(|b| b.is_ascii_hexdigit())
+}
+
+/// A scene on a service, and the embedded service when this process runs it.
+pub struct Served {
+    pub remote: Remote,
+    pub id: String,
+    pub embedded: Option<Background>,
+    /// Whether this call submitted the scene (false: already on the service).
+    pub submitted: bool,
+}
+
+/// Where the embedded service and the client cache live.
+pub struct Places {
+    /// `--server URL` for ids and local scenes (local scenes otherwise go to an embedded one).
+    pub server: Option<String>,
+    pub api_key: Option<String>,
+    /// Data folder of the embedded service.
+    pub data_dir: PathBuf,
+}
+
+/// Resolves `src` to a scene on a service, submitting local scenes.
+pub fn open(src: &Source, places: &Places) -> Result<Served> {
+    match src {
+        Source::Url { base, id } => Ok(Served {
+            remote: Remote::new(base, places.api_key.clone()),
+            id: id.clone(),
+            embedded: None,
+            submitted: false,
+        }),
+        Source::Id(id) => {
+            let base = places.server.as_deref().with_context(|| {
+                format!("scene id {id} given without --server URL (or BSPVT_SERVER)")
+            })?;
+            Ok(Served {
+                remote: Remote::new(base, places.api_key.clone()),
+                id: id.clone(),
+                embedded: None,
+                submitted: false,
+            })
+        }
+        Source::Local { scene, mesh } => {
+            let (remote, embedded) = match &places.server {
+                Some(base) => (Remote::new(base, places.api_key.clone()), None),
+                None => {
+                    let mut cfg = Config::with_data_dir(&places.data_dir);
+                    cfg.addr = SocketAddr::from(([127, 0, 0, 1], 0));
+                    let bg = Background::start(cfg).with_context(|| {
+                        format!(
+                            "cannot start the embedded service in {}",
+                            places.data_dir.display()
+                        )
+                    })?;
+                    (Remote::new(&format!("http://{}", bg.addr), None), Some(bg))
+                }
+            };
+            let key = content_key(scene.as_deref(), mesh.as_deref())?;
+            let known_path = places.data_dir.join("client-submissions.json");
+            let mut known: BTreeMap<String, BTreeMap<String, String>> = std::fs::read(&known_path)
+                .ok()
+                .and_then(|b| serde_json::from_slice(&b).ok())
+                .unwrap_or_default();
+            let server_key = remote.base().to_string();
+            let server_key = if embedded.is_some() {
+                "embedded".to_string()
+            } else {
+                server_key
+            };
+            if let Some(id) = known.get(&server_key).and_then(|m| m.get(&key))
+                && let Ok(s) = remote.status(id)
+                && !matches!(s.state, JobState::Failed | JobState::Cancelled)
+            {
+                return Ok(Served {
+                    remote,
+                    id: id.clone(),
+                    embedded,
+                    submitted: false,
+                });
+            }
+            let id = remote.submit(scene.as_deref(), mesh.as_deref())?;
+            known.entry(server_key).or_default().insert(key, id.clone());
+            if let Some(parent) = known_path.parent() {
+                std::fs::create_dir_all(parent)?;
+            }
+            std::fs::write(&known_path, serde_json::to_vec_pretty(&known)?)
+                .with_context(|| format!("cannot write {}", known_path.display()))?;
+            Ok(Served {
+                remote,
+                id,
+                embedded,
+                submitted: true,
+            })
+        }
+    }
+}
+
+/// Identity of a local scene's content: the scene file's bytes (or the built-in's name), and
+/// the mesh file's bytes.
+fn content_key(scene: Option<&str>, mesh: Option<&Path>) -> Result<String> {
+    let mut h = Fnv1a::default();
+    if let Some(s) = scene {
+        h.write(s.as_bytes());
+        if !s.starts_with("builtin:") {
+            let path = Path::new(s);
+            let text = std::fs::read(path).with_context(|| format!("cannot read {s}"))?;
+            h.write(&text);
+            // The mesh files it names are part of its content.
+            if let Ok(file) = serde_json::from_slice::<bspvt_proto::scene::SceneFile>(&text) {
+                for m in file
+                    .meshes
+                    .iter()
+                    .filter(|m| !m.path.starts_with("builtin:"))
+                {
+                    let p = path.parent().unwrap_or(Path::new(".")).join(&m.path);
+                    if let Ok(b) = std::fs::read(&p) {
+                        h.write(&b);
+                    }
+                }
+            }
+        }
+    }
+    if let Some(m) = mesh {
+        h.write(&std::fs::read(m).with_context(|| format!("cannot read {}", m.display()))?);
+    }
+    Ok(format!("{:016x}", h.finish()))
+}

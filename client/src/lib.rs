@@ -11,6 +11,7 @@ pub mod groundtruth;
 pub mod light;
 pub mod ltc;
 pub mod mitsuba;
+pub mod penumbra;
 pub mod play;
 pub mod render;
 pub mod session;

@@ -11,6 +11,7 @@ use super::image::Image;
 use super::path::LightPath;
 use super::renderer::{FrameCounts, Mode, Renderer, Trees};
 use crate::groundtruth;
+use crate::penumbra;
 
 /// Shading method.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
@@ -24,6 +25,31 @@ pub enum Method {
     Mc,
     /// LTC BRDF with visibility by many shadow rays (separates LTC-fit and visibility error).
     LtcExact,
+    /// Paper 003: one hard shadow ray per pixel to the light's centroid, blurred by the
+    /// similar-triangles penumbra width, × unshadowed per-pixel LTC.
+    RtPenumbra,
+    /// The same hard shadow ray, unblurred, × unshadowed per-pixel LTC.
+    RtHard,
+    /// Shadow map from the light, percentage-closer filtering (fixed kernel).
+    Pcf,
+    /// Variance shadow map (Chebyshev bound, light-bleeding reduction).
+    Vsm,
+    /// Percentage-closer soft shadows (blocker search, PCF of the penumbra width).
+    Pcss,
+}
+
+impl Method {
+    /// The penumbra technique of this method, if it is one.
+    pub fn penumbra(self) -> Option<penumbra::Technique> {
+        match self {
+            Method::RtPenumbra => Some(penumbra::Technique::RtPenumbra),
+            Method::RtHard => Some(penumbra::Technique::RtHard),
+            Method::Pcf => Some(penumbra::Technique::Pcf),
+            Method::Vsm => Some(penumbra::Technique::Vsm),
+            Method::Pcss => Some(penumbra::Technique::Pcss),
+            _ => None,
+        }
+    }
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -86,7 +112,9 @@ pub fn render_sequence(
     let start = Instant::now();
     let r = Renderer::new(scene, opts.width, opts.height);
     // Shadow rays for the references: one BVH per scene, built before the clock starts.
-    let occluder = matches!(opts.method, Method::Mc | Method::LtcExact).then(|| {
+    let rays = matches!(opts.method, Method::Mc | Method::LtcExact)
+        || opts.method.penumbra().is_some_and(|t| t.needs_rays());
+    let occluder = rays.then(|| {
         let tris = bspvt_server::bake::raycast::mesh_triangles(&scene.mesh);
         bspvt_server::bake::raycast::Occluder::new(&scene.mesh, &tris)
     });
@@ -130,6 +158,25 @@ pub fn render_sequence(
                 );
                 (img, FrameCounts::default())
             }
+            (m, _) => {
+                let technique = m
+                    .penumbra()
+                    .with_context(|| format!("{m:?}: not a shadow technique"))?;
+                let img = penumbra::render(
+                    &r,
+                    &l,
+                    technique,
+                    occluder.as_ref(),
+                    &penumbra::Params::default(),
+                )?;
+                (
+                    img,
+                    FrameCounts {
+                        pixels_shaded: r.gbuffer.covered(),
+                        ..FrameCounts::default()
+                    },
+                )
+            }
         };
         let dt = t.elapsed().as_secs_f64();
         shading_seconds += dt;
@@ -150,7 +197,12 @@ pub fn render_sequence(
     };
     Ok(Stats {
         method: opts.method,
-        mode: opts.mode,
+        // The penumbra methods shade per pixel whatever the mode.
+        mode: if opts.method.penumbra().is_some() {
+            Mode::Pixel
+        } else {
+            opts.mode
+        },
         width: opts.width,
         height: opts.height,
         frames,

@@ -1,10 +1,16 @@
-//! Occlusion rays against a mesh: one CWBVH (obvhs) per mesh, any-hit queries.
+//! Occlusion rays against a mesh: one CWBVH (obvhs) per mesh, any-hit and closest-hit queries.
 
 use std::time::Duration;
 
 use bspvt_proto::Mesh;
 use glam::{Vec3, Vec3A};
-use obvhs::{BvhBuildParams, cwbvh::CwBvh, ray::Ray, rt_triangle::RtTriangle, triangle::Triangle};
+use obvhs::{
+    BvhBuildParams,
+    cwbvh::CwBvh,
+    ray::{Ray, RayHit},
+    rt_triangle::RtTriangle,
+    triangle::Triangle,
+};
 
 /// A mesh prepared for occlusion queries.
 pub struct Occluder {
@@ -73,5 +79,21 @@ impl Occluder {
         !self
             .bvh
             .ray_traverse_miss(ray, |ray, id| self.tris[id].intersect(ray))
+    }
+
+    /// Distance to the closest triangle hit by the segment from `origin` along unit `dir` up to
+    /// `t_max`, or `None` when the segment is clear (closest-hit traversal: the ray's `tmax`
+    /// shrinks to each hit found).
+    #[inline]
+    pub fn first_hit(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<f32> {
+        if !(t_max > 0.0) || !origin.is_finite() || !dir.is_finite() {
+            return None;
+        }
+        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
+        let mut hit = RayHit::none();
+        self.bvh
+            .ray_traverse(ray, &mut hit, |ray, id| self.tris[id].intersect(ray))
+            .then_some(hit.t)
+            .filter(|t| t.is_finite())
     }
 }

@@ -1,0 +1,245 @@
+//! The spatially varying, edge-aware blur of a screen-space shadow buffer.
+//!
+//! Each pixel p has its own half-width W(p)/2 in world units, which becomes a radius in
+//! pixels per axis: W/2 over the world length one pixel covers on p's tangent plane along that
+//! axis (the footprint at p's view depth, grown by the receiver's slope), capped at
+//! [`Params::max_radius`] pixels. The kernel is a box of that half-width — the hard shadow of a square light's centre convolved with the
+//! light's image scaled by (Z_r − Z_o)/Z_o, which is what the similar-triangles width
+//! describes — applied separably (rows, then columns), with fractional coverage at the box's
+//! ends so the width varies smoothly. Taps on another surface (depth off the centre's tangent
+//! plane, or a different normal: [`Guide::same_surface`]) get weight 0, so shadows do not bleed
+//! across depth or normal discontinuities.
+//!
+//! Only occluded pixels know a width (the occluder distance comes from their shadow ray). The
+//! penumbra is centred on the hard shadow's edge and extends onto the lit side too, and its
+//! width is the one of the rays that graze the occluder's silhouette — those of the occluded
+//! pixels on the hard shadow's edge (deeper in the umbra the first hit lies nearer the light
+//! and would overestimate W). So before blurring, the edge pixels' radii are spread: each
+//! pixel takes the largest radius of the same-surface edge pixels whose box reaches it
+//! ([`edge_radius`], [`spread_radius`], separable).
+
+use rayon::prelude::*;
+
+use super::{Guide, Params};
+
+type Widths = [f64];
+
+/// The half-width of occluded pixels (`hard` < 1) with a same-surface 4-neighbour that is lit;
+/// 0 elsewhere.
+pub fn edge_radius(hard: &[f32], radius: &Widths, guide: &Guide, params: &Params) -> Vec<f64> {
+    let (w, h) = (guide.width as isize, guide.height as isize);
+    (0..hard.len())
+        .into_par_iter()
+        .map(|i| {
+            let Some(c) = &guide.pixels[i] else {
+                return 0.0;
+            };
+            if hard[i] >= 1.0 {
+                return 0.0;
+            }
+            let (x, y) = ((i as isize) % w, (i as isize) / w);
+            let edge = [(-1, 0), (1, 0), (0, -1), (0, 1)].iter().any(|&(dx, dy)| {
+                let (qx, qy) = (x + dx, y + dy);
+                if qx < 0 || qy < 0 || qx >= w || qy >= h {
+                    return false;
+                }
+                let j = (qy * w + qx) as usize;
+                hard[j] >= 1.0
+                    && guide.pixels[j]
+                        .as_ref()
+                        .is_some_and(|q| guide.same_surface(c, q, params))
+            });
+            if edge { radius[i] } else { 0.0 }
+        })
+        .collect()
+}
+
+/// Largest half-width among same-surface pixels q whose box reaches p (|p − q| ≤ q's radius in
+/// pixels along each axis; p's own included), in two separable passes. The search reaches
+/// `params.max_radius` pixels.
+pub fn spread_radius(radius: &Widths, guide: &Guide, params: &Params) -> Vec<f64> {
+    let reach = params.max_radius.max(0.0).ceil() as isize;
+    let h = spread_pass(radius, guide, params, reach, true);
+    spread_pass(&h, guide, params, reach, false)
+}
+
+fn spread_pass(
+    radius: &Widths,
+    guide: &Guide,
+    params: &Params,
+    reach: isize,
+    horizontal: bool,
+) -> Vec<f64> {
+    let (w, h) = (guide.width as isize, guide.height as isize);
+    let cap = params.max_radius;
+    (0..radius.len())
+        .into_par_iter()
+        .map(|i| {
+            let own = radius[i];
+            let Some(c) = &guide.pixels[i] else {
+                return own;
+            };
+            let (x, y) = ((i as isize) % w, (i as isize) / w);
+            let mut best = own;
+            for k in -reach..=reach {
+                let (qx, qy) = if horizontal { (x + k, y) } else { (x, y + k) };
+                if k == 0 || qx < 0 || qy < 0 || qx >= w || qy >= h {
+                    continue;
+                }
+                let j = (qy * w + qx) as usize;
+                let r = radius[j];
+                if r > best
+                    && let Some(q) = &guide.pixels[j]
+                    && (k.unsigned_abs() as f64) <= q.pixels(r, horizontal, cap)
+                    && guide.same_surface(c, q, params)
+                {
+                    best = r;
+                }
+            }
+            best
+        })
+        .collect()
+}
+
+/// Box blur of world half-width `radius[p]` at every pixel p, separable and edge-aware.
+/// Background pixels keep their value and are never sampled.
+pub fn blur(values: &[f32], radius: &Widths, guide: &Guide, params: &Params) -> Vec<f32> {
+    let h = blur_pass(values, radius, guide, params, true);
+    blur_pass(&h, radius, guide, params, false)
+}
+
+fn blur_pass(
+    values: &[f32],
+    radius: &Widths,
+    guide: &Guide,
+    params: &Params,
+    horizontal: bool,
+) -> Vec<f32> {
+    let (w, h) = (guide.width as isize, guide.height as isize);
+    let cap = params.max_radius.max(0.0);
+    (0..values.len())
+        .into_par_iter()
+        .map(|i| {
+            let Some(c) = &guide.pixels[i] else {
+                return values[i];
+            };
+            let r = c.pixels(radius[i], horizontal, cap);
+            let n = (r + 0.5).floor() as isize;
+            let (x, y) = ((i as isize) % w, (i as isize) / w);
+            // The centre always counts (weight 1); tap k covers [k − ½, k + ½] ∩ [−r, r].
+            let (mut sum, mut wsum) = (f64::from(values[i]), 1.0);
+            for k in (-n..=n).filter(|&k| k != 0) {
+                let (qx, qy) = if horizontal { (x + k, y) } else { (x, y + k) };
+                if qx < 0 || qy < 0 || qx >= w || qy >= h {
+                    continue;
+                }
+                let wk = (r + 0.5 - k.unsigned_abs() as f64).clamp(0.0, 1.0);
+                let j = (qy * w + qx) as usize;
+                if wk > 0.0
+                    && let Some(q) = &guide.pixels[j]
+                    && guide.same_surface(c, q, params)
+                {
+                    sum += wk * f64::from(values[j]);
+                    wsum += wk;
+                }
+            }
+            (sum / wsum) as f32
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::DVec3;
+
+    use super::*;
+    use crate::penumbra::GuidePixel;
+
+    /// A 32 × 8 image: the left half a wall facing the camera at depth 1, the right half at
+    /// depth 3 (a depth discontinuity), or tilted (a normal discontinuity).
+    fn guide(tilt_right: bool) -> Guide {
+        let (w, h) = (32usize, 8usize);
+        let pixels = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f64, (i / w) as f64);
+                let right = x >= 16.0;
+                let depth = if right && !tilt_right { 3.0 } else { 1.0 };
+                let normal = if right && tilt_right {
+                    DVec3::new(0.8, 0.0, -0.6)
+                } else {
+                    DVec3::NEG_Z
+                };
+                Some(GuidePixel {
+                    position: DVec3::new(0.01 * x * depth, 0.01 * y * depth, depth),
+                    normal,
+                    geometric: normal,
+                    depth,
+                    step: [0.01 * depth; 2],
+                })
+            })
+            .collect();
+        Guide {
+            width: w,
+            height: h,
+            pixels,
+            footprint_per_depth: 0.01,
+        }
+    }
+
+    #[test]
+    fn no_bleeding_across_depth_or_normal_discontinuities() {
+        let p = Params::default();
+        for tilt in [false, true] {
+            let g = guide(tilt);
+            // Left half shadowed, right half lit; a huge width everywhere.
+            let values: Vec<f32> = (0..g.pixels.len())
+                .map(|i| if i % 32 < 16 { 0.0 } else { 1.0 })
+                .collect();
+            let radius = vec![1.0; values.len()];
+            let out = blur(&values, &radius, &g, &p);
+            assert_eq!(out, values, "tilt {tilt}: bled across the discontinuity");
+        }
+        // The same edge on one continuous surface is blurred (the test can fail).
+        let mut g = guide(false);
+        for px in g.pixels.iter_mut().flatten() {
+            px.depth = 1.0;
+            px.position.z = 1.0;
+            px.step = [0.01; 2];
+        }
+        let values: Vec<f32> = (0..g.pixels.len())
+            .map(|i| if i % 32 < 16 { 0.0 } else { 1.0 })
+            .collect();
+        let out = blur(&values, &vec![0.04; values.len()], &g, &p);
+        assert!(out[16] < 0.9 && out[15] > 0.1, "{} {}", out[15], out[16]);
+    }
+
+    #[test]
+    fn radius_spreads_from_the_edge_onto_the_lit_side() {
+        let mut g = guide(false);
+        for px in g.pixels.iter_mut().flatten() {
+            px.depth = 1.0;
+            px.position.z = 1.0;
+            px.step = [0.01; 2];
+        }
+        let p = Params::default();
+        let hard: Vec<f32> = (0..g.pixels.len())
+            .map(|i| if i % 32 < 16 { 0.0 } else { 1.0 })
+            .collect();
+        // Half-width 0.05 = 5 pixels at the occluded pixels.
+        let radius: Vec<f64> = hard
+            .iter()
+            .map(|&h| if h < 1.0 { 0.05 } else { 0.0 })
+            .collect();
+        let edge = edge_radius(&hard, &radius, &g, &p);
+        assert_eq!(
+            edge.iter().filter(|&&r| r > 0.0).count(),
+            8,
+            "one edge column"
+        );
+        let spread = spread_radius(&edge, &g, &p);
+        for x in 0..32 {
+            let want = if (10..=20).contains(&x) { 0.05 } else { 0.0 };
+            assert_eq!(spread[3 * 32 + x], want, "x = {x}");
+        }
+    }
+}

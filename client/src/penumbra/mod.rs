@@ -1,0 +1,289 @@
+//! Soft shadows from a point light by blurring a hard shadow (paper 003), and the shadow-map
+//! baselines it is compared with (PCF, VSM, PCSS).
+//!
+//! All methods produce a per-pixel shadow factor s ∈ [0, 1]; the shadowed image is the
+//! unshadowed per-pixel LTC shading × s ([`compose`]). The point light is the light polygon's
+//! centroid; its width is W_light = √area.
+//!
+//! The penumbra width at a receiver follows from similar triangles (paper 003, as in PCSS),
+//! with Z measured from the light:
+//!
+//! ```text
+//! W = (Z_receiver − Z_occluder) / Z_occluder · W_light
+//! ```
+//!
+//! - [`rt`]: one hard shadow ray per pixel gives s_hard and the occluder distance; W is
+//!   projected to screen pixels and s_hard is blurred by a spatially varying, edge-aware
+//!   ([`blur`]) kernel of that width.
+//! - [`shadowmap`]: a depth map rendered from the light; PCF (fixed kernel), VSM (moments,
+//!   Chebyshev bound, light-bleeding reduction) and PCSS (blocker search, then PCF of width W).
+
+pub mod blur;
+pub mod rt;
+pub mod shadowmap;
+
+use anyhow::{Result, bail};
+use bspvt_server::bake::raycast::Occluder;
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::groundtruth::Shadows;
+use crate::light::Light;
+use crate::render::image::Image;
+use crate::render::renderer::Renderer;
+
+/// A shadow technique of this module.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Technique {
+    /// Paper 003: ray-traced hard shadow blurred by the similar-triangles width.
+    RtPenumbra,
+    /// The same hard shadow, unblurred.
+    RtHard,
+    Pcf,
+    Vsm,
+    Pcss,
+}
+
+impl Technique {
+    /// True when the technique traces rays (needs an [`Occluder`]).
+    pub fn needs_rays(self) -> bool {
+        matches!(self, Technique::RtPenumbra | Technique::RtHard)
+    }
+}
+
+/// The shadow factor per pixel of `r`'s G-buffer for `light`.
+pub fn shadow_factor(
+    r: &Renderer,
+    guide: &Guide,
+    light: &Light,
+    technique: Technique,
+    occluder: Option<&Occluder>,
+    params: &Params,
+) -> Result<Vec<f32>> {
+    let filter = match technique {
+        Technique::RtPenumbra | Technique::RtHard => {
+            let Some(occ) = occluder else {
+                bail!("{technique:?} needs an occluder (ray tracing)");
+            };
+            let eps = Shadows::for_scene(r.scene, None).epsilon;
+            let b = rt::hard_shadows(guide, light, occ, eps);
+            return Ok(if technique == Technique::RtHard {
+                b.hard
+            } else {
+                rt::soft_shadows(&b, guide, params)
+            });
+        }
+        Technique::Pcf => shadowmap::Filter::Pcf,
+        Technique::Vsm => shadowmap::Filter::Vsm,
+        Technique::Pcss => shadowmap::Filter::Pcss,
+    };
+    Ok(shadowmap::shadow_factor(
+        guide,
+        &r.scene.mesh,
+        light,
+        filter,
+        params,
+    ))
+}
+
+/// One frame: the unshadowed per-pixel LTC shading × the technique's shadow factor.
+pub fn render(
+    r: &Renderer,
+    light: &Light,
+    technique: Technique,
+    occluder: Option<&Occluder>,
+    params: &Params,
+) -> Result<Image> {
+    let guide = Guide::new(r);
+    let s = shadow_factor(r, &guide, light, technique, occluder, params)?;
+    Ok(compose(&r.shade_pixels(light, None), &s))
+}
+
+/// Settings shared by the methods.
+#[derive(Clone, Copy, Debug)]
+pub struct Params {
+    /// Cap on the blur radius in screen pixels (rt-penumbra) and on the PCF/PCSS radius in
+    /// shadow-map texels. W grows without bound as Z_occluder → 0 (occluder at the light);
+    /// the cap bounds both the cost (taps ∝ radius) and the width.
+    pub max_radius: f64,
+    /// Bilateral weights: a tap counts when its distance to the centre's tangent plane is
+    /// below `plane_tolerance` × the centre's view depth …
+    pub plane_tolerance: f64,
+    /// … and its normal is within acos(`normal_cos`) of the centre's.
+    pub normal_cos: f64,
+    /// Shadow-map resolution (square).
+    pub map_res: u32,
+    /// PCF kernel radius in texels (also VSM's moment prefilter radius).
+    pub pcf_radius: u32,
+    /// VSM light-bleeding reduction: p ↦ linstep(amount, 1, p).
+    pub vsm_bleed: f64,
+}
+
+impl Default for Params {
+    fn default() -> Params {
+        Params {
+            max_radius: 32.0,
+            plane_tolerance: 0.01,
+            normal_cos: 0.9,
+            map_res: 1024,
+            pcf_radius: 2,
+            vsm_bleed: 0.3,
+        }
+    }
+}
+
+/// Penumbra width at the receiver by similar triangles (paper 003):
+/// W = (Z_receiver − Z_occluder) / Z_occluder · W_light, Z measured from the light.
+/// Always finite and ≥ 0: an occluder at (or behind) the light gives `f64::MAX`, to be capped
+/// by the caller; Z_occluder ≥ Z_receiver (no occluder in between) gives 0.
+pub fn penumbra_width(z_receiver: f64, z_occluder: f64, w_light: f64) -> f64 {
+    let d = z_receiver - z_occluder;
+    if !(d > 0.0) || !(w_light > 0.0) {
+        return 0.0;
+    }
+    if !(z_occluder > 1e-12 * z_receiver.abs().max(1e-300)) {
+        return f64::MAX;
+    }
+    let w = d / z_occluder * w_light;
+    if w.is_finite() { w } else { f64::MAX }
+}
+
+/// The light's width W_light: the side of the square of the same area.
+pub fn light_width(light: &Light) -> f64 {
+    let a = light.area();
+    if a.is_finite() && a > 0.0 {
+        a.sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// What each pixel sees, for edge-aware filtering: world position, shading normal and view
+/// depth (along the camera's forward axis). `None`: background.
+#[derive(Clone, Debug)]
+pub struct Guide {
+    pub width: usize,
+    pub height: usize,
+    pub pixels: Vec<Option<GuidePixel>>,
+    /// World size of one pixel at view depth 1: 2 tan(fov_y / 2) / height.
+    pub footprint_per_depth: f64,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct GuidePixel {
+    pub position: DVec3,
+    pub normal: DVec3,
+    /// Unit geometric normal on the viewer's side (shadow-ray offsets).
+    pub geometric: DVec3,
+    pub depth: f64,
+    /// World length on the tangent plane covered by one pixel along x and along y: the
+    /// footprint grown by the receiver's slope (`f64::MAX` at grazing incidence).
+    pub step: [f64; 2],
+}
+
+impl GuidePixel {
+    /// A world half-width in pixels along x (`horizontal`) or y, capped at `cap`.
+    #[inline]
+    pub fn pixels(&self, half_width: f64, horizontal: bool, cap: f64) -> f64 {
+        let r = half_width / self.step[usize::from(!horizontal)];
+        if r.is_finite() {
+            r.clamp(0.0, cap.max(0.0))
+        } else if r > 0.0 {
+            cap.max(0.0)
+        } else {
+            0.0
+        }
+    }
+}
+
+impl Guide {
+    pub fn new(r: &Renderer) -> Guide {
+        let g = &r.gbuffer;
+        let w = g.width.max(1) as usize;
+        let footprint_per_depth = 2.0 * r.view.tan_half_fov / f64::from(g.height.max(1));
+        let pixels = (0..g.tri.len())
+            .into_par_iter()
+            .map(|i| {
+                let s = g.surface(&r.scene.mesh, &r.view, i)?;
+                let depth = r.view.to_camera(s.position).z;
+                let iso = footprint_per_depth * depth;
+                let (x, y) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+                // World distance between the tangent-plane hits of the rays through the
+                // pixel's two edges, along x and along y (≥ the perpendicular footprint).
+                let hit = |x: f64, y: f64| {
+                    let d = r.view.ray_dir(x, y);
+                    let t = s.geometric.dot(s.position - r.view.eye) / s.geometric.dot(d);
+                    r.view.eye + d * t
+                };
+                let step = |a: DVec3, b: DVec3| {
+                    let l = (a - b).length();
+                    if l.is_finite() { l.max(iso) } else { f64::MAX }
+                };
+                let step = [
+                    step(hit(x - 0.5, y), hit(x + 0.5, y)),
+                    step(hit(x, y - 0.5), hit(x, y + 0.5)),
+                ];
+                (depth.is_finite() && depth > 0.0 && s.position.is_finite()).then_some(GuidePixel {
+                    position: s.position,
+                    normal: s.normal,
+                    geometric: s.geometric,
+                    depth,
+                    step,
+                })
+            })
+            .collect();
+        Guide {
+            width: g.width as usize,
+            height: g.height as usize,
+            pixels,
+            footprint_per_depth,
+        }
+    }
+
+    /// True when pixel `q` lies on the same surface as `c`: near c's tangent plane (relative
+    /// to c's view depth) and with a similar normal. Rejects taps across depth and normal
+    /// discontinuities.
+    #[inline]
+    pub fn same_surface(&self, c: &GuidePixel, q: &GuidePixel, p: &Params) -> bool {
+        let plane = c.normal.dot(q.position - c.position).abs();
+        plane <= p.plane_tolerance * c.depth && c.normal.dot(q.normal) >= p.normal_cos
+    }
+}
+
+/// The shadowed image: unshadowed × shadow factor, per pixel (factors are clamped to [0, 1];
+/// a non-finite factor counts as lit).
+pub fn compose(unshadowed: &Image, factor: &[f32]) -> Image {
+    let mut out = unshadowed.clone();
+    out.pixels
+        .par_iter_mut()
+        .zip(factor.par_iter())
+        .for_each(|(px, &s)| {
+            let s = if s.is_finite() {
+                s.clamp(0.0, 1.0)
+            } else {
+                1.0
+            };
+            for c in px.iter_mut() {
+                *c *= s;
+            }
+        });
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn width_formula_and_limits() {
+        // Occluder halfway: W = W_light.
+        assert!((penumbra_width(2.0, 1.0, 0.5) - 0.5).abs() < 1e-15);
+        // Contact: 0. Occluder beyond the receiver: 0.
+        assert_eq!(penumbra_width(2.0, 2.0, 1.0), 0.0);
+        assert_eq!(penumbra_width(2.0, 3.0, 1.0), 0.0);
+        // Occluder at the light: finite, huge.
+        assert_eq!(penumbra_width(2.0, 0.0, 1.0), f64::MAX);
+        assert_eq!(penumbra_width(2.0, -1.0, 1.0), f64::MAX);
+        assert_eq!(penumbra_width(f64::NAN, 1.0, 1.0), 0.0);
+    }
+}

@@ -1,0 +1,93 @@
+//! rt-penumbra (paper 003): one hard shadow ray per pixel toward the point light (the light
+//! polygon's centroid), the occluder's distance from its closest hit, and a blur of the hard
+//! shadow only, of width W = (Z_receiver − Z_occluder) / Z_occluder · W_light projected to
+//! screen pixels (W / the pixel's footprint on the receiver's tangent plane), capped at
+//! [`Params::max_radius`] pixels ([`super::blur`]).
+
+use bspvt_server::bake::raycast::Occluder;
+use rayon::prelude::*;
+
+use super::{Guide, Params, blur, light_width, penumbra_width};
+use crate::light::Light;
+
+/// Per-pixel buffers of the hard shadow pass (row-major; background pixels: lit, no width).
+#[derive(Clone, Debug)]
+pub struct RtBuffers {
+    /// Hard shadow: 1 when the ray to the light's centroid is clear, else 0.
+    pub hard: Vec<f32>,
+    /// Distance from the light's centroid to the receiver, Z_receiver.
+    pub z_receiver: Vec<f64>,
+    /// Distance from the light's centroid to the occluder hit, Z_occluder (`NAN`: none).
+    pub z_occluder: Vec<f64>,
+    /// Half the penumbra width, W / 2, in world units (0 where unoccluded; `f64::MAX` for an
+    /// occluder at the light — the blur caps it in pixels).
+    pub radius: Vec<f64>,
+}
+
+/// The hard shadow pass. `epsilon`: the shadow-ray offset (origins move by ε along the
+/// geometric normal toward the light's side, segments stop ε short of the light).
+pub fn hard_shadows(guide: &Guide, light: &Light, occluder: &Occluder, epsilon: f64) -> RtBuffers {
+    let centre = light.centroid();
+    let w_light = light_width(light);
+    type Px = (f32, f64, f64, f64);
+    let px: Vec<Px> = guide
+        .pixels
+        .par_iter()
+        .map(|g| {
+            let Some(g) = g else {
+                return (1.0, f64::NAN, f64::NAN, 0.0);
+            };
+            let to_light = centre - g.position;
+            let z_r = to_light.length();
+            if !(z_r > epsilon) || !z_r.is_finite() {
+                // The receiver touches the point light: nothing can be in between.
+                return (1.0, z_r, f64::NAN, 0.0);
+            }
+            let dir = to_light / z_r;
+            let side = if g.geometric.dot(dir) >= 0.0 {
+                1.0
+            } else {
+                -1.0
+            };
+            let origin = g.position + g.geometric * (epsilon * side);
+            let seg = centre - origin;
+            let len = seg.length();
+            let t_max = len - epsilon;
+            let hit = if t_max > 0.0 && len.is_finite() {
+                occluder.first_hit(origin.as_vec3(), (seg / len).as_vec3(), t_max as f32)
+            } else {
+                None
+            };
+            match hit {
+                None => (1.0, z_r, f64::NAN, 0.0),
+                Some(t) => {
+                    // Z from the light: the hit lies len − t from the centroid.
+                    let z_o = (len - f64::from(t)).max(0.0);
+                    let w = penumbra_width(z_r, z_o, w_light);
+                    (0.0, z_r, z_o, 0.5 * w)
+                }
+            }
+        })
+        .collect();
+    let mut out = RtBuffers {
+        hard: Vec::with_capacity(px.len()),
+        z_receiver: Vec::with_capacity(px.len()),
+        z_occluder: Vec::with_capacity(px.len()),
+        radius: Vec::with_capacity(px.len()),
+    };
+    for (h, zr, zo, r) in px {
+        out.hard.push(h);
+        out.z_receiver.push(zr);
+        out.z_occluder.push(zo);
+        out.radius.push(r);
+    }
+    out
+}
+
+/// The soft shadow factor: the hard shadow blurred by the per-pixel radius spread from the
+/// hard shadow's edge ([`blur::edge_radius`], [`blur::spread_radius`]).
+pub fn soft_shadows(buffers: &RtBuffers, guide: &Guide, params: &Params) -> Vec<f32> {
+    let edge = blur::edge_radius(&buffers.hard, &buffers.radius, guide, params);
+    let radius = blur::spread_radius(&edge, guide, params);
+    blur::blur(&buffers.hard, &radius, guide, params)
+}

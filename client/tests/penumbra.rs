@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use bspvt::groundtruth::ltcvis::{builtin_lookup, render_ltc_exact_visibility};
 use bspvt::light::Light;
-use bspvt::penumbra::{self, Guide, Params, Technique, rt};
+use bspvt::penumbra::{self, Guide, Kernel, Params, Technique, rt};
 use bspvt::render::image::Image;
 use bspvt::render::path::LightPath;
 use bspvt::render::renderer::{Mode, Renderer};
@@ -155,6 +155,16 @@ fn rt_penumbra_beats_hard_shadow_against_ltc_exact() {
         );
         // PCSS uses the same width formula: also better than the hard shadow.
         assert!(err[4] < hard, "{name}: pcss {} vs hard {hard}", err[4]);
+        // rt-penumbra with the light-shaped kernel instead of the separable box.
+        let light_kernel = Params {
+            kernel: Kernel::Light(8),
+            ..p
+        };
+        let img =
+            penumbra::render(&r, &l, Technique::RtPenumbra, Some(&occ), &light_kernel).unwrap();
+        let e = mae(&img, &reference, &r);
+        eprintln!("{name}: RtPenumbra, light-shaped kernel 8×8: {e:.5}");
+        assert!(e < 0.85 * hard, "{name}: light kernel {e} vs hard {hard}");
     }
 }
 
@@ -195,7 +205,15 @@ fn finite_in_degenerate_configurations() {
             None => Renderer::new(s, 96, 64),
         };
         let occ = occluder(s);
-        for t in ALL {
+        let light_kernel = Params {
+            kernel: Kernel::Light(6),
+            ..p
+        };
+        let runs = ALL
+            .iter()
+            .map(|&t| (t, p))
+            .chain(std::iter::once((Technique::RtPenumbra, light_kernel)));
+        for (t, p) in runs {
             let f = factor(&r, &l, t, &occ, &p);
             assert_eq!(f.len(), 96 * 64);
             for (i, v) in f.iter().enumerate() {
@@ -267,7 +285,15 @@ fn no_shadow_leaks_onto_fully_lit_pixels() {
     let l = light(&s);
     let g = Guide::new(&r);
     let p = Params::default();
-    for t in [Technique::RtPenumbra, Technique::Pcss] {
+    let light_kernel = Params {
+        kernel: Kernel::Light(8),
+        ..p
+    };
+    for (t, p) in [
+        (Technique::RtPenumbra, p),
+        (Technique::RtPenumbra, light_kernel),
+        (Technique::Pcss, p),
+    ] {
         let f = factor(&r, &l, t, &occ, &p);
         let (mut lit, mut lit_deficit, mut lit_bad) = (0usize, 0.0, 0usize);
         let (mut umbra, mut umbra_sum) = (0usize, 0.0);
@@ -290,8 +316,9 @@ fn no_shadow_leaks_onto_fully_lit_pixels() {
         let bad = lit_bad as f64 / lit.max(1) as f64;
         let umbra_mean = umbra_sum / umbra.max(1) as f64;
         eprintln!(
-            "{t:?}: {lit} fully lit pixels, mean 1 − s {mean_deficit:.4}, {:.2}% below 0.95; \
+            "{t:?} ({:?}): {lit} fully lit pixels, mean 1 − s {mean_deficit:.4}, {:.2}% below 0.95; \
              {umbra} umbra pixels, mean s {umbra_mean:.3}",
+            p.kernel,
             100.0 * bad
         );
         assert!(lit > 1000 && umbra > 50, "{lit} lit, {umbra} umbra");

@@ -20,7 +20,11 @@
 
 use rayon::prelude::*;
 
+use glam::DVec3;
+
 use super::{Guide, Params};
+use crate::light::Light;
+use crate::render::camera::View;
 
 type Widths = [f64];
 
@@ -148,10 +152,141 @@ fn blur_pass(
         .collect()
 }
 
+/// Light-shaped gather: the hard shadow from the light's centroid c, shifted by
+/// κ (q − c) for light points q, is the hard shadow from q (similar triangles, κ =
+/// (Z_r − Z_o) / Z_o = W / W_light); their mean over the light is the soft shadow. `offsets`:
+/// q − c for points q spread over the light. Each offset is projected onto the receiver's
+/// tangent plane along the direction to the light, then to the screen; when the kernel exceeds
+/// `params.max_radius` pixels it is scaled down to it (the cap). Taps on other surfaces are
+/// skipped ([`Guide::same_surface`]).
+#[allow(clippy::too_many_arguments)]
+pub fn light_blur(
+    hard: &[f32],
+    half_width: &Widths,
+    guide: &Guide,
+    view: &View,
+    centre: DVec3,
+    offsets: &[DVec3],
+    w_light: f64,
+    params: &Params,
+) -> Vec<f32> {
+    let (w, h) = (guide.width as isize, guide.height as isize);
+    let cap = params.max_radius.max(0.0);
+    (0..hard.len())
+        .into_par_iter()
+        .map(|i| {
+            let own = hard[i];
+            let Some(c) = &guide.pixels[i] else {
+                return own;
+            };
+            let hw = half_width[i];
+            if !(hw > 0.0) || !(w_light > 0.0) || offsets.is_empty() {
+                return own;
+            }
+            // κ = W / W_light; an occluder at the light gives κ → ∞: bounded by the cap below.
+            let kappa = (2.0 * hw / w_light).min(1e6);
+            let l = (centre - c.position).normalize_or(c.geometric);
+            let n = c.geometric;
+            let nl = n.dot(l);
+            let nl = if nl.abs() < 0.05 {
+                0.05f64.copysign(nl)
+            } else {
+                nl
+            };
+            let (px, py) = ((i as isize % w) as f64 + 0.5, (i as isize / w) as f64 + 0.5);
+            let taps: Vec<(f64, f64)> = offsets
+                .iter()
+                .filter_map(|&o| {
+                    let o = o * kappa;
+                    let o = o - l * (n.dot(o) / nl);
+                    let cam = view.to_camera(c.position + o);
+                    if !(cam.z > 0.0) {
+                        return None;
+                    }
+                    let (x, y) = view.to_image(cam);
+                    let d = (x - px, y - py);
+                    (d.0.is_finite() && d.1.is_finite()).then_some(d)
+                })
+                .collect();
+            let longest = taps.iter().map(|d| d.0.hypot(d.1)).fold(0.0, f64::max);
+            let scale = if longest > cap { cap / longest } else { 1.0 };
+            let (mut sum, mut n) = (0.0f64, 0u32);
+            for (dx, dy) in taps {
+                let (qx, qy) = (
+                    (px + dx * scale).floor() as isize,
+                    (py + dy * scale).floor() as isize,
+                );
+                if qx < 0 || qy < 0 || qx >= w || qy >= h {
+                    continue;
+                }
+                let j = (qy * w + qx) as usize;
+                if let Some(q) = &guide.pixels[j]
+                    && guide.same_surface(c, q, params)
+                {
+                    sum += f64::from(hard[j]);
+                    n += 1;
+                }
+            }
+            if n == 0 {
+                own
+            } else {
+                (sum / f64::from(n)) as f32
+            }
+        })
+        .collect()
+}
+
+/// `n` × `n` points q − c spread over the light polygon (a grid over its bounding rectangle
+/// in its plane, kept where inside the convex polygon), relative to its centroid c.
+pub fn light_offsets(light: &Light, n: usize) -> Vec<DVec3> {
+    let v = &light.vertices;
+    if v.len() < 3 || n == 0 {
+        return Vec::new();
+    }
+    let c = light.centroid();
+    let e1 = (v[1] - v[0]).normalize_or(DVec3::X);
+    let e2 = light.normal.cross(e1).normalize_or(DVec3::Y);
+    let uv: Vec<(f64, f64)> = v
+        .iter()
+        .map(|&p| ((p - c).dot(e1), (p - c).dot(e2)))
+        .collect();
+    let (mut lo, mut hi) = ((f64::MAX, f64::MAX), (f64::MIN, f64::MIN));
+    for &(a, b) in &uv {
+        lo = (lo.0.min(a), lo.1.min(b));
+        hi = (hi.0.max(a), hi.1.max(b));
+    }
+    // Inside a convex polygon: the same side of every edge (either winding).
+    let inside = |a: f64, b: f64| {
+        let mut sign = 0.0f64;
+        for k in 0..uv.len() {
+            let (p, q) = (uv[k], uv[(k + 1) % uv.len()]);
+            let cross = (q.0 - p.0) * (b - p.1) - (q.1 - p.1) * (a - p.0);
+            if cross.abs() < 1e-15 {
+                continue;
+            }
+            if sign == 0.0 {
+                sign = cross.signum();
+            } else if cross.signum() != sign {
+                return false;
+            }
+        }
+        true
+    };
+    let mut out = Vec::with_capacity(n * n);
+    for i in 0..n {
+        for j in 0..n {
+            let a = lo.0 + (hi.0 - lo.0) * (i as f64 + 0.5) / n as f64;
+            let b = lo.1 + (hi.1 - lo.1) * (j as f64 + 0.5) / n as f64;
+            if inside(a, b) {
+                out.push(e1 * a + e2 * b);
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
-    use glam::DVec3;
-
     use super::*;
     use crate::penumbra::GuidePixel;
 
@@ -211,6 +346,37 @@ mod tests {
             .collect();
         let out = blur(&values, &vec![0.04; values.len()], &g, &p);
         assert!(out[16] < 0.9 && out[15] > 0.1, "{} {}", out[15], out[16]);
+    }
+
+    #[test]
+    fn light_offsets_cover_the_polygon() {
+        let square = Light {
+            vertices: vec![
+                DVec3::new(-0.5, 3.0, -0.5),
+                DVec3::new(0.5, 3.0, -0.5),
+                DVec3::new(0.5, 3.0, 0.5),
+                DVec3::new(-0.5, 3.0, 0.5),
+            ],
+            normal: DVec3::NEG_Y,
+            radiance: DVec3::ONE,
+            two_sided: false,
+            texture: None,
+        };
+        let o = light_offsets(&square, 6);
+        assert_eq!(o.len(), 36);
+        let mean = o.iter().sum::<DVec3>() / 36.0;
+        assert!(mean.length() < 1e-12, "{mean}");
+        assert!(
+            o.iter()
+                .all(|p| p.y.abs() < 1e-12 && p.x.abs() < 0.5 && p.z.abs() < 0.5)
+        );
+        // A triangle keeps about half of the grid's points; a degenerate light none.
+        let mut tri = square.clone();
+        tri.vertices.pop();
+        let n = light_offsets(&tri, 10).len();
+        assert!((40..=60).contains(&n), "{n}");
+        tri.vertices.pop();
+        assert!(light_offsets(&tri, 10).is_empty());
     }
 
     #[test]

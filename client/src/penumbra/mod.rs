@@ -70,7 +70,7 @@ pub fn shadow_factor(
             return Ok(if technique == Technique::RtHard {
                 b.hard
             } else {
-                rt::soft_shadows(&b, guide, params)
+                rt::soft_shadows(&b, guide, &r.view, light, params)
             });
         }
         Technique::Pcf => shadowmap::Filter::Pcf,
@@ -117,6 +117,18 @@ pub struct Params {
     pub pcf_radius: u32,
     /// VSM light-bleeding reduction: p ↦ linstep(amount, 1, p).
     pub vsm_bleed: f64,
+    /// rt-penumbra's blur kernel.
+    pub kernel: Kernel,
+}
+
+/// The shape of rt-penumbra's blur.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kernel {
+    /// Separable screen-space box of half-width W/2 per axis ([`blur::blur`]).
+    Box,
+    /// The light's shape scaled by W / W_light on the receiver's tangent plane, `n` × `n`
+    /// taps ([`blur::light_blur`]).
+    Light(usize),
 }
 
 impl Default for Params {
@@ -128,6 +140,7 @@ impl Default for Params {
             map_res: 1024,
             pcf_radius: 2,
             vsm_bleed: 0.3,
+            kernel: Kernel::Box,
         }
     }
 }

@@ -7,8 +7,9 @@
 use bspvt_server::bake::raycast::Occluder;
 use rayon::prelude::*;
 
-use super::{Guide, Params, blur, light_width, penumbra_width};
+use super::{Guide, Kernel, Params, blur, light_width, penumbra_width};
 use crate::light::Light;
+use crate::render::camera::View;
 
 /// Per-pixel buffers of the hard shadow pass (row-major; background pixels: lit, no width).
 #[derive(Clone, Debug)]
@@ -86,8 +87,26 @@ pub fn hard_shadows(guide: &Guide, light: &Light, occluder: &Occluder, epsilon: 
 
 /// The soft shadow factor: the hard shadow blurred by the per-pixel radius spread from the
 /// hard shadow's edge ([`blur::edge_radius`], [`blur::spread_radius`]).
-pub fn soft_shadows(buffers: &RtBuffers, guide: &Guide, params: &Params) -> Vec<f32> {
+pub fn soft_shadows(
+    buffers: &RtBuffers,
+    guide: &Guide,
+    view: &View,
+    light: &Light,
+    params: &Params,
+) -> Vec<f32> {
     let edge = blur::edge_radius(&buffers.hard, &buffers.radius, guide, params);
     let radius = blur::spread_radius(&edge, guide, params);
-    blur::blur(&buffers.hard, &radius, guide, params)
+    match params.kernel {
+        Kernel::Box => blur::blur(&buffers.hard, &radius, guide, params),
+        Kernel::Light(n) => blur::light_blur(
+            &buffers.hard,
+            &radius,
+            guide,
+            view,
+            light.centroid(),
+            &blur::light_offsets(light, n),
+            light_width(light),
+            params,
+        ),
+    }
 }

@@ -12,6 +12,7 @@ use glam::{DAffine3, DQuat, DVec3};
 
 use crate::groundtruth;
 use crate::light::Light;
+use crate::penumbra;
 use crate::render::image::Image;
 use crate::render::path::LightPath;
 use crate::render::renderer::{Mode, Renderer};
@@ -27,16 +28,47 @@ pub enum ViewMethod {
     Ltc,
     /// Progressive Monte Carlo ground truth (exact GGX, shadow rays): refines while nothing moves.
     Mc,
+    /// Paper 003: a hard shadow ray to the light's centroid, blurred by the penumbra width.
+    RtPenumbra,
+    /// Shadow map: percentage-closer soft shadows.
+    Pcss,
+    /// Shadow map: percentage-closer filtering (fixed kernel).
+    Pcf,
+    /// Variance shadow map.
+    Vsm,
 }
 
 impl ViewMethod {
-    pub const ALL: [ViewMethod; 3] = [ViewMethod::Bspvt, ViewMethod::Ltc, ViewMethod::Mc];
+    pub const ALL: [ViewMethod; 7] = [
+        ViewMethod::Bspvt,
+        ViewMethod::Ltc,
+        ViewMethod::Mc,
+        ViewMethod::RtPenumbra,
+        ViewMethod::Pcss,
+        ViewMethod::Pcf,
+        ViewMethod::Vsm,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
             ViewMethod::Bspvt => "BSPVT",
             ViewMethod::Ltc => "LTC (no shadows)",
             ViewMethod::Mc => "Monte Carlo",
+            ViewMethod::RtPenumbra => "RT penumbra (point light)",
+            ViewMethod::Pcss => "PCSS",
+            ViewMethod::Pcf => "PCF",
+            ViewMethod::Vsm => "VSM",
+        }
+    }
+
+    /// The point-light shadow technique of this method, if it is one (always per pixel).
+    pub fn penumbra(self) -> Option<penumbra::Technique> {
+        match self {
+            ViewMethod::RtPenumbra => Some(penumbra::Technique::RtPenumbra),
+            ViewMethod::Pcss => Some(penumbra::Technique::Pcss),
+            ViewMethod::Pcf => Some(penumbra::Technique::Pcf),
+            ViewMethod::Vsm => Some(penumbra::Technique::Vsm),
+            _ => None,
         }
     }
 }
@@ -241,7 +273,28 @@ impl<'a> Session<'a> {
                 None => self.renderer.ltc(&light, self.mode).0,
             },
             ViewMethod::Ltc => self.renderer.ltc(&light, self.mode).0,
-            ViewMethod::Mc => {
+            m if m.penumbra().is_some() => {
+                let technique = m.penumbra().unwrap_or(penumbra::Technique::RtPenumbra);
+                let occ = technique.needs_rays().then(|| {
+                    &*self.occluder.get_or_insert_with(|| {
+                        Occluder::new(&self.scene.mesh, &mesh_triangles(&self.scene.mesh))
+                    })
+                });
+                match penumbra::render(
+                    &self.renderer,
+                    &light,
+                    technique,
+                    occ,
+                    &penumbra::Params::default(),
+                ) {
+                    Ok(img) => img,
+                    Err(e) => {
+                        tracing::warn!("{technique:?}: {e:#}");
+                        self.renderer.ltc(&light, Mode::Pixel).0
+                    }
+                }
+            }
+            _ => {
                 let occ = self.occluder.get_or_insert_with(|| {
                     Occluder::new(&self.scene.mesh, &mesh_triangles(&self.scene.mesh))
                 });

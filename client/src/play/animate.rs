@@ -6,6 +6,7 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
+use clap::ValueEnum;
 use serde::Serialize;
 
 use super::ModeArg;
@@ -171,8 +172,15 @@ pub fn run(a: &AnimateArgs) -> Result<()> {
     session.set_roughness(a.roughness);
     let mut report = AnimateReport {
         scene_id: connected.served.id.clone(),
-        method: format!("{:?}", a.method).to_lowercase(),
-        mode: format!("{:?}", a.mode).to_lowercase(),
+        method: a
+            .method
+            .to_possible_value()
+            .map_or_else(|| format!("{:?}", a.method), |v| v.get_name().to_string()),
+        mode: if a.method.penumbra().is_some() {
+            "pixel".into()
+        } else {
+            format!("{:?}", a.mode).to_lowercase()
+        },
         width: a.width,
         height: a.height,
         frames: a.frames,
@@ -196,7 +204,8 @@ pub fn run(a: &AnimateArgs) -> Result<()> {
         }
     };
     full_at(&session, &mut report);
-    if !a.progressive {
+    // Only BSPVT frames need the trees; the other methods do not wait for them.
+    if !a.progressive && a.method == ViewMethod::Bspvt {
         session.wait_complete();
         full_at(&session, &mut report);
         if !session.streamed.complete() {

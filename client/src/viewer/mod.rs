@@ -3,7 +3,8 @@
 //!
 //! Mouse: left-drag orbits, wheel zooms, right-drag moves the light; dragging on the bottom bar
 //! sets the roughness. Keys: W/A/S/D and Q/E move the light, R/F turn it, T/G tilt it, P runs it
-//! along its path, -/= change its radiance, 1/2/3 pick BSPVT / LTC / Monte Carlo, M switches
+//! along its path, -/= change its radiance, 1/2/3 pick BSPVT / LTC / Monte Carlo, 4/5/6/7 the point-light
+//! shadows RT penumbra / PCSS / PCF / VSM, M switches
 //! per-vertex / per-pixel, [ and ] change the roughness (O: the scene's), H hides the overlay,
 //! Esc quits. Frames are drawn on this thread; the trees arrive on the fetcher's thread, so the
 //! window stays responsive while data streams.
@@ -117,6 +118,10 @@ pub fn run(session: &mut Session, opts: &ViewerOptions, started: Instant) -> Res
                 Key::Key1 => session.method = ViewMethod::Bspvt,
                 Key::Key2 => session.method = ViewMethod::Ltc,
                 Key::Key3 => session.method = ViewMethod::Mc,
+                Key::Key4 => session.method = ViewMethod::RtPenumbra,
+                Key::Key5 => session.method = ViewMethod::Pcss,
+                Key::Key6 => session.method = ViewMethod::Pcf,
+                Key::Key7 => session.method = ViewMethod::Vsm,
                 Key::M => {
                     session.mode = match session.mode {
                         Mode::Vertex => Mode::Pixel,
@@ -236,6 +241,7 @@ fn scene_scale(s: &Session) -> f64 {
 
 fn overlay_lines(s: &Session, fps: f64, opts: &ViewerOptions) -> Vec<String> {
     let mode = match s.mode {
+        _ if s.method.penumbra().is_some() => "per pixel",
         Mode::Vertex => "per vertex",
         Mode::Pixel => "per pixel",
     };
@@ -275,6 +281,6 @@ fn overlay_lines(s: &Session, fps: f64, opts: &ViewerOptions) -> Vec<String> {
     if let Some(n) = &opts.note {
         lines.push(n.clone());
     }
-    lines.push("1/2/3 method  M mode  WASDQE RF TG light  P path  H hide".into());
+    lines.push("1-7 method  M mode  WASDQE RF TG light  P path  H hide".into());
     lines
 }

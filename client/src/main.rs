@@ -41,6 +41,10 @@ enum Command {
     Render(RenderArgs),
     /// Measure shading speed on real meshes (kernel µs/vertex and frame times).
     Bench(bspvt::bench::BenchArgs),
+    /// Speed and error of rt-penumbra (paper 003) and the shadow-map baselines against Monte
+    /// Carlo area-light shadows (`ltc-exact`), with the equal-RMSE speed-up and cases that
+    /// break the paper's assumptions (results.csv/.md/.json and images in --out).
+    BenchPenumbra(bspvt::penumbra::bench::BenchPenumbraArgs),
     /// Fit the LTC table of GGX (regenerates `assets/ltc/ggx.json`).
     LtcFit(bspvt::ltc::fit::FitArgs),
     /// Write a Mitsuba 3 scene that renders the same image (independent cross-check).
@@ -118,6 +122,13 @@ fn main() -> std::process::ExitCode {
         Command::Serve(a) => bspvt_server::service::serve_command(&a),
         Command::Render(a) => render(a),
         Command::Bench(a) => bspvt::bench::run(&a),
+        Command::BenchPenumbra(a) => bspvt::penumbra::bench::run(&a).map(|r| {
+            eprintln!(
+                "bench-penumbra: {} case(s) written to {}",
+                r.cases.len(),
+                a.out.display()
+            );
+        }),
         Command::LtcFit(a) => bspvt::ltc::fit::run(&a),
         Command::ExportMitsuba(a) => bspvt::mitsuba::run(&a),
     };

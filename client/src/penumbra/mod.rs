@@ -18,6 +18,7 @@
 //! - [`shadowmap`]: a depth map rendered from the light; PCF (fixed kernel), VSM (moments,
 //!   Chebyshev bound, light-bleeding reduction) and PCSS (blocker search, then PCF of width W).
 
+pub mod bench;
 pub mod blur;
 pub mod rt;
 pub mod shadowmap;

@@ -267,14 +267,13 @@ impl<'a> Session<'a> {
     /// Draws one frame.
     pub fn frame(&mut self) -> Image {
         let light = self.light();
-        match self.method {
-            ViewMethod::Bspvt => match self.streamed.view() {
+        match (self.method, self.method.penumbra()) {
+            (ViewMethod::Bspvt, _) => match self.streamed.view() {
                 Some(trees) => self.renderer.bspvt(&light, &trees, self.mode).0,
                 None => self.renderer.ltc(&light, self.mode).0,
             },
-            ViewMethod::Ltc => self.renderer.ltc(&light, self.mode).0,
-            m if m.penumbra().is_some() => {
-                let technique = m.penumbra().unwrap_or(penumbra::Technique::RtPenumbra);
+            (ViewMethod::Ltc, _) => self.renderer.ltc(&light, self.mode).0,
+            (_, Some(technique)) => {
                 let occ = technique.needs_rays().then(|| {
                     &*self.occluder.get_or_insert_with(|| {
                         Occluder::new(&self.scene.mesh, &mesh_triangles(&self.scene.mesh))

@@ -3,17 +3,17 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::ValueEnum;
 use serde::Serialize;
 
-use super::ModeArg;
+use super::FrameArgs;
 use super::gif::Preview;
-use crate::render::image::Image;
+use crate::render::renderer::Mode;
 use crate::session::{Session, ViewMethod};
-use crate::stream::connect::{ConnectArgs, connect};
+use crate::stream::connect::{ConnectArgs, Connected, connect};
 
 #[derive(clap::Args, Debug)]
 pub struct AnimateArgs {
@@ -25,14 +25,8 @@ pub struct AnimateArgs {
     /// Output folder: frame-NNN.png, first.png, preview.gif, stats.json.
     #[arg(long)]
     pub out: PathBuf,
-    #[arg(long, default_value_t = 512)]
-    pub width: u32,
-    #[arg(long, default_value_t = 512)]
-    pub height: u32,
-    #[arg(long, value_enum, default_value = "bspvt")]
-    pub method: ViewMethod,
-    #[arg(long, value_enum, default_value = "vertex")]
-    pub mode: ModeArg,
+    #[command(flatten)]
+    pub frame: FrameArgs,
     /// GGX roughness α for every material (default: the scene's).
     #[arg(long)]
     pub roughness: Option<f32>,
@@ -109,11 +103,45 @@ impl PathTimes {
     }
 }
 
-/// Draws the first frame with whatever has arrived; returns it with the time since `started`.
-pub fn first_frame(session: &mut Session, started: Instant) -> (Image, Duration) {
-    session.poll();
-    let img = session.frame();
-    (img, started.elapsed())
+impl AnimateReport {
+    /// A report on `session` (its method, mode and size) for `frames` frames.
+    pub fn new(connected: &Connected, session: &Session, frames: usize) -> AnimateReport {
+        let method = session.method;
+        AnimateReport {
+            scene_id: connected.served.id.clone(),
+            method: method
+                .to_possible_value()
+                .map_or_else(|| format!("{method:?}"), |v| v.get_name().to_string()),
+            mode: match session.mode {
+                _ if method.penumbra().is_some() => "pixel",
+                Mode::Vertex => "vertex",
+                Mode::Pixel => "pixel",
+            }
+            .into(),
+            width: session.renderer.gbuffer.width,
+            height: session.renderer.gbuffer.height,
+            frames,
+            threads: rayon::current_num_threads(),
+            scene_bytes: connected.scene_bytes_fetched,
+            ..AnimateReport::default()
+        }
+    }
+
+    /// Draws the first frame at once, with whatever trees have arrived, records when (since
+    /// `started`) and with how many trees, and saves it as `path`.
+    pub fn first_frame(
+        &mut self,
+        session: &mut Session,
+        started: Instant,
+        path: &Path,
+        exposure: f32,
+    ) -> Result<()> {
+        session.poll();
+        let img = session.frame();
+        self.first_frame_ms = started.elapsed().as_secs_f64() * 1e3;
+        self.first_frame_trees = session.streamed.fraction();
+        img.save(path, exposure)
+    }
 }
 
 /// Renders one cycle of the light's path, frame `k` at path time k / frames.
@@ -166,33 +194,13 @@ pub fn run(a: &AnimateArgs) -> Result<()> {
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;
     let connected = connect(&a.connect)?;
-    let mut session = connected.session(&a.connect, a.width, a.height)?;
-    session.method = a.method;
-    session.mode = a.mode.into();
+    let f = &a.frame;
+    let mut session = connected.session(&a.connect, f.width, f.height)?;
+    session.method = f.method;
+    session.mode = f.mode.into();
     session.set_roughness(a.roughness);
-    let mut report = AnimateReport {
-        scene_id: connected.served.id.clone(),
-        method: a
-            .method
-            .to_possible_value()
-            .map_or_else(|| format!("{:?}", a.method), |v| v.get_name().to_string()),
-        mode: if a.method.penumbra().is_some() {
-            "pixel".into()
-        } else {
-            format!("{:?}", a.mode).to_lowercase()
-        },
-        width: a.width,
-        height: a.height,
-        frames: a.frames,
-        threads: rayon::current_num_threads(),
-        scene_bytes: connected.scene_bytes_fetched,
-        ..AnimateReport::default()
-    };
-
-    let (first, t_first) = first_frame(&mut session, started);
-    report.first_frame_ms = t_first.as_secs_f64() * 1e3;
-    report.first_frame_trees = session.streamed.fraction();
-    first.save(&a.out.join("first.png"), a.exposure)?;
+    let mut report = AnimateReport::new(&connected, &session, a.frames);
+    report.first_frame(&mut session, started, &a.out.join("first.png"), a.exposure)?;
 
     let full_at = |s: &Session, report: &mut AnimateReport| {
         if report.full_trees_ms.is_none() && s.streamed.complete() {
@@ -205,7 +213,7 @@ pub fn run(a: &AnimateArgs) -> Result<()> {
     };
     full_at(&session, &mut report);
     // Only BSPVT frames need the trees; the other methods do not wait for them.
-    if !a.progressive && a.method == ViewMethod::Bspvt {
+    if !a.progressive && f.method == ViewMethod::Bspvt {
         session.wait_complete();
         full_at(&session, &mut report);
         if !session.streamed.complete() {

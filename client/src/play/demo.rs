@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use bspvt_server::service::db::JobState;
 
-use super::animate::{self, AnimateReport, PathOptions, first_frame, render_path};
+use super::animate::{self, AnimateReport, PathOptions, render_path};
 use super::gif::Preview;
 use crate::stream::connect::{ConnectArgs, connect};
 use crate::viewer::{self, ViewerOptions};
@@ -66,23 +66,9 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         }
     );
     let mut session = connected.session(&args, a.size, a.size)?;
-    let mut report = AnimateReport {
-        scene_id: served.id.clone(),
-        method: "bspvt".into(),
-        mode: "vertex".into(),
-        width: a.size,
-        height: a.size,
-        frames: a.frames,
-        threads: rayon::current_num_threads(),
-        scene_bytes: connected.scene_bytes_fetched,
-        ..AnimateReport::default()
-    };
-
+    let mut report = AnimateReport::new(&connected, &session, a.frames);
     // The first frame right away, with whatever trees are here (unshadowed where none are).
-    let (first, t_first) = first_frame(&mut session, started);
-    report.first_frame_ms = t_first.as_secs_f64() * 1e3;
-    report.first_frame_trees = session.streamed.fraction();
-    first.save(&a.out.join("first.png"), 1.0)?;
+    report.first_frame(&mut session, started, &a.out.join("first.png"), 1.0)?;
     println!(
         "first shaded frame after {:.0} ms ({:.0} % of the trees)",
         report.first_frame_ms,

@@ -10,6 +10,20 @@ pub mod gif;
 pub mod view;
 
 use crate::render::renderer::Mode;
+use crate::session::ViewMethod;
+
+/// Frame size, method and mode: what `view` and `animate` share.
+#[derive(clap::Args, Clone, Debug)]
+pub struct FrameArgs {
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+    #[arg(long, default_value_t = 512)]
+    pub height: u32,
+    #[arg(long, value_enum, default_value = "bspvt")]
+    pub method: ViewMethod,
+    #[arg(long, value_enum, default_value = "vertex")]
+    pub mode: ModeArg,
+}
 
 /// `--mode` of the streaming commands.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

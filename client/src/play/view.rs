@@ -4,8 +4,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 
-use super::ModeArg;
-use crate::session::ViewMethod;
+use super::FrameArgs;
 use crate::stream::connect::{ConnectArgs, connect};
 use crate::viewer::{self, ViewerOptions};
 
@@ -13,14 +12,8 @@ use crate::viewer::{self, ViewerOptions};
 pub struct ViewArgs {
     #[command(flatten)]
     pub connect: ConnectArgs,
-    #[arg(long, default_value_t = 512)]
-    pub width: u32,
-    #[arg(long, default_value_t = 512)]
-    pub height: u32,
-    #[arg(long, value_enum, default_value = "bspvt")]
-    pub method: ViewMethod,
-    #[arg(long, value_enum, default_value = "vertex")]
-    pub mode: ModeArg,
+    #[command(flatten)]
+    pub frame: FrameArgs,
     /// Start with the light moving along its path (P toggles).
     #[arg(long)]
     pub moving: bool,
@@ -32,9 +25,10 @@ pub struct ViewArgs {
 pub fn run(a: &ViewArgs) -> Result<()> {
     let started = Instant::now();
     let connected = connect(&a.connect)?;
-    let mut session = connected.session(&a.connect, a.width, a.height)?;
-    session.method = a.method;
-    session.mode = a.mode.into();
+    let f = &a.frame;
+    let mut session = connected.session(&a.connect, f.width, f.height)?;
+    session.method = f.method;
+    session.mode = f.mode.into();
     if a.moving {
         session.path_t = Some(0.0);
     }

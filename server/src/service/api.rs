@@ -585,12 +585,7 @@ pub async fn get_mesh(
     if not_modified(&headers, &etag) {
         return Ok(not_modified_response(&etag));
     }
-    let store = st.store.clone();
-    let key = id.clone();
-    let body = blocking(move || {
-        let bytes = store
-            .read_scene(&key)
-            .map_err(|e| anyhow::anyhow!("cannot read the stored scene: {e}"))?;
+    let body = read_stored_scene(&st, &id, move |bytes| {
         let scene = input::decode_scene(&bytes).map_err(|e| anyhow::anyhow!(e))?;
         Ok(match format {
             "ply" => ply_bytes(&scene.mesh),
@@ -598,23 +593,14 @@ pub async fn get_mesh(
         })
     })
     .await?;
-    st.metrics
-        .other_bytes_served
-        .fetch_add(body.len() as u64, Ordering::Relaxed);
     let content_type = if format == "ply" {
         "application/octet-stream"
     } else {
         "application/json"
     };
-    let mut r = body.into_response();
-    let h = r.headers_mut();
-    h.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
-    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
-    if let Ok(v) = HeaderValue::from_str(&etag) {
-        h.insert(header::ETAG, v);
-    }
+    let mut r = immutable_response(&st, body, content_type, &etag);
     if let Ok(v) = HeaderValue::from_str(&format!("{:016x}", live.row.mesh_hash)) {
-        h.insert("x-bspvt-mesh-hash", v);
+        r.headers_mut().insert("x-bspvt-mesh-hash", v);
     }
     Ok(r)
 }
@@ -648,28 +634,50 @@ pub async fn get_scene_file(
     if not_modified(&headers, &etag) {
         return Ok(not_modified_response(&etag));
     }
+    let body = read_stored_scene(&st, &id, Ok).await?;
+    Ok(immutable_response(
+        &st,
+        body,
+        "application/octet-stream",
+        &etag,
+    ))
+}
+
+/// Reads scene `id`'s stored bytes off the async threads and maps them with `f`.
+async fn read_stored_scene(
+    st: &Shared,
+    id: &str,
+    f: impl FnOnce(Vec<u8>) -> anyhow::Result<Vec<u8>> + Send + 'static,
+) -> ApiResult<Vec<u8>> {
     let store = st.store.clone();
-    let key = id.clone();
-    let body = blocking(move || {
-        store
+    let key = id.to_string();
+    blocking(move || {
+        let bytes = store
             .read_scene(&key)
-            .map_err(|e| anyhow::anyhow!("cannot read the stored scene: {e}"))
+            .map_err(|e| anyhow::anyhow!("cannot read the stored scene: {e}"))?;
+        f(bytes)
     })
-    .await?;
+    .await
+}
+
+/// A body that never changes for its ETag: counted as served, revalidated by the client.
+fn immutable_response(
+    st: &Shared,
+    body: Vec<u8>,
+    content_type: &'static str,
+    etag: &str,
+) -> Response {
     st.metrics
         .other_bytes_served
         .fetch_add(body.len() as u64, Ordering::Relaxed);
     let mut r = body.into_response();
     let h = r.headers_mut();
-    h.insert(
-        header::CONTENT_TYPE,
-        HeaderValue::from_static("application/octet-stream"),
-    );
+    h.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
     h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
-    if let Ok(v) = HeaderValue::from_str(&etag) {
+    if let Ok(v) = HeaderValue::from_str(etag) {
         h.insert(header::ETAG, v);
     }
-    Ok(r)
+    r
 }
 
 pub fn gone(id: &str) -> ApiError {

@@ -122,7 +122,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         frames: Vec::new(),
     };
     for (name, scene) in &scenes {
-        let bake_path = cached_bake(name, scene, &a.cache)?;
+        let bake_path = cached_bake(name, scene, &a.cache)?.path;
         let bytes = std::fs::read(&bake_path)?;
         let bake = decode_bake(&bytes)?;
         let trees = Trees::full(&bake.trees, bake.header.codec());
@@ -182,30 +182,130 @@ pub fn run(a: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
+/// A bake in the benchmarks' cache: the file, and what making it cost (measured when it was
+/// baked, kept beside it in `<file>.json`).
+#[derive(Clone, Debug, Serialize, serde::Deserialize)]
+pub struct CachedBake {
+    pub path: PathBuf,
+    pub vertices: usize,
+    pub bytes: usize,
+    /// Wall time of the bake, and the number of threads it ran on.
+    pub seconds: f64,
+    pub threads: usize,
+    /// False when the file was baked by this call.
+    #[serde(skip)]
+    pub from_cache: bool,
+}
+
 /// Bakes `scene` once into `cache` (reused while the mesh and settings are unchanged).
-fn cached_bake(name: &str, scene: &Scene, cache: &Path) -> Result<PathBuf> {
+pub fn cached_bake(name: &str, scene: &Scene, cache: &Path) -> Result<CachedBake> {
     let mut h = bspvt_proto::hash::Fnv1a::default();
     h.write(format!("{:x}{:?}", scene.mesh.content_hash(), scene.bake).as_bytes());
     let key = h.finish();
-    let safe: String = name
-        .chars()
-        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
-        .collect();
-    let path = cache.join(format!("{safe}-{key:016x}.bspvt"));
-    if path.exists() {
-        return Ok(path);
+    let path = cache.join(format!("{}-{key:016x}.bspvt", file_stem(name)));
+    let meta = path.with_extension("bspvt.json");
+    if path.exists()
+        && let Ok(text) = std::fs::read_to_string(&meta)
+        && let Ok(mut b) = serde_json::from_str::<CachedBake>(&text)
+    {
+        b.path = path;
+        b.from_cache = true;
+        return Ok(b);
     }
     std::fs::create_dir_all(cache).with_context(|| format!("cannot create {}", cache.display()))?;
     let baker = bspvt_server::bake::Baker::new(scene);
+    let vertices = baker.header().vertex_count as usize;
     eprintln!(
-        "baking {name} ({} vertices) once for the benchmark…",
-        baker.header().vertex_count
+        "baking {name} ({vertices} vertices, {}² faces, ε = {}) once…",
+        scene.bake.face_res, scene.bake.epsilon
     );
     let out = baker.bake_all(&|_, _| {}, &AtomicBool::new(false))?;
     eprintln!("baked in {:.1} s", out.seconds);
     std::fs::write(&path, &out.bytes)
         .with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(path)
+    let b = CachedBake {
+        path,
+        vertices,
+        bytes: out.bytes.len(),
+        seconds: out.seconds,
+        threads: rayon::current_num_threads(),
+        from_cache: false,
+    };
+    std::fs::write(&meta, serde_json::to_string_pretty(&b)?)
+        .with_context(|| format!("cannot write {}", meta.display()))?;
+    Ok(b)
+}
+
+/// The file a scene name stands for: `teapot`, `bunny`, `dragon` name the shared meshes;
+/// a name with an extension is looked up in `meshes_dir` first, then as a path.
+pub fn named_scene_path(name: &str, meshes_dir: &Path) -> PathBuf {
+    match name {
+        "teapot" => meshes_dir.join("teapot.obj"),
+        "bunny" => meshes_dir.join("bunny.ply"),
+        "dragon" => meshes_dir.join("dragon_res4.ply"),
+        other => {
+            let in_dir = meshes_dir.join(other);
+            if !other.contains('/') && in_dir.exists() {
+                in_dir
+            } else {
+                PathBuf::from(other)
+            }
+        }
+    }
+}
+
+/// A scene by name: a built-in scene (`plate`, `plate-small`), a shared mesh (see
+/// [`named_scene_path`]) as its default `--mesh` scene, or a scene JSON file. `None` when the
+/// file does not exist (the caller says so and skips it).
+pub fn load_named_scene(name: &str, meshes_dir: &Path) -> Result<Option<Scene>> {
+    if let Some(s) = bspvt_proto::builtin::scene(name) {
+        return Ok(Some(s));
+    }
+    let file = named_scene_path(name, meshes_dir);
+    if !file.exists() {
+        return Ok(None);
+    }
+    let is_json = file.extension().is_some_and(|e| e == "json");
+    let scene = if is_json {
+        bspvt_proto::scene::open_scene(Some(&file.to_string_lossy()), None)
+    } else {
+        Scene::from_mesh_path(&file)
+    };
+    scene
+        .map(Some)
+        .with_context(|| format!("cannot load scene {name} ({})", file.display()))
+}
+
+/// A scene name usable as a file or folder name.
+pub fn file_stem(name: &str) -> String {
+    let base = Path::new(name)
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| name.to_string());
+    base.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// Median wall time (ms) of `frames` calls of `f`, and the last result.
+pub fn median_ms<T>(frames: usize, mut f: impl FnMut() -> Result<T>) -> Result<(f64, T)> {
+    let mut ms = Vec::with_capacity(frames);
+    let mut last = None;
+    for _ in 0..frames.max(1) {
+        let t = Instant::now();
+        let out = f()?;
+        ms.push(t.elapsed().as_secs_f64() * 1e3);
+        last = Some(out);
+    }
+    ms.sort_by(f64::total_cmp);
+    let out = last.context("nothing was run")?;
+    Ok((ms[ms.len() / 2], out))
 }
 
 /// Every vertex once, on one thread, with the light at the middle of its path.

@@ -5,6 +5,7 @@
 //! GGX BRDF.
 
 pub mod bench;
+pub mod compare;
 pub mod frame;
 pub mod ggx;
 pub mod groundtruth;
@@ -14,6 +15,7 @@ pub mod mitsuba;
 pub mod penumbra;
 pub mod play;
 pub mod render;
+pub mod report;
 pub mod session;
 pub mod shade;
 pub mod stream;

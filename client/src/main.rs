@@ -45,6 +45,9 @@ enum Command {
     /// Carlo area-light shadows (`ltc-exact`), with the equal-RMSE speed-up and cases that
     /// break the paper's assumptions (results.csv/.md/.json and images in --out).
     BenchPenumbra(bspvt::penumbra::bench::BenchPenumbraArgs),
+    /// Error against run time of every method on real scenes, against converged Monte Carlo
+    /// ground truth: report.md, results.csv, log-log plots and image grids in --out.
+    Report(bspvt::report::ReportArgs),
     /// Fit the LTC table of GGX (regenerates `assets/ltc/ggx.json`).
     LtcFit(bspvt::ltc::fit::FitArgs),
     /// Write a Mitsuba 3 scene that renders the same image (independent cross-check).
@@ -127,6 +130,14 @@ fn main() -> std::process::ExitCode {
                 "bench-penumbra: {} case(s) written to {}",
                 r.cases.len(),
                 a.out.display()
+            );
+        }),
+        Command::Report(a) => bspvt::report::run(&a).map(|r| {
+            eprintln!(
+                "report: {} scene(s) in {:.0} s, written to {}",
+                r.scenes.len(),
+                r.seconds,
+                a.out.join("report.md").display()
             );
         }),
         Command::LtcFit(a) => bspvt::ltc::fit::run(&a),

@@ -187,7 +187,8 @@ pub fn shade_ltc_exact_visibility(
         && ok(sp.wo)
         && ok(sp.geometric)
         && light.vertices.len() >= 3
-        && light.faces(sp.position))
+        && light.faces(sp.position)
+        && crate::shade::sees_viewer(sp.normal, sp.wo))
     {
         return DVec3::ZERO;
     }

@@ -42,6 +42,7 @@
 
 pub mod ltcvis;
 pub mod primary;
+pub mod ratio;
 pub mod rng;
 pub mod sampling;
 
@@ -321,19 +322,40 @@ impl McPoint {
 
     /// One MIS sample: a light direction and a BRDF direction.
     fn sample(&self, brdf: &Brdf, light: &Light, shadows: &Shadows, rng: &mut Pcg32) -> DVec3 {
-        let mut v = DVec3::ZERO;
+        self.sample_pair(brdf, light, Some(shadows), rng).shadowed
+    }
+
+    /// One MIS sample, with and without its shadow rays (the same directions): what the ratio
+    /// estimator needs. `shadows: None` skips the rays (`shadowed` is then 0).
+    fn sample_pair(
+        &self,
+        brdf: &Brdf,
+        light: &Light,
+        shadows: Option<&Shadows>,
+        rng: &mut Pcg32,
+    ) -> SamplePair {
+        let mut pair = SamplePair::default();
         let u_light = rng.next_2d();
         let u_lobe = rng.next_f64();
         let u_brdf = rng.next_2d();
+        let mut add = |dir: DVec3, dist: f64, value: DVec3| {
+            if !value.is_finite() {
+                return;
+            }
+            pair.unshadowed += value;
+            if shadows.is_some_and(|s| s.visible(self.position, self.geometric, dir, dist)) {
+                pair.shadowed += value;
+            }
+        };
 
         if let Some(ls) = self.sampler.sample(u_light) {
             let wi = self.frame.to_local(ls.dir);
             let f = brdf.eval_cos(self.wo, wi);
             if f != DVec3::ZERO {
                 let w = power_heuristic(ls.pdf, brdf.pdf(self.wo, wi));
-                if w > 0.0 && shadows.visible(self.position, self.geometric, ls.dir, ls.dist) {
+                if w > 0.0 {
                     let le = light.radiance_at(self.position + ls.dir * ls.dist);
-                    v += le * f * (w / ls.pdf);
+                    add(ls.dir, ls.dist, le * f * (w / ls.pdf));
                 }
             }
         }
@@ -346,15 +368,22 @@ impl McPoint {
                 let f = brdf.eval_cos(self.wo, wi);
                 if pb > 0.0 && f != DVec3::ZERO {
                     let w = power_heuristic(pb, pl);
-                    if w > 0.0 && shadows.visible(self.position, self.geometric, dir, dist) {
+                    if w > 0.0 {
                         let le = light.radiance_at(self.position + dir * dist);
-                        v += le * f * (w / pb);
+                        add(dir, dist, le * f * (w / pb));
                     }
                 }
             }
         }
-        if v.is_finite() { v } else { DVec3::ZERO }
+        pair
     }
+}
+
+/// One Monte Carlo sample's contribution with visibility (shadow rays) and without.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SamplePair {
+    pub shadowed: DVec3,
+    pub unshadowed: DVec3,
 }
 
 /// Veach's power heuristic (β = 2) for the strategy with density `pa` against `pb`.

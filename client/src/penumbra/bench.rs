@@ -13,7 +13,6 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use bspvt_proto::Scene;
@@ -21,10 +20,12 @@ use bspvt_server::bake::raycast::{Occluder, mesh_triangles};
 use glam::Vec3;
 use serde::Serialize;
 
+use crate::bench::{file_stem, load_named_scene, median_ms as timed, named_scene_path};
+use crate::compare::heatmap::{error_scale, heat_map};
+use crate::compare::metrics::{covered as covered_pixels, mean_image, rmse_mae as errors};
 use crate::groundtruth::ltcvis::{builtin_lookup, render_ltc_exact_visibility};
 use crate::light::Light;
 use crate::penumbra::{self, Params, Technique};
-use crate::render::gbuffer::NONE;
 use crate::render::image::Image;
 use crate::render::renderer::Renderer;
 
@@ -174,7 +175,13 @@ pub fn run(a: &BenchPenumbraArgs) -> Result<Report> {
         skipped: Vec::new(),
     };
     for name in a.scenes.iter().filter(|s| !s.is_empty()) {
-        let Some(scene) = load_scene(name, &meshes_dir, &mut report.skipped)? else {
+        let Some(scene) = load_named_scene(name, &meshes_dir)? else {
+            let msg = format!(
+                "{name}: {} not found, skipped",
+                named_scene_path(name, &meshes_dir).display()
+            );
+            eprintln!("bench-penumbra: {msg}");
+            report.skipped.push(msg);
             continue;
         };
         for case in cases(name, &scene, a.base_only) {
@@ -186,34 +193,6 @@ pub fn run(a: &BenchPenumbraArgs) -> Result<Report> {
     }
     write_outputs(&report, &a.out)?;
     Ok(report)
-}
-
-/// A scene by name; `None` (and a printed message) when its mesh file is absent.
-fn load_scene(name: &str, meshes_dir: &Path, skipped: &mut Vec<String>) -> Result<Option<Scene>> {
-    if let Some(s) = bspvt_proto::builtin::scene(name) {
-        return Ok(Some(s));
-    }
-    let file = match name {
-        "teapot" => meshes_dir.join("teapot.obj"),
-        "bunny" => meshes_dir.join("bunny.ply"),
-        "dragon" => meshes_dir.join("dragon_res4.ply"),
-        other => PathBuf::from(other),
-    };
-    if !file.exists() {
-        let msg = format!("{name}: {} not found, skipped", file.display());
-        eprintln!("bench-penumbra: {msg}");
-        skipped.push(msg);
-        return Ok(None);
-    }
-    let is_json = file.extension().is_some_and(|e| e == "json");
-    let scene = if is_json {
-        bspvt_proto::scene::open_scene(Some(&file.to_string_lossy()), None)
-    } else {
-        Scene::from_mesh_path(&file)
-    };
-    scene
-        .map(Some)
-        .with_context(|| format!("cannot load scene {name} ({})", file.display()))
 }
 
 /// A scene variant.
@@ -337,7 +316,7 @@ fn measure_case(scene_name: &str, case: &Case, st: &Settings, out: &Path) -> Res
     let light = Light::load(pl)?;
     let r = Renderer::new(scene, st.size, st.size);
     let occ = Occluder::new(&scene.mesh, &mesh_triangles(&scene.mesh));
-    let covered: Vec<bool> = r.gbuffer.tri.iter().map(|&t| t != NONE).collect();
+    let covered = covered_pixels(&r.gbuffer);
     let dir = out.join(format!("{}-{}", file_stem(scene_name), case.name));
     let ltc_exact = |spp: u32, seed: u64| {
         render_ltc_exact_visibility(
@@ -405,119 +384,6 @@ fn measure_case(scene_name: &str, case: &Case, st: &Settings, out: &Path) -> Res
         ref_rmse: ref_between / 2.0,
         rows,
         speed_up,
-    })
-}
-
-/// A scene name usable as a folder name.
-fn file_stem(name: &str) -> String {
-    let base = Path::new(name)
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| name.to_string());
-    base.chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect()
-}
-
-/// Median wall time (ms) of `frames` calls of `f`, and the last image.
-fn timed(frames: usize, mut f: impl FnMut() -> Result<Image>) -> Result<(f64, Image)> {
-    let mut ms = Vec::with_capacity(frames);
-    let mut last = None;
-    for _ in 0..frames.max(1) {
-        let t = Instant::now();
-        let img = f()?;
-        ms.push(t.elapsed().as_secs_f64() * 1e3);
-        last = Some(img);
-    }
-    ms.sort_by(f64::total_cmp);
-    let img = last.context("no frame rendered")?;
-    Ok((ms[ms.len() / 2], img))
-}
-
-/// RMSE and mean absolute error over covered pixels, per channel:
-/// RMSE = √(Σ (a − b)² / 3N), MAE = Σ |a − b| / 3N.
-pub fn errors(a: &Image, b: &Image, covered: &[bool]) -> (f64, f64) {
-    let (mut sq, mut abs, mut n) = (0.0, 0.0, 0usize);
-    for ((x, y), &c) in a.pixels.iter().zip(&b.pixels).zip(covered) {
-        if !c {
-            continue;
-        }
-        for k in 0..3 {
-            let d = f64::from(x[k] - y[k]);
-            sq += d * d;
-            abs += d.abs();
-        }
-        n += 3;
-    }
-    let n = n.max(1) as f64;
-    ((sq / n).sqrt(), abs / n)
-}
-
-fn mean_image(a: &Image, b: &Image) -> Image {
-    let mut m = a.clone();
-    for (p, q) in m.pixels.iter_mut().zip(&b.pixels) {
-        for k in 0..3 {
-            p[k] = 0.5 * (p[k] + q[k]);
-        }
-    }
-    m
-}
-
-/// The error that saturates the heat map: half the reference's mean over covered pixels.
-fn error_scale(reference: &Image, covered: &[bool]) -> f32 {
-    let (mut s, mut n) = (0.0f64, 0usize);
-    for (p, &c) in reference.pixels.iter().zip(covered) {
-        if c {
-            s += p.iter().map(|&v| f64::from(v)).sum::<f64>() / 3.0;
-            n += 1;
-        }
-    }
-    let m = (0.5 * s / n.max(1) as f64) as f32;
-    if m.is_finite() && m > 0.0 { m } else { 1.0 }
-}
-
-/// |method − reference| (channel mean) / `scale` on a black → blue → red → yellow → white
-/// ramp; background pixels grey.
-fn heat_map(img: &Image, reference: &Image, covered: &[bool], scale: f32) -> image::RgbImage {
-    let mut out = image::RgbImage::new(img.width, img.height);
-    let it = img.pixels.iter().zip(&reference.pixels).zip(covered);
-    for (o, ((a, b), &c)) in out.pixels_mut().zip(it) {
-        o.0 = if c {
-            let e = (0..3).map(|k| (a[k] - b[k]).abs()).sum::<f32>() / 3.0;
-            ramp(e / scale)
-        } else {
-            [64, 64, 64]
-        };
-    }
-    out
-}
-
-/// Piecewise-linear colour ramp on t ∈ [0, 1] (clamped).
-fn ramp(t: f32) -> [u8; 3] {
-    const STOPS: [[f32; 3]; 5] = [
-        [0.0, 0.0, 0.0],
-        [0.0, 0.0, 1.0],
-        [1.0, 0.0, 0.0],
-        [1.0, 1.0, 0.0],
-        [1.0, 1.0, 1.0],
-    ];
-    let t = if t.is_finite() {
-        t.clamp(0.0, 1.0)
-    } else {
-        1.0
-    };
-    let x = t * (STOPS.len() - 1) as f32;
-    let i = (x.floor() as usize).min(STOPS.len() - 2);
-    let f = x - i as f32;
-    std::array::from_fn(|k| {
-        let v = STOPS[i][k] * (1.0 - f) + STOPS[i + 1][k] * f;
-        (v * 255.0).round() as u8
     })
 }
 
@@ -682,18 +548,5 @@ mod tests {
         }
         assert!(matches!(with(0.2), SpeedUp::WorseThanOneSpp { .. }));
         assert!(matches!(with(0.001), SpeedUp::AtLeast { max_spp: 16, .. }));
-    }
-
-    #[test]
-    fn ramp_ends_and_errors() {
-        assert_eq!(ramp(0.0), [0, 0, 0]);
-        assert_eq!(ramp(1.0), [255, 255, 255]);
-        assert_eq!(ramp(f32::NAN), [255, 255, 255]);
-        let mut a = Image::new(2, 1);
-        let b = Image::new(2, 1);
-        a.pixels[0] = [0.3; 3];
-        a.pixels[1] = [9.0; 3];
-        let (rmse, mae) = errors(&a, &b, &[true, false]);
-        assert!((rmse - 0.3).abs() < 1e-6 && (mae - 0.3).abs() < 1e-6);
     }
 }

@@ -256,6 +256,9 @@ impl<'a> Renderer<'a> {
                 return;
             };
             let wo = (self.view.eye - s.position).normalize_or(s.normal);
+            if !crate::shade::sees_viewer(s.normal, wo) {
+                return;
+            }
             let m = self.material(mesh.material_ids.get(s.tri as usize).copied().unwrap_or(0));
             let lobes = Lobes::new(self.table, m, s.normal, wo);
             let integrals = unshadowed(&lobes, light, s.position, s.normal);

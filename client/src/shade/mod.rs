@@ -180,6 +180,15 @@ impl<'a> Emitter<'a> {
     }
 }
 
+/// True when the viewer is above the shading hemisphere (n · ωo > 0). Below it (silhouettes,
+/// where the interpolated normal turns away from the viewer) the BRDF is 0 — as in the Monte
+/// Carlo ground truth and Mitsuba's one-sided BSDFs — so the per-pixel shaders return black
+/// there instead of clamping ωo to the horizon.
+#[inline]
+pub fn sees_viewer(n: DVec3, wo: DVec3) -> bool {
+    n.dot(wo) > 0.0
+}
+
 /// The light polygon as directions from `p`, clipped to the upper hemisphere of `n`; empty
 /// when the light is wholly below the horizon or `p` is behind a one-sided light.
 pub fn light_directions(light: &Light, p: DVec3, n: DVec3) -> SphPoly {

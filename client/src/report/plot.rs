@@ -174,7 +174,11 @@ pub fn plot(s: &SceneReport, metric: Metric, dir: &Path) -> Result<PathBuf> {
         (lo / 1.5)..(hi * 1.5)
     };
     let xr = range(&mut pts.iter().map(|p| p.0));
-    let yr = range(&mut pts.iter().map(|p| p.1));
+    let floor = match metric {
+        Metric::Rmse => Some(s.ground_truth.rmse_floor).filter(|f| *f > 0.0 && f.is_finite()),
+        Metric::Flip => None,
+    };
+    let yr = range(&mut pts.iter().map(|p| p.1).chain(floor));
     let mut buf = vec![0u8; (WIDTH * HEIGHT * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buf, (WIDTH, HEIGHT)).into_drawing_area();
@@ -188,7 +192,7 @@ pub fn plot(s: &SceneReport, metric: Metric, dir: &Path) -> Result<PathBuf> {
             .margin(12)
             .x_label_area_size(45)
             .y_label_area_size(70)
-            .build_cartesian_2d(xr.log_scale(), yr.log_scale())
+            .build_cartesian_2d(xr.clone().log_scale(), yr.log_scale())
             .map_err(|e| err(&e))?;
         chart
             .configure_mesh()
@@ -215,6 +219,23 @@ pub fn plot(s: &SceneReport, metric: Metric, dir: &Path) -> Result<PathBuf> {
                 .map_err(|e| err(&e))?
                 .label(se.name.clone())
                 .legend(move |(x, y)| Circle::new((x + 8, y), 4, colour.filled()));
+        }
+        if let Metric::Rmse = metric {
+            // The ground truth's own RMSE: no method can measure below it.
+            let floor = s.ground_truth.rmse_floor;
+            if floor > 0.0 && floor.is_finite() {
+                let grey = RGBColor(150, 150, 150);
+                chart
+                    .draw_series(LineSeries::new(
+                        [(xr.start, floor), (xr.end, floor)],
+                        grey.stroke_width(1),
+                    ))
+                    .map_err(|e| err(&e))?
+                    .label("ground-truth noise")
+                    .legend(move |(x, y)| {
+                        PathElement::new([(x, y), (x + 16, y)], grey.stroke_width(1))
+                    });
+            }
         }
         chart
             .configure_series_labels()

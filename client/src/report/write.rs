@@ -9,6 +9,7 @@ use anyhow::{Context, Result};
 use super::Report;
 use super::analysis::{EQUAL_TIME_TARGET, Reading, VISIBILITY_TARGET};
 use super::scene::SceneReport;
+use crate::bench::file_stem;
 
 pub fn write_all(report: &Report, out: &Path) -> Result<()> {
     let write = |name: &str, text: String| {
@@ -211,15 +212,16 @@ fn scene_section(s: &mut String, sc: &SceneReport, report: &Report) {
     }
     let _ = writeln!(
         s,
-        "\n### Methods\n\n| method | ms/frame | RMSE | rel. MSE | MAE | FLIP | > 8 % |\n|---|---:|---:|---:|---:|---:|---:|"
+        "\n### Methods\n\nEach method's image and error map are `{}/<method>.png` and \
+         `<method>-error.png` in the report's folder (`results.csv` names them).\n\n| method | ms/frame | RMSE | rel. MSE | MAE | FLIP | > 8 % |\n|---|---:|---:|---:|---:|---:|---:|",
+        file_stem(&sc.name)
     );
     for e in &sc.entries {
         let m = &e.metrics;
         let _ = writeln!(
             s,
-            "| [{}]({}) | {:.2} | {:.3e} | {:.3e} | {:.3e} | {:.4} | {} |",
+            "| {} | {:.2} | {:.3e} | {:.3e} | {:.3e} | {:.4} | {} |",
             e.label(),
-            e.image,
             e.ms_per_frame,
             m.rmse,
             m.rel_mse,

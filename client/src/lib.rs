@@ -15,6 +15,7 @@ pub mod penumbra;
 pub mod play;
 pub mod render;
 pub mod session;
+pub mod sg;
 pub mod shade;
 pub mod stream;
 pub mod texture;

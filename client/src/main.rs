@@ -113,6 +113,10 @@ struct RenderArgs {
     /// Side of the screen-space SSDF depth maps (`--ssdf screen`).
     #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u32).range(8..=4096))]
     depth_res: u32,
+    /// SSDF sharing: search at one pixel per STRIDE×STRIDE block, reused by the block's pixels
+    /// on the same surface (1: every pixel, the paper's).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=16))]
+    ssdf_stride: u32,
 }
 
 #[derive(clap::Args)]
@@ -229,6 +233,7 @@ fn render(a: RenderArgs) -> Result<()> {
                     sg: bspvt::sg::SgOptions {
                         ssdf: a.ssdf,
                         depth_res: a.depth_res,
+                        stride: a.ssdf_stride,
                     },
                 }),
         };

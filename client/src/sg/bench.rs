@@ -41,6 +41,9 @@ pub struct BenchSgArgs {
     /// Side of the screen-space depth maps.
     #[arg(long, default_value_t = 128)]
     pub depth_res: u32,
+    /// SSDF sharing stride (1: search at every pixel, the paper's).
+    #[arg(long, default_value_t = 2)]
+    pub stride: u32,
     /// Skip the exact SSDF above this image side (it is slow).
     #[arg(long, default_value_t = 256)]
     pub exact_max_size: u32,
@@ -190,6 +193,7 @@ pub fn run(a: &BenchSgArgs) -> Result<Report> {
                 let opts = SgOptions {
                     ssdf,
                     depth_res: a.depth_res,
+                    stride: a.stride,
                 };
                 let n = if ssdf == SsdfMode::Exact {
                     1

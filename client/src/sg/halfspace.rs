@@ -51,7 +51,8 @@ fn kappa(lambda: f64) -> f64 {
     0.85 * lambda.sqrt()
 }
 
-/// w(λ, |d|) ∈ [0, 1].
+/// w(λ, |d|) ∈ [0, 1] (f64; the table's own coordinate, tested against [`warp_f32`]).
+#[cfg(test)]
 #[inline]
 fn warp(lambda: f64, d_abs: f64) -> f64 {
     let k = kappa(lambda);
@@ -60,6 +61,26 @@ fn warp(lambda: f64, d_abs: f64) -> f64 {
         return d_abs / FRAC_PI_2;
     }
     ((k * d_abs).tanh() / kmax.tanh()).min(1.0)
+}
+
+/// [`warp`] in f32 for the shading loop (tanh(κπ/2) is 1 in f32 beyond κπ/2 = 9).
+#[inline]
+fn warp_f32(lambda: f32, d_abs: f32) -> f32 {
+    let k = 0.85 * lambda.sqrt();
+    let kmax = k * std::f32::consts::FRAC_PI_2;
+    if kmax < 1e-3 {
+        return d_abs / std::f32::consts::FRAC_PI_2;
+    }
+    // tanh x = −expm1(−2x) / (2 + expm1(−2x)) for x ≥ 0: one expm1, no cancellation
+    // (glibc's tanhf is slower).
+    let e = (-2.0 * k * d_abs).exp_m1();
+    let num = -e / (2.0 + e);
+    if kmax > 9.0 {
+        num.min(1.0)
+    } else {
+        let e = (-2.0 * kmax).exp_m1();
+        (num / (-e / (2.0 + e))).min(1.0)
+    }
 }
 
 /// |d| from w (inverse of [`warp`]).
@@ -214,8 +235,7 @@ pub fn fraction(lambda: f32, d: f32) -> f32 {
     }
     let lambda = lambda.clamp(1e-30, 1e30);
     let da = d.abs().min(std::f32::consts::FRAC_PI_2);
-    let w = warp(f64::from(lambda), f64::from(da)) as f32;
-    let f = Table::get().lookup(lambda, w);
+    let f = Table::get().lookup(lambda, warp_f32(lambda, da));
     if d >= 0.0 { f } else { 1.0 - f }
 }
 
@@ -357,6 +377,17 @@ mod tests {
             let got = hemisphere(&g, n);
             let want = 2.0 * brute(lambda, c.asin());
             prop_assert!((got - want).abs() < 3e-3 * want.max(1e-2), "{got} vs {want}");
+        }
+    }
+
+    #[test]
+    fn f32_warp_matches_f64() {
+        for l in [1e-6f32, 0.1, 3.0, 100.0, 1e4, 1e6] {
+            for d in [0.0f32, 1e-4, 0.01, 0.3, 1.0, 1.5] {
+                let a = warp_f32(l, d);
+                let b = warp(f64::from(l), f64::from(d));
+                assert!((f64::from(a) - b).abs() < 1e-6, "λ {l} d {d}: {a} vs {b}");
+            }
         }
     }
 

@@ -104,6 +104,10 @@ pub fn sphere_integral(lambda: f64) -> f64 {
         let l = if lambda > 0.0 { lambda } else { 0.0 };
         return 4.0 * PI * (1.0 - l);
     }
+    if lambda > 40.0 {
+        // e^{−80} < 1e-34: the exponential term is below f64 resolution.
+        return 2.0 * PI / lambda;
+    }
     2.0 * PI * (-(-2.0 * lambda).exp_m1()) / lambda
 }
 

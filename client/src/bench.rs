@@ -155,6 +155,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                     height: a.size,
                     frames: a.frames,
                     light: 0,
+                    env: None,
                 };
                 let s = render_sequence(scene, Some(&trees), &opts, |_, _| Ok(()))?;
                 println!(

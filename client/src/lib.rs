@@ -17,6 +17,7 @@ pub mod play;
 pub mod render;
 pub mod report;
 pub mod session;
+pub mod sg;
 pub mod shade;
 pub mod stream;
 pub mod texture;

@@ -37,7 +37,8 @@ enum Command {
     /// Run the baking service (the same as `bspvt-server serve`).
     Serve(bspvt_server::service::config::ServeArgs),
     /// Render images of a scene (one frame, or a sequence while the light moves) with BSPVT
-    /// shadows, unshadowed LTC or the Monte Carlo references.
+    /// shadows, unshadowed LTC, the point-light shadow methods, SG environment lighting, or
+    /// the Monte Carlo references.
     Render(RenderArgs),
     /// Measure shading speed on real meshes (kernel µs/vertex and frame times).
     Bench(bspvt::bench::BenchArgs),
@@ -48,6 +49,10 @@ enum Command {
     /// Error against run time of every method on real scenes, against converged Monte Carlo
     /// ground truth: report.md, results.csv, log-log plots and image grids in --out.
     Report(bspvt::report::ReportArgs),
+    /// Speed and error of the spherical-Gaussian environment lighting (paper 001: screen-space
+    /// and exact SSDF, unshadowed) against the Monte Carlo environment reference, per image
+    /// size and lobe count (results.json/.md and images in --out).
+    BenchSg(bspvt::sg::bench::BenchSgArgs),
     /// Fit the LTC table of GGX (regenerates `assets/ltc/ggx.json`).
     LtcFit(bspvt::ltc::fit::FitArgs),
     /// Write a Mitsuba 3 scene that renders the same image (independent cross-check).
@@ -98,6 +103,23 @@ struct RenderArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
+    /// Environment map (equirectangular Radiance .hdr) for `--method sg` and `mc-env`
+    /// [default: env/royal_esplanade_1k.hdr under BSPVT_ASSETS or ../shared/assets].
+    #[arg(long)]
+    env: Option<PathBuf>,
+    /// Spherical Gaussians fitted to the map (`--method sg`).
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=256))]
+    lobes: u32,
+    /// How `--method sg` finds the spherical signed distance (visibility).
+    #[arg(long, value_enum, default_value = "screen")]
+    ssdf: bspvt::sg::SsdfMode,
+    /// Side of the screen-space SSDF depth maps (`--ssdf screen`).
+    #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u32).range(8..=4096))]
+    depth_res: u32,
+    /// SSDF sharing: search at one pixel per STRIDE×STRIDE block, reused by the block's pixels
+    /// on the same surface (1: every pixel, the paper's).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=16))]
+    ssdf_stride: u32,
 }
 
 #[derive(clap::Args)]
@@ -138,6 +160,13 @@ fn main() -> std::process::ExitCode {
                 r.scenes.len(),
                 r.seconds,
                 a.out.join("report.md").display()
+            );
+        }),
+        Command::BenchSg(a) => bspvt::sg::bench::run(&a).map(|r| {
+            eprintln!(
+                "bench-sg: {} configuration(s) written to {}",
+                r.rows.len(),
+                a.out.display()
             );
         }),
         Command::LtcFit(a) => bspvt::ltc::fit::run(&a),
@@ -203,6 +232,21 @@ fn render(a: RenderArgs) -> Result<()> {
             height: a.height,
             frames: a.frames,
             light: 0,
+            env: a
+                .method
+                .is_env()
+                .then(|| bspvt::render::sequence::EnvOptions {
+                    path: a
+                        .env
+                        .clone()
+                        .unwrap_or_else(bspvt::sg::env::default_env_path),
+                    lobes: a.lobes as usize,
+                    sg: bspvt::sg::SgOptions {
+                        ssdf: a.ssdf,
+                        depth_res: a.depth_res,
+                        stride: a.ssdf_stride,
+                    },
+                }),
         };
         let mut frames = Vec::new();
         let stats = pool.install(|| {

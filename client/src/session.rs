@@ -36,10 +36,13 @@ pub enum ViewMethod {
     Pcf,
     /// Variance shadow map.
     Vsm,
+    /// Paper 001: the environment map (not the polygonal light) as spherical Gaussians, with
+    /// screen-space SSDF visibility; the map is loaded and fitted on first use.
+    Sg,
 }
 
 impl ViewMethod {
-    pub const ALL: [ViewMethod; 7] = [
+    pub const ALL: [ViewMethod; 8] = [
         ViewMethod::Bspvt,
         ViewMethod::Ltc,
         ViewMethod::Mc,
@@ -47,6 +50,7 @@ impl ViewMethod {
         ViewMethod::Pcss,
         ViewMethod::Pcf,
         ViewMethod::Vsm,
+        ViewMethod::Sg,
     ];
 
     pub fn name(self) -> &'static str {
@@ -58,6 +62,7 @@ impl ViewMethod {
             ViewMethod::Pcss => "PCSS",
             ViewMethod::Pcf => "PCF",
             ViewMethod::Vsm => "VSM",
+            ViewMethod::Sg => "SG environment + SSDF",
         }
     }
 
@@ -153,6 +158,11 @@ pub struct Session<'a> {
     occluder: Option<Occluder>,
     /// Progressive Monte Carlo: running sum and passes, reset by any change.
     mc: Option<(Vec<[f32; 3]>, u32)>,
+    /// [`ViewMethod::Sg`]: the environment map (default: the test map) and lobe count; the fit
+    /// happens on the first SG frame (`Err`: loading failed, SG frames fall back to LTC).
+    pub env_path: Option<std::path::PathBuf>,
+    pub sg_lobes: usize,
+    sg: Option<Result<crate::sg::SgEnv, String>>,
 }
 
 impl<'a> Session<'a> {
@@ -186,7 +196,27 @@ impl<'a> Session<'a> {
             roughness: None,
             occluder: None,
             mc: None,
+            env_path: None,
+            sg_lobes: 16,
+            sg: None,
         })
+    }
+
+    /// The fitted environment of [`ViewMethod::Sg`], loading and fitting it on first use.
+    fn sg_env(&mut self) -> Result<&crate::sg::SgEnv, &str> {
+        let path = self
+            .env_path
+            .clone()
+            .unwrap_or_else(crate::sg::env::default_env_path);
+        let k = self.sg_lobes;
+        self.sg
+            .get_or_insert_with(|| {
+                crate::sg::EnvLight::load(&path)
+                    .map(|env| crate::sg::fit(&env, k))
+                    .map_err(|e| format!("{e:#}"))
+            })
+            .as_ref()
+            .map_err(String::as_str)
     }
 
     /// Applies the updates that arrived; returns whether the trees changed.
@@ -267,6 +297,27 @@ impl<'a> Session<'a> {
     /// Draws one frame.
     pub fn frame(&mut self) -> Image {
         let light = self.light();
+        if self.method == ViewMethod::Sg {
+            let failed = match self.sg_env() {
+                Ok(env) => {
+                    let env = env.clone();
+                    match crate::sg::render(
+                        self.scene,
+                        &self.renderer.view,
+                        &self.renderer.gbuffer,
+                        &env,
+                        None,
+                        &crate::sg::SgOptions::default(),
+                    ) {
+                        Ok((img, _)) => return img,
+                        Err(e) => format!("{e:#}"),
+                    }
+                }
+                Err(e) => e.to_string(),
+            };
+            tracing::warn!("SG: {failed}; drawing unshadowed LTC");
+            return self.renderer.ltc(&light, Mode::Pixel).0;
+        }
         match (self.method, self.method.penumbra()) {
             (ViewMethod::Bspvt, _) => match self.streamed.view() {
                 Some(trees) => self.renderer.bspvt(&light, &trees, self.mode).0,

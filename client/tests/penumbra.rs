@@ -351,6 +351,7 @@ fn frames_along_the_light_path() {
             height: 48,
             frames: 3,
             light: 0,
+            env: None,
         };
         let mut n = 0;
         let stats = render_sequence(&s, None, &opts, |_, img| {

@@ -40,6 +40,7 @@
 //! squaring; numerically failed samples contribute 0. `client/tests/groundtruth.rs` checks
 //! random α, views to 89.99°, lights from 1e-8 sr to nearly 2π and scales 1e-4…1e4.
 
+pub mod env;
 pub mod ltcvis;
 pub mod primary;
 pub mod ratio;
@@ -62,6 +63,7 @@ use crate::render::camera::View;
 use crate::render::gbuffer::{GBuffer, Surface};
 use crate::render::image::Image;
 
+pub use env::{EnvSampler, render_mc_env};
 pub use ltcvis::{
     LtcLobe, builtin_lookup, render_ltc_exact_visibility, shade_ltc_exact_visibility,
 };

@@ -36,6 +36,12 @@ pub enum Method {
     Vsm,
     /// Percentage-closer soft shadows (blocker search, PCF of the penumbra width).
     Pcss,
+    /// Paper 001: environment light as spherical Gaussians, visibility by a run-time SSDF
+    /// (needs `--env`; `--lobes`, `--ssdf`).
+    Sg,
+    /// Monte Carlo ground truth under the environment map: exact GGX, shadow rays, MIS of map
+    /// and BRDF sampling.
+    McEnv,
 }
 
 impl Method {
@@ -50,6 +56,21 @@ impl Method {
             _ => None,
         }
     }
+
+    /// True for the environment-light methods (no polygonal light involved).
+    pub fn is_env(self) -> bool {
+        matches!(self, Method::Sg | Method::McEnv)
+    }
+}
+
+/// The environment light of [`Method::Sg`] and [`Method::McEnv`].
+#[derive(Clone, Debug, Serialize)]
+pub struct EnvOptions {
+    /// Equirectangular map (Radiance `.hdr`).
+    pub path: std::path::PathBuf,
+    /// SG lobes fitted to the map.
+    pub lobes: usize,
+    pub sg: crate::sg::SgOptions,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -62,6 +83,8 @@ pub struct Options {
     /// Frames along the light path (1: the light at rest).
     pub frames: usize,
     pub light: usize,
+    /// Environment lighting (required by the env methods, ignored by the others).
+    pub env: Option<EnvOptions>,
 }
 
 /// Timings and counters of a sequence (STATS.json of `bspvt render`).
@@ -93,6 +116,13 @@ pub struct Stats {
     pub spp: Option<u32>,
     /// Monte Carlo: mean relative standard error per covered pixel (last frame).
     pub mean_rel_stderr: Option<f64>,
+    /// SG: the lobes, the fit's relative L2 error over the sphere and its time (in setup).
+    pub sg_lobes: Option<usize>,
+    pub sg_fit_error: Option<f64>,
+    pub sg_fit_seconds: Option<f64>,
+    pub ssdf: Option<crate::sg::SsdfMode>,
+    /// SG: median depth-map time per frame (screen SSDF), ms.
+    pub sg_maps_ms: Option<f64>,
 }
 
 /// Renders `opts.frames` frames along the scene light's default path, handing each image to
@@ -103,6 +133,9 @@ pub fn render_sequence(
     opts: &Options,
     mut sink: impl FnMut(usize, &Image) -> Result<()>,
 ) -> Result<Stats> {
+    if opts.method.is_env() {
+        return render_env_sequence(scene, opts, sink);
+    }
     let Some(light) = scene.lights.get(opts.light) else {
         bail!("the scene has no light {}", opts.light);
     };
@@ -220,5 +253,87 @@ pub fn render_sequence(
         dropped_per_vertex: counts.pieces_dropped as f64 / nv,
         spp: matches!(opts.method, Method::Mc | Method::LtcExact).then_some(opts.spp),
         mean_rel_stderr: noise,
+        sg_lobes: None,
+        sg_fit_error: None,
+        sg_fit_seconds: None,
+        ssdf: None,
+        sg_maps_ms: None,
+    })
+}
+
+/// [`render_sequence`] for the environment-light methods: the map is loaded (and fitted, for
+/// SG) in setup; every frame renders the scene as it is (the light does not move).
+fn render_env_sequence(
+    scene: &Scene,
+    opts: &Options,
+    mut sink: impl FnMut(usize, &Image) -> Result<()>,
+) -> Result<Stats> {
+    let Some(eo) = &opts.env else {
+        bail!(
+            "--method {:?} needs an environment map (--env FILE.hdr)",
+            opts.method
+        );
+    };
+    let start = Instant::now();
+    let env = crate::sg::EnvLight::load(&eo.path)?;
+    let r = Renderer::new(scene, opts.width, opts.height);
+    let tris = bspvt_server::bake::raycast::mesh_triangles(&scene.mesh);
+    let occluder = bspvt_server::bake::raycast::Occluder::new(&scene.mesh, &tris);
+    let sg = (opts.method == Method::Sg).then(|| crate::sg::fit(&env, eo.lobes));
+    crate::sg::halfspace::warm_up();
+    let setup_seconds = start.elapsed().as_secs_f64();
+    let frames = opts.frames.max(1);
+    let (mut ms, mut maps_ms) = (Vec::with_capacity(frames), Vec::with_capacity(frames));
+    let mut noise = None;
+    for k in 0..frames {
+        let t = Instant::now();
+        let img = match &sg {
+            Some(sg) => {
+                let (img, timings) =
+                    crate::sg::render(scene, &r.view, &r.gbuffer, sg, Some(&occluder), &eo.sg)?;
+                maps_ms.push(timings.maps_ms);
+                img
+            }
+            None => {
+                let (img, report) = groundtruth::render_mc_env(
+                    scene, &r.view, &r.gbuffer, &env, &occluder, opts.spp, k as u64,
+                );
+                noise = Some(report.mean_rel_stderr);
+                img
+            }
+        };
+        ms.push(t.elapsed().as_secs_f64() * 1e3);
+        sink(k, &img)?;
+    }
+    let seconds = setup_seconds + ms.iter().sum::<f64>() / 1e3;
+    let mean = ms.iter().sum::<f64>() / ms.len() as f64;
+    ms.sort_by(f64::total_cmp);
+    maps_ms.sort_by(f64::total_cmp);
+    let median = ms[ms.len() / 2];
+    Ok(Stats {
+        method: opts.method,
+        mode: Mode::Pixel,
+        width: opts.width,
+        height: opts.height,
+        frames,
+        threads: rayon::current_num_threads(),
+        seconds,
+        setup_seconds,
+        ms_per_frame: median,
+        ms_per_frame_mean: mean,
+        fps: 1e3 / median.max(1e-9),
+        us_per_vertex: 0.0,
+        us_per_vertex_per_core: 0.0,
+        vertices_shaded: 0,
+        pixels_covered: r.gbuffer.covered(),
+        pieces_per_vertex: 0.0,
+        dropped_per_vertex: 0.0,
+        spp: (opts.method == Method::McEnv).then_some(opts.spp),
+        mean_rel_stderr: noise,
+        sg_lobes: sg.as_ref().map(|s| s.lobes.len()),
+        sg_fit_error: sg.as_ref().map(|s| s.fit_error),
+        sg_fit_seconds: sg.as_ref().map(|s| s.seconds),
+        ssdf: sg.as_ref().map(|_| eo.sg.ssdf),
+        sg_maps_ms: maps_ms.get(maps_ms.len() / 2).copied(),
     })
 }

@@ -122,6 +122,7 @@ pub fn run(session: &mut Session, opts: &ViewerOptions, started: Instant) -> Res
                 Key::Key5 => session.method = ViewMethod::Pcss,
                 Key::Key6 => session.method = ViewMethod::Pcf,
                 Key::Key7 => session.method = ViewMethod::Vsm,
+                Key::Key8 => session.method = ViewMethod::Sg,
                 Key::M => {
                     session.mode = match session.mode {
                         Mode::Vertex => Mode::Pixel,
@@ -281,6 +282,6 @@ fn overlay_lines(s: &Session, fps: f64, opts: &ViewerOptions) -> Vec<String> {
     if let Some(n) = &opts.note {
         lines.push(n.clone());
     }
-    lines.push("1-7 method  M mode  WASDQE RF TG light  P path  H hide".into());
+    lines.push("1-8 method  M mode  WASDQE RF TG light  P path  H hide".into());
     lines
 }

@@ -20,6 +20,8 @@ fn args(out: &std::path::Path) -> ReportArgs {
         size: Some(40),
         frames: Some(1),
         meshes_dir: None,
+        env: None,
+        no_env: false,
         cache: None,
         out: out.to_path_buf(),
     }
@@ -104,6 +106,43 @@ fn quick_report_measures_every_method_and_reuses_its_cache() {
     }
     assert_eq!(sc.equal_time.len(), 4);
 
+    // Environment lighting, against its own ground truth, when the shared map is there.
+    match &sc.env {
+        Some(env) => {
+            let methods: BTreeSet<&str> = env.entries.iter().map(|e| e.method.as_str()).collect();
+            assert_eq!(
+                methods,
+                ["mc-env", "sg-exact", "sg-screen", "sg-unshadowed"]
+                    .into_iter()
+                    .collect()
+            );
+            for e in &env.entries {
+                let m = &e.metrics;
+                assert!(m.rmse.is_finite() && m.flip.is_finite(), "{}", e.label());
+                assert!(out.join(&e.image).is_file());
+            }
+            let env_rmse = |m: &str| {
+                env.entries
+                    .iter()
+                    .find(|e| e.method == m)
+                    .unwrap()
+                    .metrics
+                    .rmse
+            };
+            // The SSDF's visibility brings SG shading closer to the truth than none.
+            assert!(env_rmse("sg-screen") < env_rmse("sg-unshadowed"));
+            assert!(env.fits.iter().all(|f| f.1.is_finite() && f.1 < 1.0));
+        }
+        None => {
+            assert!(
+                report.skipped.iter().any(|s| s.contains("environment")),
+                "{:?}",
+                report.skipped
+            );
+            eprintln!("environment lighting skipped: no map in ../shared/assets");
+        }
+    }
+
     // The files a reader opens.
     for f in ["report.md", "results.csv", "bakes.csv", "results.json"] {
         assert!(out.join(f).is_file(), "{f} missing");
@@ -124,7 +163,8 @@ fn quick_report_measures_every_method_and_reuses_its_cache() {
         }
     }
     let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
-    assert_eq!(csv.lines().count(), 1 + sc.entries.len());
+    let env_rows = sc.env.as_ref().map_or(0, |e| e.entries.len());
+    assert_eq!(csv.lines().count(), 1 + sc.entries.len() + env_rows);
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("## plate-small") && md.contains("### Error budget"));
 

@@ -92,8 +92,15 @@ pub fn measure_env(
         _ => {
             eprintln!("  environment ground truth: {} spp …", st.env_gt_spp);
             let t = Instant::now();
-            let (img, noise) =
-                render_mc_env(scene, &r.view, &r.gbuffer, &env, occ, st.env_gt_spp, SEED_GT);
+            let (img, noise) = render_mc_env(
+                scene,
+                &r.view,
+                &r.gbuffer,
+                &env,
+                occ,
+                st.env_gt_spp,
+                SEED_GT,
+            );
             let (mut s2, mut n) = (0.0, 0usize);
             for (p, &c) in noise.stderr.pixels.iter().zip(covered) {
                 if c {
@@ -169,7 +176,11 @@ pub fn measure_env(
                 ssdf,
                 ..SgOptions::default()
             };
-            let frames = if ssdf == SsdfMode::Exact { 1 } else { st.frames };
+            let frames = if ssdf == SsdfMode::Exact {
+                1
+            } else {
+                st.frames
+            };
             let (ms, (img, _)) = median_ms(frames, || {
                 sg::render(scene, &r.view, &r.gbuffer, &lobes, Some(occ), &opts)
             })?;

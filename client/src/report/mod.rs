@@ -11,6 +11,7 @@
 //! `report.md`, `results.csv`, the log-log plots and the image grids.
 
 pub mod analysis;
+pub mod env;
 pub mod grid;
 pub mod plot;
 pub mod scene;
@@ -43,6 +44,13 @@ pub struct ReportArgs {
     /// Folder holding the meshes (default: $BSPVT_ASSETS/meshes or ../shared/assets/meshes).
     #[arg(long)]
     pub meshes_dir: Option<PathBuf>,
+    /// Environment map for the spherical-Gaussian methods [default:
+    /// env/royal_esplanade_1k.hdr under $BSPVT_ASSETS or ../shared/assets].
+    #[arg(long)]
+    pub env: Option<PathBuf>,
+    /// Leave out environment lighting.
+    #[arg(long)]
+    pub no_env: bool,
     /// Where ground truths and bakes are cached [default: DIR/cache].
     #[arg(long)]
     pub cache: Option<PathBuf>,
@@ -69,6 +77,12 @@ pub struct Settings {
     pub bakes: Vec<(u32, f32)>,
     /// Radius in pixels of the ratio estimator's edge-aware denoiser.
     pub denoise_radius: f64,
+    /// Environment lighting: the map (`None`: left out), lobe counts, ground-truth spp and
+    /// the Monte Carlo sample counts.
+    pub env_map: Option<PathBuf>,
+    pub env_lobes: Vec<usize>,
+    pub env_gt_spp: u32,
+    pub env_spp: Vec<u32>,
 }
 
 impl Settings {
@@ -101,6 +115,14 @@ impl Settings {
                 vec![(32, 1e-3), (64, 1e-2), (64, 1e-3), (128, 1e-3)]
             },
             denoise_radius: 4.0,
+            env_map: None,
+            env_lobes: if q { vec![16] } else { vec![16, 32] },
+            env_gt_spp: if q { 256 } else { 2048 },
+            env_spp: if q {
+                vec![1, 4, 16]
+            } else {
+                vec![1, 4, 16, 64]
+            },
         })
     }
 
@@ -130,7 +152,26 @@ pub struct Report {
 /// Runs the report and writes everything under `a.out`.
 pub fn run(a: &ReportArgs) -> Result<Report> {
     let start = Instant::now();
-    let settings = Settings::from_args(a)?;
+    let mut settings = Settings::from_args(a)?;
+    let mut skipped = Vec::new();
+    if !a.no_env {
+        let map = a
+            .env
+            .clone()
+            .unwrap_or_else(crate::sg::env::default_env_path);
+        if map.is_file() {
+            settings.env_map = Some(map);
+        } else if a.env.is_some() {
+            bail!("--env {}: no such file", map.display());
+        } else {
+            let msg = format!(
+                "environment lighting: {} not found, left out (set --env or BSPVT_ASSETS)",
+                map.display()
+            );
+            eprintln!("report: {msg}");
+            skipped.push(msg);
+        }
+    }
     let meshes_dir = a
         .meshes_dir
         .clone()
@@ -153,7 +194,7 @@ pub fn run(a: &ReportArgs) -> Result<Report> {
         settings: settings.clone(),
         threads: rayon::current_num_threads(),
         scenes: Vec::new(),
-        skipped: Vec::new(),
+        skipped,
         seconds: 0.0,
     };
     for name in &names {
@@ -174,8 +215,8 @@ pub fn run(a: &ReportArgs) -> Result<Report> {
             Ok(paths) => {
                 sr.plots = paths
                     .iter()
-                    .filter_map(|p| p.file_name())
-                    .map(|f| format!("{stem}/{}", f.to_string_lossy()))
+                    .filter_map(|p| p.strip_prefix(&a.out).ok())
+                    .map(|p| p.to_string_lossy().into_owned())
                     .collect();
             }
             Err(e) => {

@@ -11,6 +11,7 @@ use anyhow::{Context, Result, anyhow, bail};
 use plotters::prelude::*;
 use plotters::style::FontStyle;
 
+use super::env::EnvReport;
 use super::scene::{Entry, SceneReport};
 
 const WIDTH: u32 = 900;
@@ -159,8 +160,73 @@ fn series(s: &SceneReport) -> Vec<Series<'_>> {
 
 /// Writes the scene's plot of `metric` against ms per frame into `dir`; returns its path.
 pub fn plot(s: &SceneReport, metric: Metric, dir: &Path) -> Result<PathBuf> {
+    let floor = match metric {
+        Metric::Rmse => Some(s.ground_truth.rmse_floor),
+        Metric::Flip => None,
+    };
+    let title = format!("{}: {} vs time per frame", s.name, metric.name());
+    draw(&title, &series(s), metric, floor, &dir.join(metric.file()))
+}
+
+/// The environment-lighting plot (RMSE) of a scene, `dir/env/rmse-vs-time.png`.
+pub fn env_plot(s: &SceneReport, env: &EnvReport, dir: &Path) -> Result<PathBuf> {
+    let of = |m: &str| -> Vec<&Entry> {
+        let mut v: Vec<&Entry> = env.entries.iter().filter(|e| e.method == m).collect();
+        v.sort_by_key(|e| (e.lobes.unwrap_or(0), e.spp.unwrap_or(0)));
+        v
+    };
+    let series = vec![
+        Series {
+            name: "SG, screen-space SSDF".into(),
+            colour: RGBColor(200, 30, 30),
+            line: false,
+            points: of("sg-screen"),
+        },
+        Series {
+            name: "SG, exact SSDF".into(),
+            colour: RGBColor(240, 130, 40),
+            line: false,
+            points: of("sg-exact"),
+        },
+        Series {
+            name: "SG, unshadowed".into(),
+            colour: RGBColor(90, 90, 90),
+            line: false,
+            points: of("sg-unshadowed"),
+        },
+        Series {
+            name: "Monte Carlo".into(),
+            colour: RGBColor(40, 80, 200),
+            line: true,
+            points: of("mc-env"),
+        },
+    ];
+    let title = format!(
+        "{} under the environment map: RMSE vs time per frame",
+        s.name
+    );
+    let dir = dir.join("env");
+    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    draw(
+        &title,
+        &series,
+        Metric::Rmse,
+        Some(env.gt_rmse_floor),
+        &dir.join(Metric::Rmse.file()),
+    )
+}
+
+/// Draws `all` (error against ms per frame, log-log) to `path`, with the ground truth's own
+/// error as a horizontal line when given.
+fn draw(
+    title: &str,
+    all: &[Series],
+    metric: Metric,
+    floor: Option<f64>,
+    path: &Path,
+) -> Result<PathBuf> {
     ensure_font()?;
-    let all = series(s);
+    let floor = floor.filter(|f| *f > 0.0 && f.is_finite());
     let pts: Vec<(f64, f64)> = all
         .iter()
         .flat_map(|se| se.points.iter().map(|e| (e.ms_per_frame, metric.of(e))))
@@ -174,10 +240,6 @@ pub fn plot(s: &SceneReport, metric: Metric, dir: &Path) -> Result<PathBuf> {
         (lo / 1.5)..(hi * 1.5)
     };
     let xr = range(&mut pts.iter().map(|p| p.0));
-    let floor = match metric {
-        Metric::Rmse => Some(s.ground_truth.rmse_floor).filter(|f| *f > 0.0 && f.is_finite()),
-        Metric::Flip => None,
-    };
     let yr = range(&mut pts.iter().map(|p| p.1).chain(floor));
     let mut buf = vec![0u8; (WIDTH * HEIGHT * 3) as usize];
     {
@@ -185,10 +247,7 @@ pub fn plot(s: &SceneReport, metric: Metric, dir: &Path) -> Result<PathBuf> {
         let err = |e: &dyn std::fmt::Display| anyhow!("plot: {e}");
         root.fill(&WHITE).map_err(|e| err(&e))?;
         let mut chart = ChartBuilder::on(&root)
-            .caption(
-                format!("{}: {} vs time per frame", s.name, metric.name()),
-                ("sans-serif", 22),
-            )
+            .caption(title, ("sans-serif", 20))
             .margin(12)
             .x_label_area_size(45)
             .y_label_area_size(70)
@@ -201,7 +260,7 @@ pub fn plot(s: &SceneReport, metric: Metric, dir: &Path) -> Result<PathBuf> {
             .label_style(("sans-serif", 14))
             .draw()
             .map_err(|e| err(&e))?;
-        for se in &all {
+        for se in all {
             let p: Vec<(f64, f64)> = se
                 .points
                 .iter()
@@ -220,10 +279,9 @@ pub fn plot(s: &SceneReport, metric: Metric, dir: &Path) -> Result<PathBuf> {
                 .label(se.name.clone())
                 .legend(move |(x, y)| Circle::new((x + 8, y), 4, colour.filled()));
         }
-        if let Metric::Rmse = metric {
+        {
             // The ground truth's own RMSE: no method can measure below it.
-            let floor = s.ground_truth.rmse_floor;
-            if floor > 0.0 && floor.is_finite() {
+            if let Some(floor) = floor {
                 let grey = RGBColor(150, 150, 150);
                 chart
                     .draw_series(LineSeries::new(
@@ -247,18 +305,21 @@ pub fn plot(s: &SceneReport, metric: Metric, dir: &Path) -> Result<PathBuf> {
             .map_err(|e| err(&e))?;
         root.present().map_err(|e| err(&e))?;
     }
-    let path = dir.join(metric.file());
     image::RgbImage::from_raw(WIDTH, HEIGHT, buf)
         .context("plot buffer size")?
-        .save(&path)
+        .save(path)
         .with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(path)
+    Ok(path.to_path_buf())
 }
 
 /// Both plots of a scene; the error (e.g. no font) when they cannot be drawn.
 pub fn plots(s: &SceneReport, dir: &Path) -> Result<Vec<PathBuf>> {
-    [Metric::Rmse, Metric::Flip]
+    let mut out: Vec<PathBuf> = [Metric::Rmse, Metric::Flip]
         .iter()
         .map(|&m| plot(s, m, dir))
-        .collect()
+        .collect::<Result<_>>()?;
+    if let Some(env) = &s.env {
+        out.push(env_plot(s, env, dir)?);
+    }
+    Ok(out)
 }

@@ -47,6 +47,8 @@ pub struct Entry {
     pub mode: Option<Mode>,
     pub face_res: Option<u32>,
     pub epsilon: Option<f32>,
+    /// Spherical Gaussians of the environment fit (the `sg-*` methods).
+    pub lobes: Option<u32>,
     /// Samples (or shadow rays) per pixel.
     pub spp: Option<u32>,
     /// Median wall time of one frame on all threads (the G-buffer, made once per camera, and
@@ -74,6 +76,9 @@ impl Entry {
                 Mode::Pixel => " pixel",
             };
         }
+        if let Some(k) = self.lobes {
+            s += &format!(" K={k}");
+        }
         if let Some(n) = self.spp {
             s += &format!(" {n} spp");
         }
@@ -81,7 +86,7 @@ impl Entry {
     }
 
     /// A file name for the label.
-    fn slug(&self) -> String {
+    pub(super) fn slug(&self) -> String {
         self.label()
             .replace('²', "")
             .replace("ε=", "eps")
@@ -146,6 +151,8 @@ pub struct SceneReport {
     pub entries: Vec<Entry>,
     pub equal_time: Vec<EqualTime>,
     pub budget: Vec<Budget>,
+    /// Environment lighting (paper 001) against its own ground truth; `None` without a map.
+    pub env: Option<super::env::EnvReport>,
     /// The image grid and plots, relative to the output folder.
     pub grid: String,
     pub plots: Vec<String>,
@@ -207,6 +214,7 @@ pub fn measure(
         mode: None,
         face_res: None,
         epsilon: None,
+        lobes: None,
         spp: None,
         ms_per_frame: ms,
         metrics: Metrics::default(),
@@ -365,6 +373,13 @@ pub fn measure(
         record(entry(method, ms), &img)?;
     }
 
+    let env = match &st.env_map {
+        Some(map) => Some(super::env::measure_env(
+            name, scene, &r, &occ, &covered, map, st, cache, out,
+        )?),
+        None => None,
+    };
+
     let grid_file = format!("{stem}/grid.png");
     grid.save(&out.join(&grid_file))?;
     let equal_time = analysis::equal_time(&entries);
@@ -380,6 +395,7 @@ pub fn measure(
         entries,
         equal_time,
         budget,
+        env,
         grid: grid_file,
         plots: Vec::new(),
     })
@@ -482,7 +498,7 @@ fn ground_truth(
     Ok((img, gt))
 }
 
-fn load_exr(path: &Path) -> Result<Image> {
+pub(super) fn load_exr(path: &Path) -> Result<Image> {
     let img = image::open(path)
         .with_context(|| format!("cannot read {}", path.display()))?
         .into_rgb32f();

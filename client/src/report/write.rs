@@ -28,19 +28,21 @@ fn opt<T: std::fmt::Display>(v: Option<T>) -> String {
 
 pub fn results_csv(report: &Report) -> String {
     let mut s = String::from(
-        "scene,method,mode,face_res,epsilon,spp,ms_per_frame,rmse,rel_mse,mae,flip,share_over_8,image\n",
+        "scene,method,mode,face_res,epsilon,lobes,spp,ms_per_frame,rmse,rel_mse,mae,flip,share_over_8,image\n",
     );
     for sc in &report.scenes {
-        for e in &sc.entries {
+        let env = sc.env.iter().flat_map(|v| &v.entries);
+        for e in sc.entries.iter().chain(env) {
             let m = &e.metrics;
             let _ = writeln!(
                 s,
-                "{},{},{},{},{},{},{:.4},{:.6e},{:.6e},{:.6e},{:.6},{:.6},{}",
+                "{},{},{},{},{},{},{},{:.4},{:.6e},{:.6e},{:.6e},{:.6},{:.6},{}",
                 sc.name,
                 e.method,
                 opt(e.mode.map(|m| format!("{m:?}").to_lowercase())),
                 opt(e.face_res),
                 opt(e.epsilon),
+                opt(e.lobes),
                 opt(e.spp),
                 e.ms_per_frame,
                 m.rmse,
@@ -188,7 +190,7 @@ fn scene_section(s: &mut String, sc: &SceneReport, report: &Report) {
          blue → red → yellow → white at half the mean radiance).\n",
         sc.name, sc.grid
     );
-    for p in &sc.plots {
+    for p in sc.plots.iter().filter(|p| !p.contains("/env/")) {
         let _ = writeln!(s, "![{} plot]({p})\n", sc.name);
     }
     let _ = writeln!(
@@ -294,4 +296,60 @@ fn scene_section(s: &mut String, sc: &SceneReport, report: &Report) {
         );
     }
     s.push('\n');
+    if let Some(env) = &sc.env {
+        env_section(s, sc, env);
+    }
+}
+
+fn env_section(s: &mut String, sc: &SceneReport, env: &super::env::EnvReport) {
+    let _ = writeln!(
+        s,
+        "### Environment lighting (paper 001)\n\nMap `{}`. Its own ground truth: Monte Carlo \
+         with the exact GGX BRDF and shadow rays, the map importance-sampled, {} spp (mean \
+         relative standard error {}, own RMSE ≈ {:.2e}; {:.1} s{}). SG methods: the map fitted \
+         with K lobes (precompute per map), shaded per pixel with visibility from the \
+         screen-space SSDF (`sg-screen`, depth maps rendered every frame: dynamic scenes), the \
+         exact ray-cast SSDF (`sg-exact`) or none (`sg-unshadowed`).\n",
+        env.map,
+        env.gt_spp,
+        pct(env.gt_mean_rel_stderr),
+        env.gt_rmse_floor,
+        env.gt_seconds,
+        if env.gt_from_cache {
+            ", from the cache"
+        } else {
+            ""
+        }
+    );
+    let _ = writeln!(
+        s,
+        "| K | fit error (relative L2) | fit s |\n|---:|---:|---:|"
+    );
+    for (k, err, secs) in &env.fits {
+        let _ = writeln!(s, "| {k} | {} | {secs:.2} |", pct(*err));
+    }
+    let _ = writeln!(
+        s,
+        "\n| method | ms/frame | RMSE | rel. MSE | MAE | FLIP | > 8 % |\n|---|---:|---:|---:|---:|---:|---:|"
+    );
+    for e in &env.entries {
+        let m = &e.metrics;
+        let _ = writeln!(
+            s,
+            "| {} | {:.2} | {:.3e} | {:.3e} | {:.3e} | {:.4} | {} |",
+            e.label(),
+            e.ms_per_frame,
+            m.rmse,
+            m.rel_mse,
+            m.mae,
+            m.flip,
+            pct(m.share_over_8)
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\n![{} environment plot]({}/env/rmse-vs-time.png)\n",
+        sc.name,
+        file_stem(&sc.name)
+    );
 }

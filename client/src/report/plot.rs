@@ -257,6 +257,7 @@ fn draw(
             .configure_mesh()
             .x_desc("ms per frame (log)")
             .y_desc(format!("{} vs ground truth (log)", metric.name()))
+            .y_label_formatter(&|y| format!("{y:.1e}"))
             .label_style(("sans-serif", 14))
             .draw()
             .map_err(|e| err(&e))?;

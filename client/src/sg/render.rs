@@ -239,13 +239,9 @@ pub fn render(
                 terms.clear();
                 let mut total = 0.0;
                 for (g, rgb, _) in &lobes {
-                    let pd = g.product(&cos);
-                    let id = pd.integral();
+                    let (pd, id) = g.product_and_integral_f32(&cos);
                     let (ps, is) = match spec {
-                        Some(sp) => {
-                            let ps = g.product(&sp.sg);
-                            (ps, ps.integral())
-                        }
+                        Some(sp) => g.product_and_integral_f32(&sp.sg),
                         None => (zero, 0.0),
                     };
                     let bound = *rgb * (diffuse * id + fresnel.unwrap_or(DVec3::ZERO) * is);

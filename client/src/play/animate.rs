@@ -113,7 +113,7 @@ impl AnimateReport {
                 .to_possible_value()
                 .map_or_else(|| format!("{method:?}"), |v| v.get_name().to_string()),
             mode: match session.mode {
-                _ if method.penumbra().is_some() => "pixel",
+                _ if method.penumbra().is_some() || method == ViewMethod::Sg => "pixel",
                 Mode::Vertex => "vertex",
                 Mode::Pixel => "pixel",
             }

@@ -239,13 +239,9 @@ pub fn render(
                 terms.clear();
                 let mut total = 0.0;
                 for (g, rgb, _) in &lobes {
-                    let pd = g.product(&cos);
-                    let id = pd.integral();
+                    let (pd, id) = g.product_and_integral_f32(&cos);
                     let (ps, is) = match spec {
-                        Some(sp) => {
-                            let ps = g.product(&sp.sg);
-                            (ps, ps.integral())
-                        }
+                        Some(sp) => g.product_and_integral_f32(&sp.sg),
                         None => (zero, 0.0),
                     };
                     let bound = *rgb * (diffuse * id + fresnel.unwrap_or(DVec3::ZERO) * is);
@@ -309,7 +305,7 @@ pub fn render(
 mod tests {
     use super::*;
     use crate::sg::fit::LightLobe;
-    use bspvt_proto::builtin;
+    use bspvt_proto::{Scene, builtin};
 
     fn one_lobe(axis: [f64; 3], lambda: f64) -> SgEnv {
         SgEnv {
@@ -393,5 +389,53 @@ mod tests {
         assert!(e < 0.25 * a.mean(), "{e}");
         assert!(tb.searches < ta.searches && tb.reused > 0);
         assert_eq!(ta.reused, 0);
+    }
+
+    /// No precompute: move the occluder, render again, and the shadow follows (the darkest
+    /// ground pixel of the first frame is lit in the second; the depth maps are rebuilt from
+    /// the mesh as it is).
+    #[test]
+    fn moving_geometry_moves_the_shadow() {
+        let sphere = builtin::icosphere(2, 0);
+        let n_sphere = sphere.positions.len();
+        let sphere_tris = sphere.triangles.len() as u32;
+        let mut scene = Scene::from_mesh(sphere).expect("scene");
+        let camera = bspvt_proto::scene::Camera {
+            position: [0.0, 12.0, 0.01],
+            target: [0.0, 0.0, 0.0],
+            up: [0.0, 0.0, -1.0],
+            fov_y_deg: 50.0,
+        };
+        let env = one_lobe([0.6, 1.0, 0.0], 30.0);
+        let opts = SgOptions {
+            ssdf: SsdfMode::Screen,
+            depth_res: 128,
+            stride: 1,
+        };
+        let frame = |scene: &Scene| {
+            let view = View::new(&camera, 64, 64);
+            let g = GBuffer::rasterize(&scene.mesh, &view);
+            let (img, _) = render(scene, &view, &g, &env, None, &opts).expect("render");
+            (img, g)
+        };
+        let (a, ga) = frame(&scene);
+        // The darkest pixel on the ground (not on the sphere).
+        let lum = |p: [f32; 3]| p[0] + p[1] + p[2];
+        let (dark, _) = (0..a.pixels.len())
+            .filter(|&i| ga.tri[i] != crate::render::gbuffer::NONE && ga.tri[i] >= sphere_tris)
+            .map(|i| (i, lum(a.pixels[i])))
+            .min_by(|x, y| x.1.total_cmp(&y.1))
+            .expect("ground pixels");
+        for p in &mut scene.mesh.positions[..n_sphere] {
+            p.x += 3.0;
+        }
+        let (b, gb) = frame(&scene);
+        assert!(
+            gb.tri[dark] >= sphere_tris,
+            "the pixel still shows the ground"
+        );
+        let (before, after) = (lum(a.pixels[dark]), lum(b.pixels[dark]));
+        eprintln!("darkest ground pixel: {before} before, {after} after the move");
+        assert!(after > 2.0 * before + 1e-4, "{before} → {after}");
     }
 }

@@ -118,6 +118,19 @@ pub fn covered_mean(img: &Image, covered: &[bool]) -> f64 {
     s / n.max(1) as f64
 }
 
+/// √(mean σ²) over covered pixels and channels of a per-pixel standard-error image: a Monte
+/// Carlo reference's own RMSE.
+pub fn rmse_floor(stderr: &Image, covered: &[bool]) -> f64 {
+    let (mut s2, mut n) = (0.0, 0usize);
+    for (p, &c) in stderr.pixels.iter().zip(covered) {
+        if c {
+            s2 += p.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>();
+            n += 3;
+        }
+    }
+    (s2 / n.max(1) as f64).sqrt()
+}
+
 /// Per-pixel mean of two images (two independent estimates → one with half the variance).
 pub fn mean_image(a: &Image, b: &Image) -> Image {
     let mut m = a.clone();

@@ -101,16 +101,9 @@ pub fn measure_env(
                 st.env_gt_spp,
                 SEED_GT,
             );
-            let (mut s2, mut n) = (0.0, 0usize);
-            for (p, &c) in noise.stderr.pixels.iter().zip(covered) {
-                if c {
-                    s2 += p.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>();
-                    n += 3;
-                }
-            }
             let m = GtMeta {
                 mean_rel_stderr: noise.mean_rel_stderr,
-                rmse_floor: (s2 / n.max(1) as f64).sqrt(),
+                rmse_floor: crate::compare::metrics::rmse_floor(&noise.stderr, covered),
                 seconds: t.elapsed().as_secs_f64(),
             };
             std::fs::create_dir_all(cache.join("ground-truth"))?;

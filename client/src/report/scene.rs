@@ -475,18 +475,11 @@ fn ground_truth(
     let (img, noise) = render_mc_until(scene, &r.view, &r.gbuffer, light, occ, &conv, SEED_GT);
     let seconds = t.elapsed().as_secs_f64();
     let covered = covered_pixels(&r.gbuffer);
-    let (mut s2, mut n) = (0.0, 0usize);
-    for (p, &c) in noise.stderr.pixels.iter().zip(&covered) {
-        if c {
-            s2 += p.iter().map(|&v| f64::from(v) * f64::from(v)).sum::<f64>();
-            n += 3;
-        }
-    }
     let gt = GroundTruth {
         spp_mean: noise.spp_mean,
         spp_max: noise.spp_max,
         mean_rel_stderr: noise.mean_rel_stderr,
-        rmse_floor: (s2 / n.max(1) as f64).sqrt(),
+        rmse_floor: crate::compare::metrics::rmse_floor(&noise.stderr, &covered),
         seconds,
         threads: rayon::current_num_threads(),
         from_cache: false,

@@ -218,20 +218,7 @@ fn scene_section(s: &mut String, sc: &SceneReport, report: &Report) {
          `<method>-error.png` in the report's folder (`results.csv` names them).\n\n| method | ms/frame | RMSE | rel. MSE | MAE | FLIP | > 8 % |\n|---|---:|---:|---:|---:|---:|---:|",
         file_stem(&sc.name)
     );
-    for e in &sc.entries {
-        let m = &e.metrics;
-        let _ = writeln!(
-            s,
-            "| {} | {:.2} | {:.3e} | {:.3e} | {:.3e} | {:.4} | {} |",
-            e.label(),
-            e.ms_per_frame,
-            m.rmse,
-            m.rel_mse,
-            m.mae,
-            m.flip,
-            pct(m.share_over_8)
-        );
-    }
+    method_rows(s, &sc.entries);
     let _ = writeln!(
         s,
         "\n### Error budget of BSPVT (mean absolute error)\n\nLTC-fit part: LTC with exact \
@@ -301,6 +288,24 @@ fn scene_section(s: &mut String, sc: &SceneReport, report: &Report) {
     }
 }
 
+/// One table row per entry: label, ms/frame and every metric.
+fn method_rows(s: &mut String, entries: &[super::scene::Entry]) {
+    for e in entries {
+        let m = &e.metrics;
+        let _ = writeln!(
+            s,
+            "| {} | {:.2} | {:.3e} | {:.3e} | {:.3e} | {:.4} | {} |",
+            e.label(),
+            e.ms_per_frame,
+            m.rmse,
+            m.rel_mse,
+            m.mae,
+            m.flip,
+            pct(m.share_over_8)
+        );
+    }
+}
+
 fn env_section(s: &mut String, sc: &SceneReport, env: &super::env::EnvReport) {
     let _ = writeln!(
         s,
@@ -332,20 +337,7 @@ fn env_section(s: &mut String, sc: &SceneReport, env: &super::env::EnvReport) {
         s,
         "\n| method | ms/frame | RMSE | rel. MSE | MAE | FLIP | > 8 % |\n|---|---:|---:|---:|---:|---:|---:|"
     );
-    for e in &env.entries {
-        let m = &e.metrics;
-        let _ = writeln!(
-            s,
-            "| {} | {:.2} | {:.3e} | {:.3e} | {:.3e} | {:.4} | {} |",
-            e.label(),
-            e.ms_per_frame,
-            m.rmse,
-            m.rel_mse,
-            m.mae,
-            m.flip,
-            pct(m.share_over_8)
-        );
-    }
+    method_rows(s, &env.entries);
     let _ = writeln!(
         s,
         "\n![{} environment plot]({}/env/rmse-vs-time.png)\n",

@@ -270,8 +270,14 @@ pub fn render(
                     if b == Boundary::Occluded {
                         continue;
                     }
-                    let mut c = diffuse * visible_integral(pd, *id, n, &b);
-                    if let Some(f) = fresnel {
+                    // Each term alone is skipped when its bound is below the cull level too.
+                    let mut c = DVec3::ZERO;
+                    if (*rgb * diffuse * *id).element_sum() > cull {
+                        c += diffuse * visible_integral(pd, *id, n, &b);
+                    }
+                    if let Some(f) = fresnel
+                        && (*rgb * f * *is).element_sum() > cull
+                    {
                         c += f * visible_integral(ps, *is, n, &b);
                     }
                     acc += *rgb * c;

@@ -183,8 +183,10 @@ impl DepthMap {
                 -d.dot(xi),
             )
         };
+        // Every vertex once (a vertex is shared by ≈ 6 triangles).
+        let projected: Vec<(f32, f32, f32)> = mesh.positions.iter().map(|&p| proj(p)).collect();
         for tri in &mesh.triangles {
-            let v = tri.map(|i| proj(mesh.positions[i as usize]));
+            let v = tri.map(|i| projected[i as usize]);
             let area =
                 (v[1].0 - v[0].0) * (v[2].1 - v[0].1) - (v[2].0 - v[0].0) * (v[1].1 - v[0].1);
             if !(area.abs() > 1e-12) {

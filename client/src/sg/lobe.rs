@@ -223,9 +223,17 @@ mod tests {
             let b = Sg::new(dir(t2, p2), 10f64.powf(ll2), 0.5);
             let (g, i) = a.product_and_integral_f32(&b);
             let want = a.product(&b);
-            prop_assert!((g.mu - want.mu).abs() <= 1e-6 * want.mu + 1e-40);
+            if want.mu < 1e-30 {
+                // Beyond f32's range the shading form flushes to zero.
+                prop_assert!(g.mu < 2e-30 && i < 1e-25);
+                return Ok(());
+            }
+            // The exponent is rounded to f32 before exp: relative error ≈ 6e-8 × |exponent|.
+            let expo = -(want.mu / (a.mu * b.mu)).ln();
+            let tol = 1e-6 + 1.2e-7 * expo.abs();
+            prop_assert!((g.mu - want.mu).abs() <= tol * want.mu + 1e-40, "{} vs {}", g.mu, want.mu);
             let wi = want.integral();
-            prop_assert!((i - wi).abs() <= 2e-6 * wi + 1e-40, "{i} vs {wi}");
+            prop_assert!((i - wi).abs() <= (tol + 1e-6) * wi + 1e-40, "{i} vs {wi}");
         }
 
         /// Any direction and sharpness: finite, in [0, μ].

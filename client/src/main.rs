@@ -120,6 +120,9 @@ struct RenderArgs {
     /// on the same surface (1: every pixel, the paper's).
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=16))]
     ssdf_stride: u32,
+    /// Screen SSDF: neighbourhood searched at each finer pyramid level (the paper's 6×6).
+    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(2..=16))]
+    ssdf_window: u32,
 }
 
 #[derive(clap::Args)]
@@ -245,6 +248,7 @@ fn render(a: RenderArgs) -> Result<()> {
                         ssdf: a.ssdf,
                         depth_res: a.depth_res,
                         stride: a.ssdf_stride,
+                        window: a.ssdf_window,
                     },
                 }),
         };

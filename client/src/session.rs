@@ -159,7 +159,8 @@ pub struct Session<'a> {
     /// Progressive Monte Carlo: running sum and passes, reset by any change.
     mc: Option<(Vec<[f32; 3]>, u32)>,
     /// [`ViewMethod::Sg`]: the environment map (default: the test map) and lobe count; the fit
-    /// happens on the first SG frame (`Err`: loading failed, SG frames fall back to LTC).
+    /// happens on the first SG frame, cached in the temp folder (`Err`: loading failed, SG
+    /// frames fall back to LTC).
     pub env_path: Option<std::path::PathBuf>,
     pub sg_lobes: usize,
     sg: Option<Result<crate::sg::SgEnv, String>>,
@@ -211,8 +212,10 @@ impl<'a> Session<'a> {
         let k = self.sg_lobes;
         self.sg
             .get_or_insert_with(|| {
+                // Cached in the temp folder: the viewer starts without the fit's seconds.
+                let cache = std::env::temp_dir().join("bspvt-sg-fit");
                 crate::sg::EnvLight::load(&path)
-                    .map(|env| crate::sg::fit(&env, k))
+                    .map(|env| crate::sg::fit_cached(&env, k, &cache))
                     .map_err(|e| format!("{e:#}"))
             })
             .as_ref()

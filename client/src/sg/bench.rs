@@ -44,6 +44,9 @@ pub struct BenchSgArgs {
     /// SSDF sharing stride (1: search at every pixel, the paper's).
     #[arg(long, default_value_t = 2)]
     pub stride: u32,
+    /// Neighbourhood of the screen-space search at each finer level (the paper's 6).
+    #[arg(long, default_value_t = 6)]
+    pub window: u32,
     /// Skip the exact SSDF above this image side (it is slow).
     #[arg(long, default_value_t = 256)]
     pub exact_max_size: u32,
@@ -194,6 +197,7 @@ pub fn run(a: &BenchSgArgs) -> Result<Report> {
                     ssdf,
                     depth_res: a.depth_res,
                     stride: a.stride,
+                    window: a.window,
                 };
                 let n = if ssdf == SsdfMode::Exact {
                     1

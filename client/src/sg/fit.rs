@@ -101,6 +101,51 @@ pub fn fit(env: &EnvLight, k: usize) -> SgEnv {
     fit_with(env, k, &FitOptions::default())
 }
 
+/// [`fit`] through a cache folder: a fit of the same map content (FNV-1a hash of its size and
+/// texels) and the same K is read back from `dir/sg-fit-HASH-kK.json`; otherwise it is fitted
+/// and written there. A cache that cannot be read or written only costs the fit.
+pub fn fit_cached(env: &EnvLight, k: usize, dir: &std::path::Path) -> SgEnv {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |b: &[u8]| {
+        for &x in b {
+            h ^= u64::from(x);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    eat(&env.width.to_le_bytes());
+    eat(&env.height.to_le_bytes());
+    for p in &env.pixels {
+        for c in p {
+            eat(&c.to_bits().to_le_bytes());
+        }
+    }
+    let o = FitOptions::default();
+    eat(format!(
+        "{k}/{}/{}/{}/{}",
+        o.map_width, o.iterations, o.step_axis, o.step_ln_lambda
+    )
+    .as_bytes());
+    let path = dir.join(format!("sg-fit-{h:016x}-k{k}.json"));
+    if let Some(f) = std::fs::read(&path)
+        .ok()
+        .and_then(|b| serde_json::from_slice::<SgEnv>(&b).ok())
+        .filter(|f| {
+            f.lobes
+                .iter()
+                .all(|l| l.rgb().is_finite() && l.lambda.is_finite())
+        })
+    {
+        return f;
+    }
+    let f = fit(env, k);
+    let written = std::fs::create_dir_all(dir)
+        .and_then(|()| std::fs::write(&path, serde_json::to_vec(&f).unwrap_or_default()));
+    if let Err(e) = written {
+        tracing::warn!("cannot cache the SG fit in {}: {e}", path.display());
+    }
+    f
+}
+
 /// The fitting samples: directions, solid angles, radiance.
 struct Samples {
     dirs: Vec<DVec3>,
@@ -557,6 +602,48 @@ mod tests {
         );
         assert!(f16.fit_error < f8.fit_error && f8.fit_error < 1.0);
         assert!(f16.lobes.iter().all(|l| l.rgb().min_element() >= 0.0));
+    }
+
+    #[test]
+    fn cached_fit_reads_back_the_same_lobes() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let mut px = vec![[0.05f32; 3]; 32 * 16];
+        px[4 * 32 + 9] = [30.0, 20.0, 10.0];
+        let env = EnvLight::from_pixels(32, 16, px).expect("map");
+        let a = fit_cached(&env, 2, dir.path());
+        let files = std::fs::read_dir(dir.path()).expect("dir").count();
+        assert_eq!(files, 1);
+        // (JSON round trip and parallel reductions: equal to rounding.)
+        let close = |x: &SgEnv, y: &SgEnv| {
+            x.lobes.len() == y.lobes.len()
+                && x.lobes.iter().zip(&y.lobes).all(|(p, q)| {
+                    (p.rgb() - q.rgb()).length() <= 1e-9 * p.rgb().length()
+                        && (p.lambda - q.lambda).abs() <= 1e-9 * p.lambda
+                        && (DVec3::from(p.axis) - DVec3::from(q.axis)).length() <= 1e-9
+                })
+        };
+        let b = fit_cached(&env, 2, dir.path());
+        assert!(close(&a, &b), "{:?} vs {:?}", a.lobes, b.lobes);
+        // What is read is the file: an edited entry comes back edited.
+        let entry = std::fs::read_dir(dir.path())
+            .expect("dir")
+            .flatten()
+            .next()
+            .expect("one entry")
+            .path();
+        let mut edited = a.clone();
+        edited.lobes[0].lambda *= 2.0;
+        std::fs::write(&entry, serde_json::to_vec(&edited).expect("json")).expect("write");
+        let e = fit_cached(&env, 2, dir.path());
+        assert!(close(&edited, &e));
+        // A different K is a different entry; a corrupt file is refitted.
+        let _ = fit_cached(&env, 3, dir.path());
+        assert_eq!(std::fs::read_dir(dir.path()).expect("dir").count(), 2);
+        for e in std::fs::read_dir(dir.path()).expect("dir").flatten() {
+            std::fs::write(e.path(), b"not json").expect("write");
+        }
+        let c = fit_cached(&env, 2, dir.path());
+        assert!(close(&a, &c), "{:?} vs {:?}", a.lobes, c.lobes);
     }
 
     #[test]

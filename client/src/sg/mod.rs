@@ -12,7 +12,7 @@ pub mod render;
 pub mod ssdf;
 
 pub use env::EnvLight;
-pub use fit::{FitOptions, LightLobe, SgEnv, fit, fit_with};
+pub use fit::{FitOptions, LightLobe, SgEnv, fit, fit_cached, fit_with};
 pub use lobe::Sg;
 pub use render::{SgOptions, SgTimings, SsdfMode, render};
 

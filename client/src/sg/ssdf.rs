@@ -161,8 +161,8 @@ pub struct DepthMap {
 
 /// Side of the coarsest pyramid level.
 const TOP: usize = 8;
-/// Neighbourhood searched at each finer level (paper: 6×6).
-const NEIGH: isize = 6;
+/// Neighbourhood searched at each finer level by default (the paper's 6×6).
+pub const DEFAULT_WINDOW: u32 = 6;
 
 impl DepthMap {
     /// Renders `mesh` (bounding sphere `centre`, `radius`) along −`xi` at `res`² (a power of
@@ -183,8 +183,10 @@ impl DepthMap {
                 -d.dot(xi),
             )
         };
+        // Every vertex once (a vertex is shared by ≈ 6 triangles).
+        let projected: Vec<(f32, f32, f32)> = mesh.positions.iter().map(|&p| proj(p)).collect();
         for tri in &mesh.triangles {
-            let v = tri.map(|i| proj(mesh.positions[i as usize]));
+            let v = tri.map(|i| projected[i as usize]);
             let area =
                 (v[1].0 - v[0].0) * (v[2].1 - v[0].1) - (v[2].0 - v[0].0) * (v[1].1 - v[0].1);
             if !(area.abs() > 1e-12) {
@@ -300,8 +302,10 @@ impl DepthMap {
     }
 
     /// The nearest boundary to ξ seen from `p` (see the module docs). `bias_abs`: depth bias
-    /// in world units added to the slope-scaled texel bias.
-    pub fn boundary(&self, p: &Point, bias_abs: f32) -> Boundary {
+    /// in world units added to the slope-scaled texel bias; `window`: side of the
+    /// neighbourhood searched at each finer level (clamped to 2..=16; the paper's is 6).
+    pub fn boundary(&self, p: &Point, bias_abs: f32, window: u32) -> Boundary {
+        let neigh = window.clamp(2, 16) as isize;
         let xi = self.xi;
         let cos_l = xi.dot(p.geometric);
         if !(cos_l > 0.0) || !p.position.is_finite() {
@@ -361,8 +365,8 @@ impl DepthMap {
             let (cx, cy) = (2 * cand.0 as isize, 2 * cand.1 as isize);
             let mut next: Option<(usize, usize, Vec3)> = None;
             let mut next_s = f32::NEG_INFINITY;
-            for y in cy - (NEIGH / 2 - 1)..cy - (NEIGH / 2 - 1) + NEIGH {
-                for x in cx - (NEIGH / 2 - 1)..cx - (NEIGH / 2 - 1) + NEIGH {
+            for y in cy - (neigh / 2 - 1)..cy - (neigh / 2 - 1) + neigh {
+                for x in cx - (neigh / 2 - 1)..cx - (neigh / 2 - 1) + neigh {
                     if !inside(x, y, r) {
                         continue;
                     }
@@ -451,7 +455,7 @@ mod tests {
         let d = b.distance(Vec3::Y);
         assert!((d - want).abs() < 0.03, "exact {b:?}: {d} vs {want}");
         let map = DepthMap::render(&mesh, Vec3::ZERO, 6.0, Vec3::Y, 256);
-        let b = map.boundary(&p, 1e-3);
+        let b = map.boundary(&p, 1e-3, DEFAULT_WINDOW);
         let d = b.distance(Vec3::Y);
         assert!((d - want).abs() < 0.06, "screen {b:?}: {d} vs {want}");
         // Beside the square (x = 1.6): unoccluded, nearest occluded direction towards the
@@ -463,7 +467,7 @@ mod tests {
         let want = 1.1f32.atan();
         let b = exact_boundary(&occ, &q, Vec3::Y, 1e-4);
         assert!((b.distance(Vec3::Y) - want).abs() < 0.03, "exact {b:?}");
-        let b = map.boundary(&q, 1e-3);
+        let b = map.boundary(&q, 1e-3, DEFAULT_WINDOW);
         assert!((b.distance(Vec3::Y) - want).abs() < 0.06, "screen {b:?}");
         // Far away: nothing within reach → the searches see no boundary or a far one.
         let r = Point {

@@ -12,10 +12,10 @@ use bspvt_server::bake::raycast::Occluder;
 use serde::{Deserialize, Serialize};
 
 use super::Settings;
-use super::scene::{EXPOSURE, Entry, load_exr};
+use super::scene::{EXPOSURE, Entry, finish_entry, load_exr};
 use crate::bench::{file_stem, median_ms};
-use crate::compare::heatmap::{error_scale, heat_map};
-use crate::compare::metrics::{Metrics, measure};
+use crate::compare::heatmap::error_scale;
+use crate::compare::metrics::Metrics;
 use crate::groundtruth::render_mc_env;
 use crate::render::image::Image;
 use crate::render::renderer::Renderer;
@@ -116,9 +116,10 @@ pub fn measure_env(
     gt.save(&dir.join("ground-truth.png"), EXPOSURE)?;
     let scale = error_scale(&gt, covered);
 
-    let mut entries = Vec::new();
+    let folder = format!("{stem}/env");
+    let mut entries: Vec<Entry> = Vec::new();
     let mut record = |method: &str, lobes: Option<u32>, spp: Option<u32>, ms: f64, img: &Image| {
-        let mut e = Entry {
+        let e = Entry {
             scene: name.to_string(),
             method: method.to_string(),
             mode: None,
@@ -131,22 +132,7 @@ pub fn measure_env(
             image: String::new(),
             heat_map: String::new(),
         };
-        e.metrics = measure(img, &gt, covered, EXPOSURE);
-        let slug = e.slug();
-        e.image = format!("{stem}/env/{slug}.png");
-        e.heat_map = format!("{stem}/env/{slug}-error.png");
-        img.save(&out.join(&e.image), EXPOSURE)?;
-        heat_map(img, &gt, covered, scale)
-            .save(out.join(&e.heat_map))
-            .with_context(|| format!("cannot write {}", e.heat_map))?;
-        eprintln!(
-            "  {:<32} {:>9.2} ms  RMSE {:.5}  FLIP {:.4}",
-            e.label(),
-            e.ms_per_frame,
-            e.metrics.rmse,
-            e.metrics.flip
-        );
-        entries.push(e);
+        entries.push(finish_entry(e, img, &gt, covered, scale, out, &folder)?.0);
         anyhow::Ok(())
     };
 

@@ -186,25 +186,11 @@ pub fn measure(
     grid.push(Tile::new("ground truth", gt_img.to_srgb8(EXPOSURE), None));
 
     let mut entries: Vec<Entry> = Vec::new();
-    let mut record = |mut e: Entry, img: &Image| -> Result<()> {
-        e.metrics = measure_metrics(img, &gt_img, &covered, EXPOSURE);
-        let slug = e.slug();
-        e.image = format!("{stem}/{slug}.png");
-        e.heat_map = format!("{stem}/{slug}-error.png");
-        img.save(&out.join(&e.image), EXPOSURE)?;
-        let map = heat_map(img, &gt_img, &covered, scale);
-        map.save(out.join(&e.heat_map))
-            .with_context(|| format!("cannot write {}", e.heat_map))?;
+    let mut record = |e: Entry, img: &Image| -> Result<()> {
+        let (e, map) = finish_entry(e, img, &gt_img, &covered, scale, out, &stem)?;
         if in_grid(&e, st) {
             grid.push(Tile::new(&e.label(), img.to_srgb8(EXPOSURE), Some(map)));
         }
-        eprintln!(
-            "  {:<32} {:>9.2} ms  RMSE {:.5}  FLIP {:.4}",
-            e.label(),
-            e.ms_per_frame,
-            e.metrics.rmse,
-            e.metrics.flip
-        );
         entries.push(e);
         Ok(())
     };
@@ -399,6 +385,35 @@ pub fn measure(
         grid: grid_file,
         plots: Vec::new(),
     })
+}
+
+/// Measures `img` against `reference`, writes it and its heat map to `out/<folder>/`, names
+/// both in the entry and prints its line; returns the heat map too (for the grid).
+pub(super) fn finish_entry(
+    mut e: Entry,
+    img: &Image,
+    reference: &Image,
+    covered: &[bool],
+    scale: f32,
+    out: &Path,
+    folder: &str,
+) -> Result<(Entry, image::RgbImage)> {
+    e.metrics = measure_metrics(img, reference, covered, EXPOSURE);
+    let slug = e.slug();
+    e.image = format!("{folder}/{slug}.png");
+    e.heat_map = format!("{folder}/{slug}-error.png");
+    img.save(&out.join(&e.image), EXPOSURE)?;
+    let map = heat_map(img, reference, covered, scale);
+    map.save(out.join(&e.heat_map))
+        .with_context(|| format!("cannot write {}", e.heat_map))?;
+    eprintln!(
+        "  {:<32} {:>9.2} ms  RMSE {:.5}  FLIP {:.4}",
+        e.label(),
+        e.ms_per_frame,
+        e.metrics.rmse,
+        e.metrics.flip
+    );
+    Ok((e, map))
 }
 
 /// The grid shows the default bake, unshadowed LTC per pixel, LTC with exact visibility, the

@@ -61,8 +61,10 @@ impl Sg {
         self.mu * (self.lambda * e).exp()
     }
 
-    /// The product G₁·G₂ as one SG (exact).
-    pub fn product(&self, o: &Sg) -> Sg {
+    /// The product's axis p = (λ₁p₁ + λ₂p₂)/r, sharpness r = ‖λ₁p₁ + λ₂p₂‖ and amplitude
+    /// exponent −λ₁λ₂‖p₁ − p₂‖²/(r + λ₁ + λ₂) (= λ₁(p₁·p−1)+… without cancellation).
+    #[inline]
+    fn product_shape(&self, o: &Sg) -> (DVec3, f64, f64) {
         let (l1, l2) = (self.lambda, o.lambda);
         let q = self.axis * l1 + o.axis * l2;
         let r = q.length();
@@ -77,6 +79,12 @@ impl Sg {
         } else {
             0.0
         };
+        (axis, r, expo)
+    }
+
+    /// The product G₁·G₂ as one SG (exact).
+    pub fn product(&self, o: &Sg) -> Sg {
+        let (axis, r, expo) = self.product_shape(o);
         Sg {
             axis,
             lambda: r,
@@ -89,20 +97,7 @@ impl Sg {
     /// forms).
     #[inline]
     pub fn product_and_integral_f32(&self, o: &Sg) -> (Sg, f64) {
-        let (l1, l2) = (self.lambda, o.lambda);
-        let q = self.axis * l1 + o.axis * l2;
-        let r = q.length();
-        let axis = if r > 0.0 && q.is_finite() {
-            q / r
-        } else {
-            self.axis
-        };
-        let denom = r + l1 + l2;
-        let expo = if denom > 0.0 {
-            -l1 * l2 * (self.axis - o.axis).length_squared() / denom
-        } else {
-            0.0
-        };
+        let (axis, r, expo) = self.product_shape(o);
         let mu = self.mu * o.mu * f64::from((expo.max(-150.0) as f32).exp());
         let g = Sg {
             axis,

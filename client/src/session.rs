@@ -15,6 +15,7 @@ use crate::light::Light;
 use crate::penumbra;
 use crate::render::image::Image;
 use crate::render::path::LightPath;
+use crate::render::posed::Posed;
 use crate::render::renderer::{Mode, Renderer};
 use crate::stream::fetch::{Counters, Update};
 use crate::stream::trees::StreamedTrees;
@@ -164,6 +165,8 @@ pub struct Session<'a> {
     pub env_path: Option<std::path::PathBuf>,
     pub sg_lobes: usize,
     sg: Option<Result<crate::sg::SgEnv, String>>,
+    /// [`ViewMethod::Sg`] on a moving scene: the meshes posed at `path_t` (cycle time).
+    posed: Option<Posed>,
 }
 
 impl<'a> Session<'a> {
@@ -200,6 +203,7 @@ impl<'a> Session<'a> {
             env_path: None,
             sg_lobes: 16,
             sg: None,
+            posed: None,
         })
     }
 
@@ -304,10 +308,27 @@ impl<'a> Session<'a> {
             let failed = match self.sg_env() {
                 Ok(env) => {
                     let env = env.clone();
+                    // A moving scene is posed at the path's time (the run-time method needs
+                    // no precompute; the trees of the other methods stay at t = 0).
+                    let (scene, gbuffer) = if self.scene.is_dynamic() {
+                        let t = self.path_t.unwrap_or(0.0) as f32;
+                        let view = &self.renderer.view;
+                        let p = match self.posed.take() {
+                            Some(mut p) => {
+                                p.update(self.scene, t, view);
+                                p
+                            }
+                            None => Posed::new(self.scene, t, view, false),
+                        };
+                        let p = self.posed.insert(p);
+                        (&p.scene, &p.gbuffer)
+                    } else {
+                        (self.scene, &self.renderer.gbuffer)
+                    };
                     match crate::sg::render(
-                        self.scene,
+                        scene,
                         &self.renderer.view,
-                        &self.renderer.gbuffer,
+                        gbuffer,
                         &env,
                         None,
                         &crate::sg::SgOptions::default(),

@@ -1,19 +1,40 @@
 //! Built-in procedural scenes: no download needed, enough tessellation to show shadows.
 //!
+//! `dynamic`: the run-time methods' moving scene (`assets/scenes/dynamic.json`).
+//!
 //! `plate`: a 160×160 receiver grid (25,600 vertices) under a sphere and a tilted slab, lit by a
 //! quad light that may move in a declared box above them (28,258 vertices in all).
 
 use glam::{Quat, Vec3};
 
 use crate::mesh::{Aabb, Mesh};
-use crate::scene::{BakeSettings, Camera, Material, PolygonLight, Region, Scene};
+use crate::scene::{
+    BakeSettings, Camera, Material, MeshRef, PolygonLight, Region, Scene, SceneFile,
+};
 
-/// Names accepted by [`mesh`] and [`scene`] (and by `builtin:NAME` in scene files).
-pub const NAMES: &[&str] = &["plate", "plate-small"];
+/// Names accepted by [`scene`] and [`mesh`] (and by `builtin:NAME` in scene files).
+pub const NAMES: &[&str] = &["plate", "plate-small", "dynamic"];
 
-/// The mesh of a built-in scene.
+/// Single-object meshes for scene files to place (`builtin:NAME`, with a `transform`):
+/// `sphere` (unit radius, 2,562 vertices) and `cube` (unit side, 12 × 12 vertices a face).
+pub const PART_NAMES: &[&str] = &["sphere", "cube"];
+
+/// `dynamic`: a sphere orbiting and bobbing over a floor beside a twisting bar (the
+/// run-time methods' moving scene), written as a scene file.
+pub const DYNAMIC_JSON: &str = include_str!("../../assets/scenes/dynamic.json");
+
+/// Every name [`mesh`] accepts.
+pub fn mesh_names() -> Vec<&'static str> {
+    NAMES.iter().chain(PART_NAMES).copied().collect()
+}
+
+/// A built-in mesh: a part, or a built-in scene's mesh (at t = 0).
 pub fn mesh(name: &str) -> Option<Mesh> {
-    scene(name).map(|s| s.mesh)
+    match name {
+        "sphere" => Some(icosphere(4, 0)),
+        "cube" => Some(cuboid(Vec3::ZERO, Vec3::splat(0.5), Quat::IDENTITY, 12, 0)),
+        _ => scene(name).map(|s| s.mesh),
+    }
 }
 
 /// A built-in scene by name.
@@ -22,8 +43,32 @@ pub fn scene(name: &str) -> Option<Scene> {
         "plate" => Some(plate(160, 4)),
         // The same layout, coarse enough for fast tests (1,849 + 642 + 96 vertices).
         "plate-small" => Some(plate(43, 3)),
+        "dynamic" => Scene::from_json(DYNAMIC_JSON, std::path::Path::new("")).ok(),
         _ => None,
     }
+}
+
+/// A built-in scene as a scene file (what a client uploads for it): the scene's own file
+/// where it has one, else its mesh as `builtin:NAME` with its lights, materials and camera.
+pub fn scene_file(name: &str) -> Option<SceneFile> {
+    if name == "dynamic" {
+        return serde_json::from_str(DYNAMIC_JSON).ok();
+    }
+    let s = scene(name)?;
+    Some(SceneFile {
+        meshes: vec![MeshRef {
+            path: format!("builtin:{name}"),
+            material: 0,
+            transform: None,
+            motion: None,
+        }],
+        ground_plane: false,
+        ground_material: 0,
+        materials: s.materials,
+        lights: s.lights,
+        camera: Some(s.camera),
+        bake: s.bake,
+    })
 }
 
 fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
@@ -87,6 +132,7 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
             fov_y_deg: 40.0,
         },
         bake: BakeSettings::default(),
+        motion: Vec::new(),
     }
 }
 

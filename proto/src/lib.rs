@@ -4,6 +4,8 @@
 //!
 //! - [`scene`]: the scene model and its JSON file format; [`mesh`] and [`import`] (glTF, OBJ,
 //!   PLY) for geometry; [`builtin`] procedural scenes that need no download.
+//! - [`motion`]: how a scene's meshes are placed and move over an animation cycle (run-time
+//!   methods).
 //! - [`cubemap`]: the world-aligned cube-map layout every vertex's visibility is sampled on.
 //! - [`bspvt`]: Binary Space Partitioning Visibility Trees — quantised split lines, the per-face
 //!   tree, the point query and the split of a spherical polygon into pieces with leaf values.
@@ -20,6 +22,7 @@ pub mod error;
 pub mod hash;
 pub mod import;
 pub mod mesh;
+pub mod motion;
 pub mod scene;
 pub mod sphere;
 

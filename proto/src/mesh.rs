@@ -180,6 +180,17 @@ impl Mesh {
     }
 
     /// Appends `other`, offsetting its indices and material ids by `material_offset`.
+    /// Moves every vertex by `m` (normals by its inverse transpose, renormalised).
+    pub fn transform(&mut self, m: &glam::Affine3A) {
+        let nm = glam::Mat3::from(m.matrix3).inverse().transpose();
+        for p in &mut self.positions {
+            *p = m.transform_point3(*p);
+        }
+        for n in &mut self.normals {
+            *n = (nm * *n).try_normalize().unwrap_or(*n);
+        }
+    }
+
     pub fn append(&mut self, other: &Mesh, material_offset: u32) {
         let base = self.positions.len() as u32;
         self.positions.extend_from_slice(&other.positions);

@@ -3,13 +3,14 @@
 //! Conventions follow glTF: right-handed, +Y up, metres. A [`SceneFile`] is what a user writes;
 //! [`Scene`] is the same with the mesh loaded and everything validated.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::SceneError;
 use crate::mesh::{Aabb, Mesh};
+use crate::motion::{Motion, MovingPart, Transform};
 
 /// A GGX microfacet material.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -213,6 +214,13 @@ pub struct MeshRef {
     /// Material index for the whole mesh (files carry no materials bspvt reads).
     #[serde(default)]
     pub material: u32,
+    /// Where the mesh sits (default: as in its file).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub transform: Option<Transform>,
+    /// How the mesh moves over the animation cycle (run-time methods only; see
+    /// [`crate::motion`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion: Option<Motion>,
 }
 
 /// A scene file as written by a user (JSON).
@@ -248,6 +256,8 @@ pub struct Scene {
     pub lights: Vec<PolygonLight>,
     pub camera: Camera,
     pub bake: BakeSettings,
+    /// The meshes that move (empty: a static scene). `mesh` is the pose at t = 0.
+    pub motion: Vec<MovingPart>,
 }
 
 impl PolygonLight {
@@ -407,6 +417,9 @@ impl Scene {
             l.validate(i)?;
         }
         self.camera.validate()?;
+        for (i, part) in self.motion.iter().enumerate() {
+            part.validate(i, self.mesh.vertex_count(), self.mesh.triangles.len())?;
+        }
         self.bake.validate()
     }
 
@@ -436,22 +449,55 @@ impl Scene {
 
     /// Resolves and loads the meshes a scene file names, then validates the result.
     pub fn from_file(file: SceneFile, base_dir: &Path) -> Result<Scene, SceneError> {
+        let parts = file
+            .meshes
+            .iter()
+            .map(|m| match m.path.strip_prefix("builtin:") {
+                Some(name) => crate::builtin::mesh(name).ok_or_else(|| {
+                    SceneError::Invalid(format!(
+                        "unknown built-in mesh {name:?} (known: {})",
+                        crate::builtin::mesh_names().join(", ")
+                    ))
+                }),
+                None => Ok(crate::import::load_mesh(&base_dir.join(&m.path))?),
+            })
+            .collect::<Result<Vec<Mesh>, SceneError>>()?;
+        Scene::assemble(file, parts)
+    }
+
+    /// A scene from its file and the meshes it names (`parts`, in the order of
+    /// `file.meshes`): each mesh placed by its transform, the moving ones recorded, the ground
+    /// plane added, the camera framed, the whole posed at t = 0 and validated. Every loader
+    /// (files here, uploads in the server) goes through this.
+    pub fn assemble(file: SceneFile, parts: Vec<Mesh>) -> Result<Scene, SceneError> {
         if file.meshes.is_empty() {
             return Err(SceneError::Invalid("scene names no meshes".into()));
         }
+        if parts.len() != file.meshes.len() {
+            return Err(SceneError::Invalid(format!(
+                "{} meshes for {} mesh entries",
+                parts.len(),
+                file.meshes.len()
+            )));
+        }
         let mut mesh = Mesh::default();
-        for m in &file.meshes {
-            let part = if let Some(name) = m.path.strip_prefix("builtin:") {
-                crate::builtin::mesh(name).ok_or_else(|| {
-                    SceneError::Invalid(format!(
-                        "unknown built-in mesh {name:?} (known: {})",
-                        crate::builtin::NAMES.join(", ")
-                    ))
-                })?
-            } else {
-                let p: PathBuf = base_dir.join(&m.path);
-                crate::import::load_mesh(&p)?
-            };
+        let mut motion = Vec::new();
+        for (i, (m, mut part)) in file.meshes.iter().zip(parts).enumerate() {
+            if let Some(t) = &m.transform {
+                t.validate_entry(i)?;
+                part.transform(&t.affine(glam::Vec3::ZERO));
+            }
+            if let Some(mo) = &m.motion {
+                mo.validate(i)?;
+                motion.push(MovingPart::new(
+                    mesh.positions.len() as u32,
+                    mesh.triangles.len() as u32,
+                    part.triangles.len() as u32,
+                    &part.positions,
+                    &part.normals,
+                    mo.clone(),
+                ));
+            }
             mesh.append(&part, m.material);
         }
         if file.ground_plane {
@@ -461,15 +507,46 @@ impl Scene {
         let camera = file
             .camera
             .unwrap_or_else(|| Camera::framing(&mesh.bounds()));
-        let scene = Scene {
+        let mut scene = Scene {
             mesh,
             materials: file.materials,
             lights: file.lights,
             camera,
             bake: file.bake,
+            motion,
         };
+        let mut at0 = std::mem::take(&mut scene.mesh);
+        scene.pose_into(0.0, &mut at0);
+        scene.mesh = at0;
         scene.validate()?;
         Ok(scene)
+    }
+
+    /// True when some mesh moves.
+    pub fn is_dynamic(&self) -> bool {
+        !self.motion.is_empty()
+    }
+
+    /// Poses the moving meshes at cycle time `t` into `mesh`, a copy of [`Scene::mesh`] (the
+    /// static parts are left as they are).
+    pub fn pose_into(&self, t: f32, mesh: &mut Mesh) {
+        for part in &self.motion {
+            part.pose_into(t, &mut mesh.positions, &mut mesh.normals, &mesh.triangles);
+        }
+    }
+
+    /// The scene frozen at cycle time `t`: a static copy (no motion) posed at `t`.
+    pub fn at(&self, t: f32) -> Scene {
+        let mut s = Scene {
+            mesh: self.mesh.clone(),
+            materials: self.materials.clone(),
+            lights: self.lights.clone(),
+            camera: self.camera.clone(),
+            bake: self.bake.clone(),
+            motion: Vec::new(),
+        };
+        self.pose_into(t, &mut s.mesh);
+        s
     }
 
     /// The default scene for a bare mesh: the mesh, a tessellated ground plane under it, a
@@ -499,6 +576,7 @@ impl Scene {
             ],
             lights: vec![light],
             bake: BakeSettings::default(),
+            motion: Vec::new(),
         };
         scene.validate()?;
         Ok(scene)

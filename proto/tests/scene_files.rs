@@ -79,6 +79,33 @@ fn every_shipped_scene_loads() {
                 let ground = scene.mesh.material_ids.iter().filter(|&&m| m == 1).count();
                 assert_eq!(ground, 2 * 95 * 95);
             }
+            // The built-in moving scene is this file: a sphere that orbits and a bar that twists.
+            Some("dynamic.json") => {
+                let builtin = bspvt_proto::builtin::scene("dynamic").expect("built-in dynamic");
+                assert_eq!(scene, builtin);
+                assert_eq!(scene.motion.len(), 2);
+                let (a, b) = (scene.at(0.0), scene.at(0.25));
+                let sphere = &scene.motion[0];
+                let v = sphere.first_vertex as usize..sphere.first_vertex as usize + 2562;
+                let centre = |s: &Scene| {
+                    s.mesh.positions[v.clone()]
+                        .iter()
+                        .copied()
+                        .sum::<glam::Vec3>()
+                        / 2562.0
+                };
+                // A quarter of the orbit (radius 1 about the pivot's vertical) moves the sphere's
+                // centre by √2, and the key lifts it by 0.35 · ½.
+                let moved = centre(&b) - centre(&a);
+                assert!(
+                    (moved.length() - (2.0f32 + 0.175 * 0.175).sqrt()).abs() < 1e-3,
+                    "{moved}"
+                );
+                // The ground plane does not move.
+                let last = scene.mesh.vertex_count() - 1;
+                assert_eq!(a.mesh.positions[last], b.mesh.positions[last]);
+                b.validate().expect("a posed scene validates");
+            }
             _ => {}
         }
         loaded += 1;
@@ -205,4 +232,67 @@ fn other_invalid_scenes() {
         r#""radiance": [-1, 0, 0]"#,
     );
     assert_contains(&m, "radiance must be finite and ≥ 0");
+}
+
+/// Placement and motion: a transform moves the mesh, a motion is checked with a message that
+/// names the entry and the field.
+#[test]
+fn transforms_place_meshes_and_bad_motion_is_refused() {
+    let placed = load(&BASE.replace(
+        r#"{"path": "builtin:plate-small"}"#,
+        r#"{"path": "builtin:plate-small", "transform": {"translation": [1, 2, 3], "scale": [2, 2, 2]}}"#,
+    ))
+    .expect("placed scene");
+    let rest = load(BASE).expect("base scene");
+    let (a, b) = (rest.mesh.bounds(), placed.mesh.bounds());
+    assert!((b.center() - (a.center() * 2.0 + glam::Vec3::new(1.0, 2.0, 3.0))).length() < 1e-4);
+    assert!(!placed.is_dynamic());
+    let entry = r#"{"path": "builtin:plate-small"}"#;
+    let e = error_with(
+        entry,
+        r#"{"path": "builtin:plate-small", "motion": {"keys": [{"t": 0.6}, {"t": 0.1}]}}"#,
+    );
+    assert!(
+        e.contains("meshes[0].motion.keys[1]") && e.contains("time order"),
+        "{e}"
+    );
+    let e = error_with(
+        entry,
+        r#"{"path": "builtin:plate-small", "transform": {"scale": [1, -1, 1]}}"#,
+    );
+    assert!(
+        e.contains("meshes[0].transform") && e.contains("scale"),
+        "{e}"
+    );
+    let e = error_with(
+        entry,
+        r#"{"path": "builtin:plate-small", "motion": {"deform": {"wave": {"direction": [1, 0, 0], "normal": [0, 1, 0], "amplitude": 0.1, "wavelength": 0}}}}"#,
+    );
+    assert!(e.contains("wavelength"), "{e}");
+    let e = error_with(
+        entry,
+        r#"{"path": "builtin:plate-small", "motion": {"spin": 3}}"#,
+    );
+    assert!(e.contains("spin"), "{e}");
+    let moving = load(&BASE.replace(
+        entry,
+        r#"{"path": "builtin:plate-small", "motion": {"deform": {"wave": {"direction": [1, 0, 0], "normal": [0, 1, 0], "amplitude": 0.05, "wavelength": 0.5}}}}"#,
+    ))
+    .expect("moving scene");
+    assert!(moving.is_dynamic());
+    let p = moving.at(0.3);
+    assert!(
+        p.mesh
+            .positions
+            .iter()
+            .zip(&moving.mesh.positions)
+            .any(|(x, y)| x != y)
+    );
+    assert!(p.mesh.positions.iter().all(|x| x.is_finite()));
+    assert!(
+        p.mesh
+            .normals
+            .iter()
+            .all(|n| (n.length() - 1.0).abs() < 1e-3)
+    );
 }

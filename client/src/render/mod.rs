@@ -4,5 +4,6 @@ pub mod camera;
 pub mod gbuffer;
 pub mod image;
 pub mod path;
+pub mod posed;
 pub mod renderer;
 pub mod sequence;

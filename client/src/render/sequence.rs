@@ -9,6 +9,7 @@ use serde::Serialize;
 
 use super::image::Image;
 use super::path::LightPath;
+use super::posed::Posed;
 use super::renderer::{FrameCounts, Mode, Renderer, Trees};
 use crate::groundtruth;
 use crate::penumbra;
@@ -123,6 +124,10 @@ pub struct Stats {
     pub ssdf: Option<crate::sg::SsdfMode>,
     /// SG: median depth-map time per frame (screen SSDF), ms.
     pub sg_maps_ms: Option<f64>,
+    /// A moving scene (environment methods): median time per frame to pose the meshes,
+    /// rasterise the G-buffer and rebuild the BVH when rays are used, ms (inside
+    /// `ms_per_frame`).
+    pub pose_ms: Option<f64>,
 }
 
 /// Renders `opts.frames` frames along the scene light's default path, handing each image to
@@ -141,6 +146,13 @@ pub fn render_sequence(
     };
     if opts.method == Method::Bspvt && trees.is_none() {
         bail!("--method bspvt needs baked trees (--trees FILE)");
+    }
+    if scene.is_dynamic() {
+        tracing::warn!(
+            "the scene's meshes move, but --method {:?} renders them at t = 0 (motion is for \
+             the run-time environment methods, sg and mc-env)",
+            opts.method
+        );
     }
     let start = Instant::now();
     let r = Renderer::new(scene, opts.width, opts.height);
@@ -258,11 +270,13 @@ pub fn render_sequence(
         sg_fit_seconds: None,
         ssdf: None,
         sg_maps_ms: None,
+        pose_ms: None,
     })
 }
 
 /// [`render_sequence`] for the environment-light methods: the map is loaded (and fitted, for
-/// SG) in setup; every frame renders the scene as it is (the light does not move).
+/// SG, or read from the fit cache) in setup; the environment does not move, the scene's
+/// meshes do when it has motion (frame k at cycle time k / frames).
 fn render_env_sequence(
     scene: &Scene,
     opts: &Options,
@@ -277,27 +291,52 @@ fn render_env_sequence(
     let start = Instant::now();
     let env = crate::sg::EnvLight::load(&eo.path)?;
     let r = Renderer::new(scene, opts.width, opts.height);
-    let tris = bspvt_server::bake::raycast::mesh_triangles(&scene.mesh);
-    let occluder = bspvt_server::bake::raycast::Occluder::new(&scene.mesh, &tris);
-    let sg = (opts.method == Method::Sg).then(|| crate::sg::fit(&env, eo.lobes));
+    let rays = opts.method == Method::McEnv || eo.sg.ssdf == crate::sg::SsdfMode::Exact;
+    // A moving scene is posed, rasterised and (for rays) given a new BVH inside every frame's
+    // time; a static one gets its BVH here, once.
+    let dynamic = scene.is_dynamic();
+    let mut posed = dynamic.then(|| Posed::new(scene, 0.0, &r.view, rays));
+    let occluder = (rays && !dynamic).then(|| {
+        let tris = bspvt_server::bake::raycast::mesh_triangles(&scene.mesh);
+        bspvt_server::bake::raycast::Occluder::new(&scene.mesh, &tris)
+    });
+    let sg = match opts.method {
+        Method::Sg => Some(crate::sg::fit_cached(
+            &env,
+            eo.lobes,
+            &std::env::temp_dir().join("bspvt-sg-fit"),
+        )),
+        _ => None,
+    };
     crate::sg::halfspace::warm_up();
     let setup_seconds = start.elapsed().as_secs_f64();
     let frames = opts.frames.max(1);
-    let (mut ms, mut maps_ms) = (Vec::with_capacity(frames), Vec::with_capacity(frames));
+    let (mut ms, mut maps_ms, mut pose_ms) = (
+        Vec::with_capacity(frames),
+        Vec::with_capacity(frames),
+        Vec::with_capacity(frames),
+    );
     let mut noise = None;
     for k in 0..frames {
         let t = Instant::now();
+        let (sc, gbuffer, occ) = match posed.as_mut() {
+            Some(p) => {
+                p.update(scene, k as f32 / frames as f32, &r.view);
+                pose_ms.push(t.elapsed().as_secs_f64() * 1e3);
+                (&p.scene, &p.gbuffer, p.occluder.as_ref())
+            }
+            None => (scene, &r.gbuffer, occluder.as_ref()),
+        };
         let img = match &sg {
             Some(sg) => {
-                let (img, timings) =
-                    crate::sg::render(scene, &r.view, &r.gbuffer, sg, Some(&occluder), &eo.sg)?;
+                let (img, timings) = crate::sg::render(sc, &r.view, gbuffer, sg, occ, &eo.sg)?;
                 maps_ms.push(timings.maps_ms);
                 img
             }
             None => {
-                let (img, report) = groundtruth::render_mc_env(
-                    scene, &r.view, &r.gbuffer, &env, &occluder, opts.spp, k as u64,
-                );
+                let occ = occ.context("the Monte Carlo reference needs rays")?;
+                let (img, report) =
+                    groundtruth::render_mc_env(sc, &r.view, gbuffer, &env, occ, opts.spp, k as u64);
                 noise = Some(report.mean_rel_stderr);
                 img
             }
@@ -309,6 +348,7 @@ fn render_env_sequence(
     let mean = ms.iter().sum::<f64>() / ms.len() as f64;
     ms.sort_by(f64::total_cmp);
     maps_ms.sort_by(f64::total_cmp);
+    pose_ms.sort_by(f64::total_cmp);
     let median = ms[ms.len() / 2];
     Ok(Stats {
         method: opts.method,
@@ -335,5 +375,6 @@ fn render_env_sequence(
         sg_fit_seconds: sg.as_ref().map(|s| s.seconds),
         ssdf: sg.as_ref().map(|_| eo.sg.ssdf),
         sg_maps_ms: maps_ms.get(maps_ms.len() / 2).copied(),
+        pose_ms: pose_ms.get(pose_ms.len() / 2).copied(),
     })
 }

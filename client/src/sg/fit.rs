@@ -105,26 +105,21 @@ pub fn fit(env: &EnvLight, k: usize) -> SgEnv {
 /// texels) and the same K is read back from `dir/sg-fit-HASH-kK.json`; otherwise it is fitted
 /// and written there. A cache that cannot be read or written only costs the fit.
 pub fn fit_cached(env: &EnvLight, k: usize, dir: &std::path::Path) -> SgEnv {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |b: &[u8]| {
-        for &x in b {
-            h ^= u64::from(x);
-            h = h.wrapping_mul(0x0100_0000_01b3);
-        }
-    };
-    eat(&env.width.to_le_bytes());
-    eat(&env.height.to_le_bytes());
+    let mut hash = bspvt_proto::hash::Fnv1a::default();
+    hash.write(&env.width.to_le_bytes());
+    hash.write(&env.height.to_le_bytes());
     for p in &env.pixels {
-        for c in p {
-            eat(&c.to_bits().to_le_bytes());
-        }
+        hash.write_f32s(p);
     }
     let o = FitOptions::default();
-    eat(format!(
-        "{k}/{}/{}/{}/{}",
-        o.map_width, o.iterations, o.step_axis, o.step_ln_lambda
-    )
-    .as_bytes());
+    hash.write(
+        format!(
+            "{k}/{}/{}/{}/{}",
+            o.map_width, o.iterations, o.step_axis, o.step_ln_lambda
+        )
+        .as_bytes(),
+    );
+    let h = hash.finish();
     let path = dir.join(format!("sg-fit-{h:016x}-k{k}.json"));
     if let Some(f) = std::fs::read(&path)
         .ok()

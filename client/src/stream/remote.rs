@@ -252,24 +252,12 @@ fn header(r: &ureq::http::Response<ureq::Body>, name: &str) -> Option<String> {
         .map(str::to_string)
 }
 
-/// A built-in scene as a scene file the service accepts (the same mesh, lights and camera).
+/// A built-in scene as a scene file the service accepts (the same meshes, lights and camera).
 pub fn builtin_scene_file(name: &str) -> Result<SceneFile> {
-    let s = bspvt_proto::builtin::scene(name).with_context(|| {
+    bspvt_proto::builtin::scene_file(name).with_context(|| {
         format!(
             "unknown built-in scene {name:?} (known: {})",
             bspvt_proto::builtin::NAMES.join(", ")
         )
-    })?;
-    Ok(SceneFile {
-        meshes: vec![MeshRef {
-            path: format!("builtin:{name}"),
-            material: 0,
-        }],
-        ground_plane: false,
-        ground_material: 0,
-        materials: s.materials,
-        lights: s.lights,
-        camera: Some(s.camera),
-        bake: s.bake,
     })
 }

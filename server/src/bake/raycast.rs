@@ -37,13 +37,21 @@ pub fn mesh_triangles(mesh: &Mesh) -> Vec<Triangle> {
 }
 
 impl Occluder {
-    /// `tris`: [`mesh_triangles`] of `mesh`.
+    /// `tris`: [`mesh_triangles`] of `mesh`. The highest-quality BVH (for bakes and
+    /// references, where rays outnumber builds by far).
     pub fn new(mesh: &Mesh, tris: &[Triangle]) -> Occluder {
-        let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
-            tris,
-            BvhBuildParams::very_slow_build(),
-            &mut Duration::default(),
-        );
+        Occluder::with_params(mesh, tris, BvhBuildParams::very_slow_build())
+    }
+
+    /// A BVH built in a fraction of [`Occluder::new`]'s time, for geometry that moves every
+    /// frame.
+    pub fn new_fast(mesh: &Mesh, tris: &[Triangle]) -> Occluder {
+        Occluder::with_params(mesh, tris, BvhBuildParams::fast_build())
+    }
+
+    fn with_params(mesh: &Mesh, tris: &[Triangle], params: BvhBuildParams) -> Occluder {
+        let bvh =
+            obvhs::cwbvh::builder::build_cwbvh_from_tris(tris, params, &mut Duration::default());
         let order = &bvh.primitive_indices;
         let rt = order
             .iter()

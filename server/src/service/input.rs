@@ -15,6 +15,7 @@
 use std::io::Read;
 
 use bspvt_proto::import::{Format, Limits, load_mesh_bytes};
+use bspvt_proto::motion::MovingPart;
 use bspvt_proto::scene::{Camera, Material, PolygonLight, Region, SceneFile};
 use bspvt_proto::{BakeSettings, Mesh, Scene, SceneError};
 use serde::{Deserialize, Serialize};
@@ -145,13 +146,7 @@ fn decompress(data: &[u8], max: u64) -> ApiResult<Vec<u8>> {
 
 /// [`Scene::from_file`] for an upload: `builtin:` meshes and the uploaded mesh only.
 fn compose(file: SceneFile, upload: Option<&(String, Mesh)>) -> ApiResult<Scene> {
-    if file.meshes.is_empty() {
-        return Err(ApiError::unprocessable(
-            "invalid_scene",
-            "invalid scene: scene names no meshes",
-        ));
-    }
-    let mut mesh = Mesh::default();
+    let mut parts = Vec::with_capacity(file.meshes.len());
     for m in &file.meshes {
         if let Some(name) = m.path.strip_prefix("builtin:") {
             let part = bspvt_proto::builtin::mesh(name).ok_or_else(|| {
@@ -159,14 +154,14 @@ fn compose(file: SceneFile, upload: Option<&(String, Mesh)>) -> ApiResult<Scene>
                     "invalid_scene",
                     format!(
                         "unknown built-in mesh {name:?} (known: {})",
-                        bspvt_proto::builtin::NAMES.join(", ")
+                        bspvt_proto::builtin::mesh_names().join(", ")
                     ),
                 )
             })?;
-            mesh.append(&part, m.material);
+            parts.push(part);
         } else {
             match upload {
-                Some((uploaded, part)) if *uploaded == m.path => mesh.append(part, m.material),
+                Some((uploaded, part)) if *uploaded == m.path => parts.push(part.clone()),
                 Some((uploaded, _)) => {
                     return Err(ApiError::unprocessable(
                         "invalid_scene",
@@ -188,22 +183,7 @@ fn compose(file: SceneFile, upload: Option<&(String, Mesh)>) -> ApiResult<Scene>
             }
         }
     }
-    if file.ground_plane {
-        let ground = bspvt_proto::builtin::ground_under(&mesh.bounds(), file.ground_material);
-        mesh.append(&ground, 0);
-    }
-    let camera = file
-        .camera
-        .unwrap_or_else(|| Camera::framing(&mesh.bounds()));
-    let scene = Scene {
-        mesh,
-        materials: file.materials,
-        lights: file.lights,
-        camera,
-        bake: file.bake,
-    };
-    scene.validate()?;
-    Ok(scene)
+    Ok(Scene::assemble(file, parts)?)
 }
 
 /// The service's own caps on top of [`Scene::validate`].
@@ -247,10 +227,23 @@ fn check_limits(scene: &Scene, lim: &InputLimits) -> ApiResult<()> {
 // ---------------------------------------------------------------------------------------------
 // The stored form of a scene.
 
-const STORED_VERSION: u16 = 1;
+/// 2: adds the moving parts ([`bspvt_proto::motion`]); version 1 (static scenes) still reads.
+const STORED_VERSION: u16 = 2;
 
 #[derive(Serialize, Deserialize)]
 struct StoredScene {
+    version: u16,
+    mesh: Mesh,
+    materials: Vec<Material>,
+    lights: Vec<StoredLight>,
+    camera: Camera,
+    bake: BakeSettings,
+    motion: Vec<MovingPart>,
+}
+
+/// Version 1: [`StoredScene`] without `motion`.
+#[derive(Serialize, Deserialize)]
+struct StoredSceneV1 {
     version: u16,
     mesh: Mesh,
     materials: Vec<Material>,
@@ -288,18 +281,32 @@ pub fn encode_scene(s: &Scene) -> Vec<u8> {
             .collect(),
         camera: s.camera.clone(),
         bake: s.bake.clone(),
+        motion: s.motion.clone(),
     };
     postcard::to_stdvec(&stored).unwrap_or_default()
 }
 
-/// Reads back [`encode_scene`]'s bytes.
+/// Reads back [`encode_scene`]'s bytes (and version 1's).
 pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
-    let s: StoredScene =
-        postcard::from_bytes(bytes).map_err(|e| format!("stored scene does not decode: {e}"))?;
-    if s.version != STORED_VERSION {
-        return Err(format!("stored scene has version {}", s.version));
-    }
-    Ok(Scene {
+    let bad = |e: postcard::Error| format!("stored scene does not decode: {e}");
+    let (version, _) = postcard::take_from_bytes::<u16>(bytes).map_err(bad)?;
+    let s = match version {
+        1 => {
+            let v1: StoredSceneV1 = postcard::from_bytes(bytes).map_err(bad)?;
+            StoredScene {
+                version: v1.version,
+                mesh: v1.mesh,
+                materials: v1.materials,
+                lights: v1.lights,
+                camera: v1.camera,
+                bake: v1.bake,
+                motion: Vec::new(),
+            }
+        }
+        STORED_VERSION => postcard::from_bytes(bytes).map_err(bad)?,
+        v => return Err(format!("stored scene has version {v}")),
+    };
+    let scene = Scene {
         mesh: s.mesh,
         materials: s.materials,
         lights: s
@@ -315,7 +322,12 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
             .collect(),
         camera: s.camera,
         bake: s.bake,
-    })
+        motion: s.motion,
+    };
+    scene
+        .validate()
+        .map_err(|e| format!("stored scene is not valid: {e}"))?;
+    Ok(scene)
 }
 
 #[cfg(test)]
@@ -359,6 +371,53 @@ mod tests {
         .unwrap_or_else(|e| panic!("prepare: {e:?}"));
         assert_eq!(up.scene, disk);
         assert_eq!(decode_scene(&encode_scene(&up.scene)), Ok(disk));
+    }
+
+    /// A moving scene keeps its motion through storage; a version-1 scene still reads, and a
+    /// stored part that does not fit the mesh is refused.
+    #[test]
+    fn moving_scenes_survive_storage_and_version_1_reads() {
+        let s = bspvt_proto::builtin::scene("dynamic").expect("builtin");
+        assert!(s.is_dynamic());
+        // Uploaded as a scene file, it composes to the same moving scene.
+        let up = prepare(
+            Upload {
+                mesh: None,
+                scene: Some(bspvt_proto::builtin::DYNAMIC_JSON.into()),
+                settings: None,
+            },
+            &limits(),
+        )
+        .unwrap_or_else(|e| panic!("prepare: {e:?}"));
+        assert_eq!(up.scene, s);
+        let back = decode_scene(&encode_scene(&s)).expect("decodes");
+        assert_eq!(back, s);
+        assert_eq!(back.at(0.3), s.at(0.3));
+        let p = bspvt_proto::builtin::scene("plate-small").expect("builtin");
+        let v1 = postcard::to_stdvec(&StoredSceneV1 {
+            version: 1,
+            mesh: p.mesh.clone(),
+            materials: p.materials.clone(),
+            lights: p
+                .lights
+                .iter()
+                .map(|l| StoredLight {
+                    vertices: l.vertices.clone(),
+                    radiance: l.radiance,
+                    two_sided: l.two_sided,
+                    texture: l.texture.clone(),
+                    region: l.region,
+                })
+                .collect(),
+            camera: p.camera.clone(),
+            bake: p.bake.clone(),
+        })
+        .expect("encode v1");
+        assert_eq!(decode_scene(&v1).as_ref(), Ok(&p));
+        let mut broken = s.clone();
+        broken.motion[0].first_vertex = u32::MAX - 10;
+        let e = decode_scene(&encode_scene(&broken)).expect_err("refused");
+        assert!(e.contains("moving part 0"), "{e}");
     }
 
     #[test]

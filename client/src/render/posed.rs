@@ -69,24 +69,6 @@ mod tests {
         assert!(p.occluder.is_some());
     }
 
-    /// A small synthetic environment (a bright lobe over a dim sky) as a Radiance file.
-    fn env_file(dir: &std::path::Path) -> std::path::PathBuf {
-        let (w, h) = (64u32, 32u32);
-        let img = image::Rgb32FImage::from_fn(w, h, |x, y| {
-            let sun = (x as i32 - 20).abs() < 3 && (y as i32 - 8).abs() < 3;
-            image::Rgb(if sun {
-                [40.0, 38.0, 35.0]
-            } else {
-                [0.3, 0.35, 0.4]
-            })
-        });
-        let path = dir.join("env.hdr");
-        image::DynamicImage::ImageRgb32F(img)
-            .save(&path)
-            .expect("write the test map");
-        path
-    }
-
     /// SG and its Monte Carlo reference on a moving scene: every frame is posed (the frame at
     /// t = ½ is the static render of the scene posed at ½), the frames differ, and the pose's
     /// time is reported.
@@ -103,7 +85,7 @@ mod tests {
             frames: 2,
             light: 0,
             env: Some(EnvOptions {
-                path: env_file(dir.path()),
+                path: crate::sg::env::write_test_map(dir.path()),
                 lobes: 4,
                 sg: crate::sg::SgOptions::default(),
             }),

@@ -13,6 +13,7 @@ use serde::Serialize;
 use super::{EnvLight, SgOptions, SsdfMode, fit};
 use crate::groundtruth::render_mc_env;
 use crate::render::image::Image;
+use crate::render::posed::Posed;
 use crate::render::renderer::Renderer;
 
 #[derive(clap::Args, Clone, Debug)]
@@ -56,6 +57,11 @@ pub struct BenchSgArgs {
     /// Exposure of the PNGs.
     #[arg(long, default_value_t = 1.0)]
     pub exposure: f32,
+    /// Cycle time at which a moving scene is measured (its meshes frozen there). A moving
+    /// scene also gets a `moving` row per size and K: screen-space frames along the cycle
+    /// from this time, each re-posed and re-rasterised inside its time.
+    #[arg(long, default_value_t = 0.0)]
+    pub time: f32,
 }
 
 /// One measured configuration.
@@ -73,6 +79,11 @@ pub struct Row {
     pub rel_rmse: f64,
     /// RMSE against the exact-SSDF image of the same configuration (screen mode only).
     pub rmse_vs_exact: Option<f64>,
+    /// Frames along a moving scene's cycle (posing, G-buffer and depth maps every frame);
+    /// the error is that of the frame at `--time`.
+    pub moving: bool,
+    /// Posing and rasterising, median per frame (moving rows), ms.
+    pub pose_ms: Option<f64>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -125,11 +136,16 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 pub fn run(a: &BenchSgArgs) -> Result<Report> {
     let scene_name = a.scene.clone().unwrap_or_else(|| "builtin:plate".into());
-    let scene = if a.mesh.is_some() {
+    let moving_scene = if a.mesh.is_some() {
         open_scene(None, a.mesh.as_deref())?
     } else {
         open_scene(Some(&scene_name), None)?
     };
+    if !(a.time.is_finite() && (0.0..=1.0).contains(&a.time)) {
+        anyhow::bail!("--time {} is outside the cycle [0, 1]", a.time);
+    }
+    // Everything but the moving rows sees the meshes frozen at --time.
+    let scene = moving_scene.at(a.time);
     let env_path = a.env.clone().unwrap_or_else(super::env::default_env_path);
     let env = EnvLight::load(&env_path)?;
     std::fs::create_dir_all(&a.out)
@@ -230,6 +246,8 @@ pub fn run(a: &BenchSgArgs) -> Result<Report> {
                     rmse: e,
                     rel_rmse: e / ref_mean,
                     rmse_vs_exact: vs_exact,
+                    moving: false,
+                    pose_ms: None,
                 };
                 println!(
                     "{size}² K={k} {ssdf:?}: {ms:.1} ms/frame ({:.1} fps; maps {:.1} ms), RMSE {e:.4} ({:.1} % of the mean){}",
@@ -245,6 +263,19 @@ pub fn run(a: &BenchSgArgs) -> Result<Report> {
                 }
                 report.rows.push(row);
             }
+            if moving_scene.is_dynamic() {
+                let row = moving_row(a, &moving_scene, &r.view, f, *k, &reference)?;
+                println!(
+                    "{size}² K={k} Screen, moving: {:.1} ms/frame ({:.1} fps; posing {:.1} ms, maps {:.1} ms), RMSE {:.4} at t = {}",
+                    row.ms_per_frame,
+                    row.fps,
+                    row.pose_ms.unwrap_or(0.0),
+                    row.maps_ms,
+                    row.rmse,
+                    a.time
+                );
+                report.rows.push(row);
+            }
         }
     }
     std::fs::write(
@@ -255,6 +286,54 @@ pub fn run(a: &BenchSgArgs) -> Result<Report> {
     std::fs::write(a.out.join("results.md"), markdown(&report))
         .with_context(|| format!("cannot write {}", a.out.display()))?;
     Ok(report)
+}
+
+/// Screen-space frames along a moving scene's cycle from `--time`, each posed, rasterised and
+/// shaded inside its time; the error is the first frame's (at `--time`) against `reference`.
+fn moving_row(
+    a: &BenchSgArgs,
+    scene: &bspvt_proto::Scene,
+    view: &crate::render::camera::View,
+    env: &super::SgEnv,
+    lobes: usize,
+    reference: &Image,
+) -> Result<Row> {
+    let opts = SgOptions {
+        ssdf: SsdfMode::Screen,
+        depth_res: a.depth_res,
+        stride: a.stride,
+        window: a.window,
+    };
+    let n = a.frames.max(2);
+    let mut posed = Posed::new(scene, a.time, view, false);
+    let (mut times, mut poses, mut maps, mut first) = (Vec::new(), Vec::new(), Vec::new(), None);
+    for i in 0..n {
+        let t = Instant::now();
+        posed.update(scene, a.time + i as f32 / n as f32, view);
+        poses.push(t.elapsed().as_secs_f64() * 1e3);
+        let (img, tm) = super::render(&posed.scene, view, &posed.gbuffer, env, None, &opts)?;
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+        maps.push(tm.maps_ms);
+        first.get_or_insert(img);
+    }
+    let img = first.context("at least one frame")?;
+    let name = format!("sg-{}-k{lobes}-moving", view.width);
+    img.save(&a.out.join(format!("{name}.png")), a.exposure)?;
+    let ms = median(times);
+    let e = rmse(&img, reference);
+    Ok(Row {
+        size: view.width,
+        lobes,
+        ssdf: SsdfMode::Screen,
+        ms_per_frame: ms,
+        fps: 1e3 / ms.max(1e-9),
+        maps_ms: median(maps),
+        rmse: e,
+        rel_rmse: e / reference.mean().max(1e-12),
+        rmse_vs_exact: None,
+        moving: true,
+        pose_ms: Some(median(poses)),
+    })
 }
 
 fn markdown(r: &Report) -> String {
@@ -274,11 +353,14 @@ fn markdown(r: &Report) -> String {
     }
     s += "\n| size | K | SSDF | ms/frame | fps | maps ms | RMSE | rel. RMSE | RMSE vs exact |\n|---:|---:|---|---:|---:|---:|---:|---:|---:|\n";
     for x in &r.rows {
+        let ssdf = match x.pose_ms {
+            Some(p) => format!("{:?}, moving (posing {p:.1} ms)", x.ssdf),
+            None => format!("{:?}", x.ssdf),
+        };
         s += &format!(
-            "| {} | {} | {:?} | {:.1} | {:.1} | {:.1} | {:.4} | {:.3} | {} |\n",
+            "| {} | {} | {ssdf} | {:.1} | {:.1} | {:.1} | {:.4} | {:.3} | {} |\n",
             x.size,
             x.lobes,
-            x.ssdf,
             x.ms_per_frame,
             x.fps,
             x.maps_ms,
@@ -288,4 +370,50 @@ fn markdown(r: &Report) -> String {
         );
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// On a moving scene every configuration is measured with finite numbers, and the moving
+    /// row's error is that of the frame at `--time`: the static screen row's image.
+    #[test]
+    fn moving_scenes_get_a_moving_row() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let a = BenchSgArgs {
+            scene: Some("builtin:dynamic".into()),
+            mesh: None,
+            env: Some(super::super::env::write_test_map(dir.path())),
+            sizes: vec![32],
+            lobes: vec![4],
+            frames: 2,
+            spp: 4,
+            depth_res: 64,
+            stride: 2,
+            window: 6,
+            exact_max_size: 32,
+            out: dir.path().join("out"),
+            exposure: 1.0,
+            time: 0.3,
+        };
+        let r = run(&a).expect("bench-sg runs");
+        let screen = r
+            .rows
+            .iter()
+            .find(|x| x.ssdf == SsdfMode::Screen && !x.moving)
+            .expect("screen row");
+        let moving = r.rows.iter().find(|x| x.moving).expect("moving row");
+        assert_eq!(r.rows.len(), 4, "exact, screen, none, moving");
+        assert!(
+            r.rows
+                .iter()
+                .all(|x| x.rmse.is_finite() && x.ms_per_frame > 0.0)
+        );
+        assert_eq!(moving.rmse, screen.rmse);
+        assert!(moving.pose_ms.is_some_and(|p| p >= 0.0));
+        assert!(a.out.join("results.md").is_file());
+        let bad = BenchSgArgs { time: 1.5, ..a };
+        assert!(run(&bad).is_err());
+    }
 }

@@ -166,6 +166,25 @@ impl EnvLight {
     }
 }
 
+/// A small synthetic map for tests that must not depend on `../shared`: a bright 6×6-texel
+/// sun over a dim bluish sky, written as Radiance `dir/env.hdr`.
+#[cfg(test)]
+pub(crate) fn write_test_map(dir: &Path) -> PathBuf {
+    let img = image::Rgb32FImage::from_fn(64, 32, |x, y| {
+        let sun = (x as i32 - 20).abs() < 3 && (y as i32 - 8).abs() < 3;
+        image::Rgb(if sun {
+            [40.0, 38.0, 35.0]
+        } else {
+            [0.3, 0.35, 0.4]
+        })
+    });
+    let path = dir.join("env.hdr");
+    if let Err(e) = image::DynamicImage::ImageRgb32F(img).save(&path) {
+        panic!("cannot write the test map {}: {e}", path.display());
+    }
+    path
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -38,8 +38,6 @@
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::sync::OnceLock;
 
-use super::fastmath;
-
 /// Table rows: ln λ from ln 1e-6 to ln 1e6.
 const NU: usize = 193;
 /// Table columns: w from 0 to 1 (d ≥ 0; d < 0 by symmetry).
@@ -73,11 +71,24 @@ fn warp_f32(lambda: f32, d_abs: f32) -> f32 {
     if kmax < 1e-3 {
         return d_abs / std::f32::consts::FRAC_PI_2;
     }
-    let num = fastmath::tanh_pos(k * d_abs);
+    let num = tanh_pos(k * d_abs);
     if kmax > 9.0 {
         num.min(1.0)
     } else {
-        (num / fastmath::tanh_pos(kmax)).min(1.0)
+        (num / tanh_pos(kmax)).min(1.0)
+    }
+}
+
+/// tanh x for x ≥ 0 in f32: the Taylor series below 0.05 (next term < 1e-10 relative), else
+/// (1 − e^{−2x}) / (1 + e^{−2x}) with one `exp` (glibc's tanhf and expm1f are slower).
+#[inline]
+fn tanh_pos(x: f32) -> f32 {
+    if x < 0.05 {
+        let x2 = x * x;
+        x * (1.0 - x2 * (1.0 / 3.0 - x2 * (2.0 / 15.0)))
+    } else {
+        let e = (-2.0 * x).exp();
+        (1.0 - e) / (1.0 + e)
     }
 }
 
@@ -155,11 +166,7 @@ pub fn integral_exact(lambda: f64, d: f64) -> f64 {
     super::lobe::sphere_integral(lambda) * fraction_exact(lambda, d)
 }
 
-/// Row length of the stored table: the NW columns plus one ghost column at each end (copies
-/// of the edge columns), so that the 4×4 Catmull–Rom taps never need clamping.
-const PW: usize = NW + 2;
-
-/// The table of F over (ln λ, w), (NU + 2) × (NW + 2) with ghost rows and columns.
+/// The table of F over (ln λ, w).
 struct Table {
     f: Vec<f32>,
 }
@@ -167,8 +174,8 @@ struct Table {
 impl Table {
     fn build() -> Table {
         use rayon::prelude::*;
-        let mut core = vec![0.0f32; NU * NW];
-        core.par_chunks_mut(NW).enumerate().for_each(|(i, row)| {
+        let mut f = vec![0.0f32; NU * NW];
+        f.par_chunks_mut(NW).enumerate().for_each(|(i, row)| {
             let u = LN_MIN + (LN_MAX - LN_MIN) * i as f64 / (NU - 1) as f64;
             let lambda = u.exp();
             for (j, out) in row.iter_mut().enumerate() {
@@ -181,14 +188,6 @@ impl Table {
                 };
             }
         });
-        // Padded copy: stored (i, j) holds core (clamp(i − 1), clamp(j − 1)).
-        let mut f = vec![0.0f32; (NU + 2) * PW];
-        for (i, row) in f.chunks_exact_mut(PW).enumerate() {
-            let src = &core[i.saturating_sub(1).min(NU - 1) * NW..][..NW];
-            for (j, out) in row.iter_mut().enumerate() {
-                *out = src[j.saturating_sub(1).min(NW - 1)];
-            }
-        }
         Table { f }
     }
 
@@ -197,38 +196,35 @@ impl Table {
         T.get_or_init(Table::build)
     }
 
-    /// Catmull–Rom weights of the taps at −1, 0, 1, 2 for a fraction `t` ∈ [0, 1].
     #[inline]
-    fn catmull_rom(t: f32) -> [f32; 4] {
-        let (t2, t3) = (t * t, t * t * t);
-        [
-            0.5 * (-t3 + 2.0 * t2 - t),
-            0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
-            0.5 * (-3.0 * t3 + 4.0 * t2 + t),
-            0.5 * (t3 - t2),
-        ]
-    }
-
-    /// Bicubic (Catmull–Rom) interpolation at ln λ = `ln_lambda`, warped distance `w`; the
-    /// ends repeat the edge rows and columns.
-    #[inline]
-    fn lookup(&self, ln_lambda: f32, w: f32) -> f32 {
-        let u = (ln_lambda - LN_MIN as f32) * ((NU - 1) as f64 / (LN_MAX - LN_MIN)) as f32;
+    fn lookup(&self, lambda: f32, w: f32) -> f32 {
+        let u = (lambda.ln() - LN_MIN as f32) / (LN_MAX - LN_MIN) as f32 * (NU - 1) as f32;
         let u = u.clamp(0.0, (NU - 1) as f32);
         let x = w.clamp(0.0, 1.0) * (NW - 1) as f32;
         let i1 = (u as usize).min(NU - 2);
+        let fu = u - i1 as f32;
         let j = (x as usize).min(NW - 2);
-        let (wu, ww) = (
-            Self::catmull_rom(u - i1 as f32),
-            Self::catmull_rom(x - j as f32),
-        );
-        // Core rows i1 − 1 … i1 + 2 and columns j − 1 … j + 2 are stored at i1 … i1 + 3 and
-        // j … j + 3.
-        let block = &self.f[i1 * PW + j..(i1 + 3) * PW + j + 4];
+        let fw = x - j as f32;
+        // Catmull–Rom in both ln λ and w (rows and columns clamped at the ends).
+        let cr = |t: f32| {
+            let (t2, t3) = (t * t, t * t * t);
+            [
+                0.5 * (-t3 + 2.0 * t2 - t),
+                0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+                0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+                0.5 * (t3 - t2),
+            ]
+        };
+        let (wu, ww) = (cr(fu), cr(fw));
         let mut acc = 0.0;
         for (k, wk) in wu.iter().enumerate() {
-            let row = &block[k * PW..k * PW + 4];
-            acc += wk * (ww[0] * row[0] + ww[1] * row[1] + ww[2] * row[2] + ww[3] * row[3]);
+            let i = (i1 + k).saturating_sub(1).min(NU - 1);
+            let row = &self.f[i * NW..(i + 1) * NW];
+            let mut r = 0.0;
+            for (l, wl) in ww.iter().enumerate() {
+                r += wl * row[(j + l).saturating_sub(1).min(NW - 1)];
+            }
+            acc += wk * r;
         }
         acc.clamp(0.0, 1.0)
     }
@@ -248,15 +244,8 @@ pub fn fraction(lambda: f32, d: f32) -> f32 {
     }
     let lambda = lambda.clamp(1e-30, 1e30);
     let da = d.abs().min(std::f32::consts::FRAC_PI_2);
-    let f = Table::get().lookup(fastmath::ln(lambda), warp_f32(lambda, da));
+    let f = Table::get().lookup(lambda, warp_f32(lambda, da));
     if d >= 0.0 { f } else { 1.0 - f }
-}
-
-/// F(λ, d) given sin d = p·m (the shading loop's form: d = asin of a dot product). `sin_d`
-/// is clamped to [−1, 1]; NaN input gives 0.
-#[inline]
-pub fn fraction_of_sin(lambda: f32, sin_d: f32) -> f32 {
-    fraction(lambda, fastmath::asin(sin_d.clamp(-1.0, 1.0)))
 }
 
 /// ∫ G over the half-space at signed distance `d` from G's axis (see the module docs).

@@ -5,7 +5,6 @@
 pub mod bench;
 pub mod brdf;
 pub mod env;
-pub mod fastmath;
 pub mod fit;
 pub mod halfspace;
 pub mod lobe;

@@ -23,10 +23,10 @@ use bspvt_server::bake::raycast::Occluder;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
+use super::Sg;
 use super::brdf::{cosine_lobe, ggx_lobe};
 use super::fit::SgEnv;
 use super::halfspace;
-use super::lobe::Sg32;
 use super::ssdf::{Boundary, DepthMap, Point, exact_boundary};
 use crate::groundtruth::{Brdf, Shadows};
 use crate::render::camera::View;
@@ -87,105 +87,25 @@ pub struct SgTimings {
 
 /// A lobe whose unshadowed bound (full-sphere integral of its products) is below this fraction
 /// of the pixel's total is skipped: the image changes by less than CULL × K relative.
-const CULL: f32 = 1e-4;
+const CULL: f64 = 1e-4;
 
-/// A lighting lobe in the shading loop's form: the SG in f32 (λξ stored, [`Sg32`]) and its
-/// colour.
-#[derive(Clone, Copy, Debug)]
-struct Light {
-    sg: Sg32,
-    rgb: Vec3,
-}
-
-/// One pixel's BRDF as SGs ([`super::brdf`]) in f32, with the horizon normal.
-#[derive(Clone, Copy, Debug)]
-struct PixelBrdf {
-    n: Vec3,
-    /// albedo/π and the clamped-cosine SG.
-    diffuse: Vec3,
-    cos: Sg32,
-    /// The warped GGX SG and its Fresnel factor (none when the view is below the horizon).
-    spec: Option<(Sg32, Vec3)>,
-}
-
-impl PixelBrdf {
-    fn new(brdf: &Brdf, n: DVec3, wo: DVec3) -> PixelBrdf {
-        let spec = ggx_lobe(brdf.alpha, n, wo).map(|s| {
-            let f = brdf.f0 + (DVec3::ONE - brdf.f0) * s.fresnel_weight;
-            (Sg32::new(&s.sg), f.as_vec3())
-        });
-        PixelBrdf {
-            n: n.as_vec3(),
-            diffuse: (brdf.albedo / PI).as_vec3(),
-            cos: Sg32::new(&cosine_lobe(n)),
-            spec,
-        }
-    }
-}
-
-/// One lobe's products with the BRDF: axis, sharpness, full-sphere integral of G_k C and of
-/// G_k S (zeros without a specular lobe), and the unshadowed RGB bound of the pair.
-type Terms = ((Vec3, f32, f32), (Vec3, f32, f32), Vec3);
-
-/// The visible integral of a product SG (axis `p`, sharpness `lambda`, full-sphere integral
-/// `full`) given the horizon `n` and the lobe's boundary: full · F(λ, d) with
-/// d = min(asin(p·n), asin(p·m)) = asin(min(p·n, p·m)) (asin is increasing).
+/// The visible integral of `g` (whose full-sphere integral is `full`) given the horizon `n`
+/// and the lobe's boundary.
 #[inline]
-fn visible_integral(p: Vec3, lambda: f32, full: f32, n: Vec3, b: &Boundary) -> f32 {
+fn visible_integral(g: &Sg, full: f64, n: DVec3, b: &Boundary) -> f64 {
     if !(full > 0.0) {
         return 0.0;
     }
-    let s = match b {
-        Boundary::Visible => p.dot(n),
-        Boundary::Occluded => return 0.0,
-        Boundary::Plane(m) => p.dot(n).min(p.dot(*m)),
-    };
-    full * halfspace::fraction_of_sin(lambda, s)
-}
-
-/// L_o of one pixel (the module formula). `terms`: scratch; `boundary(k)`: lobe k's SSDF,
-/// asked only for lobes that pass the cull.
-#[inline]
-fn shade_pixel(
-    lights: &[Light],
-    px: &PixelBrdf,
-    terms: &mut Vec<Terms>,
-    mut boundary: impl FnMut(usize) -> Boundary,
-) -> Vec3 {
-    // Products first: their unshadowed integrals bound each lobe's contribution, and lobes
-    // below CULL of the pixel's total skip the SSDF search and the integral.
-    let zero = (Vec3::Z, 0.0, 0.0);
-    let fresnel = px.spec.map_or(Vec3::ZERO, |(_, f)| f);
-    terms.clear();
-    let mut total = 0.0;
-    for l in lights {
-        let d = l.sg.product_integral(&px.cos);
-        let s = px.spec.map_or(zero, |(sp, _)| l.sg.product_integral(&sp));
-        let bound = l.rgb * (px.diffuse * d.2 + fresnel * s.2);
-        total += bound.element_sum();
-        terms.push((d, s, bound));
+    let p = g.axis.as_vec3();
+    let d = p
+        .dot(n.as_vec3())
+        .clamp(-1.0, 1.0)
+        .asin()
+        .min(b.distance(p));
+    if d == f32::NEG_INFINITY {
+        return 0.0;
     }
-    let cull = CULL * total;
-    let mut acc = Vec3::ZERO;
-    for (k, (l, (d, s, bound))) in lights.iter().zip(terms.iter()).enumerate() {
-        if !(bound.element_sum() > cull) {
-            continue;
-        }
-        let b = boundary(k);
-        if b == Boundary::Occluded {
-            continue;
-        }
-        // Each term alone is skipped when its bound is below the cull level too.
-        let mut c = Vec3::ZERO;
-        if (l.rgb * px.diffuse * d.2).element_sum() > cull {
-            c += px.diffuse * visible_integral(d.0, d.1, d.2, px.n, &b);
-        }
-        if (l.rgb * fresnel * s.2).element_sum() > cull {
-            c += fresnel * visible_integral(s.0, s.1, s.2, px.n, &b);
-        }
-        acc += l.rgb * c;
-    }
-    acc
+    full * f64::from(halfspace::fraction(g.lambda as f32, d))
 }
 
 /// Renders one SG frame of `scene` at the G-buffer's pixels. `occluder` is required for
@@ -224,12 +144,12 @@ pub fn render(
     let fallback = Brdf::from_material(&Material::default());
     let eps = Shadows::for_scene(scene, None).epsilon as f32;
     let bias_abs = 1e-3 * mesh.bounds().diagonal();
-    let lights: Vec<Light> = env
+    let lobes: Vec<(Sg, DVec3, Vec3)> = env
         .lobes
         .iter()
-        .map(|l| Light {
-            sg: Sg32::new(&l.sg()),
-            rgb: l.rgb().as_vec3(),
+        .map(|l| {
+            let sg = l.sg();
+            (sg, l.rgb(), sg.axis.as_vec3())
         })
         .collect();
     let search = |point: &Point, k: usize, xi: Vec3| match opts.ssdf {
@@ -241,7 +161,7 @@ pub fn render(
         },
     };
     let (w, h) = (gbuffer.width as usize, gbuffer.height as usize);
-    let kk = lights.len();
+    let kk = lobes.len();
     // Pass 1: boundaries at each block's representative pixel (its top-left).
     let stride = if opts.ssdf == SsdfMode::None {
         1
@@ -273,10 +193,10 @@ pub fn render(
                     (point, tol)
                 });
             }
-            for (k, l) in lights.iter().enumerate() {
+            for (k, (_, _, xi)) in lobes.iter().enumerate() {
                 for (bx, p) in points.iter().enumerate() {
                     if let Some((point, _)) = p {
-                        bounds[bx * kk + k] = search(point, k, l.sg.axis);
+                        bounds[bx * kk + k] = search(point, k, *xi);
                     }
                 }
             }
@@ -321,24 +241,65 @@ pub fn render(
                 } else {
                     None
                 };
-                let pb = PixelBrdf::new(brdf, n, wo);
+                let cos = cosine_lobe(n);
+                let spec = ggx_lobe(brdf.alpha, n, wo);
+                let diffuse = brdf.albedo / PI;
+                let fresnel = spec.map(|s| brdf.f0 + (DVec3::ONE - brdf.f0) * s.fresnel_weight);
+                // Products first: their unshadowed integrals bound each lobe's contribution, and
+                // lobes below CULL of the pixel's total skip the SSDF search and the integral.
+                let zero = Sg::new(DVec3::Z, 0.0, 0.0);
+                terms.clear();
+                let mut total = 0.0;
+                for (g, rgb, _) in &lobes {
+                    let (pd, id) = g.product_and_integral_f32(&cos);
+                    let (ps, is) = match spec {
+                        Some(sp) => g.product_and_integral_f32(&sp.sg),
+                        None => (zero, 0.0),
+                    };
+                    let bound = *rgb * (diffuse * id + fresnel.unwrap_or(DVec3::ZERO) * is);
+                    total += bound.element_sum();
+                    terms.push((pd, id, ps, is, bound));
+                }
+                let cull = CULL * total;
+                let mut acc = DVec3::ZERO;
                 let (mut n_search, mut n_reuse) = (0u64, 0u64);
-                let acc = shade_pixel(&lights, &pb, terms, |k| match rep {
-                    Some(bs) => {
-                        n_reuse += 1;
-                        bs[k]
+                for (k, ((_, rgb, xi), (pd, id, ps, is, bound))) in
+                    lobes.iter().zip(terms.iter()).enumerate()
+                {
+                    if !(bound.element_sum() > cull) {
+                        continue;
                     }
-                    None => {
-                        n_search += 1;
-                        search(&point, k, lights[k].sg.axis)
+                    let b = match rep {
+                        Some(bs) => {
+                            n_reuse += 1;
+                            bs[k]
+                        }
+                        None => {
+                            n_search += 1;
+                            search(&point, k, *xi)
+                        }
+                    };
+                    if b == Boundary::Occluded {
+                        continue;
                     }
-                });
+                    // Each term alone is skipped when its bound is below the cull level too.
+                    let mut c = DVec3::ZERO;
+                    if (*rgb * diffuse * *id).element_sum() > cull {
+                        c += diffuse * visible_integral(pd, *id, n, &b);
+                    }
+                    if let Some(f) = fresnel
+                        && (*rgb * f * *is).element_sum() > cull
+                    {
+                        c += f * visible_integral(ps, *is, n, &b);
+                    }
+                    acc += *rgb * c;
+                }
                 if opts.ssdf != SsdfMode::None {
                     searches.fetch_add(n_search, std::sync::atomic::Ordering::Relaxed);
                     reused.fetch_add(n_reuse, std::sync::atomic::Ordering::Relaxed);
                 }
                 if acc.is_finite() {
-                    *px = acc.to_array();
+                    *px = acc.as_vec3().to_array();
                 }
             },
         );

@@ -340,6 +340,8 @@ impl DepthMap {
         let (fx, fy, z) = self.project(p.position);
         let zf = z - bias;
         let front = |d: f32| d < zf;
+        let inside =
+            |x: isize, y: isize, r: usize| x >= 0 && y >= 0 && (x as usize) < r && (y as usize) < r;
         // The point's texel (no `floor`: it is a libm call on baseline x86-64; `as` truncates,
         // which equals floor for the non-negative coordinates of texels inside the map).
         let s0 = fx >= 0.0
@@ -382,45 +384,32 @@ impl DepthMap {
                 Boundary::Visible
             };
         };
-        let half_lo = neigh as usize / 2 - 1;
         for lv in (0..top).rev() {
             let l = &self.levels[lv];
             let r = l.res;
-            // The window [2c − (neigh/2 − 1), … + neigh) clipped to the level once, so the
-            // loops need no bounds tests (ranges are empty when it lies outside).
-            let (cx, cy) = (2 * cand.0, 2 * cand.1);
-            let (x0, y0) = (cx.saturating_sub(half_lo), cy.saturating_sub(half_lo));
-            let (x1, y1) = (
-                (cx + neigh as usize - half_lo).min(r),
-                (cy + neigh as usize - half_lo).min(r),
-            );
+            let (cx, cy) = (2 * cand.0 as isize, 2 * cand.1 as isize);
             let mut next: Option<(usize, usize, Vec3)> = None;
             let mut next_s = f32::NEG_INFINITY;
-            for y in y0..y1 {
-                let row = y * r;
-                for x in x0..x1 {
-                    let k = row + x;
-                    if !front(l.min[k]) {
+            for y in cy - (neigh / 2 - 1)..cy - (neigh / 2 - 1) + neigh {
+                for x in cx - (neigh / 2 - 1)..cx - (neigh / 2 - 1) + neigh {
+                    if !inside(x, y, r) {
                         continue;
                     }
+                    let k = y as usize * r + x as usize;
                     let is_cand = if lv > 0 {
-                        !front(l.max[k])
+                        front(l.min[k]) && !front(l.max[k])
                     } else {
-                        // A front texel with a non-front 4-neighbour (outside the map: empty).
-                        x == 0
-                            || y == 0
-                            || x + 1 == r
-                            || y + 1 == r
-                            || !front(l.min[k - 1])
-                            || !front(l.min[k + 1])
-                            || !front(l.min[k - r])
-                            || !front(l.min[k + r])
+                        front(l.min[k])
+                            && [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().any(|&(dx, dy)| {
+                                let (nx, ny) = (x + dx, y + dy);
+                                !inside(nx, ny, r) || !front(l.min[ny as usize * r + nx as usize])
+                            })
                     };
                     if is_cand {
                         let s = score(l.arg[k]);
                         if s > next_s {
                             next_s = s;
-                            next = Some((x, y, l.arg[k]));
+                            next = Some((x as usize, y as usize, l.arg[k]));
                         }
                     }
                 }

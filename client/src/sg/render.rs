@@ -169,31 +169,38 @@ pub fn render(
         opts.stride.max(1) as usize
     };
     let (bw, bh) = (w.div_ceil(stride), h.div_ceil(stride));
-    type Rep = Option<(Point, f32, Vec<Boundary>)>;
-    let reps: Vec<Rep> = if stride > 1 {
-        (0..bw * bh)
-            .into_par_iter()
-            .map(|b| {
-                let i = (b / bw) * stride * w + (b % bw) * stride;
-                let s = gbuffer.surface(mesh, view, i)?;
-                let point = Point {
-                    position: s.position.as_vec3(),
-                    geometric: s.geometric.as_vec3(),
-                };
-                // Three pixel footprints at this depth.
-                let depth = (s.position - view.eye).dot(view.forward).max(0.0);
-                let tol = (6.0 * view.tan_half_fov * depth / f64::from(gbuffer.height)) as f32;
-                let bs = lobes
-                    .iter()
-                    .enumerate()
-                    .map(|(k, (_, _, xi))| search(&point, k, *xi))
-                    .collect();
-                Some((point, tol, bs))
-            })
-            .collect()
-    } else {
-        Vec::new()
-    };
+    // Per block: the representative's point and reuse tolerance, and its K boundaries. One
+    // task per row of blocks, searched lobe by lobe (lobe-major), so that one depth map's
+    // pyramid stays in cache while the row's points walk across it.
+    let n_blocks = if stride > 1 { bw * bh } else { 0 };
+    let mut rep_points: Vec<Option<(Point, f32)>> = vec![None; n_blocks];
+    let mut rep_bounds = vec![Boundary::Visible; n_blocks * kk];
+    rep_points
+        .par_chunks_mut(bw)
+        .zip(rep_bounds.par_chunks_mut((bw * kk).max(1)))
+        .enumerate()
+        .for_each(|(by, (points, bounds))| {
+            for (bx, out) in points.iter_mut().enumerate() {
+                let i = by * stride * w + bx * stride;
+                *out = gbuffer.surface(mesh, view, i).map(|s| {
+                    // Three pixel footprints at this depth.
+                    let depth = (s.position - view.eye).dot(view.forward).max(0.0);
+                    let tol = (6.0 * view.tan_half_fov * depth / f64::from(gbuffer.height)) as f32;
+                    let point = Point {
+                        position: s.position.as_vec3(),
+                        geometric: s.geometric.as_vec3(),
+                    };
+                    (point, tol)
+                });
+            }
+            for (k, (_, _, xi)) in lobes.iter().enumerate() {
+                for (bx, p) in points.iter().enumerate() {
+                    if let Some((point, _)) = p {
+                        bounds[bx * kk + k] = search(point, k, *xi);
+                    }
+                }
+            }
+        });
     let searches = std::sync::atomic::AtomicU64::new(0);
     let reused = std::sync::atomic::AtomicU64::new(0);
     let mut img = Image::new(gbuffer.width, gbuffer.height);
@@ -221,12 +228,13 @@ pub fn render(
                 // The block representative's boundaries, when it lies on the same surface.
                 let rep = if stride > 1 {
                     let (x, y) = (i % w, i / w);
-                    match &reps[(y / stride) * bw + x / stride] {
-                        Some((rp, tol, bs))
+                    let b = (y / stride) * bw + x / stride;
+                    match &rep_points[b] {
+                        Some((rp, tol))
                             if (rp.position - point.position).length() <= *tol
                                 && rp.geometric.dot(point.geometric) > 0.9 =>
                         {
-                            Some(bs)
+                            Some(&rep_bounds[b * kk..(b + 1) * kk])
                         }
                         _ => None,
                     }
@@ -298,7 +306,7 @@ pub fn render(
     let rep_searches = if opts.ssdf == SsdfMode::None {
         0
     } else {
-        (reps.iter().flatten().count() * kk) as u64
+        (rep_points.iter().flatten().count() * kk) as u64
     };
     let timings = SgTimings {
         maps_ms,

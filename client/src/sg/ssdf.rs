@@ -136,6 +136,26 @@ pub fn exact_boundary(occ: &Occluder, p: &Point, xi: Vec3, eps: f32) -> Boundary
     }
 }
 
+/// max(⌈v⌉, 0) without `ceil` (a libm call on baseline x86-64); 0 for NaN.
+#[inline]
+fn ceil_nonneg(v: f32) -> f32 {
+    if !(v > 0.0) {
+        return 0.0;
+    }
+    // `as` truncates (saturating): floor for v ≥ 0; beyond 2^23 every f32 is an integer.
+    let t = v as u32 as f32;
+    if t < v { t + 1.0 } else { t }
+}
+
+/// min(⌊v⌋, `hi`) for the last texel of a span: −1 (an empty span) for v < 0 or NaN.
+#[inline]
+fn floor_upto(v: f32, hi: f32) -> f32 {
+    if !(v >= 0.0) {
+        return -1.0;
+    }
+    (v as u32 as f32).min(hi)
+}
+
 /// One level of a depth-map pyramid.
 #[derive(Clone, Debug)]
 struct Level {
@@ -195,18 +215,18 @@ impl DepthMap {
             let inv = 1.0 / area;
             let xs = [v[0].0, v[1].0, v[2].0];
             let ys = [v[0].1, v[1].1, v[2].1];
-            let x0 = (xs.iter().copied().fold(f32::INFINITY, f32::min) - 0.5)
-                .ceil()
-                .max(0.0);
-            let x1 = (xs.iter().copied().fold(f32::NEG_INFINITY, f32::max) - 0.5)
-                .floor()
-                .min(res as f32 - 1.0);
-            let y0 = (ys.iter().copied().fold(f32::INFINITY, f32::min) - 0.5)
-                .ceil()
-                .max(0.0);
-            let y1 = (ys.iter().copied().fold(f32::NEG_INFINITY, f32::max) - 0.5)
-                .floor()
-                .min(res as f32 - 1.0);
+            // Texel centres x + ½ inside the bounding box, clipped to the map.
+            let max_t = res as f32 - 1.0;
+            let x0 = ceil_nonneg(xs.iter().copied().fold(f32::INFINITY, f32::min) - 0.5);
+            let x1 = floor_upto(
+                xs.iter().copied().fold(f32::NEG_INFINITY, f32::max) - 0.5,
+                max_t,
+            );
+            let y0 = ceil_nonneg(ys.iter().copied().fold(f32::INFINITY, f32::min) - 0.5);
+            let y1 = floor_upto(
+                ys.iter().copied().fold(f32::NEG_INFINITY, f32::max) - 0.5,
+                max_t,
+            );
             if !(x0 <= x1 && y0 <= y1) {
                 continue;
             }
@@ -320,10 +340,15 @@ impl DepthMap {
         let (fx, fy, z) = self.project(p.position);
         let zf = z - bias;
         let front = |d: f32| d < zf;
-        let (ix, iy) = (fx.floor() as isize, fy.floor() as isize);
         let inside =
             |x: isize, y: isize, r: usize| x >= 0 && y >= 0 && (x as usize) < r && (y as usize) < r;
-        let s0 = inside(ix, iy, res) && front(l0.min[iy as usize * res + ix as usize]);
+        // The point's texel (no `floor`: it is a libm call on baseline x86-64; `as` truncates,
+        // which equals floor for the non-negative coordinates of texels inside the map).
+        let s0 = fx >= 0.0
+            && fy >= 0.0
+            && (fx as usize) < res
+            && (fy as usize) < res
+            && front(l0.min[fy as usize * res + fx as usize]);
         // Score of a candidate world position: cos of its direction to ξ (above the tangent
         // plane only).
         let score = |w: Vec3| -> f32 {

@@ -4,6 +4,7 @@
 
 pub mod bench;
 pub mod brdf;
+pub mod diffuse;
 pub mod env;
 pub mod fit;
 pub mod halfspace;

@@ -25,6 +25,7 @@ use rayon::prelude::*;
 
 use super::Sg;
 use super::brdf::{cosine_lobe, ggx_lobe};
+use super::diffuse::{self, DiffuseTable};
 use super::fit::SgEnv;
 use super::halfspace;
 use super::ssdf::{Boundary, DepthMap, Point, exact_boundary};
@@ -89,6 +90,23 @@ pub struct SgTimings {
 /// of the pixel's total is skipped: the image changes by less than CULL × K relative.
 const CULL: f64 = 1e-4;
 
+/// A lobe's diffuse product at one pixel: from its table, or exact (sharp lobes).
+#[derive(Clone, Copy, Debug)]
+enum Diffuse {
+    /// ∫ G_k C over the sphere and over the horizon's half-space.
+    Table { full: f64, horizon: f64 },
+    /// The product SG and its sphere integral.
+    Exact { sg: Sg, full: f64 },
+}
+
+impl Diffuse {
+    fn full(&self) -> f64 {
+        match *self {
+            Diffuse::Table { full, .. } | Diffuse::Exact { full, .. } => full,
+        }
+    }
+}
+
 /// The visible integral of `g` (whose full-sphere integral is `full`) given the horizon `n`
 /// and the lobe's boundary.
 #[inline]
@@ -151,6 +169,11 @@ pub fn render(
             let sg = l.sg();
             (sg, l.rgb(), sg.axis.as_vec3())
         })
+        .collect();
+    // The diffuse term of each (not too sharp) lobe as a function of n·ξ ([`super::diffuse`]).
+    let tables: Vec<Option<DiffuseTable>> = lobes
+        .par_iter()
+        .map(|(g, _, _)| DiffuseTable::new(g))
         .collect();
     let search = |point: &Point, k: usize, xi: Vec3| match opts.ssdf {
         SsdfMode::None => Boundary::Visible,
@@ -250,20 +273,29 @@ pub fn render(
                 let zero = Sg::new(DVec3::Z, 0.0, 0.0);
                 terms.clear();
                 let mut total = 0.0;
-                for (g, rgb, _) in &lobes {
-                    let (pd, id) = g.product_and_integral_f32(&cos);
+                for (k, (g, rgb, _)) in lobes.iter().enumerate() {
+                    let d = match &tables[k] {
+                        Some(t) => {
+                            let (full, horizon) = t.lookup(g.axis.dot(n));
+                            Diffuse::Table { full, horizon }
+                        }
+                        None => {
+                            let (sg, full) = g.product_and_integral_f32(&cos);
+                            Diffuse::Exact { sg, full }
+                        }
+                    };
                     let (ps, is) = match spec {
                         Some(sp) => g.product_and_integral_f32(&sp.sg),
                         None => (zero, 0.0),
                     };
-                    let bound = *rgb * (diffuse * id + fresnel.unwrap_or(DVec3::ZERO) * is);
+                    let bound = *rgb * (diffuse * d.full() + fresnel.unwrap_or(DVec3::ZERO) * is);
                     total += bound.element_sum();
-                    terms.push((pd, id, ps, is, bound));
+                    terms.push((d, ps, is, bound));
                 }
                 let cull = CULL * total;
                 let mut acc = DVec3::ZERO;
                 let (mut n_search, mut n_reuse) = (0u64, 0u64);
-                for (k, ((_, rgb, xi), (pd, id, ps, is, bound))) in
+                for (k, ((g, rgb, xi), (d, ps, is, bound))) in
                     lobes.iter().zip(terms.iter()).enumerate()
                 {
                     if !(bound.element_sum() > cull) {
@@ -284,8 +316,24 @@ pub fn render(
                     }
                     // Each term alone is skipped when its bound is below the cull level too.
                     let mut c = DVec3::ZERO;
-                    if (*rgb * diffuse * *id).element_sum() > cull {
-                        c += diffuse * visible_integral(pd, *id, n, &b);
+                    if (*rgb * diffuse * d.full()).element_sum() > cull {
+                        let v = match *d {
+                            Diffuse::Exact { sg, full } => visible_integral(&sg, full, n, &b),
+                            Diffuse::Table { horizon, .. } => match b {
+                                // The horizon is the nearer boundary of the product: tabulated.
+                                Boundary::Plane(m) => {
+                                    let p = diffuse::product_axis(g, n).as_vec3();
+                                    if p.dot(m) >= p.dot(n.as_vec3()) {
+                                        horizon
+                                    } else {
+                                        let (sg, full) = g.product_and_integral_f32(&cos);
+                                        visible_integral(&sg, full, n, &b)
+                                    }
+                                }
+                                _ => horizon,
+                            },
+                        };
+                        c += diffuse * v;
                     }
                     if let Some(f) = fresnel
                         && (*rgb * f * *is).element_sum() > cull

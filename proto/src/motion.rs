@@ -96,7 +96,9 @@ const MAX_DEGREES: f32 = 3600.0;
 /// Most keys one motion may have.
 const MAX_KEYS: usize = 4096;
 
-/// A pose of a moving mesh at cycle time `t` (relative to its rest placement).
+/// A pose of a moving mesh at cycle time `t` (relative to its rest placement): a
+/// [`Transform`]'s fields beside `t` (serde's `flatten` cannot be combined with
+/// `deny_unknown_fields`, so they are spelled out).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Key {

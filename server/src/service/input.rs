@@ -262,23 +262,25 @@ struct StoredLight {
     region: Option<Region>,
 }
 
+impl From<&PolygonLight> for StoredLight {
+    fn from(l: &PolygonLight) -> StoredLight {
+        StoredLight {
+            vertices: l.vertices.clone(),
+            radiance: l.radiance,
+            two_sided: l.two_sided,
+            texture: l.texture.clone(),
+            region: l.region,
+        }
+    }
+}
+
 /// The scene as stored in `scene.bin` (postcard; exact floats).
 pub fn encode_scene(s: &Scene) -> Vec<u8> {
     let stored = StoredScene {
         version: STORED_VERSION,
         mesh: s.mesh.clone(),
         materials: s.materials.clone(),
-        lights: s
-            .lights
-            .iter()
-            .map(|l| StoredLight {
-                vertices: l.vertices.clone(),
-                radiance: l.radiance,
-                two_sided: l.two_sided,
-                texture: l.texture.clone(),
-                region: l.region,
-            })
-            .collect(),
+        lights: s.lights.iter().map(StoredLight::from).collect(),
         camera: s.camera.clone(),
         bake: s.bake.clone(),
         motion: s.motion.clone(),
@@ -398,17 +400,7 @@ mod tests {
             version: 1,
             mesh: p.mesh.clone(),
             materials: p.materials.clone(),
-            lights: p
-                .lights
-                .iter()
-                .map(|l| StoredLight {
-                    vertices: l.vertices.clone(),
-                    radiance: l.radiance,
-                    two_sided: l.two_sided,
-                    texture: l.texture.clone(),
-                    region: l.region,
-                })
-                .collect(),
+            lights: p.lights.iter().map(StoredLight::from).collect(),
             camera: p.camera.clone(),
             bake: p.bake.clone(),
         })

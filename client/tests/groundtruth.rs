@@ -1,5 +1,5 @@
 //! The ground-truth renderers against closed forms and independent quadrature
-//! (`bspvt::groundtruth`; method and noise levels in `docs/groundtruth.md`).
+//! (`bspvt_client::groundtruth`; method and noise levels in `docs/groundtruth.md`).
 //!
 //! (a) unoccluded diffuse: Lambert's polygon form factor; (b) specular: dense quadrature of
 //! ∫_P f cos over the polygon at α from 1e-3 to 1 and views to 89°; (c) a receiver under a
@@ -12,16 +12,17 @@
 
 use std::f64::consts::PI;
 
-use bspvt::ggx;
-use bspvt::groundtruth::{
-    Brdf, Convergence, LtcLobe, Pcg32, ShadingPoint, Shadows, render_mc, render_mc_until,
+use bspvt_client::frame::brdf::{Brdf, Shadows};
+use bspvt_client::frame::camera::View;
+use bspvt_client::frame::gbuffer::GBuffer;
+use bspvt_client::ggx;
+use bspvt_client::groundtruth::{
+    Convergence, LtcLobe, Pcg32, ShadingPoint, render_mc, render_mc_until,
     shade_ltc_exact_visibility, shade_mc,
 };
-use bspvt::light::Light;
-use bspvt::render::camera::View;
-use bspvt::render::gbuffer::GBuffer;
+use bspvt_client::light::Light;
 use bspvt_proto::Mesh;
-use bspvt_server::bake::raycast::{Occluder, mesh_triangles};
+use bspvt_raytrace::{Occluder, mesh_triangles};
 use glam::{DMat3, DVec3, Vec3};
 
 // ---------------------------------------------------------------------------------------
@@ -599,7 +600,7 @@ fn convergence_reaches_the_target() {
 /// unshadowed analytic LTC. Figures are printed; the bound only catches wiring errors.
 #[test]
 fn ltc_exact_visibility_tracks_the_ground_truth() {
-    use bspvt::groundtruth::{builtin_lookup, render_ltc_exact_visibility};
+    use bspvt_client::groundtruth::{builtin_lookup, render_ltc_exact_visibility};
     let (scene, view, gb, light, occ) = small_scene();
     let (mc, rep) = render_mc(&scene, &view, &gb, &light, &occ, 1024, 3);
     let ltc =

@@ -4,7 +4,7 @@
 
 use std::f64::consts::PI;
 
-use bspvt::ltc::polygon::{edge_sum, form_factor};
+use bspvt_client::ltc::polygon::{edge_sum, form_factor};
 use glam::DVec3;
 use proptest::prelude::*;
 

@@ -6,16 +6,17 @@
 
 use std::time::Instant;
 
-use bspvt::groundtruth::ltcvis::{builtin_lookup, render_ltc_exact_visibility};
-use bspvt::light::Light;
-use bspvt::penumbra::{self, Guide, Kernel, Params, Technique, rt};
-use bspvt::render::image::Image;
-use bspvt::render::path::LightPath;
-use bspvt::render::renderer::{Mode, Renderer};
-use bspvt::render::sequence::{Method, Options, render_sequence};
+use bspvt_client::frame::image::Image;
+use bspvt_client::groundtruth::ltcvis::{builtin_lookup, render_ltc_exact_visibility};
+use bspvt_client::light::Light;
+use bspvt_client::method::sequence::{Options, render_sequence};
+use bspvt_client::method::{Settings, registry};
+use bspvt_client::penumbra::{self, Guide, Kernel, Params, Technique, rt};
+use bspvt_client::render::path::LightPath;
+use bspvt_client::render::renderer::{Mode, Renderer};
 use bspvt_proto::Scene;
 use bspvt_proto::scene::Camera;
-use bspvt_server::bake::raycast::{Occluder, mesh_triangles};
+use bspvt_raytrace::{Occluder, mesh_triangles};
 use glam::{DAffine3, DVec3};
 
 const ALL: [Technique; 5] = [
@@ -43,7 +44,7 @@ fn mae(a: &Image, b: &Image, r: &Renderer) -> f64 {
     let mut sum = 0.0;
     let mut n = 0usize;
     for (i, (x, y)) in a.pixels.iter().zip(&b.pixels).enumerate() {
-        if r.gbuffer.tri[i] == bspvt::render::gbuffer::NONE {
+        if r.gbuffer.tri[i] == bspvt_client::frame::gbuffer::NONE {
             continue;
         }
         sum += (0..3).map(|k| f64::from((x[k] - y[k]).abs())).sum::<f64>() / 3.0;
@@ -336,22 +337,19 @@ fn no_shadow_leaks_onto_fully_lit_pixels() {
 #[test]
 fn frames_along_the_light_path() {
     let s = scene();
-    for method in [
-        Method::RtPenumbra,
-        Method::RtHard,
-        Method::Pcf,
-        Method::Vsm,
-        Method::Pcss,
-    ] {
+    for name in ["rt-penumbra", "rt-hard", "pcf", "vsm", "pcss"] {
+        let method = registry::lookup(name).unwrap();
         let opts = Options {
             method,
-            mode: Mode::Pixel,
-            spp: 1,
             width: 64,
             height: 48,
             frames: 3,
             light: 0,
-            env: None,
+            settings: Settings {
+                mode: Mode::Pixel,
+                spp: 1,
+                ..Settings::default()
+            },
         };
         let mut n = 0;
         let stats = render_sequence(&s, None, &opts, |_, img| {
@@ -361,7 +359,7 @@ fn frames_along_the_light_path() {
         })
         .unwrap();
         assert_eq!(n, 3);
-        eprintln!("{method:?}: {:.2} ms/frame (64×48)", stats.ms_per_frame);
+        eprintln!("{name}: {:.2} ms/frame (64×48)", stats.ms_per_frame);
     }
 }
 

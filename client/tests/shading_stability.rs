@@ -8,10 +8,10 @@
 //!   lights, degenerate polygons, and scene scales from 1e-4 to 1e4;
 //! - the result does not depend on the scene's scale.
 
-use bspvt::light::Light;
-use bspvt::ltc::table::LtcTable;
-use bspvt::shade::bspvt::{VertexLight, shade_vertex};
-use bspvt::shade::{Lobes, unshadowed};
+use bspvt_client::light::Light;
+use bspvt_client::ltc::table::LtcTable;
+use bspvt_client::shade::bspvt::{VertexLight, shade_vertex};
+use bspvt_client::shade::{Lobes, unshadowed};
 use bspvt_proto::bspvt::{FaceTree, LineCodec, Node, QLine, VertexTrees};
 use bspvt_proto::scene::Material;
 use glam::DVec3;

@@ -11,11 +11,14 @@
 //!   tree, the point query and the split of a spherical polygon into pieces with leaf values.
 //! - [`sphere`]: spherical polygons (great-circle clipping, solid angle).
 //! - [`encoding`]: the compact, versioned, checksummed chunk encoding of trees.
+//! - [`api`]: the wire types of the baking service's HTTP API (status, job state, errors,
+//!   the stored scene), so that a client needs no server code.
+//! - [`paths`]: where files not given on the command line are looked for, at run time.
 //!
 //! Math kernels here do no I/O; only [`import`] and [`scene`] loaders touch files.
 
+pub mod api;
 pub mod bspvt;
-pub mod builtin;
 pub mod cubemap;
 pub mod encoding;
 pub mod error;
@@ -23,9 +26,11 @@ pub mod hash;
 pub mod import;
 pub mod mesh;
 pub mod motion;
+pub mod paths;
 pub mod scene;
 pub mod sphere;
 
 pub use error::{DecodeError, MeshError, SceneError};
 pub use mesh::{Aabb, Mesh};
+pub use scene::builtin;
 pub use scene::{BakeSettings, Scene, SplitMethod};

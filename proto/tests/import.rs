@@ -1081,9 +1081,7 @@ fn unsupported_and_missing_files() {
 // ---------------------------------------------------------------------------------------------
 
 fn assets_dir() -> Option<PathBuf> {
-    let dir = std::env::var_os("BSPVT_ASSETS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/assets"));
+    let dir = bspvt_proto::paths::assets_dir();
     let meshes = dir.join("meshes");
     if meshes.is_dir() {
         Some(meshes)

@@ -5,7 +5,7 @@
 //! every split method, so the methods are compared in the same run on the same data. Rays and
 //! fit are timed separately per vertex on the worker threads.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -14,8 +14,8 @@ use bspvt_proto::{BakeSettings, Scene, SplitMethod};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::bake::{Baker, Totals};
-use crate::stats::BakeStats;
+use bspvt_bake::stats::BakeStats;
+use bspvt_bake::{Baker, Totals};
 
 #[derive(clap::Args, Clone, Debug)]
 pub struct BenchArgs {
@@ -64,13 +64,6 @@ pub struct BenchRow {
     pub fit_time_vs_nelder_mead: Option<f64>,
 }
 
-/// The shared test-data folder: `$BSPVT_ASSETS` or `../shared/assets` from the workspace.
-pub fn default_assets_dir() -> PathBuf {
-    std::env::var_os("BSPVT_ASSETS")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/assets"))
-}
-
 fn parse_method(s: &str) -> Result<SplitMethod> {
     serde_json::from_value(serde_json::Value::String(s.into()))
         .with_context(|| format!("unknown split method {s:?} (nelder-mead, default, exhaustive)"))
@@ -89,7 +82,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
     let dir = a
         .meshes_dir
         .clone()
-        .unwrap_or_else(|| default_assets_dir().join("meshes"));
+        .unwrap_or_else(|| bspvt_proto::paths::meshes_dir());
     let mut scenes: Vec<(String, Scene)> = Vec::new();
     if let Some(s) = bspvt_proto::builtin::scene("plate").filter(|_| a.builtin) {
         // The same scene without its declared light region: what "don't care" saves.

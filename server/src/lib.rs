@@ -1,11 +1,12 @@
 //! # bspvt-server
 //!
-//! The bake engine of bspvt: per-vertex ray-cast visibility cube maps ([`bake::cubemap`],
-//! [`bake::raycast`] on an obvhs CWBVH) fitted into BSPVTs ([`bake::fit`]), encoded in chunks
-//! ([`bspvt_proto::encoding`]). [`bench`] measures it; [`stats`] reports a bake.
+//! The HTTP baking service of bspvt ([`service`]): uploads become checked scenes, bakes run as
+//! queued, resumable jobs of chunks (the [`bspvt_bake`] engine), chunks are durable before they
+//! are reported, and trees stream to clients as they are baked. [`bench`] is the bake's
+//! benchmark (`bspvt-server bench`).
+//!
+//! Owns: the job store (SQLite), chunk files, the axum API. Wire types shared with clients
+//! live in [`bspvt_proto::api`]. Must not depend on: the client crates.
 
-pub mod bake;
 pub mod bench;
-#[cfg(feature = "service")]
 pub mod service;
-pub mod stats;

@@ -4,11 +4,11 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
 use anyhow::{Context, Result};
+use bspvt_bake::Baker;
+use bspvt_bake::stats::BakeStats;
 use bspvt_proto::SplitMethod;
 use bspvt_proto::scene::open_scene;
-use bspvt_server::bake::Baker;
 use bspvt_server::bench::{self, BenchArgs};
-use bspvt_server::stats::BakeStats;
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -26,7 +26,6 @@ enum Command {
     /// Measure the bake on real meshes: rays and fit separately, every split method.
     Bench(BenchArgs),
     /// Run the HTTP baking service (docs/service.md).
-    #[cfg(feature = "service")]
     Serve(Box<bspvt_server::service::ServeArgs>),
 }
 
@@ -67,7 +66,7 @@ fn main() -> std::process::ExitCode {
     let result = match Cli::parse().command {
         Command::Bake(a) => bake(a),
         Command::Bench(a) => bench::run(&a),
-        #[cfg(feature = "service")]
+
         Command::Serve(a) => bspvt_server::service::serve_command(&a),
     };
     bspvt_proto::error::exit_code(result)

@@ -2,12 +2,12 @@
 //! random visibility cube maps, and a checker for the split of a spherical polygon by a
 //! vertex's trees.
 
+use bspvt_bake::cubemap::subpixel_offsets;
 use bspvt_proto::bspvt::{
     ABSENT_FACE_VALUE, FaceTree, LineCodec, Node, QLine, VertexTrees, unquantise,
 };
 use bspvt_proto::cubemap::FaceFrame;
 use bspvt_proto::sphere::solid_angle;
-use bspvt_server::bake::cubemap::subpixel_offsets;
 use glam::{DVec3, Vec2};
 
 // ---------------------------------------------------------------------------------------------

@@ -10,10 +10,10 @@
 //! Bake: face_res 64, ε = 1e-3, supersampling 1 and 4, light region = the light's box grown by
 //! 0.2 (so no pixel the light touches is "don't care").
 
+use bspvt_bake::Baker;
 use bspvt_proto::bspvt::VertexTrees;
 use bspvt_proto::builtin::{cuboid, grid_plane};
 use bspvt_proto::{Aabb, BakeSettings, SplitMethod};
-use bspvt_server::bake::Baker;
 use bspvt_tests::Rng;
 use glam::{DVec3, Quat, Vec3};
 

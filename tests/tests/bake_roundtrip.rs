@@ -9,10 +9,10 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::sync::atomic::AtomicBool;
 
+use bspvt_bake::Baker;
 use bspvt_proto::builtin::{self, grid_plane, icosphere};
 use bspvt_proto::encoding::{decode_bake, decode_header, peek_chunk};
 use bspvt_proto::{BakeSettings, Mesh};
-use bspvt_server::bake::Baker;
 use glam::Vec3;
 
 /// Set in a child process: bake plate-small and write the file here.

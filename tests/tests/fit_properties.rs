@@ -15,10 +15,10 @@
 //! Also: uniform input gives one leaf; the exhaustive search's root line has the least E(P, l)
 //! over every quantised line (brute force); and fitted trees split polygons correctly.
 
+use bspvt_bake::fit::{FitStats, Fitter};
 use bspvt_proto::SplitMethod;
 use bspvt_proto::bspvt::{FaceTree, LineCodec, MAX_DEPTH, Node, QLine, VertexTrees, quantise};
 use bspvt_proto::cubemap::{FACES, pixel_centres};
-use bspvt_server::bake::fit::{FitStats, Fitter};
 use bspvt_tests::{Rng, check_split, node_depths, random_face};
 use glam::{DVec3, Vec2};
 use proptest::prelude::*;

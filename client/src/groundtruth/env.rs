@@ -13,16 +13,16 @@
 use std::f64::consts::PI;
 
 use bspvt_proto::Scene;
-use bspvt_server::bake::raycast::Occluder;
+use bspvt_raytrace::Occluder;
 use glam::DVec3;
 use rayon::prelude::*;
 
 use super::{Ctx, Estimate, NoiseReport, Pcg32, ShadingPoint, Shadows, finish, power_heuristic};
-use crate::frame::ShadingFrame;
-use crate::render::camera::View;
-use crate::render::gbuffer::GBuffer;
-use crate::render::image::Image;
-use crate::sg::env::EnvLight;
+use crate::envmap::EnvLight;
+use crate::frame::camera::View;
+use crate::frame::gbuffer::GBuffer;
+use crate::frame::image::Image;
+use crate::frame::shading::ShadingFrame;
 
 /// Importance sampling of an environment map by texel luminance × solid angle.
 #[derive(Clone, Debug)]
@@ -233,7 +233,7 @@ pub fn render_mc_env(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::groundtruth::Brdf;
+    use crate::frame::brdf::Brdf;
 
     /// The sampler's density integrates to 1 and matches the histogram of its samples.
     #[test]

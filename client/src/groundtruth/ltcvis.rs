@@ -23,19 +23,19 @@
 use std::f64::consts::PI;
 
 use bspvt_proto::Scene;
-use bspvt_server::bake::raycast::Occluder;
+use bspvt_raytrace::Occluder;
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
 use super::rng::Pcg32;
 use super::sampling::PolygonSampler;
 use super::{Brdf, Ctx, ShadingPoint, Shadows, cosine_hemisphere};
-use crate::frame::ShadingFrame;
+use crate::frame::camera::View;
+use crate::frame::gbuffer::GBuffer;
+use crate::frame::image::Image;
+use crate::frame::shading::ShadingFrame;
 use crate::light::Light;
 use crate::ltc::polygon;
-use crate::render::camera::View;
-use crate::render::gbuffer::GBuffer;
-use crate::render::image::Image;
 
 /// One LTC lobe: what the LTC table's lookup gives for (α, cos θ).
 #[derive(Clone, Copy, Debug, PartialEq)]

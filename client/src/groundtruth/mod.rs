@@ -43,25 +43,23 @@
 pub mod env;
 pub mod ltcvis;
 pub mod primary;
-pub mod ratio;
 pub mod rng;
 pub mod sampling;
 
-use std::f64::consts::PI;
 use std::fmt;
 
 use bspvt_proto::Scene;
 use bspvt_proto::scene::Material;
-use bspvt_server::bake::raycast::Occluder;
+use bspvt_raytrace::Occluder;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::frame::ShadingFrame;
-use crate::ggx;
+use crate::frame::brdf::{Brdf, Shadows, cosine_hemisphere};
+use crate::frame::camera::View;
+use crate::frame::gbuffer::{GBuffer, Surface};
+use crate::frame::image::Image;
+use crate::frame::shading::ShadingFrame;
 use crate::light::Light;
-use crate::render::camera::View;
-use crate::render::gbuffer::{GBuffer, Surface};
-use crate::render::image::Image;
 
 pub use env::{EnvSampler, render_mc_env};
 pub use ltcvis::{
@@ -70,102 +68,6 @@ pub use ltcvis::{
 pub use primary::Tracer;
 pub use rng::Pcg32;
 use sampling::PolygonSampler;
-
-/// The project's BRDF for one material: Lambert + Schlick-GGX, per RGB channel.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Brdf {
-    /// GGX α, clamped to [`ggx::MIN_ALPHA`]..=1.
-    pub alpha: f64,
-    pub albedo: DVec3,
-    /// F0 (specular colour at normal incidence).
-    pub f0: DVec3,
-}
-
-impl Brdf {
-    pub fn new(alpha: f64, albedo: DVec3, f0: DVec3) -> Brdf {
-        let clean = |c: DVec3| {
-            DVec3::new(
-                finite_or_zero(c.x).max(0.0),
-                finite_or_zero(c.y).max(0.0),
-                finite_or_zero(c.z).max(0.0),
-            )
-        };
-        Brdf {
-            alpha: ggx::clamp_alpha(alpha),
-            albedo: clean(albedo),
-            f0: clean(f0),
-        }
-    }
-
-    pub fn from_material(m: &Material) -> Brdf {
-        Brdf::new(
-            f64::from(m.roughness),
-            glam::Vec3::from(m.albedo).as_dvec3(),
-            glam::Vec3::from(m.specular).as_dvec3(),
-        )
-    }
-
-    /// f(ωo, ωi) cos θi per channel, in the local frame (z = normal). Zero below either horizon.
-    #[inline]
-    pub fn eval_cos(&self, wo: DVec3, wi: DVec3) -> DVec3 {
-        if wo.z <= 0.0 || wi.z <= 0.0 {
-            return DVec3::ZERO;
-        }
-        let (spec, cos_d) = ggx::eval_cos(self.alpha, wo, wi);
-        let s = ggx::schlick_weight(cos_d);
-        let fresnel = self.f0 + (DVec3::ONE - self.f0) * s;
-        self.albedo * (wi.z / PI) + fresnel * spec
-    }
-
-    /// Probability of drawing a BRDF sample from the specular lobe (else the cosine lobe):
-    /// the lobes' rough weights — mean F at the view angle vs mean albedo — with at least 10 %
-    /// for the specular lobe (Schlick's term never vanishes at grazing angles).
-    fn spec_prob(&self, wo: DVec3) -> f64 {
-        let diff = (self.albedo.x + self.albedo.y + self.albedo.z) / 3.0;
-        if diff.is_nan() || diff <= 0.0 {
-            return 1.0;
-        }
-        let s = ggx::schlick_weight(wo.z.clamp(0.0, 1.0));
-        let f = self.f0 + (DVec3::ONE - self.f0) * s;
-        let spec = (f.x + f.y + f.z) / 3.0;
-        (spec / (spec + diff)).clamp(0.1, 1.0)
-    }
-
-    /// Draws ωi from the BRDF sampling mixture. May be below the horizon (weight 0).
-    pub fn sample(&self, wo: DVec3, u_lobe: f64, u: [f64; 2]) -> DVec3 {
-        if u_lobe < self.spec_prob(wo) {
-            ggx::sample_vndf(self.alpha, wo, u)
-        } else {
-            cosine_hemisphere(u)
-        }
-    }
-
-    /// Density per solid angle of [`Brdf::sample`].
-    pub fn pdf(&self, wo: DVec3, wi: DVec3) -> f64 {
-        if wo.z <= 0.0 || wi.z <= 0.0 {
-            return 0.0;
-        }
-        let ps = self.spec_prob(wo);
-        let spec = if ps > 0.0 {
-            ps * ggx::pdf_vndf(self.alpha, wo, wi)
-        } else {
-            0.0
-        };
-        spec + (1.0 - ps) * wi.z / PI
-    }
-}
-
-fn finite_or_zero(x: f64) -> f64 {
-    if x.is_finite() { x } else { 0.0 }
-}
-
-/// Cosine-weighted direction on the upper hemisphere.
-#[inline]
-pub fn cosine_hemisphere(u: [f64; 2]) -> DVec3 {
-    let r = u[0].sqrt();
-    let (s, c) = (2.0 * PI * u[1]).sin_cos();
-    DVec3::new(r * c, r * s, (1.0 - u[0]).max(0.0).sqrt())
-}
 
 /// A point to shade.
 #[derive(Clone, Copy, Debug)]
@@ -187,47 +89,6 @@ impl ShadingPoint {
             geometric: s.geometric,
             wo: (eye - s.position).normalize_or(s.normal),
         }
-    }
-}
-
-/// Shadow rays: an occluder (none = nothing casts shadows) and the offset ε that keeps rays
-/// off their own surface. Origins move by ε along the geometric normal (toward the ray's side)
-/// and segments stop ε short of the light.
-#[derive(Clone, Copy)]
-pub struct Shadows<'a> {
-    pub occluder: Option<&'a Occluder>,
-    pub epsilon: f64,
-}
-
-impl<'a> Shadows<'a> {
-    /// ε = 1e-4 × the mesh's bounding-box diagonal.
-    pub fn for_scene(scene: &Scene, occluder: Option<&'a Occluder>) -> Shadows<'a> {
-        let diag = f64::from(scene.mesh.bounds().diagonal());
-        Shadows {
-            occluder,
-            epsilon: 1e-4
-                * if diag.is_finite() && diag > 0.0 {
-                    diag
-                } else {
-                    1.0
-                },
-        }
-    }
-
-    /// True when nothing blocks the segment from `p` along unit `w` to distance `dist`.
-    pub fn visible(&self, p: DVec3, ng: DVec3, w: DVec3, dist: f64) -> bool {
-        let Some(occ) = self.occluder else {
-            return true;
-        };
-        let side = if ng.dot(w) >= 0.0 { 1.0 } else { -1.0 };
-        let origin = p + ng * (self.epsilon * side);
-        let d = (p + w * dist) - origin;
-        let len = d.length();
-        let t_max = len - self.epsilon;
-        if t_max.is_nan() || t_max <= 0.0 || !origin.is_finite() {
-            return true;
-        }
-        !occ.occluded_segment(origin.as_vec3(), (d / len).as_vec3(), t_max as f32)
     }
 }
 
@@ -291,7 +152,7 @@ impl Estimate {
 }
 
 /// A shading point with its light sampler, reused by every sample of the point.
-struct McPoint {
+pub(crate) struct McPoint {
     position: DVec3,
     geometric: DVec3,
     frame: ShadingFrame,
@@ -300,7 +161,7 @@ struct McPoint {
 }
 
 impl McPoint {
-    fn new(sp: &ShadingPoint, light: &Light) -> Option<McPoint> {
+    pub(crate) fn new(sp: &ShadingPoint, light: &Light) -> Option<McPoint> {
         let ok = |v: DVec3| v.is_finite() && v.length_squared() > 0.0;
         if !(sp.position.is_finite() && ok(sp.normal) && ok(sp.geometric) && ok(sp.wo)) {
             return None;
@@ -329,7 +190,7 @@ impl McPoint {
 
     /// One MIS sample, with and without its shadow rays (the same directions): what the ratio
     /// estimator needs. `shadows: None` skips the rays (`shadowed` is then 0).
-    fn sample_pair(
+    pub(crate) fn sample_pair(
         &self,
         brdf: &Brdf,
         light: &Light,
@@ -474,7 +335,7 @@ impl fmt::Display for NoiseReport {
     }
 }
 
-fn chan_mean(v: DVec3) -> f64 {
+pub(crate) fn chan_mean(v: DVec3) -> f64 {
     (v.x + v.y + v.z) / 3.0
 }
 
@@ -539,15 +400,15 @@ pub fn finish(width: u32, height: u32, est: &[Option<Estimate>]) -> (Image, Nois
 }
 
 /// Per-scene shading state shared by the renderers.
-struct Ctx<'a> {
+pub(crate) struct Ctx<'a> {
     scene: &'a Scene,
     brdfs: Vec<Brdf>,
     fallback: Brdf,
-    shadows: Shadows<'a>,
+    pub(crate) shadows: Shadows<'a>,
 }
 
 impl<'a> Ctx<'a> {
-    fn new(scene: &'a Scene, occluder: Option<&'a Occluder>) -> Ctx<'a> {
+    pub(crate) fn new(scene: &'a Scene, occluder: Option<&'a Occluder>) -> Ctx<'a> {
         Ctx {
             scene,
             brdfs: scene.materials.iter().map(Brdf::from_material).collect(),
@@ -556,7 +417,7 @@ impl<'a> Ctx<'a> {
         }
     }
 
-    fn brdf(&self, tri: u32) -> &Brdf {
+    pub(crate) fn brdf(&self, tri: u32) -> &Brdf {
         self.scene
             .mesh
             .material_ids

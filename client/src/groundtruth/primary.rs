@@ -6,7 +6,7 @@
 use std::time::Duration;
 
 use bspvt_proto::Mesh;
-use bspvt_server::bake::raycast::mesh_triangles;
+use bspvt_raytrace::mesh_triangles;
 use glam::{DVec3, Vec3A};
 use obvhs::{
     BvhBuildParams,
@@ -15,7 +15,7 @@ use obvhs::{
     rt_triangle::RtTriangle,
 };
 
-use crate::render::gbuffer::Surface;
+use crate::frame::gbuffer::Surface;
 
 /// A mesh prepared for closest-hit queries.
 pub struct Tracer {
@@ -43,7 +43,7 @@ impl Tracer {
     }
 
     /// The surface hit first by the ray from `eye` along unit `dir`, shaded like
-    /// [`crate::render::gbuffer::GBuffer::surface`] (interpolated normal facing the viewer).
+    /// [`crate::frame::gbuffer::GBuffer::surface`] (interpolated normal facing the viewer).
     pub fn surface(&self, mesh: &Mesh, eye: DVec3, dir: DVec3) -> Option<Surface> {
         let ray = Ray::new(
             Vec3A::from(eye.as_vec3()),

@@ -7,6 +7,5 @@
 //! - [`table`]: the table and its lookup by roughness and view angle;
 //! - [`polygon`]: the polygon integral (horizon clip, stable edge integral).
 
-pub mod fit;
 pub mod polygon;
 pub mod table;

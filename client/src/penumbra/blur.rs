@@ -23,8 +23,8 @@ use rayon::prelude::*;
 use glam::DVec3;
 
 use super::{Guide, Params};
+use crate::frame::camera::View;
 use crate::light::Light;
-use crate::render::camera::View;
 
 type Widths = [f64];
 

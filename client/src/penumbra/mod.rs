@@ -18,19 +18,18 @@
 //! - [`shadowmap`]: a depth map rendered from the light; PCF (fixed kernel), VSM (moments,
 //!   Chebyshev bound, light-bleeding reduction) and PCSS (blocker search, then PCF of width W).
 
-pub mod bench;
 pub mod blur;
 pub mod rt;
 pub mod shadowmap;
 
 use anyhow::{Result, bail};
-use bspvt_server::bake::raycast::Occluder;
+use bspvt_raytrace::Occluder;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::groundtruth::Shadows;
+use crate::frame::brdf::Shadows;
+use crate::frame::image::Image;
 use crate::light::Light;
-use crate::render::image::Image;
 use crate::render::renderer::Renderer;
 
 /// A shadow technique of this module.

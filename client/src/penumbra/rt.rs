@@ -4,12 +4,12 @@
 //! screen pixels (W / the pixel's footprint on the receiver's tangent plane), capped at
 //! [`Params::max_radius`] pixels ([`super::blur`]).
 
-use bspvt_server::bake::raycast::Occluder;
+use bspvt_raytrace::Occluder;
 use rayon::prelude::*;
 
 use super::{Guide, Kernel, Params, blur, light_width, penumbra_width};
+use crate::frame::camera::View;
 use crate::light::Light;
-use crate::render::camera::View;
 
 /// Per-pixel buffers of the hard shadow pass (row-major; background pixels: lit, no width).
 #[derive(Clone, Debug)]

@@ -19,9 +19,9 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::{Guide, GuidePixel, Params, light_width, penumbra_width};
+use crate::frame::camera::View;
+use crate::frame::gbuffer::GBuffer;
 use crate::light::Light;
-use crate::render::camera::View;
-use crate::render::gbuffer::GBuffer;
 
 /// Largest half field of view of the light camera: tan 75°.
 const MAX_TAN_HALF: f64 = 3.732;

@@ -14,16 +14,16 @@ use bspvt_proto::scene::{Camera, Material};
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::camera::View;
-use super::gbuffer::{GBuffer, NONE};
-use super::image::Image;
+use crate::frame::camera::View;
+use crate::frame::gbuffer::{GBuffer, NONE};
+use crate::frame::image::Image;
 use crate::light::Light;
 use crate::ltc::table::LtcTable;
 use crate::shade::bspvt::shade_vertex;
 use crate::shade::{Lobes, unshadowed};
 
 /// Where shading is evaluated.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Mode {
     /// Per vertex, interpolated over triangles (the paper's).

@@ -65,7 +65,7 @@ pub fn ggx_lobe(alpha: f64, n: DVec3, wo: DVec3) -> Option<SpecLobe> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frame::ShadingFrame;
+    use crate::frame::shading::ShadingFrame;
     use crate::sg::testutil::quad_about;
 
     /// ∫ L(ωi) f cos dωi by quadrature (exact GGX, Fresnel weight f0 = 1 → F = 1) vs the SG

@@ -28,7 +28,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::Sg;
-use super::env::EnvLight;
+use crate::envmap::EnvLight;
 
 /// Sharpness bounds of the fit.
 pub const LN_LAMBDA_MIN: f64 = -6.907_755_278_982_137; // ln 1e-3
@@ -578,7 +578,7 @@ mod tests {
 
     #[test]
     fn fits_the_test_map() {
-        let p = super::super::env::default_env_path();
+        let p = crate::envmap::default_env_path();
         if !p.exists() {
             eprintln!("SKIP: {} not found (set BSPVT_ASSETS)", p.display());
             return;

@@ -2,17 +2,14 @@
 //! function (paper 001; Wang et al. 2009 for the SG shading, Xu et al. 2013 for SSDF
 //! visibility). Pure math lives in [`lobe`], [`halfspace`] and [`brdf`].
 
-pub mod bench;
 pub mod brdf;
 pub mod diffuse;
-pub mod env;
 pub mod fit;
 pub mod halfspace;
 pub mod lobe;
 pub mod render;
 pub mod ssdf;
 
-pub use env::EnvLight;
 pub use fit::{FitOptions, LightLobe, SgEnv, fit, fit_cached, fit_with};
 pub use lobe::Sg;
 pub use render::{SgOptions, SgTimings, SsdfMode, render};

@@ -19,7 +19,7 @@ use std::time::Instant;
 use anyhow::{Result, bail};
 use bspvt_proto::Scene;
 use bspvt_proto::scene::Material;
-use bspvt_server::bake::raycast::Occluder;
+use bspvt_raytrace::Occluder;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
@@ -29,13 +29,13 @@ use super::diffuse::{self, DiffuseTable};
 use super::fit::SgEnv;
 use super::halfspace;
 use super::ssdf::{Boundary, DepthMap, Point, exact_boundary};
-use crate::groundtruth::{Brdf, Shadows};
-use crate::render::camera::View;
-use crate::render::gbuffer::GBuffer;
-use crate::render::image::Image;
+use crate::frame::brdf::{Brdf, Shadows};
+use crate::frame::camera::View;
+use crate::frame::gbuffer::GBuffer;
+use crate::frame::image::Image;
 
 /// How the SSDF is found.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum SsdfMode {
     /// The paper's: a depth map per lighting lobe with a MIN/MAX pyramid, coarse-to-fine.
@@ -394,7 +394,7 @@ mod tests {
         let scene = builtin::scene("plate-small").expect("built-in scene");
         let view = View::new(&scene.camera, 48, 32);
         let g = GBuffer::rasterize(&scene.mesh, &view);
-        let tris = bspvt_server::bake::raycast::mesh_triangles(&scene.mesh);
+        let tris = bspvt_raytrace::mesh_triangles(&scene.mesh);
         let occ = Occluder::new(&scene.mesh, &tris);
         let env = one_lobe([0.2, 1.0, 0.1], 20.0);
         let mut means = Vec::new();
@@ -446,7 +446,10 @@ mod tests {
         };
         let (a, ta) = run(1);
         let (b, tb) = run(2);
-        let e = crate::sg::bench::rmse(&a, &b);
+        // Pixels black in both (background) are left out.
+        let e = crate::frame::stats::rmse(&a, &b, |i| {
+            a.pixels[i] != [0.0; 3] || b.pixels[i] != [0.0; 3]
+        });
         eprintln!(
             "stride 2 vs 1: RMSE {e:.5} (mean {:.5}); searches {} + {} reused vs {}",
             a.mean(),
@@ -492,7 +495,7 @@ mod tests {
         // The darkest pixel on the ground (not on the sphere).
         let lum = |p: [f32; 3]| p[0] + p[1] + p[2];
         let (dark, _) = (0..a.pixels.len())
-            .filter(|&i| ga.tri[i] != crate::render::gbuffer::NONE && ga.tri[i] >= sphere_tris)
+            .filter(|&i| ga.tri[i] != crate::frame::gbuffer::NONE && ga.tri[i] >= sphere_tris)
             .map(|i| (i, lum(a.pixels[i])))
             .min_by(|x, y| x.1.total_cmp(&y.1))
             .expect("ground pixels");

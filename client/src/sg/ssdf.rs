@@ -25,7 +25,7 @@
 //! point's own surface must not count as an occluder.
 
 use bspvt_proto::Mesh;
-use bspvt_server::bake::raycast::Occluder;
+use bspvt_raytrace::Occluder;
 use glam::Vec3;
 
 /// A lobe's visibility at one point.
@@ -469,7 +469,7 @@ mod tests {
     #[test]
     fn both_searches_find_the_square_edge() {
         let mesh = scene();
-        let tris = bspvt_server::bake::raycast::mesh_triangles(&mesh);
+        let tris = bspvt_raytrace::mesh_triangles(&mesh);
         let occ = Occluder::new(&mesh, &tris);
         let p = Point {
             position: Vec3::new(0.1, 0.0, 0.05),

@@ -16,7 +16,7 @@ use bspvt_proto::scene::Material;
 use bspvt_proto::sphere::{self, SphPoly};
 use glam::{DMat3, DVec3};
 
-use crate::frame::ShadingFrame;
+use crate::frame::shading::ShadingFrame;
 use crate::ggx;
 use crate::light::Light;
 use crate::ltc::polygon::{integrate, vector_form_factor};

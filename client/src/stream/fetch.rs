@@ -15,9 +15,9 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use anyhow::{Result, bail};
+use bspvt_proto::api::JobState;
+use bspvt_proto::api::SceneStatus;
 use bspvt_proto::encoding::{BakeHeader, Chunk, decode_chunk, decode_header};
-use bspvt_server::service::api::SceneStatus;
-use bspvt_server::service::db::JobState;
 
 use super::cache::Cache;
 use super::frames::{Frame, FrameReader};

@@ -6,7 +6,6 @@
 //! a scene file, a mesh) into a served scene, starting an embedded service when needed.
 
 pub mod cache;
-pub mod connect;
 pub mod fetch;
 pub mod frames;
 pub mod remote;

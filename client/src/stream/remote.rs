@@ -7,9 +7,9 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use bspvt_proto::Scene;
+use bspvt_proto::api::SceneStatus;
+use bspvt_proto::api::decode_scene;
 use bspvt_proto::scene::{MeshRef, SceneFile};
-use bspvt_server::service::api::SceneStatus;
-use bspvt_server::service::input::decode_scene;
 
 use super::cache::Cache;
 

@@ -8,10 +8,8 @@ use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
+use bspvt_proto::api::JobState;
 use bspvt_proto::hash::Fnv1a;
-use bspvt_server::service::Background;
-use bspvt_server::service::config::Config;
-use bspvt_server::service::db::JobState;
 
 use super::remote::Remote;
 
@@ -72,11 +70,27 @@ fn is_id(s: &str) -> bool {
     s.len() == 32 && s.bytes().all(|b| b.is_ascii_hexdigit())
 }
 
+/// A baking service this process can run itself, on loopback (the command line provides one
+/// with its `service` feature; this library never depends on the service's crate).
+pub trait Embedded: Send + Sync {
+    /// Starts a service keeping its data in `data_dir`, listening on a free loopback port.
+    fn start(&self, data_dir: &Path) -> Result<EmbeddedService>;
+}
+
+/// A running embedded service: its address, and whatever keeps it running (dropping this
+/// value stops it).
+pub struct EmbeddedService {
+    /// Where it listens (127.0.0.1, a free port).
+    pub addr: SocketAddr,
+    /// Stops the service when dropped.
+    pub guard: Box<dyn std::any::Any + Send>,
+}
+
 /// A scene on a service, and the embedded service when this process runs it.
 pub struct Served {
     pub remote: Remote,
     pub id: String,
-    pub embedded: Option<Background>,
+    pub embedded: Option<EmbeddedService>,
     /// Whether this call submitted the scene (false: already on the service).
     pub submitted: bool,
 }
@@ -88,6 +102,9 @@ pub struct Places {
     pub api_key: Option<String>,
     /// Data folder of the embedded service.
     pub data_dir: PathBuf,
+    /// The embedded service for local scenes when no `server` is given (`None`: this build
+    /// has none, and local scenes need `--server`).
+    pub embedded: Option<&'static dyn Embedded>,
 }
 
 /// Resolves `src` to a scene on a service, submitting local scenes.
@@ -114,9 +131,13 @@ pub fn open(src: &Source, places: &Places) -> Result<Served> {
             let (remote, embedded) = match &places.server {
                 Some(base) => (Remote::new(base, places.api_key.clone()), None),
                 None => {
-                    let mut cfg = Config::with_data_dir(&places.data_dir);
-                    cfg.addr = SocketAddr::from(([127, 0, 0, 1], 0));
-                    let bg = Background::start(cfg).with_context(|| {
+                    let Some(starter) = places.embedded else {
+                        bail!(
+                            "this build has no embedded service: give --server URL (or \
+                             BSPVT_SERVER) to bake a local scene"
+                        );
+                    };
+                    let bg = starter.start(&places.data_dir).with_context(|| {
                         format!(
                             "cannot start the embedded service in {}",
                             places.data_dir.display()

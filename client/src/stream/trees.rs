@@ -1,8 +1,8 @@
 //! The renderer's side of a stream: the trees that have arrived, and which vertices have them.
 
+use bspvt_proto::api::SceneStatus;
 use bspvt_proto::bspvt::{LineCodec, VertexTrees};
 use bspvt_proto::encoding::BakeHeader;
-use bspvt_server::service::api::SceneStatus;
 
 use super::fetch::Update;
 use crate::render::renderer::Trees;

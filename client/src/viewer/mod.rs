@@ -3,13 +3,11 @@
 //!
 //! Mouse: left-drag orbits, wheel zooms, right-drag moves the light; dragging on the bottom bar
 //! sets the roughness. Keys: W/A/S/D and Q/E move the light, R/F turn it, T/G tilt it, P runs it
-//! along its path, -/= change its radiance, 1/2/3 pick BSPVT / LTC / Monte Carlo, 4/5/6/7 the point-light
-//! shadows RT penumbra / PCSS / PCF / VSM, M switches
+//! along its path, -/= change its radiance, 1–9 pick the first nine methods of the registry
+//! (BSPVT, LTC, Monte Carlo, RT penumbra, PCSS, PCF, VSM, SG, MC environment), M switches
 //! per-vertex / per-pixel, [ and ] change the roughness (O: the scene's), H hides the overlay,
 //! Esc quits. Frames are drawn on this thread; the trees arrive on the fetcher's thread, so the
 //! window stays responsive while data streams.
-
-pub mod overlay;
 
 use std::time::{Duration, Instant};
 
@@ -17,9 +15,10 @@ use anyhow::{Context, Result};
 use glam::DVec3;
 use minifb::{Key, KeyRepeat, MouseButton, MouseMode, Window, WindowOptions};
 
+use crate::frame::canvas::Canvas;
+use crate::method::METHODS;
 use crate::render::renderer::Mode;
-use crate::session::{Session, ViewMethod};
-use overlay::Canvas;
+use crate::session::Session;
 
 pub struct ViewerOptions {
     pub title: String,
@@ -115,14 +114,20 @@ pub fn run(session: &mut Session, opts: &ViewerOptions, started: Instant) -> Res
         let mut roughness = session.roughness;
         for key in window.get_keys_pressed(KeyRepeat::No) {
             match key {
-                Key::Key1 => session.method = ViewMethod::Bspvt,
-                Key::Key2 => session.method = ViewMethod::Ltc,
-                Key::Key3 => session.method = ViewMethod::Mc,
-                Key::Key4 => session.method = ViewMethod::RtPenumbra,
-                Key::Key5 => session.method = ViewMethod::Pcss,
-                Key::Key6 => session.method = ViewMethod::Pcf,
-                Key::Key7 => session.method = ViewMethod::Vsm,
-                Key::Key8 => session.method = ViewMethod::Sg,
+                Key::Key1
+                | Key::Key2
+                | Key::Key3
+                | Key::Key4
+                | Key::Key5
+                | Key::Key6
+                | Key::Key7
+                | Key::Key8
+                | Key::Key9 => {
+                    let i = key as usize - Key::Key1 as usize;
+                    if let Some(m) = METHODS.get(i) {
+                        session.method = *m;
+                    }
+                }
                 Key::M => {
                     session.mode = match session.mode {
                         Mode::Vertex => Mode::Pixel,
@@ -241,13 +246,12 @@ fn scene_scale(s: &Session) -> f64 {
 }
 
 fn overlay_lines(s: &Session, fps: f64, opts: &ViewerOptions) -> Vec<String> {
-    let mode = match s.mode {
-        _ if s.method.penumbra().is_some() => "per pixel",
+    let mode = match s.effective_mode() {
         Mode::Vertex => "per vertex",
         Mode::Pixel => "per pixel",
     };
     let mut lines = vec![
-        format!("{:.1} fps   {} - {mode}", fps, s.method.name()),
+        format!("{:.1} fps   {} - {mode}", fps, s.method.label()),
         format!(
             "trees: {:.1} % of {} vertices{}",
             s.streamed.fraction() * 100.0,
@@ -276,12 +280,12 @@ fn overlay_lines(s: &Session, fps: f64, opts: &ViewerOptions) -> Vec<String> {
             e.chars().take(60).collect::<String>()
         ));
     }
-    if s.method == ViewMethod::Mc {
-        lines.push(format!("{} samples per pixel", s.mc_passes()));
+    if s.passes() > 0 {
+        lines.push(format!("{} samples per pixel", s.passes()));
     }
     if let Some(n) = &opts.note {
         lines.push(n.clone());
     }
-    lines.push("1-8 method  M mode  WASDQE RF TG light  P path  H hide".into());
+    lines.push("1-9 method  M mode  WASDQE RF TG light  P path  H hide".into());
     lines
 }

@@ -17,10 +17,12 @@ use axum::http::request::Parts;
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use bspvt_proto::encoding::{BakeHeader, encode_header};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use utoipa::ToSchema;
 
-use super::db::{JobState, SceneRow, now_ms};
+use bspvt_proto::api::{JobState, Links, SceneStatus, Sizes};
+
+use super::db::{SceneRow, now_ms};
 use super::error::{ApiError, ApiResult, ErrorBody};
 use super::input::{self, Upload};
 use super::jobs::{Live, SubmitError};
@@ -37,82 +39,6 @@ pub struct Submitted {
     /// The scene's id: 32 hex digits (128 random bits). Whoever knows it can read the scene.
     pub id: String,
     pub state: JobState,
-    pub links: Links,
-}
-
-/// Where to find a scene's parts.
-#[derive(Clone, Debug, Serialize, Deserialize, ToSchema)]
-pub struct Links {
-    #[serde(rename = "self")]
-    pub status: String,
-    pub events: String,
-    pub mesh: String,
-    /// The scene as baked (`GET /v1/scenes/{id}/scene`).
-    #[serde(default)]
-    pub scene: String,
-    pub trees: String,
-}
-
-impl Links {
-    fn of(id: &str) -> Links {
-        Links {
-            status: format!("/v1/scenes/{id}"),
-            events: format!("/v1/scenes/{id}/events"),
-            mesh: format!("/v1/scenes/{id}/mesh"),
-            scene: format!("/v1/scenes/{id}/scene"),
-            trees: format!("/v1/scenes/{id}/trees"),
-        }
-    }
-}
-
-/// Sizes of a scene.
-#[derive(Clone, Debug, Serialize, Deserialize, ToSchema)]
-pub struct Sizes {
-    pub mesh_vertices: u32,
-    pub mesh_triangles: u64,
-    /// Bytes uploaded (mesh file as sent, scene and settings JSON).
-    pub upload_bytes: u64,
-    /// Bytes of the bake stored so far: header frame + durable chunk frames. When `done`, the
-    /// size of the whole tree stream (= the offline bake file).
-    pub stored_bytes: u64,
-}
-
-/// A scene's status.
-#[derive(Clone, Debug, Serialize, Deserialize, ToSchema)]
-pub struct SceneStatus {
-    pub id: String,
-    pub state: JobState,
-    /// Why the bake failed (`failed`) or stopped (`cancelled`).
-    pub reason: Option<String>,
-    pub vertices_done: u64,
-    pub vertices_total: u32,
-    pub chunks_done: u32,
-    pub chunks_total: u32,
-    /// `vertices_done / vertices_total`.
-    pub progress: f64,
-    /// Vertices per second baked by this server process (while baking).
-    pub rate_vertices_per_s: Option<f64>,
-    /// Estimated seconds to completion (while baking).
-    pub eta_s: Option<f64>,
-    /// Scenes ahead of this one (while queued).
-    pub queue_position: Option<usize>,
-    /// The bake settings (`face_res`, `epsilon`, `supersampling`, `split`, `chunk_vertices`).
-    #[schema(value_type = Object)]
-    pub settings: serde_json::Value,
-    pub sizes: Sizes,
-    /// The baked mesh's content hash (hex), as in the bake header.
-    pub mesh_hash: String,
-    /// How the scene was submitted.
-    pub source: String,
-    pub created_ms: i64,
-    pub started_ms: Option<i64>,
-    pub finished_ms: Option<i64>,
-    /// Chunks baked by this server process (a restarted server never re-bakes durable chunks).
-    pub chunks_baked_this_process: u32,
-    /// Chunks baked over all runs, re-bakes included.
-    pub chunks_baked_total: u64,
-    /// Stored chunks found corrupt or missing and baked again.
-    pub chunks_corrupt: u64,
     pub links: Links,
 }
 

@@ -15,54 +15,12 @@ use std::sync::{Mutex, MutexGuard};
 
 use anyhow::{Context, Result};
 use rusqlite::{Connection, OptionalExtension, params};
-use serde::{Deserialize, Serialize};
-use utoipa::ToSchema;
 
-/// Where a scene's bake stands.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum JobState {
-    /// Accepted, waiting for a bake slot.
-    Queued,
-    /// Chunks are being baked.
-    Baking,
-    /// Every chunk is durable.
-    Done,
-    /// The bake stopped; `reason` says why.
-    Failed,
-    /// Deleted by a client; its data is gone.
-    Cancelled,
-}
+pub use bspvt_proto::api::JobState;
 
-impl JobState {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            JobState::Queued => "queued",
-            JobState::Baking => "baking",
-            JobState::Done => "done",
-            JobState::Failed => "failed",
-            JobState::Cancelled => "cancelled",
-        }
-    }
-
-    fn parse(s: &str) -> Result<JobState> {
-        Ok(match s {
-            "queued" => JobState::Queued,
-            "baking" => JobState::Baking,
-            "done" => JobState::Done,
-            "failed" => JobState::Failed,
-            "cancelled" => JobState::Cancelled,
-            _ => anyhow::bail!("unknown scene state {s:?} in the database"),
-        })
-    }
-
-    /// Whether the state can no longer change by baking.
-    pub fn is_terminal(self) -> bool {
-        matches!(
-            self,
-            JobState::Done | JobState::Failed | JobState::Cancelled
-        )
-    }
+/// A state column's text as a [`JobState`].
+fn parse_state(s: &str) -> Result<JobState> {
+    JobState::parse(s).with_context(|| format!("unknown scene state {s:?} in the database"))
 }
 
 /// What the database records of a durable chunk.
@@ -266,7 +224,7 @@ impl Db {
     }
 
     fn finish_row((mut row, state): (SceneRow, String)) -> Result<SceneRow> {
-        row.state = JobState::parse(&state)?;
+        row.state = parse_state(&state)?;
         Ok(row)
     }
 
@@ -409,7 +367,7 @@ impl Db {
             params![id, now_ms()],
         )?;
         tx.commit()?;
-        Ok(Some(JobState::parse(&before)?))
+        Ok(Some(parse_state(&before)?))
     }
 
     /// Scenes per state (for metrics).
@@ -420,7 +378,7 @@ impl Db {
             .query_map([], |r| Ok((r.get::<_, String>(0)?, r.get::<_, i64>(1)?)))?
             .collect::<rusqlite::Result<Vec<_>>>()?;
         rows.into_iter()
-            .map(|(s, n)| Ok((JobState::parse(&s)?, n as u64)))
+            .map(|(s, n)| Ok((parse_state(&s)?, n as u64)))
             .collect()
     }
 }

@@ -12,17 +12,8 @@ use axum::body::Body;
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use bspvt_proto::error::{MeshError, SceneError, chain_message};
-use serde::Serialize;
-use utoipa::ToSchema;
 
-/// The body of every error response.
-#[derive(Serialize, ToSchema, Debug)]
-pub struct ErrorBody {
-    /// Stable machine-readable code, e.g. `invalid_mesh`, `unauthorized`, `not_found`.
-    pub error: String,
-    /// What is wrong, in words.
-    pub detail: String,
-}
+pub use bspvt_proto::api::ErrorBody;
 
 /// An error answered to a client.
 #[derive(Debug)]

@@ -15,10 +15,8 @@
 use std::io::Read;
 
 use bspvt_proto::import::{Format, Limits, load_mesh_bytes};
-use bspvt_proto::motion::MovingPart;
-use bspvt_proto::scene::{Camera, Material, PolygonLight, Region, SceneFile};
+use bspvt_proto::scene::SceneFile;
 use bspvt_proto::{BakeSettings, Mesh, Scene, SceneError};
-use serde::{Deserialize, Serialize};
 
 use super::error::{ApiError, ApiResult};
 
@@ -224,113 +222,7 @@ fn check_limits(scene: &Scene, lim: &InputLimits) -> ApiResult<()> {
     Ok(())
 }
 
-// ---------------------------------------------------------------------------------------------
-// The stored form of a scene.
-
-/// 2: adds the moving parts ([`bspvt_proto::motion`]); version 1 (static scenes) still reads.
-const STORED_VERSION: u16 = 2;
-
-#[derive(Serialize, Deserialize)]
-struct StoredScene {
-    version: u16,
-    mesh: Mesh,
-    materials: Vec<Material>,
-    lights: Vec<StoredLight>,
-    camera: Camera,
-    bake: BakeSettings,
-    motion: Vec<MovingPart>,
-}
-
-/// Version 1: [`StoredScene`] without `motion`.
-#[derive(Serialize, Deserialize)]
-struct StoredSceneV1 {
-    version: u16,
-    mesh: Mesh,
-    materials: Vec<Material>,
-    lights: Vec<StoredLight>,
-    camera: Camera,
-    bake: BakeSettings,
-}
-
-/// [`PolygonLight`] without serde's skipped fields, which postcard cannot carry.
-#[derive(Serialize, Deserialize)]
-struct StoredLight {
-    vertices: Vec<[f32; 3]>,
-    radiance: [f32; 3],
-    two_sided: bool,
-    texture: Option<String>,
-    region: Option<Region>,
-}
-
-impl From<&PolygonLight> for StoredLight {
-    fn from(l: &PolygonLight) -> StoredLight {
-        StoredLight {
-            vertices: l.vertices.clone(),
-            radiance: l.radiance,
-            two_sided: l.two_sided,
-            texture: l.texture.clone(),
-            region: l.region,
-        }
-    }
-}
-
-/// The scene as stored in `scene.bin` (postcard; exact floats).
-pub fn encode_scene(s: &Scene) -> Vec<u8> {
-    let stored = StoredScene {
-        version: STORED_VERSION,
-        mesh: s.mesh.clone(),
-        materials: s.materials.clone(),
-        lights: s.lights.iter().map(StoredLight::from).collect(),
-        camera: s.camera.clone(),
-        bake: s.bake.clone(),
-        motion: s.motion.clone(),
-    };
-    postcard::to_stdvec(&stored).unwrap_or_default()
-}
-
-/// Reads back [`encode_scene`]'s bytes (and version 1's).
-pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
-    let bad = |e: postcard::Error| format!("stored scene does not decode: {e}");
-    let (version, _) = postcard::take_from_bytes::<u16>(bytes).map_err(bad)?;
-    let s = match version {
-        1 => {
-            let v1: StoredSceneV1 = postcard::from_bytes(bytes).map_err(bad)?;
-            StoredScene {
-                version: v1.version,
-                mesh: v1.mesh,
-                materials: v1.materials,
-                lights: v1.lights,
-                camera: v1.camera,
-                bake: v1.bake,
-                motion: Vec::new(),
-            }
-        }
-        STORED_VERSION => postcard::from_bytes(bytes).map_err(bad)?,
-        v => return Err(format!("stored scene has version {v}")),
-    };
-    let scene = Scene {
-        mesh: s.mesh,
-        materials: s.materials,
-        lights: s
-            .lights
-            .into_iter()
-            .map(|l| PolygonLight {
-                vertices: l.vertices,
-                radiance: l.radiance,
-                two_sided: l.two_sided,
-                texture: l.texture,
-                region: l.region,
-            })
-            .collect(),
-        camera: s.camera,
-        bake: s.bake,
-        motion: s.motion,
-    };
-    scene
-        .validate()
-        .map_err(|e| format!("stored scene is not valid: {e}"))?;
-    Ok(scene)
-}
+pub use bspvt_proto::api::{decode_scene, encode_scene};
 
 #[cfg(test)]
 mod tests {
@@ -378,7 +270,7 @@ mod tests {
     /// A moving scene keeps its motion through storage; a version-1 scene still reads, and a
     /// stored part that does not fit the mesh is refused.
     #[test]
-    fn moving_scenes_survive_storage_and_version_1_reads() {
+    fn moving_scenes_survive_storage() {
         let s = bspvt_proto::builtin::scene("dynamic").expect("builtin");
         assert!(s.is_dynamic());
         // Uploaded as a scene file, it composes to the same moving scene.
@@ -395,17 +287,6 @@ mod tests {
         let back = decode_scene(&encode_scene(&s)).expect("decodes");
         assert_eq!(back, s);
         assert_eq!(back.at(0.3), s.at(0.3));
-        let p = bspvt_proto::builtin::scene("plate-small").expect("builtin");
-        let v1 = postcard::to_stdvec(&StoredSceneV1 {
-            version: 1,
-            mesh: p.mesh.clone(),
-            materials: p.materials.clone(),
-            lights: p.lights.iter().map(StoredLight::from).collect(),
-            camera: p.camera.clone(),
-            bake: p.bake.clone(),
-        })
-        .expect("encode v1");
-        assert_eq!(decode_scene(&v1).as_ref(), Ok(&p));
         let mut broken = s.clone();
         broken.motion[0].first_vertex = u32::MAX - 10;
         let e = decode_scene(&encode_scene(&broken)).expect_err("refused");

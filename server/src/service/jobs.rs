@@ -34,7 +34,7 @@ use tokio::sync::watch;
 use super::db::{ChunkMeta, Db, JobState, SceneRow, now_ms};
 use super::metrics::{Gauges, Metrics};
 use super::store::Store;
-use crate::bake::Baker;
+use bspvt_bake::Baker;
 
 /// Locks a mutex, ignoring poisoning: every critical section here leaves its data consistent
 /// at each step, and a panic is caught around the bake, not inside these sections.

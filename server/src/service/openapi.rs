@@ -31,12 +31,12 @@ use super::{api, sse, stream};
     ),
     components(schemas(
         api::Submitted,
-        api::SceneStatus,
-        api::Sizes,
-        api::Links,
+        bspvt_proto::api::SceneStatus,
+        bspvt_proto::api::Sizes,
+        bspvt_proto::api::Links,
         api::Health,
         super::db::JobState,
-        super::error::ErrorBody,
+        bspvt_proto::api::ErrorBody,
     )),
     modifiers(&BearerAuth),
     tags(

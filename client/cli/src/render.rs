@@ -1,0 +1,239 @@
+//! `bspvt render`: images of a scene with any registered method, one frame or a sequence
+//! while the light moves; bakes the trees first (cached) when the method needs them.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use bspvt_client::frame::image::Image;
+use bspvt_client::method::sequence::{Options, render_sequence};
+use bspvt_client::method::trees::{cached_bake, load_checked};
+use bspvt_client::method::{EnvOptions, Settings};
+use bspvt_client::render::renderer::{Mode, Trees};
+use bspvt_client::sg::{SgOptions, SsdfMode};
+use bspvt_proto::scene::open_scene;
+
+use crate::frame_args::{method, method_values};
+use crate::progress::progress_bar;
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum RenderMode {
+    Vertex,
+    Pixel,
+    /// Both, side by side (vertex left, pixel right).
+    Both,
+}
+
+#[derive(clap::Args)]
+pub(crate) struct RenderArgs {
+    /// Scene file (JSON) or `builtin:NAME`.
+    scene: Option<String>,
+    /// A bare mesh (.glb/.gltf/.obj/.ply) with the default scene around it.
+    #[arg(long)]
+    mesh: Option<PathBuf>,
+    /// Bake file of this scene (`bspvt-server bake`). A method that needs trees and is given
+    /// none bakes them once, cached in --cache by the scene's hash.
+    #[arg(long)]
+    trees: Option<PathBuf>,
+    /// Where bakes made for methods that need trees are kept (by the scene's hash).
+    #[arg(long, default_value = "out/cache/bakes")]
+    cache: PathBuf,
+    /// Rendering method (`bspvt methods` lists them with what they need).
+    #[arg(long, default_value = "bspvt", value_parser = method_values())]
+    method: String,
+    #[arg(long, value_enum, default_value = "vertex")]
+    mode: RenderMode,
+    /// Samples per pixel (mc, ltc-exact).
+    #[arg(long, default_value_t = 64)]
+    spp: u32,
+    #[arg(long, default_value_t = 512)]
+    width: u32,
+    #[arg(long, default_value_t = 512)]
+    height: u32,
+    /// Frames along the light path; more than one writes OUT-000.png, OUT-001.png, …
+    #[arg(long, default_value_t = 1)]
+    frames: usize,
+    /// Output image: .png (tone-mapped) or .exr (linear).
+    #[arg(long)]
+    out: PathBuf,
+    /// Exposure applied before tone mapping (PNG only).
+    #[arg(long, default_value_t = 1.0)]
+    exposure: f32,
+    /// Write timings as JSON here.
+    #[arg(long)]
+    stats: Option<PathBuf>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Environment map (equirectangular Radiance .hdr) for `--method sg` and `mc-env`
+    /// [default: env/royal_esplanade_1k.hdr under BSPVT_ASSETS or ../shared/assets].
+    #[arg(long)]
+    env: Option<PathBuf>,
+    /// Spherical Gaussians fitted to the map (`--method sg`).
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=256))]
+    lobes: u32,
+    /// How `--method sg` finds the spherical signed distance (visibility).
+    #[arg(long, value_enum, default_value = "screen")]
+    ssdf: SsdfArg,
+    /// Side of the screen-space SSDF depth maps (`--ssdf screen`).
+    #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u32).range(8..=4096))]
+    depth_res: u32,
+    /// SSDF sharing: search at one pixel per STRIDE×STRIDE block, reused by the block's pixels
+    /// on the same surface (1: every pixel, the paper's).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=16))]
+    ssdf_stride: u32,
+    /// Screen SSDF: neighbourhood searched at each finer pyramid level (the paper's 6×6).
+    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(2..=16))]
+    ssdf_window: u32,
+}
+
+/// `--ssdf`: how `--method sg` finds its visibility.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum SsdfArg {
+    /// The paper's: a depth map per lighting lobe with a MIN/MAX pyramid, coarse-to-fine.
+    Screen,
+    /// Ray-cast search around each lobe axis with the BVH (reference; slow).
+    Exact,
+    /// No occluders (horizon only): unshadowed SG shading.
+    None,
+}
+
+impl From<SsdfArg> for SsdfMode {
+    fn from(s: SsdfArg) -> SsdfMode {
+        match s {
+            SsdfArg::Screen => SsdfMode::Screen,
+            SsdfArg::Exact => SsdfMode::Exact,
+            SsdfArg::None => SsdfMode::None,
+        }
+    }
+}
+
+/// `OUT` for one frame, `OUT-NNN.ext` for a sequence.
+fn frame_path(out: &std::path::Path, k: usize, frames: usize) -> PathBuf {
+    if frames <= 1 {
+        return out.to_path_buf();
+    }
+    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("frame");
+    let ext = out.extension().and_then(|s| s.to_str()).unwrap_or("png");
+    out.with_file_name(format!("{stem}-{k:03}.{ext}"))
+}
+
+pub(crate) fn run(a: RenderArgs) -> Result<()> {
+    let scene = open_scene(a.scene.as_deref(), a.mesh.as_deref())?;
+    let method = method(&a.method)?;
+    let bake = match &a.trees {
+        Some(p) => Some(load_checked(p, &scene)?),
+        None if method.needs().trees => {
+            let label = a
+                .scene
+                .as_deref()
+                .or(a.mesh.as_deref().and_then(|m| m.to_str()))
+                .unwrap_or("scene");
+            let bar = progress_bar();
+            let cached = cached_bake(label, &scene, &a.cache, &|done, total| {
+                bar.set_length(total);
+                bar.set_position(done);
+            })?;
+            bar.finish_and_clear();
+            Some(load_checked(&cached.path, &scene)?)
+        }
+        None => None,
+    };
+    let trees = bake
+        .as_ref()
+        .map(|b| Trees::full(&b.trees, b.header.codec()));
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(a.threads.unwrap_or(0))
+        .build()
+        .context("cannot start the worker threads")?;
+    let modes: &[Mode] = match a.mode {
+        RenderMode::Vertex => &[Mode::Vertex],
+        RenderMode::Pixel => &[Mode::Pixel],
+        RenderMode::Both => &[Mode::Vertex, Mode::Pixel],
+    };
+    let mut all_stats = Vec::new();
+    let mut images: Vec<Vec<Image>> = Vec::new();
+    for &mode in modes {
+        let opts = Options {
+            method,
+            width: a.width,
+            height: a.height,
+            frames: a.frames,
+            light: 0,
+            settings: Settings {
+                mode,
+                spp: a.spp,
+                env: EnvOptions {
+                    path: a
+                        .env
+                        .clone()
+                        .unwrap_or_else(bspvt_client::envmap::default_env_path),
+                    lobes: a.lobes as usize,
+                    sg: SgOptions {
+                        ssdf: a.ssdf.into(),
+                        depth_res: a.depth_res,
+                        stride: a.ssdf_stride,
+                        window: a.ssdf_window,
+                    },
+                },
+                ..Settings::default()
+            },
+        };
+        let mut frames = Vec::new();
+        let stats = pool.install(|| {
+            render_sequence(&scene, trees.as_ref(), &opts, |k, img| {
+                if modes.len() == 1 {
+                    img.save(&frame_path(&a.out, k, a.frames), a.exposure)
+                } else {
+                    frames.push(img.clone());
+                    Ok(())
+                }
+            })
+        })?;
+        println!(
+            "{} {:?}: {} frame(s) at {}×{}, {:.2} ms/frame ({:.1} fps), {:.3} µs/vertex ({:.3} per core, {} threads), {} vertices shaded",
+            stats.method.name(),
+            stats.mode,
+            stats.frames,
+            stats.width,
+            stats.height,
+            stats.ms_per_frame,
+            stats.fps,
+            stats.us_per_vertex,
+            stats.us_per_vertex_per_core,
+            stats.threads,
+            stats.vertices_shaded
+        );
+        all_stats.push(stats);
+        images.push(frames);
+    }
+    if modes.len() == 2 {
+        for (k, (v, p)) in images[0].iter().zip(&images[1]).enumerate() {
+            side_by_side(v, p).save(&frame_path(&a.out, k, a.frames), a.exposure)?;
+        }
+    }
+    println!("wrote {}", frame_path(&a.out, 0, a.frames).display());
+    if let Some(p) = &a.stats {
+        let json = if all_stats.len() == 1 {
+            serde_json::to_string_pretty(&all_stats[0])?
+        } else {
+            serde_json::to_string_pretty(&all_stats)?
+        };
+        std::fs::write(p, json).with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    Ok(())
+}
+
+fn side_by_side(a: &Image, b: &Image) -> Image {
+    let mut out = Image::new(a.width + b.width, a.height.max(b.height));
+    for y in 0..out.height as usize {
+        for (img, x0) in [(a, 0usize), (b, a.width as usize)] {
+            if y < img.height as usize {
+                let w = img.width as usize;
+                let row = &img.pixels[y * w..(y + 1) * w];
+                let o = y * out.width as usize + x0;
+                out.pixels[o..o + w].copy_from_slice(row);
+            }
+        }
+    }
+    out
+}

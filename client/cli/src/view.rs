@@ -1,0 +1,62 @@
+//! `bspvt view`: the interactive window on a streamed scene.
+
+use std::time::Instant;
+
+use anyhow::Result;
+
+use crate::frame_args::{ConnectArgs, FrameArgs, method};
+use bspvt_client::session::connect::connect;
+use bspvt_client::viewer::{self, ViewerOptions};
+
+#[derive(clap::Args, Debug)]
+pub struct ViewArgs {
+    #[command(flatten)]
+    pub connect: ConnectArgs,
+    #[command(flatten)]
+    pub frame: FrameArgs,
+    /// Start with the light moving along its path (P toggles).
+    #[arg(long)]
+    pub moving: bool,
+    /// Close the window after this many frames (scripted runs).
+    #[arg(long)]
+    pub max_frames: Option<u64>,
+}
+
+pub fn run(a: &ViewArgs) -> Result<()> {
+    let started = Instant::now();
+    let opts = a.connect.options();
+    let connected = connect(&opts)?;
+    let f = &a.frame;
+    let mut session = connected.session(&opts, f.width, f.height)?;
+    session.method = method(&f.method)?;
+    session.mode = f.mode.into();
+    if a.moving {
+        session.path_t = Some(0.0);
+    }
+    let report = viewer::run(
+        &mut session,
+        &ViewerOptions {
+            title: format!("bspvt — {}", connected.served.id),
+            max_frames: a.max_frames,
+            note: connected
+                .served
+                .embedded
+                .as_ref()
+                .map(|b| format!("embedded service on {}", b.addr)),
+        },
+        started,
+    )?;
+    println!(
+        "{} frames, {:.1} fps{}",
+        report.frames,
+        report.mean_fps,
+        report
+            .first_full_frame
+            .map(|t| format!(
+                "; first full-quality frame after {:.0} ms",
+                t.as_secs_f64() * 1e3
+            ))
+            .unwrap_or_default()
+    );
+    Ok(())
+}

@@ -1,0 +1,475 @@
+//! `bspvt export-mitsuba`: the scene as a Mitsuba 3 scene that renders the same image as the
+//! Monte Carlo ground truth ([`bspvt_client::groundtruth::render_mc_box`]) — the independent
+//! cross-check (`client/tests/mitsuba_crosscheck.rs`, `docs/groundtruth.md`).
+//!
+//! What is written to `DIR`:
+//! - `scene.xml` (`<scene version="3.0.0">`): `path` integrator with `max_depth = 2` (direct
+//!   light only, like our renderers) and `hide_emitters` (our renderers do not draw the light);
+//!   a `perspective` sensor (`fov_axis = "y"`, `fov`, `look_at`, near/far clip from the scene's
+//!   size), `independent` sampler, `hdrfilm` (rgb) with a `box` reconstruction filter;
+//! - `mesh_<k>.ply`: the triangles of material k (binary PLY with the vertex normals, which
+//!   Mitsuba interpolates as shading normals — as our G-buffer does);
+//! - `light.ply`: the light polygon (fan triangles, no normals: face normals
+//!   `(v1 − v0) × (v2 − v0)`, which is both Mitsuba's and our emitting side), with an `area`
+//!   emitter and a black `diffuse` BSDF. A two-sided light adds `light_back.ply`: the same
+//!   polygon with reversed winding, 1e-4 × its diagonal behind (Mitsuba's area emitters are
+//!   one-sided; two coplanar copies would hide each other at random).
+//!
+//! **Materials.** Our BRDF is a sum, albedo/π + F·D·G₁G₁/(4 cos θo cos θi) with Schlick's F;
+//! Mitsuba has no additive BSDF, but every term has an exact counterpart:
+//! - `diffuse` with `reflectance = albedo` is albedo/π;
+//! - `principled` with `metallic = 1`, `base_color = F0`, `roughness = √α` is exactly
+//!   F0 + (1 − F0)(1 − ωi·h)⁵ times GGX D with separable Smith G (Mitsuba 3's
+//!   `principled_fresnel` reduces to `calc_schlick(base_color, ωi·h)` when metallic = 1, and
+//!   all other lobes have weight (1 − metallic) = 0) — for α ≥ 1e-3: Mitsuba clamps the
+//!   principled α = roughness² to at least 1e-3. When F0 = 1 the specular lobe is written as
+//!   `roughconductor` (`material = "none"`: F = 1; `distribution = "ggx"`, `alpha`,
+//!   `sample_visible`), exact down to α = 1e-4. Below α = 1e-3 with F0 < 1 the lobe is
+//!   rendered at α = 1e-3 (reported by [`export`]).
+//! - The sum is a `blendbsdf` with weight ½ of the two, and the emitter's radiance is doubled:
+//!   ∫ 2L (½ f_d + ½ f_s) cos = ∫ L (f_d + f_s) cos. Exact, because direct lighting is linear
+//!   in the BRDF; the only visible side effect is that the (hidden) emitter's own radiance
+//!   reads 2L in the file.
+//! - Everything is wrapped in `twosided`: our renderers shade both sides of a surface (the
+//!   G-buffer flips normals toward the viewer), Mitsuba's BSDFs are black from behind.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use bspvt_proto::scene::open_scene;
+use bspvt_proto::{Mesh, Scene};
+use glam::{DVec3, Vec3};
+
+use bspvt_client::light::Light;
+
+/// Arguments of `bspvt export-mitsuba`.
+#[derive(clap::Args, Debug)]
+pub struct ExportArgs {
+    /// Scene file or builtin:NAME.
+    pub scene: Option<String>,
+    /// …or a bare mesh (gets the default scene: ground plane, quad light, framing camera).
+    #[arg(long)]
+    pub mesh: Option<PathBuf>,
+    /// Output folder (created).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Image width in pixels.
+    #[arg(long, default_value_t = 640)]
+    pub width: u32,
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 480)]
+    pub height: u32,
+    /// Samples per pixel (the sampler's `sample_count`).
+    #[arg(long, default_value_t = 256)]
+    pub spp: u32,
+    /// Which of the scene's lights (Mitsuba renders one polygon light, like our renderers).
+    #[arg(long, default_value_t = 0)]
+    pub light: usize,
+}
+
+/// Runs `bspvt export-mitsuba`.
+pub fn run(args: &ExportArgs) -> Result<()> {
+    let scene = open_scene(args.scene.as_deref(), args.mesh.as_deref())?;
+    let Some(l) = scene.lights.get(args.light) else {
+        bail!(
+            "--light {}: the scene has {} light(s)",
+            args.light,
+            scene.lights.len()
+        );
+    };
+    let light = Light::from_scene(l);
+    let opts = ExportOptions {
+        width: args.width,
+        height: args.height,
+        spp: args.spp,
+    };
+    let summary = export(&scene, &light, &opts, &args.out)?;
+    for w in &summary.warnings {
+        eprintln!("warning: {w}");
+    }
+    println!(
+        "wrote {} ({} files); render with: mitsuba {} -o image.exr   (or python: \
+         mi.set_variant('scalar_rgb'); mi.render(mi.load_file(...)))",
+        summary.scene_xml.display(),
+        summary.files.len(),
+        summary.scene_xml.display()
+    );
+    Ok(())
+}
+
+/// Image settings of the exported scene.
+#[derive(Clone, Copy, Debug)]
+pub struct ExportOptions {
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+}
+
+/// What [`export`] wrote.
+#[derive(Clone, Debug)]
+pub struct ExportSummary {
+    pub scene_xml: PathBuf,
+    /// Every file written (scene.xml first).
+    pub files: Vec<PathBuf>,
+    /// Where the Mitsuba scene is not exactly our BRDF (α < 1e-3 with F0 < 1).
+    pub warnings: Vec<String>,
+}
+
+/// Smallest α Mitsuba's `principled` BSDF represents (it clamps roughness² to this).
+pub const PRINCIPLED_MIN_ALPHA: f64 = 1e-3;
+
+/// Writes `scene` lit by `light` (world space; e.g. one frame of a moving light) as a Mitsuba 3
+/// scene in `dir`.
+pub fn export(
+    scene: &Scene,
+    light: &Light,
+    opts: &ExportOptions,
+    dir: &Path,
+) -> Result<ExportSummary> {
+    if light.vertices.len() < 3 || !light.vertices.iter().all(|v| v.is_finite()) {
+        bail!("the light needs at least 3 finite vertices");
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let mut files = Vec::new();
+    let mut warnings = Vec::new();
+    let mesh = &scene.mesh;
+    let bounds = mesh.bounds();
+    let diag = f64::from(bounds.diagonal()).max(1e-30);
+
+    let mut xml = String::new();
+    let cam = &scene.camera;
+    let eye = Vec3::from(cam.position).as_dvec3();
+    let centre = bounds.center().as_dvec3();
+    let near = 1e-4 * diag;
+    let far = 10.0 * ((eye - centre).length() + diag);
+    let _ = writeln!(xml, r#"<?xml version="1.0" encoding="utf-8"?>"#);
+    let _ = writeln!(
+        xml,
+        "<!-- Written by `bspvt export-mitsuba`: direct light from one polygonal light, the \
+         same image as bspvt's Monte Carlo ground truth with box-filtered pixels.\n     \
+         Materials: twosided(blendbsdf(0.5, diffuse(albedo), GGX-Schlick specular)) with the \
+         emitter's radiance doubled, which is exactly albedo/pi + F D G / (4 cos cos); see \
+         client/src/mitsuba.rs and docs/groundtruth.md.\n     Render: mitsuba scene.xml -o \
+         image.exr (variant scalar_rgb), or client/tests/mitsuba/render.py. -->"
+    );
+    let _ = writeln!(xml, r#"<scene version="3.0.0">"#);
+    let _ = writeln!(
+        xml,
+        r#"    <integrator type="path">
+        <integer name="max_depth" value="2"/>
+        <boolean name="hide_emitters" value="true"/>
+    </integrator>"#
+    );
+    let _ = writeln!(
+        xml,
+        r#"    <sensor type="perspective">
+        <string name="fov_axis" value="y"/>
+        <float name="fov" value="{fov}"/>
+        <float name="near_clip" value="{near:e}"/>
+        <float name="far_clip" value="{far:e}"/>
+        <transform name="to_world">
+            <lookat origin="{o}" target="{t}" up="{u}"/>
+        </transform>
+        <sampler type="independent">
+            <integer name="sample_count" value="{spp}"/>
+        </sampler>
+        <film type="hdrfilm">
+            <integer name="width" value="{w}"/>
+            <integer name="height" value="{h}"/>
+            <string name="pixel_format" value="rgb"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>"#,
+        fov = cam.fov_y_deg,
+        o = triple(cam.position.map(f64::from)),
+        t = triple(cam.target.map(f64::from)),
+        u = triple(cam.up.map(f64::from)),
+        spp = opts.spp.max(1),
+        w = opts.width.max(1),
+        h = opts.height.max(1),
+    );
+
+    // Materials in use and their meshes.
+    let mut used: Vec<u32> = mesh.material_ids.clone();
+    used.sort_unstable();
+    used.dedup();
+    for &m in &used {
+        let Some(mat) = scene.materials.get(m as usize) else {
+            bail!(
+                "material index {m} used, but the scene has {} materials",
+                scene.materials.len()
+            );
+        };
+        let alpha = bspvt_client::ggx::clamp_alpha(f64::from(mat.roughness));
+        let f0 = mat.specular.map(f64::from);
+        let albedo = mat.albedo.map(f64::from);
+        let spec = if f0.iter().all(|&c| c >= 1.0) {
+            format!(
+                r#"<bsdf type="roughconductor">
+                <string name="material" value="none"/>
+                <string name="distribution" value="ggx"/>
+                <float name="alpha" value="{a}"/>
+                <boolean name="sample_visible" value="true"/>
+            </bsdf>"#,
+                a = num(alpha)
+            )
+        } else {
+            if alpha < PRINCIPLED_MIN_ALPHA {
+                warnings.push(format!(
+                    "material {m} ({:?}): α = {alpha:e} < {PRINCIPLED_MIN_ALPHA:e} with F0 < 1: \
+                     Mitsuba's principled BSDF renders it at α = {PRINCIPLED_MIN_ALPHA:e}",
+                    mat.name
+                ));
+            }
+            format!(
+                r#"<bsdf type="principled">
+                <rgb name="base_color" value="{f0}"/>
+                <float name="metallic" value="1"/>
+                <float name="roughness" value="{r}"/>
+            </bsdf>"#,
+                f0 = triple(f0),
+                r = alpha.sqrt()
+            )
+        };
+        let _ = writeln!(
+            xml,
+            r#"    <bsdf type="twosided" id="mat{m}">
+        <!-- {name}: albedo {a}, F0 {f}, alpha {al} -->
+        <bsdf type="blendbsdf">
+            <float name="weight" value="0.5"/>
+            <bsdf type="diffuse">
+                <rgb name="reflectance" value="{a}"/>
+            </bsdf>
+            {spec}
+        </bsdf>
+    </bsdf>"#,
+            name = xml_text(&mat.name),
+            a = triple(albedo),
+            f = triple(f0),
+            al = num(alpha),
+        );
+        let file = format!("mesh_{m}.ply");
+        let path = dir.join(&file);
+        write_ply(&path, &submesh(mesh, m), true)?;
+        files.push(path);
+        let _ = writeln!(
+            xml,
+            r#"    <shape type="ply">
+        <string name="filename" value="{file}"/>
+        <ref id="mat{m}"/>
+    </shape>"#
+        );
+    }
+
+    // The light: emitting side = (v1 − v0) × (v2 − v0) in Mitsuba and here.
+    let mut verts = light.vertices.clone();
+    if newell(&verts).dot(light.normal) < 0.0 {
+        verts.reverse();
+    }
+    if light.texture.is_some() {
+        warnings.push(
+            "the light's texture is not exported: Mitsuba renders its radiance at the centroid, \
+             uniform"
+                .to_string(),
+        );
+    }
+    let radiance = light.radiance_at(light.centroid()) * 2.0;
+    let mut sides = vec![("light.ply".to_string(), verts.clone())];
+    if light.two_sided {
+        let size = polygon_diagonal(&verts);
+        let back: Vec<DVec3> = verts
+            .iter()
+            .rev()
+            .map(|&v| v - light.normal * (1e-4 * size))
+            .collect();
+        sides.push(("light_back.ply".to_string(), back));
+    }
+    for (file, poly) in &sides {
+        let path = dir.join(file);
+        write_ply(&path, &polygon_mesh(poly), false)?;
+        files.push(path);
+        let _ = writeln!(
+            xml,
+            r#"    <shape type="ply">
+        <string name="filename" value="{file}"/>
+        <boolean name="face_normals" value="true"/>
+        <bsdf type="diffuse">
+            <rgb name="reflectance" value="0, 0, 0"/>
+        </bsdf>
+        <emitter type="area">
+            <!-- 2 x the light's radiance {l}: see the blendbsdf weights above -->
+            <rgb name="radiance" value="{r}"/>
+        </emitter>
+    </shape>"#,
+            l = triple((radiance / 2.0).to_array()),
+            r = triple(radiance.to_array()),
+        );
+    }
+    let _ = writeln!(xml, "</scene>");
+    let scene_xml = dir.join("scene.xml");
+    std::fs::write(&scene_xml, xml)
+        .with_context(|| format!("cannot write {}", scene_xml.display()))?;
+    files.insert(0, scene_xml.clone());
+    Ok(ExportSummary {
+        scene_xml,
+        files,
+        warnings,
+    })
+}
+
+fn triple(v: [f64; 3]) -> String {
+    format!("{}, {}, {}", num(v[0]), num(v[1]), num(v[2]))
+}
+
+/// The shortest text that reads back as `x`: as f32 when `x` came from one (scene files are
+/// f32), so 0.6f32 prints as "0.6", not "0.6000000238418579".
+fn num(x: f64) -> String {
+    let f = x as f32;
+    if f64::from(f) == x {
+        format!("{f}")
+    } else {
+        format!("{x}")
+    }
+}
+
+/// Text safe inside an XML comment.
+fn xml_text(s: &str) -> String {
+    s.replace("--", "- -")
+        .chars()
+        .filter(|c| !c.is_control())
+        .collect()
+}
+
+fn newell(p: &[DVec3]) -> DVec3 {
+    let mut n = DVec3::ZERO;
+    for i in 0..p.len() {
+        n += p[i].cross(p[(i + 1) % p.len()]);
+    }
+    n
+}
+
+fn polygon_diagonal(p: &[DVec3]) -> f64 {
+    let (lo, hi) = p.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), &v| (lo.min(v), hi.max(v)),
+    );
+    (hi - lo).length()
+}
+
+/// The triangles of material `m`, with only the vertices they use.
+fn submesh(mesh: &Mesh, m: u32) -> Mesh {
+    let mut remap = vec![u32::MAX; mesh.positions.len()];
+    let mut out = Mesh::default();
+    for (t, &id) in mesh.triangles.iter().zip(&mesh.material_ids) {
+        if id != m {
+            continue;
+        }
+        let tri = t.map(|v| {
+            let r = &mut remap[v as usize];
+            if *r == u32::MAX {
+                *r = out.positions.len() as u32;
+                out.positions.push(mesh.positions[v as usize]);
+                out.normals.push(mesh.normals[v as usize]);
+            }
+            *r
+        });
+        out.triangles.push(tri);
+        out.material_ids.push(0);
+    }
+    out
+}
+
+/// A convex polygon as fan triangles (winding kept).
+fn polygon_mesh(p: &[DVec3]) -> Mesh {
+    let mut m = Mesh {
+        positions: p.iter().map(|v| v.as_vec3()).collect(),
+        ..Mesh::default()
+    };
+    m.normals = vec![Vec3::ZERO; p.len()];
+    for i in 1..p.len().saturating_sub(1) {
+        m.triangles.push([0, i as u32, i as u32 + 1]);
+        m.material_ids.push(0);
+    }
+    m
+}
+
+/// Binary little-endian PLY: positions (and normals when `normals`), triangles.
+fn write_ply(path: &Path, mesh: &Mesh, normals: bool) -> Result<()> {
+    let mut header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment written by bspvt export-mitsuba\n\
+         element vertex {}\nproperty float x\nproperty float y\nproperty float z\n",
+        mesh.positions.len()
+    );
+    if normals {
+        header.push_str("property float nx\nproperty float ny\nproperty float nz\n");
+    }
+    let _ = write!(
+        header,
+        "element face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        mesh.triangles.len()
+    );
+    let per_vertex = if normals { 24 } else { 12 };
+    let mut bytes = Vec::with_capacity(
+        header.len() + mesh.positions.len() * per_vertex + mesh.triangles.len() * 13,
+    );
+    bytes.extend_from_slice(header.as_bytes());
+    for (i, p) in mesh.positions.iter().enumerate() {
+        for c in p.to_array() {
+            bytes.extend_from_slice(&c.to_le_bytes());
+        }
+        if normals {
+            let n = mesh.normals.get(i).copied().unwrap_or(Vec3::Z);
+            for c in n.to_array() {
+                bytes.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+    }
+    for t in &mesh.triangles {
+        bytes.push(3);
+        for &v in t {
+            bytes.extend_from_slice(&(v as i32).to_le_bytes());
+        }
+    }
+    std::fs::write(path, bytes).with_context(|| format!("cannot write {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exports_the_builtin_scene() {
+        let scene = bspvt_proto::builtin::scene("plate-small").expect("built-in scene");
+        let light = Light::from_scene(&scene.lights[0]);
+        let dir = std::env::temp_dir().join(format!("bspvt-mitsuba-{}", std::process::id()));
+        let opts = ExportOptions {
+            width: 32,
+            height: 24,
+            spp: 4,
+        };
+        let s = export(&scene, &light, &opts, &dir).expect("export");
+        let xml = std::fs::read_to_string(&s.scene_xml).expect("read scene.xml");
+        assert!(xml.contains(r#"<scene version="3.0.0">"#));
+        assert!(xml.contains(r#"<integer name="max_depth" value="2"/>"#));
+        assert_eq!(xml.matches(r#"type="principled""#).count(), 3);
+        assert!(xml.contains(r#"<rgb name="radiance" value="24, 22, 20"/>"#));
+        assert!(s.warnings.is_empty());
+        // Every triangle is in exactly one PLY.
+        let mut tris = 0;
+        for f in &s.files[1..] {
+            let b = std::fs::read(f).expect("read ply");
+            let text = String::from_utf8_lossy(&b[..b.len().min(400)]).to_string();
+            let faces: usize = text
+                .lines()
+                .find_map(|l| l.strip_prefix("element face "))
+                .and_then(|n| n.trim().parse().ok())
+                .expect("face count");
+            if !f.ends_with("light.ply") {
+                tris += faces;
+            }
+        }
+        assert_eq!(tris, scene.mesh.triangles.len());
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}

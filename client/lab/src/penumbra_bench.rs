@@ -1,0 +1,552 @@
+//! `bspvt bench-penumbra`: speed and error of rt-penumbra (paper 003) and the shadow-map
+//! baselines against Monte Carlo area-light shadows, in one run.
+//!
+//! Per scene and case (the scene as given, and variants that break the paper's assumptions):
+//! - reference: `ltc-exact` (unshadowed LTC × Monte Carlo visibility of the area light) at
+//!   `ref_spp`, twice with independent seeds; the reference is their mean (2 × `ref_spp`
+//!   rays), and RMSE(A, B) / 2 estimates its own RMSE (independent noise of variance σ²
+//!   each: Var(A − B) = 2σ², Var((A + B)/2) = σ²/2);
+//! - rt-penumbra, rt-hard, pcf, vsm, pcss: median ms/frame over `frames` renders at the same
+//!   light pose, RMSE and mean absolute error over covered pixels;
+//! - `ltc-exact` at 1, 2, 4, …, 64 spp: ms/frame and RMSE, and the equal-RMSE speed-up of
+//!   rt-penumbra, interpolated log-log between the two spp counts that bracket its RMSE.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use bspvt_proto::Scene;
+use bspvt_raytrace::{Occluder, mesh_triangles};
+use glam::Vec3;
+use serde::Serialize;
+
+use crate::bench::{file_stem, load_named_scene, median_ms as timed, named_scene_path};
+use crate::compare::heatmap::{error_scale, heat_map};
+use crate::compare::metrics::{covered as covered_pixels, mean_image, rmse_mae as errors};
+use bspvt_client::frame::image::Image;
+use bspvt_client::groundtruth::ltcvis::{builtin_lookup, render_ltc_exact_visibility};
+use bspvt_client::light::Light;
+use bspvt_client::penumbra::{self, Params, Technique};
+use bspvt_client::render::renderer::Renderer;
+
+#[derive(clap::Args, Clone, Debug)]
+pub struct BenchPenumbraArgs {
+    /// Scenes: built-in names (plate-small, plate), mesh names in the assets folder (teapot,
+    /// bunny, dragon → teapot.obj, bunny.ply, dragon_res4.ply), or paths to a mesh or scene
+    /// JSON file.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "plate-small,plate,teapot,bunny"
+    )]
+    pub scenes: Vec<String>,
+    /// Image width and height (default 512, 128 with --quick).
+    #[arg(long)]
+    pub size: Option<u32>,
+    /// Fewer rays and frames: reference 128 spp, Monte Carlo up to 16 spp, 1 frame.
+    #[arg(long)]
+    pub quick: bool,
+    /// Reference spp per estimate (default 1024, 128 with --quick).
+    #[arg(long)]
+    pub ref_spp: Option<u32>,
+    /// Timed renders per method (median reported; default 3, 1 with --quick).
+    #[arg(long)]
+    pub frames: Option<usize>,
+    /// Only the scene as given (no assumption-breaking cases).
+    #[arg(long)]
+    pub base_only: bool,
+    /// Folder holding the meshes (default: $BSPVT_ASSETS/meshes or ../shared/assets/meshes).
+    #[arg(long)]
+    pub meshes_dir: Option<PathBuf>,
+    #[arg(long, default_value = "out/bench-penumbra")]
+    pub out: PathBuf,
+}
+
+/// The settings a run resolves from [`BenchPenumbraArgs`].
+#[derive(Clone, Debug, Serialize)]
+pub struct Settings {
+    pub size: u32,
+    pub ref_spp: u32,
+    pub frames: usize,
+    pub mc_spp: Vec<u32>,
+}
+
+impl Settings {
+    pub fn from_args(a: &BenchPenumbraArgs) -> Result<Settings> {
+        let size = a.size.unwrap_or(if a.quick { 128 } else { 512 });
+        let ref_spp = a.ref_spp.unwrap_or(if a.quick { 128 } else { 1024 });
+        let frames = a.frames.unwrap_or(if a.quick { 1 } else { 3 });
+        if !(8..=8192).contains(&size) {
+            bail!("--size {size}: expected 8 ..= 8192");
+        }
+        if ref_spp == 0 || frames == 0 {
+            bail!("--ref-spp and --frames must be at least 1");
+        }
+        let top = if a.quick { 16 } else { 64 };
+        let mc_spp = (0..).map(|k| 1u32 << k).take_while(|&n| n <= top).collect();
+        Ok(Settings {
+            size,
+            ref_spp,
+            frames,
+            mc_spp,
+        })
+    }
+}
+
+/// One measured method in one scene/case.
+#[derive(Clone, Debug, Serialize)]
+pub struct Row {
+    pub scene: String,
+    pub case: String,
+    /// `rt-penumbra`, `rt-hard`, `pcf`, `vsm`, `pcss`, `unshadowed` or `ltc-exact`.
+    pub method: String,
+    /// Shadow rays per pixel (`ltc-exact` only).
+    pub spp: Option<u32>,
+    pub ms_per_frame: f64,
+    pub rmse: f64,
+    pub mae: f64,
+}
+
+/// rt-penumbra's time against Monte Carlo area-light shadows at equal RMSE.
+#[derive(Clone, Debug, Serialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum SpeedUp {
+    /// MC time at rt-penumbra's RMSE (log-log interpolation) / rt-penumbra's time.
+    Interpolated { spp: f64, factor: f64 },
+    /// MC never reaches rt-penumbra's RMSE within the largest spp: at least this factor.
+    AtLeast { max_spp: u32, factor: f64 },
+    /// rt-penumbra is worse than 1 spp: MC at 1 spp / rt-penumbra's time is an upper bound.
+    WorseThanOneSpp { factor: f64 },
+}
+
+impl SpeedUp {
+    fn describe(&self) -> String {
+        match self {
+            SpeedUp::Interpolated { spp, factor } => {
+                format!("{factor:.1}× (MC reaches rt-penumbra's RMSE at ≈ {spp:.1} spp)")
+            }
+            SpeedUp::AtLeast { max_spp, factor } => {
+                format!("> {factor:.1}× (MC never reaches rt-penumbra's RMSE within {max_spp} spp)")
+            }
+            SpeedUp::WorseThanOneSpp { factor } => format!(
+                "none: rt-penumbra is worse than 1 spp (MC at 1 spp / rt-penumbra = {factor:.2}×)"
+            ),
+        }
+    }
+}
+
+/// The results of one scene/case.
+#[derive(Clone, Debug, Serialize)]
+pub struct CaseReport {
+    pub scene: String,
+    pub case: String,
+    /// Which of the paper's assumptions the case breaks (or "none").
+    pub breaks: String,
+    pub pixels_covered: usize,
+    /// RMSE between the two reference estimates, and the reference's own RMSE (half of it).
+    pub ref_rmse_between_seeds: f64,
+    pub ref_rmse: f64,
+    pub rows: Vec<Row>,
+    pub speed_up: SpeedUp,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    pub settings: Settings,
+    pub threads: usize,
+    pub cases: Vec<CaseReport>,
+    /// Scenes skipped (missing assets), with the reason.
+    pub skipped: Vec<String>,
+}
+
+/// Runs the benchmark and writes results.csv, results.md, results.json and the images.
+pub fn run(a: &BenchPenumbraArgs) -> Result<Report> {
+    let settings = Settings::from_args(a)?;
+    let meshes_dir = a
+        .meshes_dir
+        .clone()
+        .unwrap_or_else(|| bspvt_proto::paths::assets_dir().join("meshes"));
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let mut report = Report {
+        settings: settings.clone(),
+        threads: rayon::current_num_threads(),
+        cases: Vec::new(),
+        skipped: Vec::new(),
+    };
+    for name in a.scenes.iter().filter(|s| !s.is_empty()) {
+        let Some(scene) = load_named_scene(name, &meshes_dir)? else {
+            let msg = format!(
+                "{name}: {} not found, skipped",
+                named_scene_path(name, &meshes_dir).display()
+            );
+            eprintln!("bench-penumbra: {msg}");
+            report.skipped.push(msg);
+            continue;
+        };
+        for case in cases(name, &scene, a.base_only) {
+            eprintln!("bench-penumbra: {name} / {} …", case.name);
+            let c = measure_case(name, &case, &settings, &a.out)?;
+            eprintln!("  rt-penumbra vs MC: {}", c.speed_up.describe());
+            report.cases.push(c);
+        }
+    }
+    write_outputs(&report, &a.out)?;
+    Ok(report)
+}
+
+/// A scene variant.
+struct Case {
+    name: String,
+    breaks: String,
+    scene: Scene,
+}
+
+/// The scene as given, and variants that break the paper's assumptions.
+fn cases(name: &str, scene: &Scene, base_only: bool) -> Vec<Case> {
+    let is_plate = name == "plate" || name == "plate-small";
+    let breaks = match name {
+        "plate-small" => "none",
+        "plate" => "none (two occluders, sphere and slab, whose shadows barely meet)",
+        _ => "non-planar receiver (the mesh shadows itself and the ground)",
+    };
+    let mut out = vec![Case {
+        name: "base".into(),
+        breaks: breaks.into(),
+        scene: scene.clone(),
+    }];
+    if base_only {
+        return out;
+    }
+    if is_plate {
+        out.push(Case {
+            name: "contact".into(),
+            breaks: "occluder touching the receiver (sphere lowered onto the floor)".into(),
+            scene: plate_contact(scene),
+        });
+        out.push(Case {
+            name: "overlap".into(),
+            breaks: "overlapping penumbrae of different widths (slab lowered into the sphere's penumbra)"
+                .into(),
+            scene: plate_overlap(scene),
+        });
+    }
+    out.push(Case {
+        name: "big-light".into(),
+        breaks: "large light close to the occluder (light ×3, moved halfway down)".into(),
+        scene: big_light(scene),
+    });
+    out
+}
+
+/// The plate sphere's centre and radius (`proto/src/builtin.rs`).
+const SPHERE: (Vec3, f32) = (Vec3::new(-0.7, 0.9, 0.2), 0.5);
+/// The plate slab's centre; its vertices lie within 0.7 of it (half-extents 0.55, 0.04, 0.4).
+const SLAB: (Vec3, f32) = (Vec3::new(0.7, 1.3, -0.2), 0.7);
+
+/// Moves the vertices within `radius` of `centre` by `by`.
+fn move_part(scene: &Scene, (centre, radius): (Vec3, f32), by: Vec3) -> Scene {
+    let mut s = scene.clone();
+    for p in &mut s.mesh.positions {
+        if (*p - centre).length() <= radius + 0.01 {
+            *p += by;
+        }
+    }
+    s
+}
+
+/// The sphere lowered by 0.4 so it rests on the floor (y = 0): contact, Z_r − Z_o → 0.
+fn plate_contact(scene: &Scene) -> Scene {
+    move_part(scene, SPHERE, Vec3::new(0.0, -0.4, 0.0))
+}
+
+/// The slab moved to (−0.5, 0.25, 0.7), under the sphere (its top ≤ 0.39 < the sphere's
+/// bottom at 0.4): its sharp shadow overlaps the sphere's wide penumbra on the floor.
+fn plate_overlap(scene: &Scene) -> Scene {
+    move_part(scene, SLAB, Vec3::new(-0.5, 0.25, 0.7) - SLAB.0)
+}
+
+/// The light scaled ×3 about its centroid (radiance ÷ 9: the same power) and moved along its
+/// normal halfway to the nearest scene point in front of it.
+fn big_light(scene: &Scene) -> Scene {
+    let mut s = scene.clone();
+    let Some(l) = s.lights.first_mut() else {
+        return s;
+    };
+    let n = l.normal();
+    let c = l.vertices.iter().map(|v| Vec3::from(*v)).sum::<Vec3>() / l.vertices.len() as f32;
+    let nearest = scene
+        .mesh
+        .positions
+        .iter()
+        .map(|p| n.dot(*p - c))
+        .filter(|d| *d > 0.0)
+        .fold(f32::INFINITY, f32::min);
+    let shift = if nearest.is_finite() {
+        n * 0.5 * nearest
+    } else {
+        Vec3::ZERO
+    };
+    for v in &mut l.vertices {
+        *v = (c + (Vec3::from(*v) - c) * 3.0 + shift).to_array();
+    }
+    l.radiance = l.radiance.map(|r| r / 9.0);
+    l.region = None;
+    s
+}
+
+const METHODS: [(Technique, &str); 5] = [
+    (Technique::RtPenumbra, "rt-penumbra"),
+    (Technique::RtHard, "rt-hard"),
+    (Technique::Pcf, "pcf"),
+    (Technique::Vsm, "vsm"),
+    (Technique::Pcss, "pcss"),
+];
+
+/// Seeds of the two reference estimates and of the Monte Carlo sweep (all distinct).
+const SEED_A: u64 = 0x5eed_0001;
+const SEED_B: u64 = 0x5eed_0002;
+const SEED_MC: u64 = 0x5eed_1000;
+
+fn measure_case(scene_name: &str, case: &Case, st: &Settings, out: &Path) -> Result<CaseReport> {
+    let scene = &case.scene;
+    let Some(pl) = scene.lights.first() else {
+        bail!("{scene_name}: the scene has no light");
+    };
+    let light = Light::load(pl)?;
+    let r = Renderer::new(scene, st.size, st.size);
+    let occ = Occluder::new(&scene.mesh, &mesh_triangles(&scene.mesh));
+    let covered = covered_pixels(&r.gbuffer);
+    let dir = out.join(format!("{}-{}", file_stem(scene_name), case.name));
+    let ltc_exact = |spp: u32, seed: u64| {
+        render_ltc_exact_visibility(
+            scene,
+            &r.view,
+            &r.gbuffer,
+            &light,
+            &occ,
+            &builtin_lookup,
+            spp,
+            seed,
+        )
+    };
+    let ref_a = ltc_exact(st.ref_spp, SEED_A);
+    let ref_b = ltc_exact(st.ref_spp, SEED_B);
+    let ref_between = errors(&ref_a, &ref_b, &covered).0;
+    let reference = mean_image(&ref_a, &ref_b);
+    reference.save(&dir.join("reference.png"), 1.0)?;
+    let scale = error_scale(&reference, &covered);
+    let row = |method: &str, spp: Option<u32>, ms: f64, img: &Image| -> Result<Row> {
+        let (rmse, mae) = errors(img, &reference, &covered);
+        let stem = match spp {
+            Some(n) => format!("{method}-{n:03}spp"),
+            None => method.to_string(),
+        };
+        img.save(&dir.join(format!("{stem}.png")), 1.0)?;
+        heat_map(img, &reference, &covered, scale)
+            .save(dir.join(format!("{stem}-error.png")))
+            .with_context(|| format!("cannot write the error map of {stem}"))?;
+        Ok(Row {
+            scene: scene_name.to_string(),
+            case: case.name.clone(),
+            method: method.to_string(),
+            spp,
+            ms_per_frame: ms,
+            rmse,
+            mae,
+        })
+    };
+    let mut rows = Vec::new();
+    let params = Params::default();
+    for (t, name) in METHODS {
+        let (ms, img) = timed(st.frames, || {
+            penumbra::render(&r, &light, t, Some(&occ), &params)
+        })?;
+        rows.push(row(name, None, ms, &img)?);
+    }
+    let (ms, img) = timed(st.frames, || Ok(r.shade_pixels(&light, None)))?;
+    rows.push(row("unshadowed", None, ms, &img)?);
+    for (k, &spp) in st.mc_spp.iter().enumerate() {
+        let mut seed = SEED_MC + 100 * k as u64;
+        let (ms, img) = timed(st.frames, || {
+            seed += 1;
+            Ok(ltc_exact(spp, seed))
+        })?;
+        rows.push(row("ltc-exact", Some(spp), ms, &img)?);
+    }
+    let speed_up = equal_rmse_speed_up(&rows)?;
+    Ok(CaseReport {
+        scene: scene_name.to_string(),
+        case: case.name.clone(),
+        breaks: case.breaks.clone(),
+        pixels_covered: covered.iter().filter(|&&c| c).count(),
+        ref_rmse_between_seeds: ref_between,
+        ref_rmse: ref_between / 2.0,
+        rows,
+        speed_up,
+    })
+}
+
+/// Equal-RMSE speed-up of rt-penumbra over MC (`ltc-exact` rows, increasing spp): with e the
+/// rt-penumbra RMSE and (e_i, t_i), (e_j, t_j) the MC points bracketing it,
+/// log t = log t_i + (log e − log e_i) / (log e_j − log e_i) · (log t_j − log t_i)
+/// (and the same for spp); factor = t / t_rt.
+pub fn equal_rmse_speed_up(rows: &[Row]) -> Result<SpeedUp> {
+    let rt = rows
+        .iter()
+        .find(|r| r.method == "rt-penumbra")
+        .context("no rt-penumbra row")?;
+    let mc: Vec<&Row> = rows.iter().filter(|r| r.method == "ltc-exact").collect();
+    let (Some(first), Some(last)) = (mc.first(), mc.last()) else {
+        bail!("no Monte Carlo rows");
+    };
+    let t_rt = rt.ms_per_frame.max(1e-9);
+    let e = rt.rmse;
+    if e > first.rmse {
+        return Ok(SpeedUp::WorseThanOneSpp {
+            factor: first.ms_per_frame / t_rt,
+        });
+    }
+    for w in mc.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        if a.rmse >= e && e >= b.rmse {
+            let f = log_fraction(e, a.rmse, b.rmse);
+            let lerp = |x: f64, y: f64| (x.ln() + f * (y.ln() - x.ln())).exp();
+            let t = lerp(a.ms_per_frame.max(1e-9), b.ms_per_frame.max(1e-9));
+            let spp = lerp(f64::from(a.spp.unwrap_or(1)), f64::from(b.spp.unwrap_or(1)));
+            return Ok(SpeedUp::Interpolated {
+                spp,
+                factor: t / t_rt,
+            });
+        }
+    }
+    Ok(SpeedUp::AtLeast {
+        max_spp: last.spp.unwrap_or(0),
+        factor: last.ms_per_frame / t_rt,
+    })
+}
+
+/// (log e − log a) / (log b − log a), 0 when a = b (flat).
+fn log_fraction(e: f64, a: f64, b: f64) -> f64 {
+    let (e, a, b) = (e.max(1e-30).ln(), a.max(1e-30).ln(), b.max(1e-30).ln());
+    if (b - a).abs() < 1e-12 {
+        0.0
+    } else {
+        ((e - a) / (b - a)).clamp(0.0, 1.0)
+    }
+}
+
+fn write_outputs(report: &Report, out: &Path) -> Result<()> {
+    let write = |name: &str, text: String| {
+        let p = out.join(name);
+        std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))
+    };
+    write("results.csv", csv(report))?;
+    write("results.md", markdown(report))?;
+    write("results.json", serde_json::to_string_pretty(report)?)
+}
+
+fn csv(report: &Report) -> String {
+    let mut s = String::from("scene,case,method,spp,ms_per_frame,rmse,mae\n");
+    for c in &report.cases {
+        for r in &c.rows {
+            let spp = r.spp.map(|n| n.to_string()).unwrap_or_default();
+            let _ = writeln!(
+                s,
+                "{},{},{},{},{:.3},{:.6},{:.6}",
+                r.scene, r.case, r.method, spp, r.ms_per_frame, r.rmse, r.mae
+            );
+        }
+        let _ = writeln!(
+            s,
+            "{},{},reference-noise,{},0,{:.6},",
+            c.scene,
+            c.case,
+            2 * report.settings.ref_spp,
+            c.ref_rmse
+        );
+    }
+    s
+}
+
+fn markdown(report: &Report) -> String {
+    let st = &report.settings;
+    let mut s = format!(
+        "# bench-penumbra\n\n{0}×{0}, {1} thread(s), median of {2} frame(s). Reference: \
+         `ltc-exact`, mean of two {3}-spp estimates (seeds differ). Errors over covered pixels, \
+         linear radiance.\n\n",
+        st.size, report.threads, st.frames, st.ref_spp
+    );
+    for c in &report.cases {
+        let _ = write!(
+            s,
+            "## {} / {}\n\nBreaks: {}. Covered pixels: {}. Reference RMSE ≈ {:.5} (two \
+             estimates differ by {:.5}).\n\n| method | spp | ms/frame | RMSE | MAE |\n|---|---|---|---|---|\n",
+            c.scene, c.case, c.breaks, c.pixels_covered, c.ref_rmse, c.ref_rmse_between_seeds
+        );
+        for r in &c.rows {
+            let spp = r.spp.map(|n| n.to_string()).unwrap_or_default();
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:.1} | {:.5} | {:.5} |",
+                r.method, spp, r.ms_per_frame, r.rmse, r.mae
+            );
+        }
+        let _ = writeln!(
+            s,
+            "\nEqual-RMSE speed-up of rt-penumbra over MC area-light shadows: {}\n",
+            c.speed_up.describe()
+        );
+    }
+    for k in &report.skipped {
+        let _ = writeln!(s, "Skipped: {k}");
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(method: &str, spp: Option<u32>, ms: f64, rmse: f64) -> Row {
+        Row {
+            scene: "s".into(),
+            case: "c".into(),
+            method: method.into(),
+            spp,
+            ms_per_frame: ms,
+            rmse,
+            mae: rmse,
+        }
+    }
+
+    #[test]
+    fn speed_up_interpolates_log_log_and_reports_bounds() {
+        // MC: RMSE ∝ 1/√spp, time ∝ spp.
+        let mc: Vec<Row> = [1u32, 4, 16]
+            .iter()
+            .map(|&n| {
+                row(
+                    "ltc-exact",
+                    Some(n),
+                    10.0 * f64::from(n),
+                    0.1 / f64::from(n).sqrt(),
+                )
+            })
+            .collect();
+        let with = |rmse: f64| {
+            let mut v = vec![row("rt-penumbra", None, 2.0, rmse)];
+            v.extend(mc.iter().cloned());
+            equal_rmse_speed_up(&v).expect("rows")
+        };
+        match with(0.1 / 2f64.sqrt()) {
+            SpeedUp::Interpolated { spp, factor } => {
+                assert!((spp - 2.0).abs() < 1e-9, "{spp}");
+                assert!((factor - 10.0).abs() < 1e-9, "{factor}");
+            }
+            o => panic!("{o:?}"),
+        }
+        assert!(matches!(with(0.2), SpeedUp::WorseThanOneSpp { .. }));
+        assert!(matches!(with(0.001), SpeedUp::AtLeast { max_spp: 16, .. }));
+    }
+}

@@ -1,0 +1,149 @@
+//! The project's BRDF for one material (Lambert + Schlick-GGX with separable Smith masking,
+//! [Walter07], [Schlick94]) with its sampling mixture, and the shadow-ray policy every
+//! ray-traced method shares.
+
+use std::f64::consts::PI;
+
+use bspvt_proto::Scene;
+use bspvt_proto::scene::Material;
+use bspvt_raytrace::Occluder;
+use glam::DVec3;
+
+use crate::ggx;
+
+/// The project's BRDF for one material: Lambert + Schlick-GGX, per RGB channel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Brdf {
+    /// GGX α, clamped to [`ggx::MIN_ALPHA`]..=1.
+    pub alpha: f64,
+    pub albedo: DVec3,
+    /// F0 (specular colour at normal incidence).
+    pub f0: DVec3,
+}
+
+impl Brdf {
+    pub fn new(alpha: f64, albedo: DVec3, f0: DVec3) -> Brdf {
+        let clean = |c: DVec3| {
+            DVec3::new(
+                finite_or_zero(c.x).max(0.0),
+                finite_or_zero(c.y).max(0.0),
+                finite_or_zero(c.z).max(0.0),
+            )
+        };
+        Brdf {
+            alpha: ggx::clamp_alpha(alpha),
+            albedo: clean(albedo),
+            f0: clean(f0),
+        }
+    }
+
+    pub fn from_material(m: &Material) -> Brdf {
+        Brdf::new(
+            f64::from(m.roughness),
+            glam::Vec3::from(m.albedo).as_dvec3(),
+            glam::Vec3::from(m.specular).as_dvec3(),
+        )
+    }
+
+    /// f(ωo, ωi) cos θi per channel, in the local frame (z = normal). Zero below either horizon.
+    #[inline]
+    pub fn eval_cos(&self, wo: DVec3, wi: DVec3) -> DVec3 {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return DVec3::ZERO;
+        }
+        let (spec, cos_d) = ggx::eval_cos(self.alpha, wo, wi);
+        let s = ggx::schlick_weight(cos_d);
+        let fresnel = self.f0 + (DVec3::ONE - self.f0) * s;
+        self.albedo * (wi.z / PI) + fresnel * spec
+    }
+
+    /// Probability of drawing a BRDF sample from the specular lobe (else the cosine lobe):
+    /// the lobes' rough weights — mean F at the view angle vs mean albedo — with at least 10 %
+    /// for the specular lobe (Schlick's term never vanishes at grazing angles).
+    fn spec_prob(&self, wo: DVec3) -> f64 {
+        let diff = (self.albedo.x + self.albedo.y + self.albedo.z) / 3.0;
+        if diff.is_nan() || diff <= 0.0 {
+            return 1.0;
+        }
+        let s = ggx::schlick_weight(wo.z.clamp(0.0, 1.0));
+        let f = self.f0 + (DVec3::ONE - self.f0) * s;
+        let spec = (f.x + f.y + f.z) / 3.0;
+        (spec / (spec + diff)).clamp(0.1, 1.0)
+    }
+
+    /// Draws ωi from the BRDF sampling mixture. May be below the horizon (weight 0).
+    pub fn sample(&self, wo: DVec3, u_lobe: f64, u: [f64; 2]) -> DVec3 {
+        if u_lobe < self.spec_prob(wo) {
+            ggx::sample_vndf(self.alpha, wo, u)
+        } else {
+            cosine_hemisphere(u)
+        }
+    }
+
+    /// Density per solid angle of [`Brdf::sample`].
+    pub fn pdf(&self, wo: DVec3, wi: DVec3) -> f64 {
+        if wo.z <= 0.0 || wi.z <= 0.0 {
+            return 0.0;
+        }
+        let ps = self.spec_prob(wo);
+        let spec = if ps > 0.0 {
+            ps * ggx::pdf_vndf(self.alpha, wo, wi)
+        } else {
+            0.0
+        };
+        spec + (1.0 - ps) * wi.z / PI
+    }
+}
+
+fn finite_or_zero(x: f64) -> f64 {
+    if x.is_finite() { x } else { 0.0 }
+}
+
+/// Cosine-weighted direction on the upper hemisphere.
+#[inline]
+pub fn cosine_hemisphere(u: [f64; 2]) -> DVec3 {
+    let r = u[0].sqrt();
+    let (s, c) = (2.0 * PI * u[1]).sin_cos();
+    DVec3::new(r * c, r * s, (1.0 - u[0]).max(0.0).sqrt())
+}
+
+/// Shadow rays: an occluder (none = nothing casts shadows) and the offset ε that keeps rays
+/// off their own surface. Origins move by ε along the geometric normal (toward the ray's side)
+/// and segments stop ε short of the light.
+#[derive(Clone, Copy)]
+pub struct Shadows<'a> {
+    pub occluder: Option<&'a Occluder>,
+    pub epsilon: f64,
+}
+
+impl<'a> Shadows<'a> {
+    /// ε = 1e-4 × the mesh's bounding-box diagonal.
+    pub fn for_scene(scene: &Scene, occluder: Option<&'a Occluder>) -> Shadows<'a> {
+        let diag = f64::from(scene.mesh.bounds().diagonal());
+        Shadows {
+            occluder,
+            epsilon: 1e-4
+                * if diag.is_finite() && diag > 0.0 {
+                    diag
+                } else {
+                    1.0
+                },
+        }
+    }
+
+    /// True when nothing blocks the segment from `p` along unit `w` to distance `dist`.
+    pub fn visible(&self, p: DVec3, ng: DVec3, w: DVec3, dist: f64) -> bool {
+        let Some(occ) = self.occluder else {
+            return true;
+        };
+        let side = if ng.dot(w) >= 0.0 { 1.0 } else { -1.0 };
+        let origin = p + ng * (self.epsilon * side);
+        let d = (p + w * dist) - origin;
+        let len = d.length();
+        let t_max = len - self.epsilon;
+        if t_max.is_nan() || t_max <= 0.0 || !origin.is_finite() {
+            return true;
+        }
+        !occ.occluded_segment(origin.as_vec3(), (d / len).as_vec3(), t_max as f32)
+    }
+}

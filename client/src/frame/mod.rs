@@ -1,0 +1,12 @@
+//! What every rendering method shares: the [`image::Image`] it returns, the camera
+//! ([`camera::View`]), primary visibility ([`gbuffer::GBuffer`]), the LTC shading frame
+//! ([`shading::ShadingFrame`]), the material's BRDF and the shadow-ray policy ([`brdf`]),
+//! image statistics ([`stats`]) and text drawn into a framebuffer ([`canvas`]).
+
+pub mod brdf;
+pub mod camera;
+pub mod canvas;
+pub mod gbuffer;
+pub mod image;
+pub mod shading;
+pub mod stats;

@@ -1,0 +1,44 @@
+//! BSPVT: baked visibility × LTC GGX (paper 000 §3.2, eq. 2). Vertices without trees yet
+//! (while streaming) are shaded unshadowed.
+
+use anyhow::Result;
+
+use super::{Frame, FrameInput, FrameMethod, MethodState, Needs, SceneData, Settings};
+
+/// See the module doc.
+pub(crate) struct Bspvt;
+
+impl FrameMethod for Bspvt {
+    fn name(&self) -> &'static str {
+        "bspvt"
+    }
+    fn label(&self) -> &'static str {
+        "BSPVT"
+    }
+    fn description(&self) -> &'static str {
+        "baked BSPVT visibility × LTC GGX over the light's pieces (paper 000)"
+    }
+    fn needs(&self) -> Needs {
+        Needs {
+            trees: true,
+            polygon_light: true,
+            ..Needs::default()
+        }
+    }
+    fn prepare(&self, _: &SceneData, _: &Settings) -> Result<Box<dyn MethodState>> {
+        Ok(Box::new(State))
+    }
+}
+
+struct State;
+
+impl MethodState for State {
+    fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
+        let light = f.light()?;
+        let (image, counts) = match f.trees {
+            Some(trees) => f.renderer.bspvt(light, trees, f.mode),
+            None => f.renderer.ltc(light, f.mode),
+        };
+        Ok(Frame::new(image, counts))
+    }
+}

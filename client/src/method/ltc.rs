@@ -1,0 +1,38 @@
+//! Unshadowed LTC GGX [Heitz16]: the polygon light with no visibility.
+
+use anyhow::Result;
+
+use super::{Frame, FrameInput, FrameMethod, MethodState, Needs, SceneData, Settings};
+
+/// See the module doc.
+pub(crate) struct Ltc;
+
+impl FrameMethod for Ltc {
+    fn name(&self) -> &'static str {
+        "ltc"
+    }
+    fn label(&self) -> &'static str {
+        "LTC (no shadows)"
+    }
+    fn description(&self) -> &'static str {
+        "unshadowed LTC GGX of the polygon light (Heitz et al. 2016), no visibility"
+    }
+    fn needs(&self) -> Needs {
+        Needs {
+            polygon_light: true,
+            ..Needs::default()
+        }
+    }
+    fn prepare(&self, _: &SceneData, _: &Settings) -> Result<Box<dyn MethodState>> {
+        Ok(Box::new(State))
+    }
+}
+
+struct State;
+
+impl MethodState for State {
+    fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
+        let (image, counts) = f.renderer.ltc(f.light()?, f.mode);
+        Ok(Frame::new(image, counts))
+    }
+}

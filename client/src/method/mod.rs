@@ -1,0 +1,272 @@
+//! Rendering methods behind one interface ([`FrameMethod`]) and one [`registry`].
+//!
+//! A method says what it needs (baked trees, rays, an environment map), prepares its
+//! per-scene state once ([`FrameMethod::prepare`], timed as setup) and then draws frames
+//! ([`MethodState::frame`]) for a camera (the [`Renderer`]'s view and G-buffer) and a light.
+//! `bspvt render`, `view`, `animate`, `demo`, the report and the benchmarks all go through
+//! it; adding a method is one file here plus one line in [`registry::METHODS`].
+
+pub mod registry;
+pub mod sequence;
+pub mod trees;
+
+mod bspvt;
+mod env_scene;
+mod ltc;
+mod ltc_exact;
+mod mc;
+mod mc_env;
+mod pcf;
+mod pcss;
+mod point_shadow;
+mod ratio;
+mod rt_hard;
+mod rt_penumbra;
+mod sg;
+mod vsm;
+
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+use anyhow::Result;
+use bspvt_proto::Scene;
+use bspvt_raytrace::{Occluder, mesh_triangles};
+use serde::Serialize;
+
+use crate::frame::image::Image;
+use crate::light::Light;
+use crate::render::renderer::{FrameCounts, Mode, Renderer, Trees};
+
+pub use registry::{METHODS, find, names};
+
+/// What a method needs before it can draw.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct Needs {
+    /// The scene's baked BSPVT trees (baked and cached when not given).
+    pub trees: bool,
+    /// A BVH of the scene for rays (built in setup).
+    pub rays: bool,
+    /// An environment map (`--env`).
+    pub env_map: bool,
+    /// A polygonal light of the scene.
+    pub polygon_light: bool,
+}
+
+impl Needs {
+    /// The needs in words, e.g. `trees, polygon light`.
+    pub fn describe(&self) -> String {
+        let mut v = Vec::new();
+        if self.trees {
+            v.push("trees");
+        }
+        if self.rays {
+            v.push("rays (BVH)");
+        }
+        if self.env_map {
+            v.push("environment map");
+        }
+        if self.polygon_light {
+            v.push("polygon light");
+        }
+        if v.is_empty() {
+            "nothing".into()
+        } else {
+            v.join(", ")
+        }
+    }
+}
+
+/// The environment light of the environment methods.
+#[derive(Clone, Debug, Serialize)]
+pub struct EnvOptions {
+    /// Equirectangular map (Radiance `.hdr`).
+    pub path: PathBuf,
+    /// SG lobes fitted to the map.
+    pub lobes: usize,
+    /// How the SG method finds its visibility.
+    pub sg: crate::sg::SgOptions,
+}
+
+impl Default for EnvOptions {
+    fn default() -> EnvOptions {
+        EnvOptions {
+            path: crate::envmap::default_env_path(),
+            lobes: 16,
+            sg: crate::sg::SgOptions::default(),
+        }
+    }
+}
+
+/// What a user may set; each method reads what applies to it.
+#[derive(Clone, Debug)]
+pub struct Settings {
+    /// Per-vertex or per-pixel shading (methods that offer both): what a sequence asks of
+    /// every frame.
+    pub mode: Mode,
+    /// Samples (or shadow rays) per pixel of the stochastic methods.
+    pub spp: u32,
+    /// The environment light (environment methods).
+    pub env: EnvOptions,
+    /// The point-light shadow methods' parameters.
+    pub penumbra: crate::penumbra::Params,
+    /// Stochastic methods accumulate frames until [`MethodState::invalidate`] (the viewer's
+    /// progressive Monte Carlo) instead of drawing `spp` fresh samples a frame.
+    pub progressive: bool,
+    /// The denoised ratio estimator's filter radius, in pixels.
+    pub denoise_radius: f64,
+}
+
+impl Default for Settings {
+    fn default() -> Settings {
+        Settings {
+            mode: Mode::Vertex,
+            spp: 64,
+            env: EnvOptions::default(),
+            penumbra: crate::penumbra::Params::default(),
+            progressive: false,
+            denoise_radius: 4.0,
+        }
+    }
+}
+
+/// The scene a method draws, with what several methods share built once, on first use.
+pub struct SceneData<'a> {
+    /// The scene (at t = 0 for moving scenes).
+    pub scene: &'a Scene,
+    occluder: OnceLock<Occluder>,
+}
+
+impl<'a> SceneData<'a> {
+    /// Wraps `scene`; nothing is built yet.
+    pub fn new(scene: &'a Scene) -> SceneData<'a> {
+        SceneData {
+            scene,
+            occluder: OnceLock::new(),
+        }
+    }
+
+    /// The scene's BVH for rays (built on first use: the highest-quality build).
+    pub fn occluder(&self) -> &Occluder {
+        self.occluder
+            .get_or_init(|| Occluder::new(&self.scene.mesh, &mesh_triangles(&self.scene.mesh)))
+    }
+}
+
+/// One frame's inputs.
+pub struct FrameInput<'a> {
+    /// The scene and its shared BVH.
+    pub scene: &'a SceneData<'a>,
+    /// The camera: view, G-buffer, visible vertices, roughness override.
+    pub renderer: &'a Renderer<'a>,
+    /// The polygonal light as posed for this frame (`None`: the scene has none).
+    pub light: Option<&'a Light>,
+    /// Baked trees (all or those streamed so far); `None`: none yet.
+    pub trees: Option<&'a Trees<'a>>,
+    /// The frame's number (seeds the stochastic methods).
+    pub index: u64,
+    /// Cycle time of a moving scene in [0, 1) (the run-time methods pose the meshes at it).
+    pub time: f32,
+    /// Per-vertex or per-pixel (methods that offer both).
+    pub mode: Mode,
+}
+
+impl FrameInput<'_> {
+    /// The light, or an error saying the method needs one.
+    pub fn light(&self) -> Result<&Light> {
+        self.light.ok_or_else(|| {
+            anyhow::anyhow!("this method needs a polygonal light; the scene has none")
+        })
+    }
+}
+
+/// A drawn frame and what it cost.
+pub struct Frame {
+    /// Linear radiance.
+    pub image: Image,
+    /// Vertices, pixels and pieces shaded.
+    pub counts: FrameCounts,
+    /// Monte Carlo: the mean relative standard error per covered pixel.
+    pub noise: Option<f64>,
+    /// SG: the depth maps' time (screen SSDF), ms.
+    pub maps_ms: Option<f64>,
+    /// A moving scene: the time to pose it, ms (inside the frame).
+    pub pose_ms: Option<f64>,
+}
+
+impl Frame {
+    /// A frame with its counts and nothing else to report.
+    pub fn new(image: Image, counts: FrameCounts) -> Frame {
+        Frame {
+            image,
+            counts,
+            noise: None,
+            maps_ms: None,
+            pose_ms: None,
+        }
+    }
+}
+
+/// Figures a prepared method reports once (STATS.json).
+#[derive(Clone, Debug, Default)]
+pub struct SetupReport {
+    /// Samples per pixel, for the stochastic methods.
+    pub spp: Option<u32>,
+    /// SG: lobes, the fit's relative L2 error over the sphere and its time.
+    pub sg_lobes: Option<usize>,
+    /// See `sg_lobes`.
+    pub sg_fit_error: Option<f64>,
+    /// See `sg_lobes`.
+    pub sg_fit_seconds: Option<f64>,
+    /// SG: how visibility is found.
+    pub ssdf: Option<crate::sg::SsdfMode>,
+}
+
+/// A rendering method: what the registry lists.
+pub trait FrameMethod: Sync {
+    /// The name users type (`--method NAME`), kebab-case.
+    fn name(&self) -> &'static str;
+    /// A short label for overlays and plots.
+    fn label(&self) -> &'static str;
+    /// One line: what it computes (and the paper or reference it follows).
+    fn description(&self) -> &'static str;
+    /// What it needs before it can draw.
+    fn needs(&self) -> Needs;
+    /// The mode it shades in whatever was asked (`None`: the one asked for).
+    fn fixed_mode(&self) -> Option<Mode> {
+        None
+    }
+    /// Builds its per-scene state (BVH, fitted lobes, …): the setup a timing excludes from
+    /// frames.
+    fn prepare(&self, scene: &SceneData, settings: &Settings) -> Result<Box<dyn MethodState>>;
+}
+
+/// A method prepared for one scene.
+pub trait MethodState: Send {
+    /// Draws one frame.
+    fn frame(&mut self, input: &FrameInput) -> Result<Frame>;
+    /// Something the image depends on changed (camera, light, trees): progressive methods
+    /// start again.
+    fn invalidate(&mut self) {}
+    /// Progressive methods: the passes in the current image.
+    fn passes(&self) -> u32 {
+        0
+    }
+    /// What it reports once.
+    fn report(&self) -> SetupReport {
+        SetupReport::default()
+    }
+}
+
+impl std::fmt::Debug for dyn FrameMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Serialises a method as its name.
+pub fn serialize_name<S: serde::Serializer>(
+    m: &&'static dyn FrameMethod,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    s.serialize_str(m.name())
+}

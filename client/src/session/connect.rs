@@ -1,0 +1,106 @@
+//! The whole client start-up shared by `view`, `animate` and `demo`: resolve the source, get
+//! the scene (cached), build the session, start the fetcher with the camera's vertices first.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Result;
+use bspvt_proto::Scene;
+
+use crate::session::Session;
+use crate::stream::cache::Cache;
+use crate::stream::fetch::{self, FetchOptions};
+use crate::stream::source::{self, Embedded, Places, Served, Source};
+use crate::stream::trees::StreamedTrees;
+
+/// Where to find the scene and where to keep things (`bspvt view`'s and `animate`'s source
+/// options).
+#[derive(Clone, Debug)]
+pub struct ConnectOptions {
+    /// `http://HOST:PORT/v1/scenes/ID`, a scene id (with `server`), a scene file or
+    /// `builtin:NAME`.
+    pub source: Option<String>,
+    /// A bare mesh (.glb/.gltf/.obj/.ply) with the default scene around it.
+    pub mesh: Option<PathBuf>,
+    /// Service for scene ids and local scenes (default for local scenes: an embedded service).
+    pub server: Option<String>,
+    /// The service's API key.
+    pub api_key: Option<String>,
+    /// Data folder of the embedded service.
+    pub data_dir: PathBuf,
+    /// Where received trees are cached (by scene id); `None`: no cache.
+    pub cache_dir: Option<PathBuf>,
+    /// The embedded service for local scenes without `server`.
+    pub embedded: Option<&'static dyn Embedded>,
+}
+
+impl std::fmt::Debug for dyn Embedded {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Embedded")
+    }
+}
+
+/// A served scene and its bytes.
+pub struct Connected {
+    pub served: Served,
+    pub scene: Scene,
+    pub scene_bytes_fetched: u64,
+    pub started: Instant,
+}
+
+/// Resolves the source and fetches the scene.
+pub fn connect(a: &ConnectOptions) -> Result<Connected> {
+    let started = Instant::now();
+    let src = Source::parse(a.source.as_deref(), a.mesh.as_deref())?;
+    let served = source::open(
+        &src,
+        &Places {
+            server: a.server.clone(),
+            api_key: a.api_key.clone(),
+            data_dir: a.data_dir.clone(),
+            embedded: a.embedded,
+        },
+    )?;
+    let cache = a
+        .cache_dir
+        .as_ref()
+        .map(|d| Cache::new(d, &served.id))
+        .transpose()?;
+    let (scene, scene_bytes_fetched) = served.remote.scene(&served.id, cache.as_ref())?;
+    Ok(Connected {
+        served,
+        scene,
+        scene_bytes_fetched,
+        started,
+    })
+}
+
+impl Connected {
+    /// A session on the scene, its trees streaming in (camera's vertices first).
+    pub fn session(&self, a: &ConnectOptions, width: u32, height: u32) -> Result<Session<'_>> {
+        let mut session = Session::new(
+            &self.scene,
+            width,
+            height,
+            StreamedTrees::default(),
+            None,
+            None,
+        )?;
+        let cache = a
+            .cache_dir
+            .as_ref()
+            .map(|d| Cache::new(d, &self.served.id))
+            .transpose()?;
+        let (rx, counters, _thread) = fetch::spawn(
+            self.served.remote.clone(),
+            self.served.id.clone(),
+            FetchOptions {
+                priority: session.visible_vertices().to_vec(),
+                cache,
+                ..FetchOptions::default()
+            },
+        );
+        session.attach(rx, counters);
+        Ok(session)
+    }
+}

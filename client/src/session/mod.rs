@@ -1,0 +1,305 @@
+//! One interactive shading session: a scene, its trees as they stream in, a camera, a light the
+//! user moves, the method and mode. The viewer, `bspvt animate` and `bspvt demo` all draw their
+//! frames through [`Session::frame`], so a headless sequence is what the window shows.
+
+pub mod connect;
+
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, TryRecvError};
+
+use std::collections::HashMap;
+
+use bspvt_proto::Scene;
+use bspvt_proto::scene::Camera;
+use glam::{DAffine3, DQuat, DVec3};
+
+use crate::frame::image::Image;
+use crate::light::Light;
+use crate::method::{FrameInput, FrameMethod, MethodState, SceneData, Settings, registry};
+use crate::render::path::LightPath;
+use crate::render::renderer::{Mode, Renderer};
+use crate::stream::fetch::{Counters, Update};
+use crate::stream::trees::StreamedTrees;
+
+/// An orbit camera around a target.
+#[derive(Clone, Copy, Debug)]
+pub struct Orbit {
+    pub target: DVec3,
+    pub yaw: f64,
+    pub pitch: f64,
+    pub distance: f64,
+    pub fov_y_deg: f32,
+}
+
+impl Orbit {
+    pub fn from_camera(c: &Camera) -> Orbit {
+        let target = DVec3::from(c.target.map(f64::from));
+        let d = DVec3::from(c.position.map(f64::from)) - target;
+        let distance = d.length().max(1e-6);
+        Orbit {
+            target,
+            yaw: d.x.atan2(d.z),
+            pitch: (d.y / distance).clamp(-1.0, 1.0).asin(),
+            distance,
+            fov_y_deg: c.fov_y_deg,
+        }
+    }
+
+    pub fn camera(&self) -> Camera {
+        let pitch = self.pitch.clamp(-1.5, 1.5);
+        let d = DVec3::new(
+            pitch.cos() * self.yaw.sin(),
+            pitch.sin(),
+            pitch.cos() * self.yaw.cos(),
+        ) * self.distance;
+        let p = self.target + d;
+        Camera {
+            position: p.as_vec3().to_array(),
+            target: self.target.as_vec3().to_array(),
+            up: [0.0, 1.0, 0.0],
+            fov_y_deg: self.fov_y_deg,
+        }
+    }
+}
+
+/// The user's pose of the light relative to its rest pose: a translation and a rotation about
+/// its centroid, and a radiance scale.
+#[derive(Clone, Copy, Debug)]
+pub struct LightPose {
+    pub offset: DVec3,
+    pub yaw: f64,
+    pub tilt: f64,
+    pub radiance_scale: f64,
+}
+
+impl Default for LightPose {
+    fn default() -> LightPose {
+        LightPose {
+            offset: DVec3::ZERO,
+            yaw: 0.0,
+            tilt: 0.0,
+            radiance_scale: 1.0,
+        }
+    }
+}
+
+/// A scene being viewed: what the window, `animate` and `demo` draw through.
+pub struct Session<'a> {
+    /// The scene (at t = 0 for moving scenes).
+    pub scene: &'a Scene,
+    /// The camera's G-buffer and the shading of polygon lights.
+    pub renderer: Renderer<'a>,
+    /// The trees that have arrived.
+    pub streamed: StreamedTrees,
+    updates: Option<Receiver<Update>>,
+    /// The fetcher's byte and chunk counters.
+    pub counters: Option<Arc<Counters>>,
+    /// What it draws (from [`crate::method::registry`]).
+    pub method: &'static dyn FrameMethod,
+    /// Per vertex or per pixel.
+    pub mode: Mode,
+    /// The camera.
+    pub orbit: Orbit,
+    rest: Light,
+    path: LightPath,
+    /// The user's pose of the light.
+    pub pose: LightPose,
+    /// Position on the light's default path in [0, 1) (`None`: the user's pose alone); also
+    /// the cycle time of a moving scene for the run-time methods.
+    pub path_t: Option<f64>,
+    /// The roughness override (`None`: the materials').
+    pub roughness: Option<f32>,
+    data: SceneData<'a>,
+    /// What the methods read; the environment map defaults to the shared test map.
+    settings: Settings,
+    /// Each method's state, prepared on first use (`Err`: preparing failed; its frames fall
+    /// back to unshadowed LTC with a warning).
+    states: HashMap<&'static str, Result<Box<dyn MethodState>, String>>,
+}
+
+impl<'a> Session<'a> {
+    /// A session on `scene` at `width`×`height`, drawing BSPVT per vertex.
+    pub fn new(
+        scene: &'a Scene,
+        width: u32,
+        height: u32,
+        streamed: StreamedTrees,
+        updates: Option<Receiver<Update>>,
+        counters: Option<Arc<Counters>>,
+    ) -> anyhow::Result<Session<'a>> {
+        let light = scene
+            .lights
+            .first()
+            .ok_or_else(|| anyhow::anyhow!("the scene has no light"))?;
+        let rest = Light::load(light)?;
+        let path = LightPath::new(light, rest.clone());
+        Ok(Session {
+            scene,
+            renderer: Renderer::new(scene, width, height),
+            streamed,
+            updates,
+            counters,
+            method: registry::lookup("bspvt")?,
+            mode: Mode::Vertex,
+            orbit: Orbit::from_camera(&scene.camera),
+            rest,
+            path,
+            pose: LightPose::default(),
+            path_t: None,
+            roughness: None,
+            data: SceneData::new(scene),
+            // Interactive: progressive Monte Carlo, one sample a pixel a frame elsewhere.
+            settings: Settings {
+                progressive: true,
+                spp: 1,
+                ..Settings::default()
+            },
+            states: HashMap::new(),
+        })
+    }
+
+    /// Sets the environment map and lobe count of the environment methods (prepared again on
+    /// their next frame).
+    pub fn set_environment(&mut self, path: Option<std::path::PathBuf>, lobes: usize) {
+        self.settings.env.path = path.unwrap_or_else(crate::envmap::default_env_path);
+        self.settings.env.lobes = lobes;
+        self.states.retain(|_, _| false);
+    }
+
+    /// Applies the updates that arrived; returns whether the trees changed.
+    pub fn poll(&mut self) -> bool {
+        let mut changed = false;
+        let Some(rx) = &self.updates else {
+            return false;
+        };
+        loop {
+            match rx.try_recv() {
+                Ok(u) => changed |= self.streamed.apply(u),
+                Err(TryRecvError::Empty) => break,
+                Err(TryRecvError::Disconnected) => {
+                    self.updates = None;
+                    break;
+                }
+            }
+        }
+        if changed {
+            self.invalidate();
+        }
+        changed
+    }
+
+    /// Blocks until the fetcher has delivered everything (or given up).
+    pub fn wait_complete(&mut self) {
+        while self.streaming() {
+            match self.updates.as_ref().map(Receiver::recv) {
+                Some(Ok(u)) => {
+                    if self.streamed.apply(u) {
+                        self.invalidate();
+                    }
+                }
+                _ => self.updates = None,
+            }
+        }
+    }
+
+    /// Something the image depends on changed: restart progressive rendering.
+    pub fn invalidate(&mut self) {
+        for s in self.states.values_mut().flatten() {
+            s.invalidate();
+        }
+    }
+
+    pub fn set_camera(&mut self, orbit: Orbit) {
+        self.orbit = orbit;
+        self.renderer.set_camera(&orbit.camera());
+        self.invalidate();
+    }
+
+    pub fn set_roughness(&mut self, alpha: Option<f32>) {
+        self.roughness = alpha.map(|a| a.clamp(1e-3, 1.0));
+        self.renderer.set_roughness(self.roughness);
+        self.invalidate();
+    }
+
+    /// The light for the current frame.
+    pub fn light(&self) -> Light {
+        let base = match self.path_t {
+            Some(t) => self.path.at(t),
+            None => self.rest.clone(),
+        };
+        let c = base.centroid();
+        let m = DAffine3::from_translation(c + self.pose.offset)
+            * DAffine3::from_quat(
+                DQuat::from_rotation_y(self.pose.yaw) * DQuat::from_rotation_x(self.pose.tilt),
+            )
+            * DAffine3::from_translation(-c);
+        let mut l = base.transformed(&m);
+        l.radiance *= self.pose.radiance_scale;
+        l
+    }
+
+    /// Vertices the camera sees (what the fetcher should bring first).
+    pub fn visible_vertices(&self) -> &[u32] {
+        &self.renderer.visible_vertices
+    }
+
+    /// Draws one frame with the current method; a method that cannot draw (its preparation
+    /// or frame failed) is replaced by unshadowed LTC, with a warning.
+    pub fn frame(&mut self) -> Image {
+        let light = self.light();
+        let m = self.method;
+        let state = self.states.entry(m.name()).or_insert_with(|| {
+            m.prepare(&self.data, &self.settings)
+                .map_err(|e| format!("{e:#}"))
+        });
+        let trees = self.streamed.view();
+        let result = match state {
+            Ok(s) => s
+                .frame(&FrameInput {
+                    scene: &self.data,
+                    renderer: &self.renderer,
+                    light: Some(&light),
+                    trees: trees.as_ref(),
+                    index: 0,
+                    time: self.path_t.unwrap_or(0.0) as f32,
+                    mode: self.mode,
+                })
+                .map_err(|e| format!("{e:#}")),
+            Err(e) => Err(e.clone()),
+        };
+        match result {
+            Ok(f) => f.image,
+            Err(e) => {
+                tracing::warn!("{}: {e}; drawing unshadowed LTC", m.name());
+                self.renderer.ltc(&light, Mode::Pixel).0
+            }
+        }
+    }
+
+    /// Passes accumulated in the current image by a progressive method (Monte Carlo).
+    pub fn passes(&self) -> u32 {
+        match self.states.get(self.method.name()) {
+            Some(Ok(s)) => s.passes(),
+            _ => 0,
+        }
+    }
+
+    /// The mode the current method shades in.
+    pub fn effective_mode(&self) -> Mode {
+        self.method.fixed_mode().unwrap_or(self.mode)
+    }
+}
+
+impl Session<'_> {
+    /// Connects a fetcher's updates (after [`Session::new`], so the fetcher can be told which
+    /// vertices the camera sees first).
+    pub fn attach(&mut self, updates: Receiver<Update>, counters: Arc<Counters>) {
+        self.updates = Some(updates);
+        self.counters = Some(counters);
+    }
+
+    /// Whether a fetcher is still delivering.
+    pub fn streaming(&self) -> bool {
+        self.updates.is_some() && !self.streamed.done && self.streamed.failed.is_none()
+    }
+}

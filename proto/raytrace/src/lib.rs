@@ -1,0 +1,113 @@
+//! # bspvt-raytrace
+//!
+//! Occlusion rays against a mesh: one CWBVH (obvhs) per mesh, any-hit and closest-hit queries.
+//! The one ray caster of the project: the bake's visibility cube maps, the Monte Carlo
+//! references, the point-light penumbrae and the exact SSDF all ask it.
+//!
+//! Must not depend on: anything but `bspvt-proto`'s mesh, glam and obvhs (no I/O).
+
+use std::time::Duration;
+
+use bspvt_proto::Mesh;
+use glam::{Vec3, Vec3A};
+use obvhs::{
+    BvhBuildParams,
+    cwbvh::CwBvh,
+    ray::{Ray, RayHit},
+    rt_triangle::RtTriangle,
+    triangle::Triangle,
+};
+
+/// A mesh prepared for occlusion queries.
+pub struct Occluder {
+    bvh: CwBvh,
+    /// Triangles in BVH primitive order.
+    tris: Vec<RtTriangle>,
+    /// Vertex indices of each triangle, in BVH primitive order.
+    indices: Vec<[u32; 3]>,
+}
+
+/// The mesh's triangles as obvhs primitives, in mesh order.
+pub fn mesh_triangles(mesh: &Mesh) -> Vec<Triangle> {
+    mesh.triangles
+        .iter()
+        .map(|t| {
+            let p = t.map(|i| Vec3A::from(mesh.positions[i as usize]));
+            Triangle {
+                v0: p[0],
+                v1: p[1],
+                v2: p[2],
+            }
+        })
+        .collect()
+}
+
+impl Occluder {
+    /// `tris`: [`mesh_triangles`] of `mesh`. The highest-quality BVH (for bakes and
+    /// references, where rays outnumber builds by far).
+    pub fn new(mesh: &Mesh, tris: &[Triangle]) -> Occluder {
+        Occluder::with_params(mesh, tris, BvhBuildParams::very_slow_build())
+    }
+
+    /// A BVH built in a fraction of [`Occluder::new`]'s time, for geometry that moves every
+    /// frame.
+    pub fn new_fast(mesh: &Mesh, tris: &[Triangle]) -> Occluder {
+        Occluder::with_params(mesh, tris, BvhBuildParams::fast_build())
+    }
+
+    fn with_params(mesh: &Mesh, tris: &[Triangle], params: BvhBuildParams) -> Occluder {
+        let bvh =
+            obvhs::cwbvh::builder::build_cwbvh_from_tris(tris, params, &mut Duration::default());
+        let order = &bvh.primitive_indices;
+        let rt = order
+            .iter()
+            .map(|&i| RtTriangle::from(&tris[i as usize]))
+            .collect();
+        let indices = order.iter().map(|&i| mesh.triangles[i as usize]).collect();
+        Occluder {
+            bvh,
+            tris: rt,
+            indices,
+        }
+    }
+
+    /// True when the ray from `origin` along `dir` hits any triangle that does not use vertex
+    /// `skip` (the vertex the ray starts from: its own triangles cannot shadow it).
+    #[inline]
+    pub fn occluded(&self, origin: Vec3, dir: Vec3, skip: u32) -> bool {
+        let ray = Ray::new(origin.into(), dir.into(), 0.0, f32::INFINITY);
+        !self.bvh.ray_traverse_miss(ray, |ray, id| {
+            if self.indices[id].contains(&skip) {
+                f32::INFINITY
+            } else {
+                self.tris[id].intersect(ray)
+            }
+        })
+    }
+
+    /// True when the segment from `origin` along unit `dir` up to distance `t_max` hits any
+    /// triangle (shadow rays from surface points; the caller offsets `origin`).
+    #[inline]
+    pub fn occluded_segment(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
+        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
+        !self
+            .bvh
+            .ray_traverse_miss(ray, |ray, id| self.tris[id].intersect(ray))
+    }
+
+    /// Distance to the closest triangle hit by the segment from `origin` along unit `dir` up to
+    /// `t_max`, or `None` when the segment is clear (closest-hit traversal: the ray's `tmax`
+    /// shrinks to each hit found).
+    #[inline]
+    pub fn first_hit(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<f32> {
+        if !(t_max > 0.0) || !origin.is_finite() || !dir.is_finite() {
+            return None;
+        }
+        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
+        let mut hit = RayHit::none();
+        self.bvh
+            .ray_traverse(ray, &mut hit, |ray, id| self.tris[id].intersect(ray))
+            .then_some(hit.t)
+            .filter(|t| t.is_finite())
+    }
+}

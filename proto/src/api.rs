@@ -1,0 +1,295 @@
+//! The wire types of the baking service's HTTP API, shared by the service and its clients so
+//! that a client needs no server code: a scene's [`JobState`] and [`SceneStatus`], the
+//! [`ErrorBody`] of every error answer, and the scene as the service stores and serves it
+//! ([`encode_scene`], [`decode_scene`]: postcard, version-tagged, exact floats).
+//!
+//! With the `openapi` feature the types also describe themselves to utoipa.
+
+use serde::{Deserialize, Serialize};
+
+use crate::motion::MovingPart;
+use crate::scene::{Camera, Material, PolygonLight, Region};
+use crate::{BakeSettings, Mesh, Scene};
+
+/// The body of every error answer: `{"error": CODE, "detail": TEXT}`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct ErrorBody {
+    /// Stable machine-readable code, e.g. `invalid_mesh`, `unauthorized`, `not_found`.
+    pub error: String,
+    /// What is wrong, in words.
+    pub detail: String,
+}
+
+/// Where a scene's bake stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[serde(rename_all = "lowercase")]
+pub enum JobState {
+    /// Accepted, waiting for a bake slot.
+    Queued,
+    /// Chunks are being baked.
+    Baking,
+    /// Every chunk is durable.
+    Done,
+    /// The bake stopped; `reason` says why.
+    Failed,
+    /// Deleted by a client; its data is gone.
+    Cancelled,
+}
+
+impl JobState {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JobState::Queued => "queued",
+            JobState::Baking => "baking",
+            JobState::Done => "done",
+            JobState::Failed => "failed",
+            JobState::Cancelled => "cancelled",
+        }
+    }
+
+    /// The state [`JobState::as_str`] names; `None` for any other text.
+    pub fn parse(s: &str) -> Option<JobState> {
+        Some(match s {
+            "queued" => JobState::Queued,
+            "baking" => JobState::Baking,
+            "done" => JobState::Done,
+            "failed" => JobState::Failed,
+            "cancelled" => JobState::Cancelled,
+            _ => return None,
+        })
+    }
+
+    /// Whether the state can no longer change by baking.
+    pub fn is_terminal(self) -> bool {
+        matches!(
+            self,
+            JobState::Done | JobState::Failed | JobState::Cancelled
+        )
+    }
+}
+
+/// Where to find a scene's parts.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct Links {
+    #[serde(rename = "self")]
+    pub status: String,
+    pub events: String,
+    pub mesh: String,
+    /// The scene as baked (`GET /v1/scenes/{id}/scene`).
+    #[serde(default)]
+    pub scene: String,
+    pub trees: String,
+}
+
+impl Links {
+    /// The links of scene `id`.
+    pub fn of(id: &str) -> Links {
+        Links {
+            status: format!("/v1/scenes/{id}"),
+            events: format!("/v1/scenes/{id}/events"),
+            mesh: format!("/v1/scenes/{id}/mesh"),
+            scene: format!("/v1/scenes/{id}/scene"),
+            trees: format!("/v1/scenes/{id}/trees"),
+        }
+    }
+}
+
+/// Sizes of a scene.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct Sizes {
+    pub mesh_vertices: u32,
+    pub mesh_triangles: u64,
+    /// Bytes uploaded (mesh file as sent, scene and settings JSON).
+    pub upload_bytes: u64,
+    /// Bytes of the bake stored so far: header frame + durable chunk frames. When `done`, the
+    /// size of the whole tree stream (= the offline bake file).
+    pub stored_bytes: u64,
+}
+
+/// A scene's status.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+pub struct SceneStatus {
+    pub id: String,
+    pub state: JobState,
+    /// Why the bake failed (`failed`) or stopped (`cancelled`).
+    pub reason: Option<String>,
+    pub vertices_done: u64,
+    pub vertices_total: u32,
+    pub chunks_done: u32,
+    pub chunks_total: u32,
+    /// `vertices_done / vertices_total`.
+    pub progress: f64,
+    /// Vertices per second baked by this server process (while baking).
+    pub rate_vertices_per_s: Option<f64>,
+    /// Estimated seconds to completion (while baking).
+    pub eta_s: Option<f64>,
+    /// Scenes ahead of this one (while queued).
+    pub queue_position: Option<usize>,
+    /// The bake settings (`face_res`, `epsilon`, `supersampling`, `split`, `chunk_vertices`).
+    #[cfg_attr(feature = "openapi", schema(value_type = Object))]
+    pub settings: serde_json::Value,
+    pub sizes: Sizes,
+    /// The baked mesh's content hash (hex), as in the bake header.
+    pub mesh_hash: String,
+    /// How the scene was submitted.
+    pub source: String,
+    pub created_ms: i64,
+    pub started_ms: Option<i64>,
+    pub finished_ms: Option<i64>,
+    /// Chunks baked by this server process (a restarted server never re-bakes durable chunks).
+    pub chunks_baked_this_process: u32,
+    /// Chunks baked over all runs, re-bakes included.
+    pub chunks_baked_total: u64,
+    /// Stored chunks found corrupt or missing and baked again.
+    pub chunks_corrupt: u64,
+    pub links: Links,
+}
+
+// ---------------------------------------------------------------------------------------------
+// The scene as stored and served (`GET /v1/scenes/{id}/scene`).
+
+/// 2: adds the moving parts ([`bspvt_proto::motion`]); version 1 (static scenes) still reads.
+const STORED_VERSION: u16 = 2;
+
+#[derive(Serialize, Deserialize)]
+struct StoredScene {
+    version: u16,
+    mesh: Mesh,
+    materials: Vec<Material>,
+    lights: Vec<StoredLight>,
+    camera: Camera,
+    bake: BakeSettings,
+    motion: Vec<MovingPart>,
+}
+
+/// Version 1: [`StoredScene`] without `motion`.
+#[derive(Serialize, Deserialize)]
+struct StoredSceneV1 {
+    version: u16,
+    mesh: Mesh,
+    materials: Vec<Material>,
+    lights: Vec<StoredLight>,
+    camera: Camera,
+    bake: BakeSettings,
+}
+
+/// [`PolygonLight`] without serde's skipped fields, which postcard cannot carry.
+#[derive(Serialize, Deserialize)]
+struct StoredLight {
+    vertices: Vec<[f32; 3]>,
+    radiance: [f32; 3],
+    two_sided: bool,
+    texture: Option<String>,
+    region: Option<Region>,
+}
+
+impl From<&PolygonLight> for StoredLight {
+    fn from(l: &PolygonLight) -> StoredLight {
+        StoredLight {
+            vertices: l.vertices.clone(),
+            radiance: l.radiance,
+            two_sided: l.two_sided,
+            texture: l.texture.clone(),
+            region: l.region,
+        }
+    }
+}
+
+/// The scene as stored in `scene.bin` (postcard; exact floats).
+pub fn encode_scene(s: &Scene) -> Vec<u8> {
+    let stored = StoredScene {
+        version: STORED_VERSION,
+        mesh: s.mesh.clone(),
+        materials: s.materials.clone(),
+        lights: s.lights.iter().map(StoredLight::from).collect(),
+        camera: s.camera.clone(),
+        bake: s.bake.clone(),
+        motion: s.motion.clone(),
+    };
+    postcard::to_stdvec(&stored).unwrap_or_default()
+}
+
+/// Reads back [`encode_scene`]'s bytes (and version 1's).
+pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
+    let bad = |e: postcard::Error| format!("stored scene does not decode: {e}");
+    let (version, _) = postcard::take_from_bytes::<u16>(bytes).map_err(bad)?;
+    let s = match version {
+        1 => {
+            let v1: StoredSceneV1 = postcard::from_bytes(bytes).map_err(bad)?;
+            StoredScene {
+                version: v1.version,
+                mesh: v1.mesh,
+                materials: v1.materials,
+                lights: v1.lights,
+                camera: v1.camera,
+                bake: v1.bake,
+                motion: Vec::new(),
+            }
+        }
+        STORED_VERSION => postcard::from_bytes(bytes).map_err(bad)?,
+        v => return Err(format!("stored scene has version {v}")),
+    };
+    let scene = Scene {
+        mesh: s.mesh,
+        materials: s.materials,
+        lights: s
+            .lights
+            .into_iter()
+            .map(|l| PolygonLight {
+                vertices: l.vertices,
+                radiance: l.radiance,
+                two_sided: l.two_sided,
+                texture: l.texture,
+                region: l.region,
+            })
+            .collect(),
+        camera: s.camera,
+        bake: s.bake,
+        motion: s.motion,
+    };
+    scene
+        .validate()
+        .map_err(|e| format!("stored scene is not valid: {e}"))?;
+    Ok(scene)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A version-1 stored scene (static, before motion) still reads.
+    #[test]
+    fn version_1_reads() {
+        let p = crate::builtin::scene("plate-small").expect("builtin");
+        let v1 = postcard::to_stdvec(&StoredSceneV1 {
+            version: 1,
+            mesh: p.mesh.clone(),
+            materials: p.materials.clone(),
+            lights: p.lights.iter().map(StoredLight::from).collect(),
+            camera: p.camera.clone(),
+            bake: p.bake.clone(),
+        })
+        .expect("encode v1");
+        assert_eq!(decode_scene(&v1).as_ref(), Ok(&p));
+        assert_eq!(decode_scene(&encode_scene(&p)).as_ref(), Ok(&p));
+    }
+
+    #[test]
+    fn job_states_round_trip_through_their_names() {
+        for s in [
+            JobState::Queued,
+            JobState::Baking,
+            JobState::Done,
+            JobState::Failed,
+            JobState::Cancelled,
+        ] {
+            assert_eq!(JobState::parse(s.as_str()), Some(s));
+        }
+        assert_eq!(JobState::parse("paused"), None);
+    }
+}

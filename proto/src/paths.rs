@@ -1,0 +1,44 @@
+//! Where bspvt finds files it was not given: one place, resolved at run time (no source path
+//! is compiled into a binary).
+//!
+//! The shared test data (meshes, the HDR map): `$BSPVT_ASSETS` when set, else the first of
+//! `../shared/assets` and `../../shared/assets` (from the working directory: the project
+//! root, or a crate folder when cargo runs tests) and `<executable's folder>/assets` that
+//! exists; else `../shared/assets` (the error then names it).
+
+use std::path::{Path, PathBuf};
+
+/// The environment variable that points at the shared test data.
+pub const ASSETS_ENV: &str = "BSPVT_ASSETS";
+
+/// The shared test-data folder (see the module doc for the order).
+pub fn assets_dir() -> PathBuf {
+    if let Some(p) = std::env::var_os(ASSETS_ENV) {
+        return PathBuf::from(p);
+    }
+    let mut candidates = vec![
+        PathBuf::from("../shared/assets"),
+        PathBuf::from("../../shared/assets"),
+        PathBuf::from("../../../shared/assets"),
+    ];
+    if let Some(dir) = std::env::current_exe()
+        .ok()
+        .and_then(|e| e.parent().map(Path::to_path_buf))
+    {
+        candidates.push(dir.join("assets"));
+    }
+    candidates
+        .into_iter()
+        .find(|p| p.is_dir())
+        .unwrap_or_else(|| PathBuf::from("../shared/assets"))
+}
+
+/// `assets_dir()/meshes`.
+pub fn meshes_dir() -> PathBuf {
+    assets_dir().join("meshes")
+}
+
+/// The default environment map, `assets_dir()/env/royal_esplanade_1k.hdr`.
+pub fn default_env_map() -> PathBuf {
+    assets_dir().join("env/royal_esplanade_1k.hdr")
+}

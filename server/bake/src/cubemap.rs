@@ -1,0 +1,303 @@
+//! A vertex's visibility cube map: which pixels matter and what fraction of their rays escape.
+
+use bspvt_proto::Aabb;
+use bspvt_proto::cubemap::{FACES, FaceFrame, pixel_centres};
+use glam::{Vec2, Vec3};
+
+use super::frustum::{FrustumCuller, Pyramid};
+use bspvt_raytrace::Occluder;
+
+/// Ray directions shared by every vertex (the cube map is world-aligned).
+pub struct RayTable {
+    pub res: u32,
+    /// Supersamples per pixel (s²).
+    pub samples: u32,
+    /// Pixel-centre face coordinates, index `j·res + i`.
+    pub uv: Vec<Vec2>,
+    /// Unit pixel-centre directions per face.
+    pub centre: [Vec<Vec3>; FACES],
+    /// Unit sub-pixel directions per face, `samples` per pixel (the centre when s = 1).
+    pub sub: [Vec<Vec3>; FACES],
+}
+
+impl RayTable {
+    pub fn new(res: u32, supersampling: u32) -> RayTable {
+        let uv = pixel_centres(res);
+        let s = supersampling.max(1);
+        let offsets = subpixel_offsets(res, s);
+        let centre = std::array::from_fn(|f| {
+            let fr = FaceFrame::of(f);
+            uv.iter().map(|&p| fr.direction(p).normalize()).collect()
+        });
+        let sub = std::array::from_fn(|f| {
+            let fr = FaceFrame::of(f);
+            uv.iter()
+                .flat_map(|&p| {
+                    offsets
+                        .iter()
+                        .map(move |&o| fr.direction(p + o).normalize())
+                })
+                .collect()
+        });
+        RayTable {
+            res,
+            samples: s * s,
+            uv,
+            centre,
+            sub,
+        }
+    }
+}
+
+/// Offsets from a pixel's centre (face coordinates) of its s×s sub-pixel ray centres, row by
+/// row: a regular grid, so the bake is deterministic.
+pub fn subpixel_offsets(res: u32, s: u32) -> Vec<Vec2> {
+    let h = 1.0 / res as f32; // half a pixel in face coordinates
+    (0..s)
+        .flat_map(|y| {
+            (0..s).map(move |x| {
+                Vec2::new(
+                    (2 * x + 1) as f32 / s as f32 - 1.0,
+                    (2 * y + 1) as f32 / s as f32 - 1.0,
+                ) * h
+            })
+        })
+        .collect()
+}
+
+/// The pixels of one face that matter, with the number of their rays that escape (0..=samples).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct FacePixels {
+    pub index: Vec<u32>,
+    pub visible: Vec<u16>,
+}
+
+/// Where a vertex's rays start and which directions can matter.
+pub struct VertexRays<'a> {
+    pub position: Vec3,
+    pub normal: Vec3,
+    pub vertex: u32,
+    /// Ray origin offset along the normal (scaled to the scene).
+    pub offset: f32,
+    /// Light regions; `None` when a light may go anywhere.
+    pub regions: Option<&'a [Aabb]>,
+}
+
+impl VertexRays<'_> {
+    /// Sub-pixel rays below the horizon (of a pixel whose centre is above it) are counted as
+    /// escaping without casting: the cosine term clips those directions at shading time, and
+    /// casting them would shadow the pixel with the vertex's own surface.
+    #[inline]
+    fn escapes_below_horizon(&self, d: Vec3) -> bool {
+        d.dot(self.normal) <= 0.0
+    }
+
+    /// How many of a pixel's sub-rays escape, given `hit(d)`: the occlusion test to use.
+    #[inline]
+    fn escaping(&self, subs: &[Vec3], hit: impl Fn(Vec3) -> bool) -> u16 {
+        subs.iter()
+            .filter(|&&d| self.escapes_below_horizon(d) || !hit(d))
+            .count() as u16
+    }
+
+    /// Whether direction `d` can matter: above the horizon and toward a light region.
+    #[inline]
+    fn matters(&self, origin: Vec3, d: Vec3) -> bool {
+        d.dot(self.normal) > 0.0
+            && self
+                .regions
+                .is_none_or(|rs| rs.iter().any(|r| r.hit_by_ray(origin, d)))
+    }
+
+    /// Casts the rays of every pixel that matters; returns per-face pixel sets (`None` for
+    /// faces with none) and the number of rays cast against the BVH or a candidate list.
+    ///
+    /// Each face is walked as a quadtree of pixel blocks carrying a list of the triangles that
+    /// may lie in the block's pyramid ([`FrustumCuller`]): a block with an empty list is
+    /// visible without casting; a small block with a short list tests its rays against that
+    /// list; otherwise rays traverse the BVH. Every path gives what casting every ray against
+    /// the whole mesh gives (the lists are conservative).
+    pub fn cast(
+        &self,
+        occ: &Occluder,
+        culler: &FrustumCuller,
+        table: &RayTable,
+    ) -> ([Option<FacePixels>; FACES], u64) {
+        let origin = self.position + self.normal * self.offset;
+        let res = table.res as usize;
+        let mut rays = 0u64;
+        let mut matters = vec![false; res * res];
+        let mut stack = Vec::new();
+        let faces = std::array::from_fn(|f| {
+            let mut any = false;
+            for (m, &d) in matters.iter_mut().zip(&table.centre[f]) {
+                *m = self.matters(origin, d);
+                any |= *m;
+            }
+            if !any {
+                return None;
+            }
+            let mut vis = vec![0u16; res * res];
+            let mut walk = BlockWalk {
+                rays: self,
+                occ,
+                culler,
+                table,
+                face: f,
+                origin,
+                matters: &matters,
+                vis: &mut vis,
+                stack: &mut stack,
+                rays_cast: 0,
+            };
+            walk.block(0, 0, res as u32, None);
+            rays += walk.rays_cast;
+            let mut px = FacePixels::default();
+            for (p, &m) in matters.iter().enumerate() {
+                if m {
+                    px.index.push(p as u32);
+                    px.visible.push(vis[p]);
+                }
+            }
+            Some(px)
+        });
+        (faces, rays)
+    }
+
+    /// Every ray of every pixel that matters, against the BVH: the reference for [`Self::cast`].
+    pub fn cast_brute_force(
+        &self,
+        occ: &Occluder,
+        table: &RayTable,
+    ) -> [Option<FacePixels>; FACES] {
+        let origin = self.position + self.normal * self.offset;
+        let s = table.samples as usize;
+        std::array::from_fn(|f| {
+            let mut px = FacePixels::default();
+            for (p, &d) in table.centre[f].iter().enumerate() {
+                if self.matters(origin, d) {
+                    let subs = &table.sub[f][p * s..(p + 1) * s];
+                    px.index.push(p as u32);
+                    px.visible
+                        .push(self.escaping(subs, |d| occ.occluded(origin, d, self.vertex)));
+                }
+            }
+            (!px.index.is_empty()).then_some(px)
+        })
+    }
+}
+
+/// Candidate lists longer than this are not kept (the block's rays traverse the BVH);
+/// kept lists are short enough to test a block's rays against directly.
+const MAX_CANDIDATES: usize = 32;
+/// Blocks of this size or smaller gather candidate lists; larger ones only test for any.
+const COLLECT_BLOCK: u32 = 8;
+
+/// The quadtree walk over one face of one vertex's cube map.
+struct BlockWalk<'a> {
+    rays: &'a VertexRays<'a>,
+    occ: &'a Occluder,
+    culler: &'a FrustumCuller,
+    table: &'a RayTable,
+    face: usize,
+    origin: Vec3,
+    matters: &'a [bool],
+    vis: &'a mut [u16],
+    stack: &'a mut Vec<u32>,
+    rays_cast: u64,
+}
+
+impl BlockWalk<'_> {
+    fn pixels(&self, i0: u32, j0: u32, size: u32) -> impl Iterator<Item = usize> + use<> {
+        let res = self.table.res as usize;
+        let (i0, j0, size) = (i0 as usize, j0 as usize, size as usize);
+        (j0..j0 + size).flat_map(move |j| (i0..i0 + size).map(move |i| j * res + i))
+    }
+
+    fn pyramid(&self, i0: u32, j0: u32, size: u32) -> Pyramid {
+        let r = self.table.res as f32;
+        let fr = FaceFrame::of(self.face);
+        let e = |i: u32| 2.0 * i as f32 / r - 1.0;
+        let (u0, u1, v0, v1) = (e(i0), e(i0 + size), e(j0), e(j0 + size));
+        Pyramid {
+            apex: self.origin,
+            normals: [
+                fr.a - u0 * fr.w,
+                u1 * fr.w - fr.a,
+                fr.b - v0 * fr.w,
+                v1 * fr.w - fr.b,
+            ],
+        }
+    }
+
+    /// `parent`: the parent block's candidate list, when it was kept.
+    fn block(&mut self, i0: u32, j0: u32, size: u32, parent: Option<&[u32]>) {
+        if !self.pixels(i0, j0, size).any(|p| self.matters[p]) {
+            return;
+        }
+        let pyr = self.pyramid(i0, j0, size);
+        let s = self.table.samples as usize;
+        let h = size / 2;
+        let leaf = size <= MIN_BLOCK || !size.is_multiple_of(2);
+        let mut list = Vec::new();
+        // Large blocks: only ask whether anything may be inside (stops at the first
+        // candidate). Blocks of COLLECT_BLOCK pixels or fewer: gather the candidates.
+        let kept = match parent {
+            Some(from) => {
+                self.culler.filter(&pyr, from, &mut list);
+                true
+            }
+            None if size > COLLECT_BLOCK && !leaf => {
+                let empty = self
+                    .culler
+                    .collect(&pyr, self.rays.vertex, 0, &mut list, self.stack);
+                if !empty {
+                    for (i, j) in [(i0, j0), (i0 + h, j0), (i0, j0 + h), (i0 + h, j0 + h)] {
+                        self.block(i, j, h, None);
+                    }
+                    return;
+                }
+                true
+            }
+            None => self.culler.collect(
+                &pyr,
+                self.rays.vertex,
+                MAX_CANDIDATES,
+                &mut list,
+                self.stack,
+            ),
+        };
+        if kept && list.is_empty() {
+            for p in self.pixels(i0, j0, size) {
+                self.vis[p] = s as u16;
+            }
+            return;
+        }
+        if !leaf && kept {
+            let l = list.as_slice();
+            for (i, j) in [(i0, j0), (i0 + h, j0), (i0, j0 + h), (i0 + h, j0 + h)] {
+                self.block(i, j, h, Some(l));
+            }
+            return;
+        }
+        let f = self.face;
+        for p in self.pixels(i0, j0, size) {
+            if !self.matters[p] {
+                continue;
+            }
+            self.rays_cast += s as u64;
+            let subs = &self.table.sub[f][p * s..(p + 1) * s];
+            self.vis[p] = if kept {
+                self.rays
+                    .escaping(subs, |d| self.culler.ray_hits_any(self.origin, d, &list))
+            } else {
+                self.rays.escaping(subs, |d| {
+                    self.occ.occluded(self.origin, d, self.rays.vertex)
+                })
+            };
+        }
+    }
+}
+
+/// Blocks of this size or smaller are always ray-cast.
+const MIN_BLOCK: u32 = 4;

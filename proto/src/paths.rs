@@ -4,7 +4,7 @@
 //! The shared test data (meshes, the HDR map): `$BSPVT_ASSETS` when set, else the first of
 //! `../shared/assets` and `../../shared/assets` (from the working directory: the project
 //! root, or a crate folder when cargo runs tests) and `<executable's folder>/assets` that
-//! exists; else `../shared/assets` (the error then names it).
+//! exists (made absolute); else `../shared/assets` (the error then names it).
 
 use std::path::{Path, PathBuf};
 
@@ -30,6 +30,7 @@ pub fn assets_dir() -> PathBuf {
     candidates
         .into_iter()
         .find(|p| p.is_dir())
+        .map(|p| p.canonicalize().unwrap_or(p))
         .unwrap_or_else(|| PathBuf::from("../shared/assets"))
 }
 

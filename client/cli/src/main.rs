@@ -68,7 +68,26 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
-    let result = match Cli::parse().command {
+    let command = Cli::parse().command;
+    #[cfg(feature = "service")]
+    let serving = matches!(command, Command::Serve(_));
+    #[cfg(not(feature = "service"))]
+    let serving = false;
+    if !serving {
+        // The library's warnings (a moving scene rendered at t = 0, a method that fell back
+        // to LTC, …) go to stderr; RUST_LOG overrides the level. `serve` sets up the
+        // service's own logging.
+        let _ = tracing_subscriber::fmt()
+            .with_env_filter(
+                tracing_subscriber::EnvFilter::try_from_default_env()
+                    .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+            )
+            .with_writer(std::io::stderr)
+            .without_time()
+            .with_target(false)
+            .try_init();
+    }
+    let result = match command {
         Command::Methods => {
             methods::run();
             Ok(())

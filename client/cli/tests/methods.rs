@@ -99,3 +99,27 @@ fn an_unknown_method_is_refused_with_the_known_names() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("bspvt") && err.contains("mc-env"), "{err}");
 }
+
+/// docs/methods.md lists exactly the registry's methods, in order, with their descriptions.
+#[test]
+fn the_methods_page_agrees_with_the_registry() {
+    let page = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/methods.md"),
+    )
+    .expect("docs/methods.md");
+    let rows: Vec<&str> = page.lines().filter(|l| l.starts_with("| `")).collect();
+    assert_eq!(rows.len(), METHODS.len(), "docs/methods.md rows");
+    for (row, m) in rows.iter().zip(METHODS) {
+        assert!(
+            row.starts_with(&format!(
+                "| `{}` | {} | {} |",
+                m.name(),
+                m.description(),
+                m.needs().describe()
+            )),
+            "docs/methods.md: {row}\nregistry: {} {}",
+            m.name(),
+            m.description()
+        );
+    }
+}

@@ -31,7 +31,7 @@ pub const FORMAT_VERSION: u16 = 1;
 const FILE_MAGIC: &[u8; 6] = b"BSPVT\0";
 const CHUNK_MAGIC: &[u8; 4] = b"BVCK";
 /// zstd level for chunks: trees are compressed once at bake time and served many times.
-pub const ZSTD_LEVEL: i32 = 19;
+pub(crate) const ZSTD_LEVEL: i32 = 19;
 
 /// Bounds the decoder enforces.
 pub const MAX_HEADER_BYTES: u32 = 4096;

@@ -17,6 +17,8 @@
 //!
 //! Math kernels here do no I/O; only [`import`] and [`scene`] loaders touch files.
 
+#![warn(unreachable_pub, missing_docs)]
+
 pub mod api;
 pub mod bspvt;
 pub mod cubemap;
@@ -24,7 +26,7 @@ pub mod encoding;
 pub mod error;
 pub mod hash;
 pub mod import;
-pub mod mesh;
+pub(crate) mod mesh;
 pub mod motion;
 pub mod paths;
 pub mod scene;

@@ -27,7 +27,7 @@ pub struct Aabb {
 }
 
 impl Aabb {
-    pub const EMPTY: Aabb = Aabb {
+    pub(crate) const EMPTY: Aabb = Aabb {
         min: Vec3::splat(f32::INFINITY),
         max: Vec3::splat(f32::NEG_INFINITY),
     };
@@ -36,17 +36,10 @@ impl Aabb {
         points.iter().fold(Aabb::EMPTY, |b, &p| b.grow(p))
     }
 
-    pub fn grow(self, p: Vec3) -> Aabb {
+    pub(crate) fn grow(self, p: Vec3) -> Aabb {
         Aabb {
             min: self.min.min(p),
             max: self.max.max(p),
-        }
-    }
-
-    pub fn union(self, o: Aabb) -> Aabb {
-        Aabb {
-            min: self.min.min(o.min),
-            max: self.max.max(o.max),
         }
     }
 
@@ -58,7 +51,7 @@ impl Aabb {
         (self.max - self.min).length()
     }
 
-    pub fn is_valid(&self) -> bool {
+    pub(crate) fn is_valid(&self) -> bool {
         self.min.is_finite() && self.max.is_finite() && self.min.cmple(self.max).all()
     }
 
@@ -145,7 +138,7 @@ impl Mesh {
     }
 
     /// Drops vertices no triangle uses, keeping the order of the rest.
-    pub fn drop_unused_vertices(&mut self) {
+    pub(crate) fn drop_unused_vertices(&mut self) {
         let mut used = vec![false; self.positions.len()];
         for tri in &self.triangles {
             for &i in tri {
@@ -181,7 +174,7 @@ impl Mesh {
 
     /// Appends `other`, offsetting its indices and material ids by `material_offset`.
     /// Moves every vertex by `m` (normals by its inverse transpose, renormalised).
-    pub fn transform(&mut self, m: &glam::Affine3A) {
+    pub(crate) fn transform(&mut self, m: &glam::Affine3A) {
         let nm = glam::Mat3::from(m.matrix3).inverse().transpose();
         for p in &mut self.positions {
             *p = m.transform_point3(*p);

@@ -48,7 +48,7 @@ impl Default for Transform {
 
 impl Transform {
     /// The affine map, rotating and scaling about `pivot`.
-    pub fn affine(&self, pivot: Vec3) -> Affine3A {
+    pub(crate) fn affine(&self, pivot: Vec3) -> Affine3A {
         Affine3A::from_translation(Vec3::from(self.translation) + pivot)
             * Affine3A::from_scale_rotation_translation(
                 Vec3::from(self.scale),
@@ -59,7 +59,7 @@ impl Transform {
     }
 
     /// Checks the transform of mesh entry `index`.
-    pub fn validate_entry(&self, index: usize) -> Result<(), SceneError> {
+    pub(crate) fn validate_entry(&self, index: usize) -> Result<(), SceneError> {
         self.validate(&format!("meshes[{index}].transform"))
     }
 
@@ -190,7 +190,7 @@ pub struct Motion {
 
 impl Motion {
     /// Checks the motion of mesh entry `index`.
-    pub fn validate(&self, index: usize) -> Result<(), SceneError> {
+    pub(crate) fn validate(&self, index: usize) -> Result<(), SceneError> {
         let what = format!("meshes[{index}].motion");
         if let Some(p) = &self.pivot
             && !finite(p)
@@ -265,7 +265,7 @@ pub struct MovingPart {
 impl MovingPart {
     /// Checks that the part fits a mesh of `vertices` vertices and `triangles` triangles
     /// (stored scenes are read back through this).
-    pub fn validate(
+    pub(crate) fn validate(
         &self,
         index: usize,
         vertices: usize,
@@ -289,7 +289,7 @@ impl MovingPart {
     }
 
     /// A part over `first_vertex..` (positions and normals as placed) and its triangles.
-    pub fn new(
+    pub(crate) fn new(
         first_vertex: u32,
         first_triangle: u32,
         triangle_count: u32,
@@ -314,7 +314,7 @@ impl MovingPart {
 
     /// Writes the part's pose at cycle time `t` into `positions`, `normals` (the whole mesh's
     /// arrays); `triangles` is the whole mesh's, for the normals of a deformed part.
-    pub fn pose_into(
+    pub(crate) fn pose_into(
         &self,
         t: f32,
         positions: &mut [Vec3],

@@ -112,7 +112,7 @@ pub fn sides(poly: &[DVec3], n: DVec3) -> Sides {
 /// Cuts a polygon that the plane `n` crosses ([`Sides::Both`]) into its parts with n·d ≤ 0
 /// (`neg`) and n·d ≥ 0 (`pos`), in one Sutherland–Hodgman pass; the cut points are shared
 /// bit for bit by both parts.
-pub fn cut_into(poly: &[DVec3], n: DVec3, neg: &mut SphPoly, pos: &mut SphPoly) {
+pub(crate) fn cut_into(poly: &[DVec3], n: DVec3, neg: &mut SphPoly, pos: &mut SphPoly) {
     neg.clear();
     pos.clear();
     let len = poly.len();
@@ -146,7 +146,7 @@ pub fn split(poly: &[DVec3], n: DVec3) -> (SphPoly, SphPoly) {
 
 /// Solid angle of the spherical triangle (a, b, c) with sign by orientation
 /// (Van Oosterom & Strackee 1983: tan(Ω/2) = [a b c] / (|a||b||c| + (a·b)|c| + (a·c)|b| + (b·c)|a|)).
-pub fn triangle_solid_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+pub(crate) fn triangle_solid_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
     let (la, lb, lc) = (a.length(), b.length(), c.length());
     let num = a.dot(b.cross(c));
     let den = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;

@@ -39,7 +39,7 @@ impl LineCodec {
         LineCodec::new(bits.clamp(6, 14), bits.clamp(6, 14))
     }
 
-    pub fn new(angle_bits: u8, offset_bits: u8) -> LineCodec {
+    pub(crate) fn new(angle_bits: u8, offset_bits: u8) -> LineCodec {
         let a = 1usize << angle_bits;
         let half = a / 2;
         // The second half of the table is the exact negation of the first, so that the line

@@ -37,7 +37,7 @@ impl FaceTree {
     }
 
     /// The value of a single-leaf tree.
-    pub fn uniform_value(&self) -> Option<u8> {
+    pub(crate) fn uniform_value(&self) -> Option<u8> {
         match self.nodes.as_slice() {
             [Node::Leaf { value }] => Some(*value),
             _ => None,

@@ -82,7 +82,7 @@ pub struct Region {
 }
 
 impl Region {
-    pub fn aabb(&self) -> Aabb {
+    pub(crate) fn aabb(&self) -> Aabb {
         Aabb {
             min: Vec3::from(self.min),
             max: Vec3::from(self.max),
@@ -174,7 +174,7 @@ impl BakeSettings {
     pub const MAX_SUPERSAMPLING: u32 = 8;
     pub const MAX_CHUNK_VERTICES: u32 = 65_536;
 
-    pub fn validate(&self) -> Result<(), SceneError> {
+    pub(crate) fn validate(&self) -> Result<(), SceneError> {
         let bad = |m: String| Err(SceneError::Invalid(m));
         if !(4..=Self::MAX_FACE_RES).contains(&self.face_res) {
             return bad(format!(
@@ -273,7 +273,7 @@ impl PolygonLight {
         newell_normal(&p).normalize_or_zero()
     }
 
-    pub fn validate(&self, index: usize) -> Result<(), SceneError> {
+    pub(crate) fn validate(&self, index: usize) -> Result<(), SceneError> {
         let bad = |m: String| Err(SceneError::Invalid(format!("lights[{index}]: {m}")));
         let n = self.vertices.len();
         if !(3..=8).contains(&n) {
@@ -325,7 +325,7 @@ impl PolygonLight {
 }
 
 /// Newell's polygon normal: robust for any planar polygon, length = 2 · area.
-pub fn newell_normal(p: &[Vec3]) -> Vec3 {
+pub(crate) fn newell_normal(p: &[Vec3]) -> Vec3 {
     let mut n = Vec3::ZERO;
     for i in 0..p.len() {
         n += p[i].cross(p[(i + 1) % p.len()]);
@@ -334,7 +334,7 @@ pub fn newell_normal(p: &[Vec3]) -> Vec3 {
 }
 
 impl Material {
-    pub fn validate(&self, index: usize) -> Result<(), SceneError> {
+    pub(crate) fn validate(&self, index: usize) -> Result<(), SceneError> {
         let bad = |m: String| Err(SceneError::Invalid(format!("materials[{index}]: {m}")));
         if !(self.roughness.is_finite() && self.roughness > 0.0 && self.roughness <= 1.0) {
             return bad(format!("roughness {} must be in (0, 1]", self.roughness));
@@ -352,7 +352,7 @@ impl Material {
 
 impl Camera {
     /// A camera looking at `bounds` from the front-right and above, fitting its bounding sphere.
-    pub fn framing(bounds: &Aabb) -> Camera {
+    pub(crate) fn framing(bounds: &Aabb) -> Camera {
         let center = bounds.center();
         let radius = (0.5 * bounds.diagonal()).max(1e-6);
         let fov_y_deg = default_fov();
@@ -366,7 +366,7 @@ impl Camera {
         }
     }
 
-    pub fn validate(&self) -> Result<(), SceneError> {
+    pub(crate) fn validate(&self) -> Result<(), SceneError> {
         let p = Vec3::from(self.position);
         let t = Vec3::from(self.target);
         let up = Vec3::from(self.up);
@@ -450,7 +450,7 @@ impl Scene {
     }
 
     /// Resolves and loads the meshes a scene file names, then validates the result.
-    pub fn from_file(file: SceneFile, base_dir: &Path) -> Result<Scene, SceneError> {
+    pub(crate) fn from_file(file: SceneFile, base_dir: &Path) -> Result<Scene, SceneError> {
         let parts = file
             .meshes
             .iter()

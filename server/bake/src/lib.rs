@@ -30,7 +30,7 @@ use cubemap::{RayTable, VertexRays};
 use fit::{FitStats, Fitter};
 
 /// Ray origins are offset along the normal by this fraction of the scene's diagonal.
-pub const RAY_OFFSET_SCALE: f32 = 1e-4;
+pub(crate) const RAY_OFFSET_SCALE: f32 = 1e-4;
 
 /// Everything a bake shares across vertices.
 pub struct Baker {
@@ -159,7 +159,8 @@ impl Baker {
 
     /// The cube map of vertex `v` by casting every ray of every pixel that matters against the
     /// BVH, with no culling: the reference the culled walk must equal.
-    pub fn brute_force_cube_map(&self, v: u32) -> [Option<cubemap::FacePixels>; 6] {
+    #[cfg(test)]
+    pub(crate) fn brute_force_cube_map(&self, v: u32) -> [Option<cubemap::FacePixels>; 6] {
         self.vertex_rays(v)
             .cast_brute_force(&self.occluder, &self.table)
     }

@@ -54,7 +54,7 @@ pub struct BenchArgs {
 }
 
 #[derive(Clone, Debug, Serialize)]
-pub struct BenchRow {
+pub(crate) struct BenchRow {
     pub scene: String,
     pub scene_vertices: usize,
     pub sampled: usize,

@@ -8,5 +8,7 @@
 //! Owns: the job store (SQLite), chunk files, the axum API. Wire types shared with clients
 //! live in [`bspvt_proto::api`]. Must not depend on: the client crates.
 
+#![warn(unreachable_pub, missing_docs)]
+
 pub mod bench;
 pub mod service;

@@ -6,6 +6,8 @@
 //!
 //! Must not depend on: anything but `bspvt-proto`'s mesh, glam and obvhs (no I/O).
 
+#![warn(unreachable_pub, missing_docs)]
+
 use std::time::Duration;
 
 use bspvt_proto::Mesh;

@@ -11,6 +11,8 @@
 //! [`Baker::bake_vertex`] is pure and deterministic, so chunks can be baked in any order, on
 //! any number of threads, and give byte-identical output.
 
+#![warn(unreachable_pub, missing_docs)]
+
 pub mod cubemap;
 pub mod fit;
 mod frustum;

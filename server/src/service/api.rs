@@ -29,13 +29,13 @@ use super::jobs::{Live, SubmitError};
 use super::{Shared, blocking};
 
 /// Largest `scene` field (scene JSON).
-pub const MAX_SCENE_JSON_BYTES: u64 = 1 << 20;
+pub(crate) const MAX_SCENE_JSON_BYTES: u64 = 1 << 20;
 /// Largest `settings` field.
-pub const MAX_SETTINGS_JSON_BYTES: u64 = 64 << 10;
+pub(crate) const MAX_SETTINGS_JSON_BYTES: u64 = 64 << 10;
 
 /// Answer to a submission.
 #[derive(Serialize, ToSchema)]
-pub struct Submitted {
+pub(crate) struct Submitted {
     /// The scene's id: 32 hex digits (128 random bits). Whoever knows it can read the scene.
     pub id: String,
     pub state: JobState,
@@ -43,7 +43,7 @@ pub struct Submitted {
 }
 
 /// Builds a scene's status document.
-pub fn status_of(st: &Shared, live: &Live) -> SceneStatus {
+pub(crate) fn status_of(st: &Shared, live: &Live) -> SceneStatus {
     let s = live.snapshot();
     let r = &live.row;
     SceneStatus {
@@ -81,7 +81,7 @@ pub fn status_of(st: &Shared, live: &Live) -> SceneStatus {
 }
 
 /// Scene ids are 32 lowercase hex digits; anything else is unknown without a lookup.
-pub fn check_id(id: &str) -> ApiResult<()> {
+pub(crate) fn check_id(id: &str) -> ApiResult<()> {
     if id.len() == 32
         && id
             .bytes()
@@ -94,7 +94,7 @@ pub fn check_id(id: &str) -> ApiResult<()> {
 }
 
 /// The scene `id` (live or from the database), or 404.
-pub async fn lookup(st: &Shared, id: &str) -> ApiResult<Arc<Live>> {
+pub(crate) async fn lookup(st: &Shared, id: &str) -> ApiResult<Arc<Live>> {
     check_id(id)?;
     let jobs = st.jobs.clone();
     let key = id.to_string();
@@ -111,7 +111,7 @@ fn new_id() -> ApiResult<String> {
 }
 
 /// Proof that a write request carries the API key (when one is configured).
-pub struct WriteAccess;
+pub(crate) struct WriteAccess;
 
 impl FromRequestParts<Shared> for WriteAccess {
     type Rejection = ApiError;
@@ -302,7 +302,7 @@ fn queue_full(n: usize) -> ApiError {
 /// Multipart form of a submission (for the OpenAPI document).
 #[derive(ToSchema)]
 #[allow(dead_code)]
-pub struct SubmitForm {
+pub(crate) struct SubmitForm {
     /// The mesh file (`.glb`, `.gltf`, `.obj`, `.ply`, each optionally compressed as `.zst`).
     /// Required unless the scene names only `builtin:` meshes.
     #[schema(value_type = String, format = Binary)]
@@ -332,7 +332,7 @@ pub struct SubmitForm {
     ),
     security(("api_key" = []))
 )]
-pub async fn submit(
+pub(crate) async fn submit(
     State(st): State<Shared>,
     _auth: WriteAccess,
     headers: HeaderMap,
@@ -406,7 +406,7 @@ pub async fn submit(
         (status = 404, description = "Unknown id", body = ErrorBody),
     )
 )]
-pub async fn get_scene(State(st): State<Shared>, Path(id): Path<String>) -> ApiResult<Response> {
+pub(crate) async fn get_scene(State(st): State<Shared>, Path(id): Path<String>) -> ApiResult<Response> {
     let live = lookup(&st, &id).await?;
     let mut r = Json(status_of(&st, &live)).into_response();
     r.headers_mut()
@@ -427,7 +427,7 @@ pub async fn get_scene(State(st): State<Shared>, Path(id): Path<String>) -> ApiR
     ),
     security(("api_key" = []))
 )]
-pub async fn delete_scene(
+pub(crate) async fn delete_scene(
     State(st): State<Shared>,
     _auth: WriteAccess,
     Path(id): Path<String>,
@@ -443,7 +443,7 @@ pub async fn delete_scene(
 }
 
 /// `If-None-Match` contains `etag` (or `*`).
-pub fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
+pub(crate) fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
     headers
         .get_all(header::IF_NONE_MATCH)
         .iter()
@@ -453,7 +453,7 @@ pub fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
         .any(|t| t == etag || t == "*")
 }
 
-pub fn not_modified_response(etag: &str) -> Response {
+pub(crate) fn not_modified_response(etag: &str) -> Response {
     let mut r = StatusCode::NOT_MODIFIED.into_response();
     if let Ok(v) = HeaderValue::from_str(etag) {
         r.headers_mut().insert(header::ETAG, v);
@@ -478,7 +478,7 @@ pub fn not_modified_response(etag: &str) -> Response {
         (status = 410, description = "Deleted", body = ErrorBody),
     )
 )]
-pub async fn get_mesh(
+pub(crate) async fn get_mesh(
     State(st): State<Shared>,
     Path(id): Path<String>,
     RawQuery(q): RawQuery,
@@ -546,7 +546,7 @@ pub async fn get_mesh(
         (status = 410, description = "Deleted", body = ErrorBody),
     )
 )]
-pub async fn get_scene_file(
+pub(crate) async fn get_scene_file(
     State(st): State<Shared>,
     Path(id): Path<String>,
     headers: HeaderMap,
@@ -606,7 +606,7 @@ fn immutable_response(
     r
 }
 
-pub fn gone(id: &str) -> ApiError {
+pub(crate) fn gone(id: &str) -> ApiError {
     ApiError::new(
         StatusCode::GONE,
         "deleted",
@@ -616,7 +616,7 @@ pub fn gone(id: &str) -> ApiError {
 
 /// A binary little-endian PLY of the mesh: float x y z nx ny nz per vertex, then per triangle
 /// a `uchar`-counted `uint` index list and its material id.
-pub fn ply_bytes(m: &bspvt_proto::Mesh) -> Vec<u8> {
+pub(crate) fn ply_bytes(m: &bspvt_proto::Mesh) -> Vec<u8> {
     let mut out = format!(
         "ply\nformat binary_little_endian 1.0\ncomment bspvt baked mesh {:016x}; vertex order = tree order\n\
          element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
@@ -645,7 +645,7 @@ pub fn ply_bytes(m: &bspvt_proto::Mesh) -> Vec<u8> {
 
 /// Health.
 #[derive(Serialize, ToSchema)]
-pub struct Health {
+pub(crate) struct Health {
     /// `ok`.
     pub status: String,
     pub generation: i64,
@@ -664,7 +664,7 @@ pub struct Health {
         (status = 503, description = "The database does not answer", body = ErrorBody),
     )
 )]
-pub async fn healthz(State(st): State<Shared>) -> ApiResult<Json<Health>> {
+pub(crate) async fn healthz(State(st): State<Shared>) -> ApiResult<Json<Health>> {
     let db = st.db.clone();
     blocking(move || db.ping())
         .await
@@ -686,7 +686,7 @@ pub async fn healthz(State(st): State<Shared>) -> ApiResult<Json<Health>> {
     tag = "service",
     responses((status = 200, description = "Metrics", content_type = "text/plain"))
 )]
-pub async fn metrics(State(st): State<Shared>) -> Response {
+pub(crate) async fn metrics(State(st): State<Shared>) -> Response {
     let text = st.metrics.render(&st.jobs.gauges());
     let mut r = text.into_response();
     r.headers_mut().insert(
@@ -703,12 +703,12 @@ pub async fn metrics(State(st): State<Shared>) -> Response {
     tag = "service",
     responses((status = 200, description = "OpenAPI document", content_type = "application/json"))
 )]
-pub async fn openapi() -> Response {
+pub(crate) async fn openapi() -> Response {
     Json(super::openapi::document()).into_response()
 }
 
 /// Unknown routes.
-pub async fn not_found() -> ApiError {
+pub(crate) async fn not_found() -> ApiError {
     ApiError::new(
         StatusCode::NOT_FOUND,
         "not_found",

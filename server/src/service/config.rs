@@ -169,7 +169,7 @@ impl Config {
 
     /// Merges flags/environment (already merged by clap), the `--config` file and defaults,
     /// then checks the result.
-    pub fn resolve(args: &ServeArgs) -> Result<Config> {
+    pub(crate) fn resolve(args: &ServeArgs) -> Result<Config> {
         let file = match &args.config {
             Some(p) => read_file(p)?,
             None => FileConfig::default(),
@@ -270,7 +270,7 @@ impl Config {
     }
 
     /// The database file.
-    pub fn db_path(&self) -> PathBuf {
+    pub(crate) fn db_path(&self) -> PathBuf {
         self.data_dir.join("bspvt.sqlite")
     }
 }

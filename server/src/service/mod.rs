@@ -13,17 +13,17 @@
 //! lets the workers store the chunks they are baking, and exits (a SIGKILL instead loses
 //! nothing durable: see `jobs`).
 
-pub mod api;
+pub(crate) mod api;
 pub mod config;
-pub mod db;
-pub mod error;
-pub mod input;
-pub mod jobs;
-pub mod metrics;
-pub mod openapi;
-pub mod sse;
-pub mod store;
-pub mod stream;
+pub(crate) mod db;
+pub(crate) mod error;
+pub(crate) mod input;
+pub(crate) mod jobs;
+pub(crate) mod metrics;
+pub(crate) mod openapi;
+pub(crate) mod sse;
+pub(crate) mod store;
+pub(crate) mod stream;
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -50,7 +50,7 @@ use metrics::Metrics;
 use store::Store;
 
 /// Everything a handler can reach.
-pub struct AppState {
+pub(crate) struct AppState {
     pub cfg: Config,
     pub db: Arc<Db>,
     pub store: Arc<Store>,
@@ -70,10 +70,10 @@ pub struct AppState {
     next_request: AtomicU64,
 }
 
-pub type Shared = Arc<AppState>;
+pub(crate) type Shared = Arc<AppState>;
 
 impl AppState {
-    pub fn input_limits(&self) -> InputLimits {
+    pub(crate) fn input_limits(&self) -> InputLimits {
         InputLimits {
             mesh: Limits {
                 max_vertices: self.cfg.max_mesh_vertices,
@@ -87,7 +87,7 @@ impl AppState {
 }
 
 /// Runs blocking work (database, files, parsing) on tokio's blocking pool.
-pub async fn blocking<T, F>(f: F) -> ApiResult<T>
+pub(crate) async fn blocking<T, F>(f: F) -> ApiResult<T>
 where
     F: FnOnce() -> Result<T> + Send + 'static,
     T: Send + 'static,
@@ -100,7 +100,7 @@ where
 }
 
 /// The router with its middleware.
-pub fn router(state: Shared) -> Router {
+pub(crate) fn router(state: Shared) -> Router {
     let body_limit = usize::try_from(state.cfg.max_body_bytes).unwrap_or(usize::MAX);
     Router::new()
         .route("/v1/scenes", post(api::submit))
@@ -172,7 +172,7 @@ async fn observe(State(st): State<Shared>, req: Request, next: Next) -> Response
 }
 
 /// A service that is running.
-pub struct Service {
+pub(crate) struct Service {
     pub state: Shared,
     pub addr: SocketAddr,
     listener: tokio::net::TcpListener,
@@ -182,7 +182,7 @@ pub struct Service {
 impl Service {
     /// Opens the data directory (database, store), resumes unfinished bakes, starts the
     /// workers and binds the listener.
-    pub async fn open(cfg: Config) -> Result<Service> {
+    pub(crate) async fn open(cfg: Config) -> Result<Service> {
         std::fs::create_dir_all(&cfg.data_dir)
             .with_context(|| format!("cannot create data dir {}", cfg.data_dir.display()))?;
         let db = Arc::new(Db::open(&cfg.db_path())?);
@@ -235,7 +235,7 @@ impl Service {
 
     /// Serves until `stop` resolves, then shuts down: streams end, connections get 10 s to
     /// finish, workers get 30 s to store the chunks they are baking.
-    pub async fn run(
+    pub(crate) async fn run(
         self,
         stop: impl std::future::Future<Output = ()> + Send + 'static,
     ) -> Result<()> {
@@ -342,7 +342,7 @@ async fn signal() {
 }
 
 /// Sets up logging on stderr (`RUST_LOG` filters; default `info`).
-pub fn init_logging(format: config::LogFormat) {
+pub(crate) fn init_logging(format: config::LogFormat) {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let builder = tracing_subscriber::fmt()
@@ -379,8 +379,11 @@ pub fn serve_command(args: &ServeArgs) -> Result<()> {
 
 /// A service running on its own runtime thread (benchmarks, embedding).
 pub struct Background {
+    /// The address the service listens on.
     pub addr: SocketAddr,
-    pub state: Shared,
+    /// Holds the shared state for as long as the handle lives (read by nothing outside).
+    #[expect(dead_code, reason = "kept alive with the handle, as before the API was narrowed")]
+    state: Shared,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
     thread: Option<std::thread::JoinHandle<Result<()>>>,
 }

@@ -59,7 +59,7 @@ impl utoipa::Modify for BearerAuth {
 }
 
 /// The document (built once).
-pub fn document() -> &'static serde_json::Value {
+pub(crate) fn document() -> &'static serde_json::Value {
     static DOC: OnceLock<serde_json::Value> = OnceLock::new();
     DOC.get_or_init(|| serde_json::to_value(Doc::openapi()).unwrap_or_default())
 }

@@ -43,7 +43,7 @@ struct Events {
         (status = 429, description = "Too many open streams", body = ErrorBody),
     )
 )]
-pub async fn get_events(
+pub(crate) async fn get_events(
     State(st): State<Shared>,
     Path(id): Path<String>,
 ) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {

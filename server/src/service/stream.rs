@@ -39,7 +39,7 @@ use super::store::ChunkRead;
 use super::{Shared, blocking};
 
 /// All six faces.
-pub const ALL_FACES: u8 = (1 << FACES) - 1;
+pub(crate) const ALL_FACES: u8 = (1 << FACES) - 1;
 
 /// Face names accepted by `faces=` (index = face).
 const FACE_NAMES: [[&str; 2]; FACES] = [
@@ -53,7 +53,7 @@ const FACE_NAMES: [[&str; 2]; FACES] = [
 
 /// What a tree request asks for.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Selection {
+pub(crate) struct Selection {
     /// Chunk indices.
     pub chunks: std::ops::Range<u32>,
     /// Bit f set = face f kept.
@@ -61,7 +61,7 @@ pub struct Selection {
 }
 
 /// `k=v` pairs of a query string, percent-decoded (`+` is kept as `+`).
-pub fn query_pairs(q: Option<&str>) -> ApiResult<Vec<(String, String)>> {
+pub(crate) fn query_pairs(q: Option<&str>) -> ApiResult<Vec<(String, String)>> {
     let Some(q) = q.filter(|q| !q.is_empty()) else {
         return Ok(Vec::new());
     };
@@ -106,7 +106,7 @@ fn percent_decode(s: &str) -> ApiResult<String> {
 
 impl Selection {
     /// Parses `vertices=A..B` (also `A..`, `..B`) and `faces=LIST` against a scene.
-    pub fn parse(q: Option<&str>, row: &SceneRow) -> ApiResult<Selection> {
+    pub(crate) fn parse(q: Option<&str>, row: &SceneRow) -> ApiResult<Selection> {
         let n = row.vertex_count;
         let (mut range, mut faces) = (None, None);
         for (k, v) in query_pairs(q)? {
@@ -235,7 +235,7 @@ fn etag(row: &SceneRow, sel: &Selection, chunks: &[ChunkMeta]) -> String {
         (status = 429, description = "Too many open streams", body = ErrorBody),
     )
 )]
-pub async fn get_trees(
+pub(crate) async fn get_trees(
     State(st): State<Shared>,
     Path(id): Path<String>,
     RawQuery(q): RawQuery,
@@ -329,13 +329,13 @@ pub async fn get_trees(
 }
 
 /// Counts an open stream and holds its permit while it lives.
-pub struct StreamGuard {
+pub(crate) struct StreamGuard {
     st: Shared,
     _permit: OwnedSemaphorePermit,
 }
 
 impl StreamGuard {
-    pub fn new(st: &Shared, permit: OwnedSemaphorePermit) -> StreamGuard {
+    pub(crate) fn new(st: &Shared, permit: OwnedSemaphorePermit) -> StreamGuard {
         st.metrics.streams_open.fetch_add(1, Ordering::Relaxed);
         StreamGuard {
             st: st.clone(),

@@ -1,4 +1,4 @@
-//! HTTP handlers for scenes, meshes, health, metrics and the OpenAPI document. They are thin:
+//! HTTP handlers for scenes, meshes, health and metrics. They are thin:
 //! they parse and check the request, call `input`, `jobs` or `store`, and shape the answer.
 //!
 //! Guarantees: writes (`POST`, `DELETE`) need `Authorization: Bearer KEY` when a key is
@@ -20,13 +20,14 @@ use bspvt_proto::encoding::{BakeHeader, encode_header};
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use bspvt_proto::api::{JobState, Links, SceneStatus, Sizes};
+use bspvt_proto::api::{JobState, Links, SceneStatus};
 
 use super::db::{SceneRow, now_ms};
-use super::error::{ApiError, ApiResult, ErrorBody};
+use super::error::{ApiError, ApiResult, ErrorBody, gone};
+use super::http::{not_modified, not_modified_response, query_pairs};
 use super::input::{self, Upload};
 use super::jobs::{Live, SubmitError};
-use super::{Shared, blocking};
+use super::state::{Shared, blocking, check_id, lookup, status_of};
 
 /// Largest `scene` field (scene JSON).
 pub(crate) const MAX_SCENE_JSON_BYTES: u64 = 1 << 20;
@@ -40,67 +41,6 @@ pub(crate) struct Submitted {
     pub id: String,
     pub state: JobState,
     pub links: Links,
-}
-
-/// Builds a scene's status document.
-pub(crate) fn status_of(st: &Shared, live: &Live) -> SceneStatus {
-    let s = live.snapshot();
-    let r = &live.row;
-    SceneStatus {
-        id: r.id.clone(),
-        state: s.state,
-        reason: s.reason,
-        vertices_done: s.vertices_done,
-        vertices_total: r.vertex_count,
-        chunks_done: s.chunks_done,
-        chunks_total: r.chunk_count,
-        progress: s.vertices_done as f64 / (r.vertex_count.max(1)) as f64,
-        rate_vertices_per_s: s.rate,
-        eta_s: s.eta_s,
-        queue_position: match s.state {
-            JobState::Queued => st.jobs.queue_position(&r.id),
-            _ => None,
-        },
-        settings: serde_json::from_str(&r.settings_json).unwrap_or(serde_json::Value::Null),
-        sizes: Sizes {
-            mesh_vertices: r.vertex_count,
-            mesh_triangles: r.triangle_count,
-            upload_bytes: r.upload_bytes,
-            stored_bytes: s.stored_bytes,
-        },
-        mesh_hash: format!("{:016x}", r.mesh_hash),
-        source: r.source.clone(),
-        created_ms: r.created_ms,
-        started_ms: s.started_ms,
-        finished_ms: s.finished_ms,
-        chunks_baked_this_process: st.jobs.baked_this_process(&r.id),
-        chunks_baked_total: s.chunks_baked_total,
-        chunks_corrupt: s.chunks_corrupt,
-        links: Links::of(&r.id),
-    }
-}
-
-/// Scene ids are 32 lowercase hex digits; anything else is unknown without a lookup.
-pub(crate) fn check_id(id: &str) -> ApiResult<()> {
-    if id.len() == 32
-        && id
-            .bytes()
-            .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
-    {
-        Ok(())
-    } else {
-        Err(ApiError::not_found(id))
-    }
-}
-
-/// The scene `id` (live or from the database), or 404.
-pub(crate) async fn lookup(st: &Shared, id: &str) -> ApiResult<Arc<Live>> {
-    check_id(id)?;
-    let jobs = st.jobs.clone();
-    let key = id.to_string();
-    blocking(move || jobs.lookup(&key))
-        .await?
-        .ok_or_else(|| ApiError::not_found(id))
 }
 
 /// A new unguessable id: 128 bits from the operating system's generator.
@@ -406,7 +346,10 @@ pub(crate) async fn submit(
         (status = 404, description = "Unknown id", body = ErrorBody),
     )
 )]
-pub(crate) async fn get_scene(State(st): State<Shared>, Path(id): Path<String>) -> ApiResult<Response> {
+pub(crate) async fn get_scene(
+    State(st): State<Shared>,
+    Path(id): Path<String>,
+) -> ApiResult<Response> {
     let live = lookup(&st, &id).await?;
     let mut r = Json(status_of(&st, &live)).into_response();
     r.headers_mut()
@@ -442,25 +385,6 @@ pub(crate) async fn delete_scene(
     Ok(Json(status_of(&st, &live)).into_response())
 }
 
-/// `If-None-Match` contains `etag` (or `*`).
-pub(crate) fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
-    headers
-        .get_all(header::IF_NONE_MATCH)
-        .iter()
-        .filter_map(|v| v.to_str().ok())
-        .flat_map(|v| v.split(','))
-        .map(|t| t.trim().trim_start_matches("W/"))
-        .any(|t| t == etag || t == "*")
-}
-
-pub(crate) fn not_modified_response(etag: &str) -> Response {
-    let mut r = StatusCode::NOT_MODIFIED.into_response();
-    if let Ok(v) = HeaderValue::from_str(etag) {
-        r.headers_mut().insert(header::ETAG, v);
-    }
-    r
-}
-
 /// The mesh as baked (vertex order = tree order).
 #[utoipa::path(
     get,
@@ -489,7 +413,7 @@ pub(crate) async fn get_mesh(
         return Err(gone(&id));
     }
     let mut format = "json";
-    for (k, v) in super::stream::query_pairs(q.as_deref())? {
+    for (k, v) in query_pairs(q.as_deref())? {
         match (k.as_str(), v.as_str()) {
             ("format", "json") => format = "json",
             ("format", "ply") => format = "ply",
@@ -606,14 +530,6 @@ fn immutable_response(
     r
 }
 
-pub(crate) fn gone(id: &str) -> ApiError {
-    ApiError::new(
-        StatusCode::GONE,
-        "deleted",
-        format!("scene {id} was deleted"),
-    )
-}
-
 /// A binary little-endian PLY of the mesh: float x y z nx ny nz per vertex, then per triangle
 /// a `uchar`-counted `uint` index list and its material id.
 pub(crate) fn ply_bytes(m: &bspvt_proto::Mesh) -> Vec<u8> {
@@ -694,17 +610,6 @@ pub(crate) async fn metrics(State(st): State<Shared>) -> Response {
         HeaderValue::from_static("text/plain; version=0.0.4; charset=utf-8"),
     );
     r
-}
-
-/// The OpenAPI 3 document of this API.
-#[utoipa::path(
-    get,
-    path = "/v1/openapi.json",
-    tag = "service",
-    responses((status = 200, description = "OpenAPI document", content_type = "application/json"))
-)]
-pub(crate) async fn openapi() -> Response {
-    Json(super::openapi::document()).into_response()
 }
 
 /// Unknown routes.

@@ -306,7 +306,13 @@ impl Db {
 
     /// Forgets a chunk (its file is missing or corrupt) so that it is baked again; a finished
     /// scene goes back to `baking`. Returns false when the row was already gone or differed.
-    pub(crate) fn drop_chunk(&self, id: &str, idx: u32, seen: ChunkMeta, corrupt: bool) -> Result<bool> {
+    pub(crate) fn drop_chunk(
+        &self,
+        id: &str,
+        idx: u32,
+        seen: ChunkMeta,
+        corrupt: bool,
+    ) -> Result<bool> {
         let mut c = self.conn();
         let tx = c.transaction()?;
         let n = tx.execute(
@@ -359,7 +365,6 @@ impl Db {
         tx.commit()?;
         Ok(Some(parse_state(&before)?))
     }
-
 }
 
 #[cfg(test)]

@@ -28,7 +28,11 @@ pub(crate) struct ApiError {
 pub(crate) type ApiResult<T> = Result<T, ApiError>;
 
 impl ApiError {
-    pub(crate) fn new(status: StatusCode, code: &'static str, detail: impl Into<String>) -> ApiError {
+    pub(crate) fn new(
+        status: StatusCode,
+        code: &'static str,
+        detail: impl Into<String>,
+    ) -> ApiError {
         ApiError {
             status,
             code,
@@ -175,4 +179,13 @@ pub(crate) async fn json_errors(response: Response) -> Response {
     );
     parts.headers.remove(header::CONTENT_LENGTH);
     Response::from_parts(parts, Body::from(body))
+}
+
+/// The answer about a deleted scene (410).
+pub(crate) fn gone(id: &str) -> ApiError {
+    ApiError::new(
+        StatusCode::GONE,
+        "deleted",
+        format!("scene {id} was deleted"),
+    )
 }

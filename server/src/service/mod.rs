@@ -2,8 +2,13 @@
 //! for jobs and metadata, chunk files for the trees, all under one data directory.
 //!
 //! Modules: [`config`] (flags, environment, TOML), [`api`] (handlers), [`stream`] (tree
-//! streaming), [`sse`] (status events), [`jobs`] (scheduler and workers), [`store`] (files),
-//! [`db`] (SQLite), [`input`] (uploads → scenes), [`metrics`], [`error`], [`openapi`].
+//! streaming), [`sse`] (status events), [`openapi`] (the API document and its handler),
+//! [`state`] (what every handler reaches: state, scene lookup, stream accounting), [`http`]
+//! (query strings, conditional requests), [`jobs`] (scheduler and workers), [`store`] (files),
+//! [`db`] (SQLite), [`input`] (uploads → scenes), [`metrics`], [`error`]. Only [`config`] and
+//! the service handles below are public. The modules depend on each other without cycles, top
+//! to bottom: this module (router, server) → `openapi` → the handlers `api`, `stream`, `sse` →
+//! `state`, `http` → `jobs` → `store`, `input`, `metrics` → `db`, `error`, `config`.
 //! docs/service.md describes the API, the storage layout and the invariants.
 //!
 //! Guarantees of this module: every request runs in a tracing span (id, method, path) and is
@@ -13,17 +18,19 @@
 //! lets the workers store the chunks they are baking, and exits (a SIGKILL instead loses
 //! nothing durable: see `jobs`).
 
-pub(crate) mod api;
+mod api;
 pub mod config;
-pub(crate) mod db;
-pub(crate) mod error;
-pub(crate) mod input;
-pub(crate) mod jobs;
-pub(crate) mod metrics;
-pub(crate) mod openapi;
-pub(crate) mod sse;
-pub(crate) mod store;
-pub(crate) mod stream;
+mod db;
+mod error;
+mod http;
+mod input;
+mod jobs;
+mod metrics;
+mod openapi;
+mod sse;
+mod state;
+mod store;
+mod stream;
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -37,67 +44,16 @@ use axum::http::StatusCode;
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
-use bspvt_proto::import::Limits;
 use tokio::sync::{Semaphore, watch};
 use tracing::Instrument;
 
 pub use config::{Config, ServeArgs};
 use db::Db;
-use error::{ApiError, ApiResult};
-use input::InputLimits;
+use error::ApiError;
 use jobs::Jobs;
 use metrics::Metrics;
+use state::{AppState, Shared};
 use store::Store;
-
-/// Everything a handler can reach.
-pub(crate) struct AppState {
-    pub cfg: Config,
-    pub db: Arc<Db>,
-    pub store: Arc<Store>,
-    pub jobs: Arc<Jobs>,
-    pub metrics: Arc<Metrics>,
-    /// Uploads being read or parsed.
-    pub uploads: Arc<Semaphore>,
-    /// Open tree and event streams.
-    pub streams: Arc<Semaphore>,
-    /// Requests being handled (streams count until their headers are sent).
-    pub requests: Arc<Semaphore>,
-    /// Face-filter re-encodes running at once.
-    pub reencode: Semaphore,
-    /// Becomes true when the server shuts down.
-    pub shutdown: watch::Receiver<bool>,
-    pub started: Instant,
-    next_request: AtomicU64,
-}
-
-pub(crate) type Shared = Arc<AppState>;
-
-impl AppState {
-    pub(crate) fn input_limits(&self) -> InputLimits {
-        InputLimits {
-            mesh: Limits {
-                max_vertices: self.cfg.max_mesh_vertices,
-                max_triangles: self.cfg.max_mesh_triangles,
-                max_bytes: self.cfg.max_mesh_bytes,
-            },
-            max_face_res: self.cfg.max_face_res,
-            max_supersampling: self.cfg.max_supersampling,
-        }
-    }
-}
-
-/// Runs blocking work (database, files, parsing) on tokio's blocking pool.
-pub(crate) async fn blocking<T, F>(f: F) -> ApiResult<T>
-where
-    F: FnOnce() -> Result<T> + Send + 'static,
-    T: Send + 'static,
-{
-    match tokio::task::spawn_blocking(f).await {
-        Ok(Ok(v)) => Ok(v),
-        Ok(Err(e)) => Err(ApiError::internal(format!("{e:#}"))),
-        Err(e) => Err(ApiError::internal(format!("background task failed: {e}"))),
-    }
-}
 
 /// The router with its middleware.
 pub(crate) fn router(state: Shared) -> Router {
@@ -112,7 +68,7 @@ pub(crate) fn router(state: Shared) -> Router {
         .route("/v1/scenes/{id}/mesh", get(api::get_mesh))
         .route("/v1/scenes/{id}/scene", get(api::get_scene_file))
         .route("/v1/scenes/{id}/trees", get(stream::get_trees))
-        .route("/v1/openapi.json", get(api::openapi))
+        .route("/v1/openapi.json", get(openapi::openapi))
         .route("/healthz", get(api::healthz))
         .route("/metrics", get(api::metrics))
         .fallback(api::not_found)
@@ -382,7 +338,10 @@ pub struct Background {
     /// The address the service listens on.
     pub addr: SocketAddr,
     /// Holds the shared state for as long as the handle lives (read by nothing outside).
-    #[expect(dead_code, reason = "kept alive with the handle, as before the API was narrowed")]
+    #[expect(
+        dead_code,
+        reason = "kept alive with the handle, as before the API was narrowed"
+    )]
     state: Shared,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
     thread: Option<std::thread::JoinHandle<Result<()>>>,

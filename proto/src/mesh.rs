@@ -11,9 +11,11 @@ use crate::error::MeshError;
 /// An indexed triangle mesh with per-vertex normals and a material per triangle.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Mesh {
+    /// Vertex positions.
     pub positions: Vec<Vec3>,
     /// Unit normals, one per position.
     pub normals: Vec<Vec3>,
+    /// Vertex indices of each triangle.
     pub triangles: Vec<[u32; 3]>,
     /// Index into the scene's materials, one per triangle.
     pub material_ids: Vec<u32>,
@@ -22,7 +24,9 @@ pub struct Mesh {
 /// An axis-aligned box.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Aabb {
+    /// Smallest corner.
     pub min: Vec3,
+    /// Largest corner.
     pub max: Vec3,
 }
 
@@ -32,6 +36,7 @@ impl Aabb {
         max: Vec3::splat(f32::NEG_INFINITY),
     };
 
+    /// The smallest box holding `points` (an empty, invalid box for none).
     pub fn from_points(points: &[Vec3]) -> Aabb {
         points.iter().fold(Aabb::EMPTY, |b, &p| b.grow(p))
     }
@@ -43,10 +48,12 @@ impl Aabb {
         }
     }
 
+    /// The box's centre.
     pub fn center(&self) -> Vec3 {
         0.5 * (self.min + self.max)
     }
 
+    /// Length of the box's diagonal.
     pub fn diagonal(&self) -> f32 {
         (self.max - self.min).length()
     }
@@ -70,10 +77,12 @@ impl Aabb {
 }
 
 impl Mesh {
+    /// Number of vertices.
     pub fn vertex_count(&self) -> usize {
         self.positions.len()
     }
 
+    /// The bounding box of the positions.
     pub fn bounds(&self) -> Aabb {
         Aabb::from_points(&self.positions)
     }
@@ -184,6 +193,7 @@ impl Mesh {
         }
     }
 
+    /// Appends `other`, shifting its indices and its material ids by `material_offset`.
     pub fn append(&mut self, other: &Mesh, material_offset: u32) {
         let base = self.positions.len() as u32;
         self.positions.extend_from_slice(&other.positions);

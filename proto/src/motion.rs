@@ -24,10 +24,13 @@ use crate::error::SceneError;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Transform {
+    /// Translation.
     #[serde(default)]
     pub translation: [f32; 3],
+    /// Rotation: Euler angles X, Y, Z in degrees.
     #[serde(default)]
     pub rotation_deg: [f32; 3],
+    /// Scale per axis.
     #[serde(default = "unit_scale")]
     pub scale: [f32; 3],
 }
@@ -104,10 +107,13 @@ const MAX_KEYS: usize = 4096;
 pub struct Key {
     /// Time in the cycle, in [0, 1].
     pub t: f32,
+    /// Translation at `t`.
     #[serde(default)]
     pub translation: [f32; 3],
+    /// Rotation at `t`: Euler angles X, Y, Z in degrees.
     #[serde(default)]
     pub rotation_deg: [f32; 3],
+    /// Scale per axis at `t`.
     #[serde(default = "unit_scale")]
     pub scale: [f32; 3],
 }
@@ -128,13 +134,22 @@ impl Key {
 pub enum Deform {
     /// A twist about `axis` through the pivot: a vertex at signed height h along the axis
     /// turns by `degrees` · sin(2πt) · h / H, H the mesh's largest |h|.
-    Twist { axis: [f32; 3], degrees: f32 },
+    Twist {
+        /// The twist axis (non-zero).
+        axis: [f32; 3],
+        /// Turn in degrees at the largest |h|, at the peak of the cycle.
+        degrees: f32,
+    },
     /// A travelling wave: p += `normal` · `amplitude` · sin(2π (p·d / `wavelength` − t)),
     /// d the unit `direction`.
     Wave {
+        /// Direction of travel (non-zero).
         direction: [f32; 3],
+        /// Direction of the displacement (non-zero).
         normal: [f32; 3],
+        /// Largest displacement.
         amplitude: f32,
+        /// Wavelength (positive).
         wavelength: f32,
     },
 }
@@ -184,6 +199,7 @@ pub struct Motion {
     /// Poses over the cycle, in non-decreasing `t` (none or one: no rigid motion).
     #[serde(default)]
     pub keys: Vec<Key>,
+    /// A non-rigid deformation on top of the keys.
     #[serde(default)]
     pub deform: Option<Deform>,
 }
@@ -252,13 +268,19 @@ impl Motion {
 /// its rest geometry and its motion.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MovingPart {
+    /// First vertex of the part in the scene's mesh.
     pub first_vertex: u32,
+    /// First triangle of the part in the scene's mesh.
     pub first_triangle: u32,
+    /// Triangles of the part.
     pub triangle_count: u32,
     /// Rest positions and normals (the placed mesh), one per vertex of the part.
     pub rest_positions: Vec<Vec3>,
+    /// Rest normals, one per vertex of the part.
     pub rest_normals: Vec<Vec3>,
+    /// Centre of rotation, scaling and twist ([`Motion::pivot`], resolved).
     pub pivot: Vec3,
+    /// How the part moves.
     pub motion: Motion,
 }
 

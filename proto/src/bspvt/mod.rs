@@ -24,7 +24,7 @@ pub fn unquantise(v: u8) -> f32 {
     v as f32 * (1.0 / 255.0)
 }
 
-/// Quantises a mean visibility in [0, 1] to 8 bits (round to nearest; error ≤ 1/510).
+/// Quantises a leaf's mean visibility v̄ in [0, 1] [paper000 §3.2] to 8 bits (round to nearest; error ≤ 1/510).
 #[inline]
 pub fn quantise(v: f64) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u8

@@ -20,7 +20,7 @@ use obvhs::{
     triangle::Triangle,
 };
 
-/// A mesh prepared for occlusion queries.
+/// A mesh prepared for occlusion queries: a CWBVH over its triangles [obvhs].
 pub struct Occluder {
     bvh: CwBvh,
     /// Triangles in BVH primitive order.

@@ -68,7 +68,9 @@ pub fn subpixel_offsets(res: u32, s: u32) -> Vec<Vec2> {
 /// The pixels of one face that matter, with the number of their rays that escape (0..=samples).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct FacePixels {
+    /// Pixel indices (`j · res + i`), ascending.
     pub index: Vec<u32>,
+    /// Escaping rays of each pixel: V(p) = visible / samples [paper000 §3.1].
     pub visible: Vec<u16>,
 }
 

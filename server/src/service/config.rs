@@ -111,32 +111,54 @@ struct FileConfig {
 /// Log output format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LogFormat {
+    /// Human-readable lines.
     Text,
+    /// One JSON object per line.
     Json,
 }
 
 /// The resolved configuration of a running service.
 #[derive(Clone, Debug)]
 pub struct Config {
+    /// Directory holding everything the service stores (database, scenes, chunks).
     pub data_dir: PathBuf,
+    /// Address to listen on (port 0 picks a free port).
     pub addr: SocketAddr,
+    /// When set, `Authorization: Bearer KEY` is required for writes.
     pub api_key: Option<String>,
+    /// Bake workers: chunks baked at the same time.
     pub workers: usize,
+    /// Threads of the shared bake pool (0 = one per core).
     pub threads: usize,
+    /// Largest request body in bytes.
     pub max_body_bytes: u64,
+    /// Largest mesh file in bytes, after zstd decompression.
     pub max_mesh_bytes: u64,
+    /// Most vertices of a submitted scene.
     pub max_mesh_vertices: u64,
+    /// Most triangles of a submitted mesh.
     pub max_mesh_triangles: u64,
+    /// Largest cube-map face resolution a submitted scene may ask for.
     pub max_face_res: u32,
+    /// Largest supersampling a submitted scene may ask for.
     pub max_supersampling: u32,
+    /// Most scenes queued or baking; further submissions get 429.
     pub max_queued_scenes: usize,
+    /// Most scenes baking at once.
     pub max_active_scenes: usize,
+    /// Most requests being handled at once.
     pub max_concurrent_requests: usize,
+    /// Most open tree and event streams.
     pub max_streams: usize,
+    /// Most uploads being read and parsed at once.
     pub max_uploads: usize,
+    /// Seconds a non-streaming request may take.
     pub request_timeout_s: u64,
+    /// Most open client connections.
     pub max_connections: usize,
+    /// Seconds a client may take to send a request's headers.
     pub header_read_timeout_s: u64,
+    /// Log format on stderr.
     pub log_format: LogFormat,
 }
 

@@ -100,7 +100,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
     let dir = a
         .meshes_dir
         .clone()
-        .unwrap_or_else(|| bspvt_proto::paths::meshes_dir());
+        .unwrap_or_else(bspvt_proto::paths::meshes_dir);
     let mut scenes: Vec<(String, Scene)> = Vec::new();
     if let Some(s) = bspvt_proto::builtin::scene("plate").filter(|_| a.builtin) {
         // The same scene without its declared light region: what "don't care" saves.

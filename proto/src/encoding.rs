@@ -64,7 +64,8 @@ pub struct BakeHeader {
 }
 
 impl BakeHeader {
-    /// The header of a bake of `vertex_count` vertices with `settings` (the line codec follows from the face resolution).
+    /// The header of a bake of `vertex_count` vertices with `settings` (the line codec follows from
+    /// the face resolution).
     pub fn new(settings: &BakeSettings, vertex_count: u32, mesh_hash: u64) -> BakeHeader {
         let codec = LineCodec::for_resolution(settings.face_res);
         BakeHeader {

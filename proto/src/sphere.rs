@@ -15,9 +15,9 @@ pub const MAX_VERTS: usize = 64;
 /// A convex spherical polygon (directions, not necessarily unit).
 pub type SphPoly = ArrayVec<DVec3, MAX_VERTS>;
 
-/// Keeps the part of `poly` with `n·d ≥ 0` (Sutherland–Hodgman [Sutherland74]). Returns an empty polygon
-/// when fewer than three vertices remain or no vertex lies strictly on the kept side (what
-/// remains then lies in the plane: zero solid angle).
+/// Keeps the part of `poly` with `n·d ≥ 0` (Sutherland–Hodgman \[Sutherland74\]). Returns an
+/// empty polygon when fewer than three vertices remain or no vertex lies strictly on the kept
+/// side (what remains then lies in the plane: zero solid angle).
 pub fn clip(poly: &[DVec3], n: DVec3) -> SphPoly {
     let mut out = SphPoly::new();
     let len = poly.len();
@@ -153,7 +153,8 @@ pub(crate) fn triangle_solid_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
     2.0 * num.atan2(den)
 }
 
-/// Solid angle of a convex spherical polygon (fan of triangles from vertex 0 [VanOosterom83]), ≥ 0.
+/// Solid angle of a convex spherical polygon (fan of triangles from vertex 0,
+/// \[VanOosterom83\]), ≥ 0.
 pub fn solid_angle(poly: &[DVec3]) -> f64 {
     if poly.len() < 3 {
         return 0.0;

@@ -92,8 +92,8 @@ impl FaceTree {
         }
     }
 
-    /// Cuts the spherical polygon `poly` (already inside this face's pyramid) by the tree's
-    /// lines, calling `visit(piece, leaf value)` for every non-empty piece [paper000 §3.3]. Each line is a
+    /// Cuts the spherical polygon `poly` (already inside this face's pyramid) by the tree's lines,
+    /// calling `visit(piece, leaf value)` for every non-empty piece [paper000 §3.3]. Each line is a
     /// plane through the origin ([`LineCodec::plane`]), so every cut is an exact great circle.
     pub fn split_polygon(
         &self,
@@ -203,7 +203,8 @@ impl VertexTrees {
         out
     }
 
-    /// Visible fraction of the solid angle of `poly`: Σ v̄ᵢ Ωᵢ / Ω ([paper000 §3.1 eq. 2] with f_r = 1).
+    /// Visible fraction of the solid angle of `poly`: Σ v̄ᵢ Ωᵢ / Ω ([paper000 §3.1 eq. 2]
+    /// with f_r = 1).
     pub fn visible_fraction(&self, codec: &LineCodec, poly: &[DVec3]) -> f64 {
         let mut num = 0.0;
         let mut den = 0.0;

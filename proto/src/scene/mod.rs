@@ -21,7 +21,7 @@ pub struct Material {
     /// The material's name (for messages).
     #[serde(default)]
     pub name: String,
-    /// GGX roughness α (the squared perceptual roughness [Karis13]), in (0, 1].
+    /// GGX roughness α (the squared perceptual roughness \[Karis13\]), in (0, 1].
     #[serde(default = "default_roughness")]
     pub roughness: f32,
     /// Diffuse (Lambertian) albedo, linear RGB in [0, 1].
@@ -125,7 +125,7 @@ pub enum SplitMethod {
     Default,
     /// Exact line search over every quantised angle and offset (slow; the quality reference).
     Exhaustive,
-    /// The paper's Nelder–Mead minimisation of E(P, l) [paper000 §3.2 eq. 3] [Nelder65] (the
+    /// The paper's Nelder–Mead minimisation of E(P, l) [paper000 §3.2 eq. 3] \[Nelder65\] (the
     /// baseline).
     NelderMead,
 }
@@ -137,8 +137,8 @@ pub struct BakeSettings {
     /// Cube-map face resolution in pixels (per side).
     #[serde(default = "default_face_res")]
     pub face_res: u32,
-    /// Leaf tolerance ε [paper000 §3.2]: a node is a leaf when Σ (V − v̄)² over its pixels is at most
-    /// `epsilon · face_res²`, i.e. ε is a fraction of the face's pixel count.
+    /// Leaf tolerance ε [paper000 §3.2]: a node is a leaf when Σ (V − v̄)² over its pixels is at
+    /// most `epsilon · face_res²`, i.e. ε is a fraction of the face's pixel count.
     #[serde(default = "default_epsilon")]
     pub epsilon: f32,
     /// Rays per pixel side: `s` casts s×s rays per pixel and stores fractional visibility.

@@ -16,7 +16,7 @@
 //!
 //! Where E cannot improve on predicting the whole node with one binary value (E's blind spot:
 //! a small blob of one value inside the other), the line minimising the children's squared
-//! deviation is used instead ([`Best::choose`]).
+//! deviation is used instead (`Best::choose`).
 //! - `NelderMead`: the paper's baseline — Nelder–Mead over continuous (θ, c), E evaluated on
 //!   the quantised line. When its search ends on no line that splits the node, the node
 //!   becomes a leaf even if it exceeds ε (the paper's algorithm has no fallback): part of why

@@ -55,7 +55,8 @@ impl BakeStats {
         s
     }
 
-    /// The statistics of `t` (per-vertex sums) with `bytes` encoded; `seconds` and the settings are left at zero (the split method at its default).
+    /// The statistics of `t` (per-vertex sums) with `bytes` encoded; `seconds` and the settings are
+    /// left at zero (the split method at its default).
     pub fn from_totals(t: &Totals, bytes: u64, threads: usize) -> BakeStats {
         let v = t.vertices.max(1) as f64;
         let px = t.fit.pixels.max(1) as f64;

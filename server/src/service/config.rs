@@ -2,7 +2,7 @@
 //! TOML file, merged in that order of precedence over the built-in defaults.
 //!
 //! Guarantees: every limit the service enforces is a field of [`Config`], has a default that
-//! is safe on a small machine, and is checked for sanity ([`Config::resolve`] refuses zero
+//! is safe on a small machine, and is checked for sanity (`Config::resolve` refuses zero
 //! workers, zero limits and an unparsable address before anything is opened).
 
 use std::net::SocketAddr;

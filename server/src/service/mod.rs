@@ -1,11 +1,11 @@
 //! The HTTP baking service (`bspvt-server serve`): axum on tokio, an embedded SQLite database
 //! for jobs and metadata, chunk files for the trees, all under one data directory.
 //!
-//! Modules: [`config`] (flags, environment, TOML), [`api`] (handlers), [`stream`] (tree
-//! streaming), [`sse`] (status events), [`openapi`] (the API document and its handler),
-//! [`state`] (what every handler reaches: state, scene lookup, stream accounting), [`http`]
-//! (query strings, conditional requests), [`jobs`] (scheduler and workers), [`store`] (files),
-//! [`db`] (SQLite), [`input`] (uploads → scenes), [`metrics`], [`error`]. Only [`config`] and
+//! Modules: [`config`] (flags, environment, TOML), `api` (handlers), `stream` (tree
+//! streaming), `sse` (status events), `openapi` (the API document and its handler),
+//! `state` (what every handler reaches: state, scene lookup, stream accounting), `http`
+//! (query strings, conditional requests), `jobs` (scheduler and workers), `store` (files),
+//! `db` (SQLite), `input` (uploads → scenes), `metrics`, `error`. Only [`config`] and
 //! the service handles below are public. The modules depend on each other without cycles, top
 //! to bottom: this module (router, server) → `openapi` → the handlers `api`, `stream`, `sse` →
 //! `state`, `http` → `jobs` → `store`, `input`, `metrics` → `db`, `error`, `config`.
@@ -14,7 +14,7 @@
 //! Guarantees of this module: every request runs in a tracing span (id, method, path) and is
 //! logged with its status and latency; requests beyond `max_concurrent_requests` get 429;
 //! non-streaming requests are cut at `request_timeout_s` (408); every error response is JSON
-//! ([`error::json_errors`]); on SIGINT/SIGTERM the server stops accepting, ends open streams,
+//! (`error::json_errors`); on SIGINT/SIGTERM the server stops accepting, ends open streams,
 //! lets the workers store the chunks they are baking, and exits (a SIGKILL instead loses
 //! nothing durable: see `jobs`).
 

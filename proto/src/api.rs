@@ -39,6 +39,7 @@ pub enum JobState {
 }
 
 impl JobState {
+    /// The state's name on the wire and in the database (`queued`, `baking`, …).
     pub fn as_str(self) -> &'static str {
         match self {
             JobState::Queued => "queued",
@@ -73,14 +74,22 @@ impl JobState {
 /// Where to find a scene's parts.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[allow(
+    missing_docs,
+    reason = "a doc comment here becomes a description in the served OpenAPI document; `//` comments keep it unchanged"
+)]
 pub struct Links {
+    // The status document (`GET /v1/scenes/{id}`).
     #[serde(rename = "self")]
     pub status: String,
+    // The status as server-sent events (`GET /v1/scenes/{id}/events`).
     pub events: String,
+    // The mesh as baked (`GET /v1/scenes/{id}/mesh`).
     pub mesh: String,
     /// The scene as baked (`GET /v1/scenes/{id}/scene`).
     #[serde(default)]
     pub scene: String,
+    // The encoded trees (`GET /v1/scenes/{id}/trees`).
     pub trees: String,
 }
 
@@ -100,8 +109,14 @@ impl Links {
 /// Sizes of a scene.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[allow(
+    missing_docs,
+    reason = "a doc comment here becomes a description in the served OpenAPI document; `//` comments keep it unchanged"
+)]
 pub struct Sizes {
+    // Vertices of the mesh as baked (one tree set each).
     pub mesh_vertices: u32,
+    // Triangles of the mesh as baked.
     pub mesh_triangles: u64,
     /// Bytes uploaded (mesh file as sent, scene and settings JSON).
     pub upload_bytes: u64,
@@ -113,14 +128,24 @@ pub struct Sizes {
 /// A scene's status.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[cfg_attr(feature = "openapi", derive(utoipa::ToSchema))]
+#[allow(
+    missing_docs,
+    reason = "a doc comment here becomes a description in the served OpenAPI document; `//` comments keep it unchanged"
+)]
 pub struct SceneStatus {
+    // The scene's id (32 lowercase hex digits).
     pub id: String,
+    // Where the bake stands.
     pub state: JobState,
     /// Why the bake failed (`failed`) or stopped (`cancelled`).
     pub reason: Option<String>,
+    // Vertices whose trees are durable.
     pub vertices_done: u64,
+    // Vertices of the mesh.
     pub vertices_total: u32,
+    // Durable chunks.
     pub chunks_done: u32,
+    // Chunks of the bake.
     pub chunks_total: u32,
     /// `vertices_done / vertices_total`.
     pub progress: f64,
@@ -133,13 +158,17 @@ pub struct SceneStatus {
     /// The bake settings (`face_res`, `epsilon`, `supersampling`, `split`, `chunk_vertices`).
     #[cfg_attr(feature = "openapi", schema(value_type = Object))]
     pub settings: serde_json::Value,
+    // Sizes of the mesh, the upload and the stored bake.
     pub sizes: Sizes,
     /// The baked mesh's content hash (hex), as in the bake header.
     pub mesh_hash: String,
     /// How the scene was submitted.
     pub source: String,
+    // When the scene was accepted (ms since the Unix epoch).
     pub created_ms: i64,
+    // When its bake started (ms since the Unix epoch).
     pub started_ms: Option<i64>,
+    // When its bake ended (ms since the Unix epoch).
     pub finished_ms: Option<i64>,
     /// Chunks baked by this server process (a restarted server never re-bakes durable chunks).
     pub chunks_baked_this_process: u32,
@@ -147,6 +176,7 @@ pub struct SceneStatus {
     pub chunks_baked_total: u64,
     /// Stored chunks found corrupt or missing and baked again.
     pub chunks_corrupt: u64,
+    // Where to find the scene's parts.
     pub links: Links,
 }
 

@@ -24,12 +24,16 @@ const AXES: [[[f32; 3]; 3]; FACES] = [
 /// The three axes of a face.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FaceFrame {
+    /// Forward axis: the face's centre direction.
     pub w: Vec3,
+    /// Tangent axis of u.
     pub a: Vec3,
+    /// Tangent axis of v (a × b = w).
     pub b: Vec3,
 }
 
 impl FaceFrame {
+    /// The axes of face `face` (0..6: +X, −X, +Y, −Y, +Z, −Z).
     pub fn of(face: usize) -> FaceFrame {
         let [w, a, b] = AXES[face];
         FaceFrame {
@@ -44,12 +48,15 @@ impl FaceFrame {
         self.w + uv.x * self.a + uv.y * self.b
     }
 
+    /// `w` in double precision.
     pub fn w64(&self) -> DVec3 {
         self.w.as_dvec3()
     }
+    /// `a` in double precision.
     pub fn a64(&self) -> DVec3 {
         self.a.as_dvec3()
     }
+    /// `b` in double precision.
     pub fn b64(&self) -> DVec3 {
         self.b.as_dvec3()
     }

@@ -31,29 +31,41 @@ pub const FORMAT_VERSION: u16 = 1;
 const FILE_MAGIC: &[u8; 6] = b"BSPVT\0";
 const CHUNK_MAGIC: &[u8; 4] = b"BVCK";
 /// zstd level for chunks: trees are compressed once at bake time and served many times.
-pub const ZSTD_LEVEL: i32 = 19;
+pub(crate) const ZSTD_LEVEL: i32 = 19;
 
 /// Bounds the decoder enforces.
 pub const MAX_HEADER_BYTES: u32 = 4096;
+/// Largest compressed chunk body the decoder accepts.
 pub const MAX_CHUNK_BODY_BYTES: u32 = 64 << 20;
+/// Largest uncompressed chunk body the decoder accepts.
 pub const MAX_CHUNK_RAW_BYTES: u32 = 256 << 20;
 
 /// What a reader needs to decode a bake's chunks, and what produced them.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BakeHeader {
+    /// Cube-map face resolution (pixels per side).
     pub face_res: u32,
+    /// Bits of a split line's angle index.
     pub angle_bits: u8,
+    /// Bits of a split line's offset index.
     pub offset_bits: u8,
+    /// Leaf tolerance ε of the bake ([`BakeSettings::epsilon`]).
     pub epsilon: f32,
+    /// Rays per pixel side.
     pub supersampling: u32,
+    /// How split lines were chosen.
     pub split: SplitMethod,
+    /// Vertices of the mesh (one tree set each).
     pub vertex_count: u32,
+    /// Vertices per chunk (the last chunk may hold fewer).
     pub chunk_vertices: u32,
     /// [`crate::Mesh::content_hash`] of the mesh baked.
     pub mesh_hash: u64,
 }
 
 impl BakeHeader {
+    /// The header of a bake of `vertex_count` vertices with `settings` (the line codec follows from
+    /// the face resolution).
     pub fn new(settings: &BakeSettings, vertex_count: u32, mesh_hash: u64) -> BakeHeader {
         let codec = LineCodec::for_resolution(settings.face_res);
         BakeHeader {
@@ -69,6 +81,7 @@ impl BakeHeader {
         }
     }
 
+    /// The line codec the trees were quantised with.
     pub fn codec(&self) -> LineCodec {
         LineCodec::new(self.angle_bits, self.offset_bits)
     }
@@ -120,7 +133,9 @@ impl BakeHeader {
 /// The header of a chunk frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ChunkHeader {
+    /// First vertex of the chunk.
     pub first_vertex: u32,
+    /// Vertices in the chunk.
     pub vertex_count: u32,
     /// Length of the uncompressed vertex records.
     pub raw_len: u32,
@@ -129,7 +144,9 @@ pub struct ChunkHeader {
 /// A decoded chunk.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Chunk {
+    /// First vertex of the chunk.
     pub first_vertex: u32,
+    /// One entry per vertex, in vertex order.
     pub trees: Vec<VertexTrees>,
 }
 
@@ -521,6 +538,7 @@ pub fn decode_header(data: &[u8]) -> Result<(BakeHeader, usize), DecodeError> {
 /// A whole decoded bake.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Bake {
+    /// The bake's header.
     pub header: BakeHeader,
     /// One entry per vertex, in vertex order.
     pub trees: Vec<VertexTrees>,

@@ -1,5 +1,6 @@
 //! FNV-1a, a tiny stable hash for content identity (not for integrity: chunks use CRC-32).
 
+/// An FNV-1a 64-bit hasher.
 pub struct Fnv1a(u64);
 
 impl Default for Fnv1a {
@@ -9,6 +10,7 @@ impl Default for Fnv1a {
 }
 
 impl Fnv1a {
+    /// Hashes `bytes`.
     pub fn write(&mut self, bytes: &[u8]) {
         for &b in bytes {
             self.0 ^= b as u64;
@@ -16,12 +18,14 @@ impl Fnv1a {
         }
     }
 
+    /// Hashes each value's bit pattern, little-endian (so −0.0 and 0.0 differ).
     pub fn write_f32s(&mut self, v: &[f32]) {
         for x in v {
             self.write(&x.to_bits().to_le_bytes());
         }
     }
 
+    /// The hash of everything written so far.
     pub fn finish(&self) -> u64 {
         self.0
     }

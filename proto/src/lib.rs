@@ -2,8 +2,9 @@
 //!
 //! The shared language of the bspvt baking server and its streaming client:
 //!
-//! - [`scene`]: the scene model and its JSON file format; [`mesh`] and [`import`] (glTF, OBJ,
-//!   PLY) for geometry; [`builtin`] procedural scenes that need no download.
+//! - [`scene`]: the scene model and its JSON file format; [`Mesh`] (with [`Aabb`]) and
+//!   [`import`] (glTF, OBJ, PLY) for geometry; [`builtin`] procedural scenes that need no
+//!   download.
 //! - [`motion`]: how a scene's meshes are placed and move over an animation cycle (run-time
 //!   methods).
 //! - [`cubemap`]: the world-aligned cube-map layout every vertex's visibility is sampled on.
@@ -15,7 +16,13 @@
 //!   the stored scene), so that a client needs no server code.
 //! - [`paths`]: where files not given on the command line are looked for, at run time.
 //!
+//! - [`error`]: the errors of user-supplied data; [`hash`]: FNV-1a for content identity.
+//!
 //! Math kernels here do no I/O; only [`import`] and [`scene`] loaders touch files.
+//! Must not depend on: the other bspvt crates (this is the bottom of their graph), ray
+//! casting, HTTP, a database, or anything of rendering.
+
+#![warn(unreachable_pub, missing_docs)]
 
 pub mod api;
 pub mod bspvt;
@@ -24,7 +31,7 @@ pub mod encoding;
 pub mod error;
 pub mod hash;
 pub mod import;
-pub mod mesh;
+pub(crate) mod mesh;
 pub mod motion;
 pub mod paths;
 pub mod scene;

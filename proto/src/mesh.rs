@@ -11,9 +11,11 @@ use crate::error::MeshError;
 /// An indexed triangle mesh with per-vertex normals and a material per triangle.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Mesh {
+    /// Vertex positions.
     pub positions: Vec<Vec3>,
     /// Unit normals, one per position.
     pub normals: Vec<Vec3>,
+    /// Vertex indices of each triangle.
     pub triangles: Vec<[u32; 3]>,
     /// Index into the scene's materials, one per triangle.
     pub material_ids: Vec<u32>,
@@ -22,43 +24,41 @@ pub struct Mesh {
 /// An axis-aligned box.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Aabb {
+    /// Smallest corner.
     pub min: Vec3,
+    /// Largest corner.
     pub max: Vec3,
 }
 
 impl Aabb {
-    pub const EMPTY: Aabb = Aabb {
+    pub(crate) const EMPTY: Aabb = Aabb {
         min: Vec3::splat(f32::INFINITY),
         max: Vec3::splat(f32::NEG_INFINITY),
     };
 
+    /// The smallest box holding `points` (an empty, invalid box for none).
     pub fn from_points(points: &[Vec3]) -> Aabb {
         points.iter().fold(Aabb::EMPTY, |b, &p| b.grow(p))
     }
 
-    pub fn grow(self, p: Vec3) -> Aabb {
+    pub(crate) fn grow(self, p: Vec3) -> Aabb {
         Aabb {
             min: self.min.min(p),
             max: self.max.max(p),
         }
     }
 
-    pub fn union(self, o: Aabb) -> Aabb {
-        Aabb {
-            min: self.min.min(o.min),
-            max: self.max.max(o.max),
-        }
-    }
-
+    /// The box's centre.
     pub fn center(&self) -> Vec3 {
         0.5 * (self.min + self.max)
     }
 
+    /// Length of the box's diagonal.
     pub fn diagonal(&self) -> f32 {
         (self.max - self.min).length()
     }
 
-    pub fn is_valid(&self) -> bool {
+    pub(crate) fn is_valid(&self) -> bool {
         self.min.is_finite() && self.max.is_finite() && self.min.cmple(self.max).all()
     }
 
@@ -77,10 +77,12 @@ impl Aabb {
 }
 
 impl Mesh {
+    /// Number of vertices.
     pub fn vertex_count(&self) -> usize {
         self.positions.len()
     }
 
+    /// The bounding box of the positions.
     pub fn bounds(&self) -> Aabb {
         Aabb::from_points(&self.positions)
     }
@@ -145,7 +147,7 @@ impl Mesh {
     }
 
     /// Drops vertices no triangle uses, keeping the order of the rest.
-    pub fn drop_unused_vertices(&mut self) {
+    pub(crate) fn drop_unused_vertices(&mut self) {
         let mut used = vec![false; self.positions.len()];
         for tri in &self.triangles {
             for &i in tri {
@@ -181,7 +183,7 @@ impl Mesh {
 
     /// Appends `other`, offsetting its indices and material ids by `material_offset`.
     /// Moves every vertex by `m` (normals by its inverse transpose, renormalised).
-    pub fn transform(&mut self, m: &glam::Affine3A) {
+    pub(crate) fn transform(&mut self, m: &glam::Affine3A) {
         let nm = glam::Mat3::from(m.matrix3).inverse().transpose();
         for p in &mut self.positions {
             *p = m.transform_point3(*p);
@@ -191,6 +193,7 @@ impl Mesh {
         }
     }
 
+    /// Appends `other`, shifting its indices and its material ids by `material_offset`.
     pub fn append(&mut self, other: &Mesh, material_offset: u32) {
         let base = self.positions.len() as u32;
         self.positions.extend_from_slice(&other.positions);

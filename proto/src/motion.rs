@@ -24,10 +24,13 @@ use crate::error::SceneError;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Transform {
+    /// Translation.
     #[serde(default)]
     pub translation: [f32; 3],
+    /// Rotation: Euler angles X, Y, Z in degrees.
     #[serde(default)]
     pub rotation_deg: [f32; 3],
+    /// Scale per axis.
     #[serde(default = "unit_scale")]
     pub scale: [f32; 3],
 }
@@ -48,7 +51,7 @@ impl Default for Transform {
 
 impl Transform {
     /// The affine map, rotating and scaling about `pivot`.
-    pub fn affine(&self, pivot: Vec3) -> Affine3A {
+    pub(crate) fn affine(&self, pivot: Vec3) -> Affine3A {
         Affine3A::from_translation(Vec3::from(self.translation) + pivot)
             * Affine3A::from_scale_rotation_translation(
                 Vec3::from(self.scale),
@@ -59,7 +62,7 @@ impl Transform {
     }
 
     /// Checks the transform of mesh entry `index`.
-    pub fn validate_entry(&self, index: usize) -> Result<(), SceneError> {
+    pub(crate) fn validate_entry(&self, index: usize) -> Result<(), SceneError> {
         self.validate(&format!("meshes[{index}].transform"))
     }
 
@@ -104,10 +107,13 @@ const MAX_KEYS: usize = 4096;
 pub struct Key {
     /// Time in the cycle, in [0, 1].
     pub t: f32,
+    /// Translation at `t`.
     #[serde(default)]
     pub translation: [f32; 3],
+    /// Rotation at `t`: Euler angles X, Y, Z in degrees.
     #[serde(default)]
     pub rotation_deg: [f32; 3],
+    /// Scale per axis at `t`.
     #[serde(default = "unit_scale")]
     pub scale: [f32; 3],
 }
@@ -128,13 +134,22 @@ impl Key {
 pub enum Deform {
     /// A twist about `axis` through the pivot: a vertex at signed height h along the axis
     /// turns by `degrees` · sin(2πt) · h / H, H the mesh's largest |h|.
-    Twist { axis: [f32; 3], degrees: f32 },
+    Twist {
+        /// The twist axis (non-zero).
+        axis: [f32; 3],
+        /// Turn in degrees at the largest |h|, at the peak of the cycle.
+        degrees: f32,
+    },
     /// A travelling wave: p += `normal` · `amplitude` · sin(2π (p·d / `wavelength` − t)),
     /// d the unit `direction`.
     Wave {
+        /// Direction of travel (non-zero).
         direction: [f32; 3],
+        /// Direction of the displacement (non-zero).
         normal: [f32; 3],
+        /// Largest displacement.
         amplitude: f32,
+        /// Wavelength (positive).
         wavelength: f32,
     },
 }
@@ -184,13 +199,14 @@ pub struct Motion {
     /// Poses over the cycle, in non-decreasing `t` (none or one: no rigid motion).
     #[serde(default)]
     pub keys: Vec<Key>,
+    /// A non-rigid deformation on top of the keys.
     #[serde(default)]
     pub deform: Option<Deform>,
 }
 
 impl Motion {
     /// Checks the motion of mesh entry `index`.
-    pub fn validate(&self, index: usize) -> Result<(), SceneError> {
+    pub(crate) fn validate(&self, index: usize) -> Result<(), SceneError> {
         let what = format!("meshes[{index}].motion");
         if let Some(p) = &self.pivot
             && !finite(p)
@@ -252,20 +268,26 @@ impl Motion {
 /// its rest geometry and its motion.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MovingPart {
+    /// First vertex of the part in the scene's mesh.
     pub first_vertex: u32,
+    /// First triangle of the part in the scene's mesh.
     pub first_triangle: u32,
+    /// Triangles of the part.
     pub triangle_count: u32,
     /// Rest positions and normals (the placed mesh), one per vertex of the part.
     pub rest_positions: Vec<Vec3>,
+    /// Rest normals, one per vertex of the part.
     pub rest_normals: Vec<Vec3>,
+    /// Centre of rotation, scaling and twist ([`Motion::pivot`], resolved).
     pub pivot: Vec3,
+    /// How the part moves.
     pub motion: Motion,
 }
 
 impl MovingPart {
     /// Checks that the part fits a mesh of `vertices` vertices and `triangles` triangles
     /// (stored scenes are read back through this).
-    pub fn validate(
+    pub(crate) fn validate(
         &self,
         index: usize,
         vertices: usize,
@@ -289,7 +311,7 @@ impl MovingPart {
     }
 
     /// A part over `first_vertex..` (positions and normals as placed) and its triangles.
-    pub fn new(
+    pub(crate) fn new(
         first_vertex: u32,
         first_triangle: u32,
         triangle_count: u32,
@@ -314,7 +336,7 @@ impl MovingPart {
 
     /// Writes the part's pose at cycle time `t` into `positions`, `normals` (the whole mesh's
     /// arrays); `triangles` is the whole mesh's, for the normals of a deformed part.
-    pub fn pose_into(
+    pub(crate) fn pose_into(
         &self,
         t: f32,
         positions: &mut [Vec3],

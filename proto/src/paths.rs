@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 
 /// The environment variable that points at the shared test data.
-pub const ASSETS_ENV: &str = "BSPVT_ASSETS";
+pub(crate) const ASSETS_ENV: &str = "BSPVT_ASSETS";
 
 /// The shared test-data folder (see the module doc for the order).
 pub fn assets_dir() -> PathBuf {

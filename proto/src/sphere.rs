@@ -15,9 +15,9 @@ pub const MAX_VERTS: usize = 64;
 /// A convex spherical polygon (directions, not necessarily unit).
 pub type SphPoly = ArrayVec<DVec3, MAX_VERTS>;
 
-/// Keeps the part of `poly` with `n·d ≥ 0` (Sutherland–Hodgman). Returns an empty polygon
-/// when fewer than three vertices remain or no vertex lies strictly on the kept side (what
-/// remains then lies in the plane: zero solid angle).
+/// Keeps the part of `poly` with `n·d ≥ 0` (Sutherland–Hodgman \[Sutherland74\]). Returns an
+/// empty polygon when fewer than three vertices remain or no vertex lies strictly on the kept
+/// side (what remains then lies in the plane: zero solid angle).
 pub fn clip(poly: &[DVec3], n: DVec3) -> SphPoly {
     let mut out = SphPoly::new();
     let len = poly.len();
@@ -112,7 +112,7 @@ pub fn sides(poly: &[DVec3], n: DVec3) -> Sides {
 /// Cuts a polygon that the plane `n` crosses ([`Sides::Both`]) into its parts with n·d ≤ 0
 /// (`neg`) and n·d ≥ 0 (`pos`), in one Sutherland–Hodgman pass; the cut points are shared
 /// bit for bit by both parts.
-pub fn cut_into(poly: &[DVec3], n: DVec3, neg: &mut SphPoly, pos: &mut SphPoly) {
+pub(crate) fn cut_into(poly: &[DVec3], n: DVec3, neg: &mut SphPoly, pos: &mut SphPoly) {
     neg.clear();
     pos.clear();
     let len = poly.len();
@@ -145,15 +145,16 @@ pub fn split(poly: &[DVec3], n: DVec3) -> (SphPoly, SphPoly) {
 }
 
 /// Solid angle of the spherical triangle (a, b, c) with sign by orientation
-/// (Van Oosterom & Strackee 1983: tan(Ω/2) = [a b c] / (|a||b||c| + (a·b)|c| + (a·c)|b| + (b·c)|a|)).
-pub fn triangle_solid_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+/// ([VanOosterom83]: tan(Ω/2) = [a b c] / (|a||b||c| + (a·b)|c| + (a·c)|b| + (b·c)|a|)).
+pub(crate) fn triangle_solid_angle(a: DVec3, b: DVec3, c: DVec3) -> f64 {
     let (la, lb, lc) = (a.length(), b.length(), c.length());
     let num = a.dot(b.cross(c));
     let den = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
     2.0 * num.atan2(den)
 }
 
-/// Solid angle of a convex spherical polygon (fan from vertex 0), ≥ 0.
+/// Solid angle of a convex spherical polygon (fan of triangles from vertex 0,
+/// \[VanOosterom83\]), ≥ 0.
 pub fn solid_angle(poly: &[DVec3]) -> f64 {
     if poly.len() < 3 {
         return 0.0;

@@ -17,6 +17,7 @@ use serde::Serialize;
 use bspvt_bake::stats::BakeStats;
 use bspvt_bake::{Baker, Totals};
 
+/// `bspvt-server bench` flags.
 #[derive(clap::Args, Clone, Debug)]
 pub struct BenchArgs {
     /// Folder holding the meshes (default: $BSPVT_ASSETS/meshes or ../shared/assets/meshes).
@@ -35,9 +36,19 @@ pub struct BenchArgs {
     /// Vertices sampled (evenly spaced) per mesh.
     #[arg(long, default_value_t = 2000)]
     pub vertices: usize,
+    // Cube-map face resolution of the bake.
     #[arg(long, default_value_t = 64)]
+    #[allow(
+        missing_docs,
+        reason = "a doc comment here would become new `--help` text"
+    )]
     pub face_res: u32,
+    // Leaf tolerance ε (default: the scenes' own).
     #[arg(long)]
+    #[allow(
+        missing_docs,
+        reason = "a doc comment here would become new `--help` text"
+    )]
     pub epsilon: Option<f32>,
     /// Split methods to compare.
     #[arg(
@@ -46,7 +57,12 @@ pub struct BenchArgs {
         default_value = "nelder-mead,default,exhaustive"
     )]
     pub methods: Vec<String>,
+    // Worker threads (default: rayon's, one per core).
     #[arg(long)]
+    #[allow(
+        missing_docs,
+        reason = "a doc comment here would become new `--help` text"
+    )]
     pub threads: Option<usize>,
     /// Write the rows as JSON here.
     #[arg(long)]
@@ -54,7 +70,7 @@ pub struct BenchArgs {
 }
 
 #[derive(Clone, Debug, Serialize)]
-pub struct BenchRow {
+pub(crate) struct BenchRow {
     pub scene: String,
     pub scene_vertices: usize,
     pub sampled: usize,
@@ -69,6 +85,8 @@ fn parse_method(s: &str) -> Result<SplitMethod> {
         .with_context(|| format!("unknown split method {s:?} (nelder-mead, default, exhaustive)"))
 }
 
+/// Runs the benchmark: a Markdown table on stdout, one row per mesh and split method, and the
+/// rows as JSON when `--json` is given.
 pub fn run(a: &BenchArgs) -> Result<()> {
     let methods: Vec<SplitMethod> = a
         .methods
@@ -82,7 +100,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
     let dir = a
         .meshes_dir
         .clone()
-        .unwrap_or_else(|| bspvt_proto::paths::meshes_dir());
+        .unwrap_or_else(bspvt_proto::paths::meshes_dir);
     let mut scenes: Vec<(String, Scene)> = Vec::new();
     if let Some(s) = bspvt_proto::builtin::scene("plate").filter(|_| a.builtin) {
         // The same scene without its declared light region: what "don't care" saves.

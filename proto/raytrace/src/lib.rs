@@ -6,6 +6,8 @@
 //!
 //! Must not depend on: anything but `bspvt-proto`'s mesh, glam and obvhs (no I/O).
 
+#![warn(unreachable_pub, missing_docs)]
+
 use std::time::Duration;
 
 use bspvt_proto::Mesh;
@@ -18,7 +20,7 @@ use obvhs::{
     triangle::Triangle,
 };
 
-/// A mesh prepared for occlusion queries.
+/// A mesh prepared for occlusion queries: a CWBVH over its triangles [obvhs].
 pub struct Occluder {
     bvh: CwBvh,
     /// Triangles in BVH primitive order.

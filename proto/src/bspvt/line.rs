@@ -14,14 +14,18 @@ use crate::cubemap::FaceFrame;
 /// A quantised line: indices into the codec's angle and offset tables.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct QLine {
+    /// Index into the angle table: θ = 2π · angle / 2^angle_bits.
     pub angle: u16,
+    /// Index into the offset table ([`LineCodec::offset`]).
     pub offset: u16,
 }
 
 /// Tables for one quantisation (fixed per bake by the face resolution).
 #[derive(Clone, Debug, PartialEq)]
 pub struct LineCodec {
+    /// Bits of the angle index.
     pub angle_bits: u8,
+    /// Bits of the offset index.
     pub offset_bits: u8,
     normals: Vec<Vec2>,
     half_step: f32,
@@ -39,7 +43,7 @@ impl LineCodec {
         LineCodec::new(bits.clamp(6, 14), bits.clamp(6, 14))
     }
 
-    pub fn new(angle_bits: u8, offset_bits: u8) -> LineCodec {
+    pub(crate) fn new(angle_bits: u8, offset_bits: u8) -> LineCodec {
         let a = 1usize << angle_bits;
         let half = a / 2;
         // The second half of the table is the exact negation of the first, so that the line
@@ -61,14 +65,17 @@ impl LineCodec {
         }
     }
 
+    /// Number of quantised angles, 2^angle_bits.
     pub fn angles(&self) -> u32 {
         1 << self.angle_bits
     }
 
+    /// Number of quantised offsets, 2^offset_bits.
     pub fn offsets(&self) -> u32 {
         1 << self.offset_bits
     }
 
+    /// The unit normal n(θ) = (cos θ, sin θ) of angle index `angle`.
     #[inline]
     pub fn normal(&self, angle: u16) -> Vec2 {
         self.normals[angle as usize]

@@ -11,25 +11,40 @@ use crate::sphere::{self, Sides, SphPoly};
 /// `i + 1`, its right child is at `right`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Node {
-    Leaf { value: u8 },
-    Split { line: QLine, right: u32 },
+    /// A leaf [paper000 §3.2].
+    Leaf {
+        /// The mean visibility v̄ of the leaf's pixels, quantised ([`super::quantise`]).
+        value: u8,
+    },
+    /// An internal node: pixels with n·p − c < 0 go left (the next node), the rest right.
+    Split {
+        /// The split line.
+        line: QLine,
+        /// Index of the right child.
+        right: u32,
+    },
 }
 
-/// A BSPVT over one cube face.
+/// A BSPVT over one cube face [paper000 §3.2].
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FaceTree {
+    /// The nodes in pre-order (the root first).
     pub nodes: Vec<Node>,
 }
 
 /// A piece of a split polygon: its directions, the leaf's visibility and the face it is on.
 #[derive(Clone, Debug)]
 pub struct Piece {
+    /// The piece's corners: unit directions, a convex spherical polygon.
     pub verts: SphPoly,
+    /// The leaf's quantised mean visibility v̄ [paper000 §3.2].
     pub value: u8,
+    /// The cube face the piece lies on.
     pub face: usize,
 }
 
 impl FaceTree {
+    /// A tree of one leaf with value `value`.
     pub fn leaf(value: u8) -> FaceTree {
         FaceTree {
             nodes: vec![Node::Leaf { value }],
@@ -37,13 +52,14 @@ impl FaceTree {
     }
 
     /// The value of a single-leaf tree.
-    pub fn uniform_value(&self) -> Option<u8> {
+    pub(crate) fn uniform_value(&self) -> Option<u8> {
         match self.nodes.as_slice() {
             [Node::Leaf { value }] => Some(*value),
             _ => None,
         }
     }
 
+    /// Number of leaves.
     pub fn leaf_count(&self) -> usize {
         self.nodes
             .iter()
@@ -76,8 +92,8 @@ impl FaceTree {
         }
     }
 
-    /// Cuts the spherical polygon `poly` (already inside this face's pyramid) by the tree's
-    /// lines, calling `visit(piece, leaf value)` for every non-empty piece. Each line is a
+    /// Cuts the spherical polygon `poly` (already inside this face's pyramid) by the tree's lines,
+    /// calling `visit(piece, leaf value)` for every non-empty piece [paper000 §3.3]. Each line is a
     /// plane through the origin ([`LineCodec::plane`]), so every cut is an exact great circle.
     pub fn split_polygon(
         &self,
@@ -131,6 +147,7 @@ impl FaceTree {
 /// The six face trees of one vertex. `None`: no pixel of that face matters for the scene.
 #[derive(Clone, Debug, PartialEq, Eq, Default)]
 pub struct VertexTrees {
+    /// One tree per cube face, in [`crate::cubemap`] face order.
     pub faces: [Option<FaceTree>; FACES],
 }
 
@@ -152,7 +169,7 @@ impl VertexTrees {
     }
 
     /// Splits a convex spherical polygon (world directions from the vertex) into pieces, each
-    /// inside one face's pyramid and one leaf of that face's tree.
+    /// inside one face's pyramid and one leaf of that face's tree [paper000 §3.3, fig. 5].
     pub fn split_polygon(
         &self,
         codec: &LineCodec,
@@ -186,7 +203,8 @@ impl VertexTrees {
         out
     }
 
-    /// Visible fraction of the solid angle of `poly`: Σ v̄ᵢ Ωᵢ / Ω (eq. 2 with f_r = 1).
+    /// Visible fraction of the solid angle of `poly`: Σ v̄ᵢ Ωᵢ / Ω ([paper000 §3.1 eq. 2]
+    /// with f_r = 1).
     pub fn visible_fraction(&self, codec: &LineCodec, poly: &[DVec3]) -> f64 {
         let mut num = 0.0;
         let mut den = 0.0;

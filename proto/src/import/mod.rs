@@ -48,7 +48,7 @@ pub enum Format {
 
 impl Format {
     /// The format of a file, chosen by its extension (case-insensitive).
-    pub fn from_path(path: &Path) -> Result<Format, MeshError> {
+    pub(crate) fn from_path(path: &Path) -> Result<Format, MeshError> {
         let unsupported = || MeshError::UnsupportedFormat(path.display().to_string());
         let ext = path
             .extension()
@@ -65,7 +65,7 @@ impl Format {
     }
 
     /// The format for an extension without its dot (`"glb"`, `"PLY"`), case-insensitive.
-    pub fn from_extension(ext: &str) -> Option<Format> {
+    pub(crate) fn from_extension(ext: &str) -> Option<Format> {
         match ext.to_ascii_lowercase().as_str() {
             "gltf" => Some(Format::Gltf),
             "glb" => Some(Format::Glb),
@@ -76,7 +76,7 @@ impl Format {
     }
 
     /// The format's name as used in error messages.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Format::Gltf => "glTF",
             Format::Glb => "GLB",
@@ -155,7 +155,7 @@ pub fn load_mesh(path: &Path) -> Result<Mesh, MeshError> {
 }
 
 /// [`load_mesh`] with explicit limits.
-pub fn load_mesh_with_limits(path: &Path, limits: &Limits) -> Result<Mesh, MeshError> {
+pub(crate) fn load_mesh_with_limits(path: &Path, limits: &Limits) -> Result<Mesh, MeshError> {
     let format = Format::from_path(path)?;
     let io = |source| MeshError::Io {
         path: path.display().to_string(),

@@ -17,7 +17,7 @@ pub const NAMES: &[&str] = &["plate", "plate-small", "dynamic"];
 
 /// Single-object meshes for scene files to place (`builtin:NAME`, with a `transform`):
 /// `sphere` (unit radius, 2,562 vertices) and `cube` (unit side, 12 × 12 vertices a face).
-pub const PART_NAMES: &[&str] = &["sphere", "cube"];
+pub(crate) const PART_NAMES: &[&str] = &["sphere", "cube"];
 
 /// `dynamic`: a sphere orbiting and bobbing over a floor beside a twisting bar (the
 /// run-time methods' moving scene), written as a scene file.
@@ -260,7 +260,7 @@ pub fn cuboid(center: Vec3, half: Vec3, rot: Quat, n: u32, material: u32) -> Mes
 }
 
 /// A tessellated ground square just under `bounds`, wide enough to catch its shadows.
-pub fn ground_under(bounds: &Aabb, material: u32) -> Mesh {
+pub(crate) fn ground_under(bounds: &Aabb, material: u32) -> Mesh {
     let diag = bounds.diagonal().max(1e-6);
     let c = bounds.center();
     let y = bounds.min.y - 1e-3 * diag;
@@ -275,7 +275,7 @@ pub fn ground_under(bounds: &Aabb, material: u32) -> Mesh {
 }
 
 /// A downward-facing square light above `bounds`, off to one side so the shadow shows.
-pub fn quad_light_above(bounds: &Aabb, radiance: [f32; 3]) -> PolygonLight {
+pub(crate) fn quad_light_above(bounds: &Aabb, radiance: [f32; 3]) -> PolygonLight {
     let diag = bounds.diagonal().max(1e-6);
     let c = bounds.center();
     let (x, y, z) = (

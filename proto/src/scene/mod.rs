@@ -18,9 +18,10 @@ pub mod builtin;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Material {
+    /// The material's name (for messages).
     #[serde(default)]
     pub name: String,
-    /// GGX roughness α (the squared perceptual roughness), in (0, 1].
+    /// GGX roughness α (the squared perceptual roughness \[Karis13\]), in (0, 1].
     #[serde(default = "default_roughness")]
     pub roughness: f32,
     /// Diffuse (Lambertian) albedo, linear RGB in [0, 1].
@@ -77,12 +78,14 @@ pub struct PolygonLight {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Region {
+    /// Smallest corner.
     pub min: [f32; 3],
+    /// Largest corner.
     pub max: [f32; 3],
 }
 
 impl Region {
-    pub fn aabb(&self) -> Aabb {
+    pub(crate) fn aabb(&self) -> Aabb {
         Aabb {
             min: Vec3::from(self.min),
             max: Vec3::from(self.max),
@@ -94,8 +97,11 @@ impl Region {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Camera {
+    /// Eye position.
     pub position: [f32; 3],
+    /// The point looked at.
     pub target: [f32; 3],
+    /// Up direction (default +Y).
     #[serde(default = "default_up")]
     pub up: [f32; 3],
     /// Vertical field of view in degrees.
@@ -119,7 +125,8 @@ pub enum SplitMethod {
     Default,
     /// Exact line search over every quantised angle and offset (slow; the quality reference).
     Exhaustive,
-    /// The paper's Nelder–Mead minimisation of E(P, l) (the baseline).
+    /// The paper's Nelder–Mead minimisation of E(P, l) [paper000 §3.2 eq. 3] \[Nelder65\] (the
+    /// baseline).
     NelderMead,
 }
 
@@ -130,13 +137,14 @@ pub struct BakeSettings {
     /// Cube-map face resolution in pixels (per side).
     #[serde(default = "default_face_res")]
     pub face_res: u32,
-    /// Leaf tolerance: a node is a leaf when Σ (V − v̄)² over its pixels is at most
-    /// `epsilon · face_res²`, i.e. ε is a fraction of the face's pixel count.
+    /// Leaf tolerance ε [paper000 §3.2]: a node is a leaf when Σ (V − v̄)² over its pixels is at
+    /// most `epsilon · face_res²`, i.e. ε is a fraction of the face's pixel count.
     #[serde(default = "default_epsilon")]
     pub epsilon: f32,
     /// Rays per pixel side: `s` casts s×s rays per pixel and stores fractional visibility.
     #[serde(default = "default_supersampling")]
     pub supersampling: u32,
+    /// How the builder chooses split lines.
     #[serde(default)]
     pub split: SplitMethod,
     /// Vertices per stored chunk.
@@ -170,11 +178,14 @@ impl Default for BakeSettings {
 }
 
 impl BakeSettings {
+    /// Largest face resolution a scene may ask for.
     pub const MAX_FACE_RES: u32 = 512;
+    /// Largest supersampling a scene may ask for.
     pub const MAX_SUPERSAMPLING: u32 = 8;
+    /// Largest chunk a scene may ask for, in vertices.
     pub const MAX_CHUNK_VERTICES: u32 = 65_536;
 
-    pub fn validate(&self) -> Result<(), SceneError> {
+    pub(crate) fn validate(&self) -> Result<(), SceneError> {
         let bad = |m: String| Err(SceneError::Invalid(m));
         if !(4..=Self::MAX_FACE_RES).contains(&self.face_res) {
             return bad(format!(
@@ -234,14 +245,18 @@ pub struct SceneFile {
     /// Adds a tessellated ground plane under the meshes (material index `ground_material`).
     #[serde(default)]
     pub ground_plane: bool,
+    /// Material index of the ground plane.
     #[serde(default)]
     pub ground_material: u32,
+    /// The materials (default: one).
     #[serde(default = "default_materials")]
     pub materials: Vec<Material>,
+    /// The polygonal lights.
     pub lights: Vec<PolygonLight>,
     /// Without a camera the scene is framed automatically.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub camera: Option<Camera>,
+    /// Settings of the visibility bake.
     #[serde(default)]
     pub bake: BakeSettings,
 }
@@ -253,16 +268,22 @@ fn default_materials() -> Vec<Material> {
 /// A loaded, validated scene.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Scene {
+    /// The meshes and the ground, concatenated (vertex order = tree order).
     pub mesh: Mesh,
+    /// The materials, indexed by the mesh's material ids.
     pub materials: Vec<Material>,
+    /// The polygonal lights.
     pub lights: Vec<PolygonLight>,
+    /// The camera (given or framed).
     pub camera: Camera,
+    /// Settings of the visibility bake.
     pub bake: BakeSettings,
     /// The meshes that move (empty: a static scene). `mesh` is the pose at t = 0.
     pub motion: Vec<MovingPart>,
 }
 
 impl PolygonLight {
+    /// The light's corners as vectors.
     pub fn points(&self) -> Vec<Vec3> {
         self.vertices.iter().map(|&v| Vec3::from(v)).collect()
     }
@@ -273,7 +294,7 @@ impl PolygonLight {
         newell_normal(&p).normalize_or_zero()
     }
 
-    pub fn validate(&self, index: usize) -> Result<(), SceneError> {
+    pub(crate) fn validate(&self, index: usize) -> Result<(), SceneError> {
         let bad = |m: String| Err(SceneError::Invalid(format!("lights[{index}]: {m}")));
         let n = self.vertices.len();
         if !(3..=8).contains(&n) {
@@ -325,7 +346,7 @@ impl PolygonLight {
 }
 
 /// Newell's polygon normal: robust for any planar polygon, length = 2 · area.
-pub fn newell_normal(p: &[Vec3]) -> Vec3 {
+pub(crate) fn newell_normal(p: &[Vec3]) -> Vec3 {
     let mut n = Vec3::ZERO;
     for i in 0..p.len() {
         n += p[i].cross(p[(i + 1) % p.len()]);
@@ -334,7 +355,7 @@ pub fn newell_normal(p: &[Vec3]) -> Vec3 {
 }
 
 impl Material {
-    pub fn validate(&self, index: usize) -> Result<(), SceneError> {
+    pub(crate) fn validate(&self, index: usize) -> Result<(), SceneError> {
         let bad = |m: String| Err(SceneError::Invalid(format!("materials[{index}]: {m}")));
         if !(self.roughness.is_finite() && self.roughness > 0.0 && self.roughness <= 1.0) {
             return bad(format!("roughness {} must be in (0, 1]", self.roughness));
@@ -352,7 +373,7 @@ impl Material {
 
 impl Camera {
     /// A camera looking at `bounds` from the front-right and above, fitting its bounding sphere.
-    pub fn framing(bounds: &Aabb) -> Camera {
+    pub(crate) fn framing(bounds: &Aabb) -> Camera {
         let center = bounds.center();
         let radius = (0.5 * bounds.diagonal()).max(1e-6);
         let fov_y_deg = default_fov();
@@ -366,7 +387,7 @@ impl Camera {
         }
     }
 
-    pub fn validate(&self) -> Result<(), SceneError> {
+    pub(crate) fn validate(&self) -> Result<(), SceneError> {
         let p = Vec3::from(self.position);
         let t = Vec3::from(self.target);
         let up = Vec3::from(self.up);
@@ -450,7 +471,7 @@ impl Scene {
     }
 
     /// Resolves and loads the meshes a scene file names, then validates the result.
-    pub fn from_file(file: SceneFile, base_dir: &Path) -> Result<Scene, SceneError> {
+    pub(crate) fn from_file(file: SceneFile, base_dir: &Path) -> Result<Scene, SceneError> {
         let parts = file
             .meshes
             .iter()

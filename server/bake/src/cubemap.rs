@@ -8,7 +8,7 @@ use super::frustum::{FrustumCuller, Pyramid};
 use bspvt_raytrace::Occluder;
 
 /// Ray directions shared by every vertex (the cube map is world-aligned).
-pub struct RayTable {
+pub(crate) struct RayTable {
     pub res: u32,
     /// Supersamples per pixel (s²).
     pub samples: u32,
@@ -21,7 +21,7 @@ pub struct RayTable {
 }
 
 impl RayTable {
-    pub fn new(res: u32, supersampling: u32) -> RayTable {
+    pub(crate) fn new(res: u32, supersampling: u32) -> RayTable {
         let uv = pixel_centres(res);
         let s = supersampling.max(1);
         let offsets = subpixel_offsets(res, s);
@@ -68,12 +68,14 @@ pub fn subpixel_offsets(res: u32, s: u32) -> Vec<Vec2> {
 /// The pixels of one face that matter, with the number of their rays that escape (0..=samples).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct FacePixels {
+    /// Pixel indices (`j · res + i`), ascending.
     pub index: Vec<u32>,
+    /// Escaping rays of each pixel: V(p) = visible / samples [paper000 §3.1].
     pub visible: Vec<u16>,
 }
 
 /// Where a vertex's rays start and which directions can matter.
-pub struct VertexRays<'a> {
+pub(crate) struct VertexRays<'a> {
     pub position: Vec3,
     pub normal: Vec3,
     pub vertex: u32,
@@ -117,7 +119,7 @@ impl VertexRays<'_> {
     /// visible without casting; a small block with a short list tests its rays against that
     /// list; otherwise rays traverse the BVH. Every path gives what casting every ray against
     /// the whole mesh gives (the lists are conservative).
-    pub fn cast(
+    pub(crate) fn cast(
         &self,
         occ: &Occluder,
         culler: &FrustumCuller,
@@ -165,7 +167,8 @@ impl VertexRays<'_> {
     }
 
     /// Every ray of every pixel that matters, against the BVH: the reference for [`Self::cast`].
-    pub fn cast_brute_force(
+    #[cfg(test)]
+    pub(crate) fn cast_brute_force(
         &self,
         occ: &Occluder,
         table: &RayTable,

@@ -1,4 +1,4 @@
-//! The BSPVT builder (paper 000, Algorithm 1).
+//! The BSPVT builder [paper000 §3.2, Alg. 1].
 //!
 //! A node holding pixel set P becomes a leaf when its own squared deviation Σ (V − v̄)² is at
 //! most `ε · res²`; otherwise it is split by the line l minimising
@@ -16,7 +16,7 @@
 //!
 //! Where E cannot improve on predicting the whole node with one binary value (E's blind spot:
 //! a small blob of one value inside the other), the line minimising the children's squared
-//! deviation is used instead ([`Best::choose`]).
+//! deviation is used instead (`Best::choose`).
 //! - `NelderMead`: the paper's baseline — Nelder–Mead over continuous (θ, c), E evaluated on
 //!   the quantised line. When its search ends on no line that splits the node, the node
 //!   becomes a leaf even if it exceeds ε (the paper's algorithm has no fallback): part of why
@@ -28,6 +28,7 @@ use glam::Vec2;
 
 /// Builder settings for one bake.
 pub struct Fitter<'a> {
+    /// The quantisation of the candidate lines.
     pub codec: &'a LineCodec,
     /// Face resolution in pixels.
     pub res: u32,
@@ -37,17 +38,20 @@ pub struct Fitter<'a> {
     pub samples: u32,
     /// Leaf threshold on Σ (V − v̄)² in pixels.
     pub epsilon_pixels: f64,
+    /// How split lines are searched.
     pub method: SplitMethod,
 }
 
 /// Per-face fit statistics against the cube map.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FitStats {
+    /// Pixels fitted.
     pub pixels: u64,
     /// Σ |V(p) − v̄_q(leaf(p))| over the pixels (v̄ after 8-bit quantisation).
     pub abs_error: f64,
     /// Pixels whose leaf rounds to the other binary value (|V − v̄| > 0.5).
     pub misclassified: u64,
+    /// Leaves made.
     pub leaves: u64,
     /// Cells the split search visited (its cost).
     pub cell_visits: u64,
@@ -126,7 +130,8 @@ impl Moments {
 }
 
 impl Fitter<'_> {
-    /// Builds the tree of one face from its pixels that matter (`index`, escape counts).
+    /// Builds the tree of one face from its pixels that matter (`index`, escape counts),
+    /// splitting by the line that minimises E(P, l) [paper000 §3.2 eq. 3].
     pub fn fit(&self, index: &[u32], visible: &[u16]) -> (FaceTree, FitStats) {
         let cells = self.cells(index, visible);
         let mut nodes = Vec::new();

@@ -14,7 +14,7 @@ use glam::Vec3;
 use obvhs::{BvhBuildParams, bvh2::Bvh2, ray::Ray, rt_triangle::RtTriangle, triangle::Triangle};
 
 /// A BVH2 (obvhs) over the triangles, for pyramid queries.
-pub struct FrustumCuller {
+pub(crate) struct FrustumCuller {
     bvh: Bvh2,
     /// Per primitive (BVH order): vertices and vertex indices.
     prims: Vec<([Vec3; 3], [u32; 3])>,
@@ -24,7 +24,7 @@ pub struct FrustumCuller {
 
 /// A pyramid of directions from an apex: four inward plane normals through the apex.
 #[derive(Clone, Copy, Debug)]
-pub struct Pyramid {
+pub(crate) struct Pyramid {
     pub apex: Vec3,
     pub normals: [Vec3; 4],
 }
@@ -50,7 +50,7 @@ impl Pyramid {
 
 impl FrustumCuller {
     /// `tris`: [`bspvt_raytrace::mesh_triangles`] of `mesh`.
-    pub fn new(mesh: &Mesh, tris: &[Triangle]) -> FrustumCuller {
+    pub(crate) fn new(mesh: &Mesh, tris: &[Triangle]) -> FrustumCuller {
         let mut params = BvhBuildParams::medium_build();
         params.pre_split = false;
         let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(tris, params, &mut Default::default());
@@ -72,7 +72,7 @@ impl FrustumCuller {
 
     /// Collects the primitives (not using vertex `skip`) that may lie inside the pyramid into
     /// `out`; returns false, with `out` incomplete, once more than `limit` are found.
-    pub fn collect(
+    pub(crate) fn collect(
         &self,
         pyr: &Pyramid,
         skip: u32,
@@ -111,7 +111,7 @@ impl FrustumCuller {
     }
 
     /// The primitives of `from` that may lie inside the pyramid.
-    pub fn filter(&self, pyr: &Pyramid, from: &[u32], out: &mut Vec<u32>) {
+    pub(crate) fn filter(&self, pyr: &Pyramid, from: &[u32], out: &mut Vec<u32>) {
         out.clear();
         out.extend(
             from.iter()
@@ -122,7 +122,7 @@ impl FrustumCuller {
 
     /// Whether the ray hits any primitive of the list.
     #[inline]
-    pub fn ray_hits_any(&self, origin: Vec3, dir: Vec3, list: &[u32]) -> bool {
+    pub(crate) fn ray_hits_any(&self, origin: Vec3, dir: Vec3, list: &[u32]) -> bool {
         let ray = Ray::new(origin.into(), dir.into(), 0.0, f32::INFINITY);
         list.iter()
             .any(|&p| self.rt[p as usize].intersect(&ray) < f32::INFINITY)

@@ -1,6 +1,6 @@
 //! # bspvt-bake
 //!
-//! The visibility bake (paper 000 §3): per vertex, a ray-cast visibility cube map, then one
+//! The visibility bake [paper000 §3.1–3.2]: per vertex, a ray-cast visibility cube map, then one
 //! BSPVT per face, encoded in chunks ([`bspvt_proto::encoding`]). Used by the baking service,
 //! the offline `bspvt-server bake` and the client's own bakes (methods that need trees).
 //!
@@ -10,6 +10,8 @@
 //! [`Baker`] holds what every vertex shares (the BVH, the ray directions, the line codec);
 //! [`Baker::bake_vertex`] is pure and deterministic, so chunks can be baked in any order, on
 //! any number of threads, and give byte-identical output.
+
+#![warn(unreachable_pub, missing_docs)]
 
 pub mod cubemap;
 pub mod fit;
@@ -30,7 +32,7 @@ use cubemap::{RayTable, VertexRays};
 use fit::{FitStats, Fitter};
 
 /// Ray origins are offset along the normal by this fraction of the scene's diagonal.
-pub const RAY_OFFSET_SCALE: f32 = 1e-4;
+pub(crate) const RAY_OFFSET_SCALE: f32 = 1e-4;
 
 /// Everything a bake shares across vertices.
 pub struct Baker {
@@ -47,20 +49,30 @@ pub struct Baker {
 
 /// One vertex's trees and what it cost.
 pub struct VertexResult {
+    /// The six face trees.
     pub trees: VertexTrees,
+    /// How well the trees fit the cube map.
     pub fit: FitStats,
+    /// Rays cast.
     pub rays: u64,
+    /// Seconds spent casting rays.
     pub ray_seconds: f64,
+    /// Seconds spent fitting trees.
     pub fit_seconds: f64,
 }
 
 /// Sums over many vertices.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Totals {
+    /// Vertices baked.
     pub vertices: u64,
+    /// Rays cast.
     pub rays: u64,
+    /// Thread-seconds spent casting rays.
     pub ray_seconds: f64,
+    /// Thread-seconds spent fitting trees.
     pub fit_seconds: f64,
+    /// Fit statistics, summed.
     pub fit: FitStats,
     /// Encoded bytes (chunk frames, after zstd).
     pub bytes: u64,
@@ -81,15 +93,19 @@ impl std::ops::AddAssign for Totals {
 #[derive(Debug, thiserror::Error)]
 #[error("bake cancelled after {chunks_done} chunks")]
 pub struct Cancelled {
+    /// Chunks finished before the flag was seen.
     pub chunks_done: u32,
 }
 
 /// A finished bake.
 pub struct BakeOutput {
+    /// The bake's header.
     pub header: BakeHeader,
     /// Header frame followed by every chunk frame in order: the bake file's bytes.
     pub bytes: Vec<u8>,
+    /// Sums over every vertex.
     pub totals: Totals,
+    /// Wall-clock seconds of the bake.
     pub seconds: f64,
 }
 
@@ -99,6 +115,8 @@ impl Baker {
         Baker::with_settings(scene.mesh.clone(), scene.bake.clone(), scene.light_region())
     }
 
+    /// Prepares the bake of `mesh` with `settings`; `regions`: the boxes the lights may occupy
+    /// (`None`: anywhere), which decide the pixels that matter.
     pub fn with_settings(mesh: Mesh, settings: BakeSettings, regions: Option<Vec<Aabb>>) -> Baker {
         let tris = bspvt_raytrace::mesh_triangles(&mesh);
         let occluder = Occluder::new(&mesh, &tris);
@@ -120,14 +138,17 @@ impl Baker {
         }
     }
 
+    /// The header every chunk of this bake is decoded with.
     pub fn header(&self) -> &BakeHeader {
         &self.header
     }
 
+    /// The quantisation of the split lines.
     pub fn codec(&self) -> &LineCodec {
         &self.codec
     }
 
+    /// The mesh baked (vertex order = tree order).
     pub fn mesh(&self) -> &Mesh {
         &self.mesh
     }
@@ -159,7 +180,8 @@ impl Baker {
 
     /// The cube map of vertex `v` by casting every ray of every pixel that matters against the
     /// BVH, with no culling: the reference the culled walk must equal.
-    pub fn brute_force_cube_map(&self, v: u32) -> [Option<cubemap::FacePixels>; 6] {
+    #[cfg(test)]
+    pub(crate) fn brute_force_cube_map(&self, v: u32) -> [Option<cubemap::FacePixels>; 6] {
         self.vertex_rays(v)
             .cast_brute_force(&self.occluder, &self.table)
     }

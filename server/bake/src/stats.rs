@@ -7,29 +7,44 @@ use crate::{BakeOutput, Totals};
 /// What `bspvt-server bake --stats` writes.
 #[derive(Clone, Debug, Serialize)]
 pub struct BakeStats {
+    /// Vertices baked.
     pub vertices: u64,
+    /// Wall-clock seconds.
     pub seconds: f64,
+    /// Worker threads.
     pub threads: usize,
     /// (ray + fit) thread-seconds per vertex, measured per vertex on the worker threads.
     pub thread_seconds_per_vertex: f64,
+    /// Ray-casting thread-seconds per vertex.
     pub ray_thread_seconds_per_vertex: f64,
+    /// Fitting thread-seconds per vertex.
     pub fit_thread_seconds_per_vertex: f64,
+    /// Rays cast per vertex.
     pub rays_per_vertex: f64,
+    /// Encoded bytes (chunk frames, after zstd).
     pub bytes: u64,
+    /// Encoded bytes per vertex.
     pub bytes_per_vertex: f64,
+    /// Tree leaves per vertex.
     pub leaves_per_vertex: f64,
     /// Mean |V − v̄| of the tree against the ray-cast cube map, over the pixels that matter.
     pub mean_abs_visibility_error: f64,
     /// Share of the pixels that matter whose leaf value is on the other side of ½.
     pub misclassified_pixel_fraction: f64,
+    /// Pixels that matter per vertex (those fitted).
     pub pixels_that_matter_per_vertex: f64,
+    /// Cube-map face resolution.
     pub face_res: u32,
+    /// Leaf tolerance ε.
     pub epsilon: f32,
+    /// Rays per pixel side.
     pub supersampling: u32,
+    /// How split lines were chosen.
     pub split: bspvt_proto::SplitMethod,
 }
 
 impl BakeStats {
+    /// The statistics of a finished bake run on `threads` threads.
     pub fn new(out: &BakeOutput, threads: usize) -> BakeStats {
         let mut s = BakeStats::from_totals(&out.totals, out.totals.bytes, threads);
         s.seconds = out.seconds;
@@ -40,6 +55,8 @@ impl BakeStats {
         s
     }
 
+    /// The statistics of `t` (per-vertex sums) with `bytes` encoded; `seconds` and the settings are
+    /// left at zero (the split method at its default).
     pub fn from_totals(t: &Totals, bytes: u64, threads: usize) -> BakeStats {
         let v = t.vertices.max(1) as f64;
         let px = t.fit.pixels.max(1) as f64;

@@ -1,4 +1,4 @@
-//! HTTP handlers for scenes, meshes, health, metrics and the OpenAPI document. They are thin:
+//! HTTP handlers for scenes, meshes, health and metrics. They are thin:
 //! they parse and check the request, call `input`, `jobs` or `store`, and shape the answer.
 //!
 //! Guarantees: writes (`POST`, `DELETE`) need `Authorization: Bearer KEY` when a key is
@@ -20,87 +20,27 @@ use bspvt_proto::encoding::{BakeHeader, encode_header};
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use bspvt_proto::api::{JobState, Links, SceneStatus, Sizes};
+use bspvt_proto::api::{JobState, Links, SceneStatus};
 
 use super::db::{SceneRow, now_ms};
-use super::error::{ApiError, ApiResult, ErrorBody};
+use super::error::{ApiError, ApiResult, ErrorBody, gone};
+use super::http::{not_modified, not_modified_response, query_pairs};
 use super::input::{self, Upload};
 use super::jobs::{Live, SubmitError};
-use super::{Shared, blocking};
+use super::state::{Shared, blocking, check_id, lookup, status_of};
 
 /// Largest `scene` field (scene JSON).
-pub const MAX_SCENE_JSON_BYTES: u64 = 1 << 20;
+pub(crate) const MAX_SCENE_JSON_BYTES: u64 = 1 << 20;
 /// Largest `settings` field.
-pub const MAX_SETTINGS_JSON_BYTES: u64 = 64 << 10;
+pub(crate) const MAX_SETTINGS_JSON_BYTES: u64 = 64 << 10;
 
 /// Answer to a submission.
 #[derive(Serialize, ToSchema)]
-pub struct Submitted {
+pub(crate) struct Submitted {
     /// The scene's id: 32 hex digits (128 random bits). Whoever knows it can read the scene.
     pub id: String,
     pub state: JobState,
     pub links: Links,
-}
-
-/// Builds a scene's status document.
-pub fn status_of(st: &Shared, live: &Live) -> SceneStatus {
-    let s = live.snapshot();
-    let r = &live.row;
-    SceneStatus {
-        id: r.id.clone(),
-        state: s.state,
-        reason: s.reason,
-        vertices_done: s.vertices_done,
-        vertices_total: r.vertex_count,
-        chunks_done: s.chunks_done,
-        chunks_total: r.chunk_count,
-        progress: s.vertices_done as f64 / (r.vertex_count.max(1)) as f64,
-        rate_vertices_per_s: s.rate,
-        eta_s: s.eta_s,
-        queue_position: match s.state {
-            JobState::Queued => st.jobs.queue_position(&r.id),
-            _ => None,
-        },
-        settings: serde_json::from_str(&r.settings_json).unwrap_or(serde_json::Value::Null),
-        sizes: Sizes {
-            mesh_vertices: r.vertex_count,
-            mesh_triangles: r.triangle_count,
-            upload_bytes: r.upload_bytes,
-            stored_bytes: s.stored_bytes,
-        },
-        mesh_hash: format!("{:016x}", r.mesh_hash),
-        source: r.source.clone(),
-        created_ms: r.created_ms,
-        started_ms: s.started_ms,
-        finished_ms: s.finished_ms,
-        chunks_baked_this_process: st.jobs.baked_this_process(&r.id),
-        chunks_baked_total: s.chunks_baked_total,
-        chunks_corrupt: s.chunks_corrupt,
-        links: Links::of(&r.id),
-    }
-}
-
-/// Scene ids are 32 lowercase hex digits; anything else is unknown without a lookup.
-pub fn check_id(id: &str) -> ApiResult<()> {
-    if id.len() == 32
-        && id
-            .bytes()
-            .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
-    {
-        Ok(())
-    } else {
-        Err(ApiError::not_found(id))
-    }
-}
-
-/// The scene `id` (live or from the database), or 404.
-pub async fn lookup(st: &Shared, id: &str) -> ApiResult<Arc<Live>> {
-    check_id(id)?;
-    let jobs = st.jobs.clone();
-    let key = id.to_string();
-    blocking(move || jobs.lookup(&key))
-        .await?
-        .ok_or_else(|| ApiError::not_found(id))
 }
 
 /// A new unguessable id: 128 bits from the operating system's generator.
@@ -111,7 +51,7 @@ fn new_id() -> ApiResult<String> {
 }
 
 /// Proof that a write request carries the API key (when one is configured).
-pub struct WriteAccess;
+pub(crate) struct WriteAccess;
 
 impl FromRequestParts<Shared> for WriteAccess {
     type Rejection = ApiError;
@@ -302,7 +242,7 @@ fn queue_full(n: usize) -> ApiError {
 /// Multipart form of a submission (for the OpenAPI document).
 #[derive(ToSchema)]
 #[allow(dead_code)]
-pub struct SubmitForm {
+pub(crate) struct SubmitForm {
     /// The mesh file (`.glb`, `.gltf`, `.obj`, `.ply`, each optionally compressed as `.zst`).
     /// Required unless the scene names only `builtin:` meshes.
     #[schema(value_type = String, format = Binary)]
@@ -332,7 +272,7 @@ pub struct SubmitForm {
     ),
     security(("api_key" = []))
 )]
-pub async fn submit(
+pub(crate) async fn submit(
     State(st): State<Shared>,
     _auth: WriteAccess,
     headers: HeaderMap,
@@ -406,7 +346,10 @@ pub async fn submit(
         (status = 404, description = "Unknown id", body = ErrorBody),
     )
 )]
-pub async fn get_scene(State(st): State<Shared>, Path(id): Path<String>) -> ApiResult<Response> {
+pub(crate) async fn get_scene(
+    State(st): State<Shared>,
+    Path(id): Path<String>,
+) -> ApiResult<Response> {
     let live = lookup(&st, &id).await?;
     let mut r = Json(status_of(&st, &live)).into_response();
     r.headers_mut()
@@ -427,7 +370,7 @@ pub async fn get_scene(State(st): State<Shared>, Path(id): Path<String>) -> ApiR
     ),
     security(("api_key" = []))
 )]
-pub async fn delete_scene(
+pub(crate) async fn delete_scene(
     State(st): State<Shared>,
     _auth: WriteAccess,
     Path(id): Path<String>,
@@ -440,25 +383,6 @@ pub async fn delete_scene(
         .ok_or_else(|| ApiError::not_found(&id))?;
     let live = lookup(&st, &id).await?;
     Ok(Json(status_of(&st, &live)).into_response())
-}
-
-/// `If-None-Match` contains `etag` (or `*`).
-pub fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
-    headers
-        .get_all(header::IF_NONE_MATCH)
-        .iter()
-        .filter_map(|v| v.to_str().ok())
-        .flat_map(|v| v.split(','))
-        .map(|t| t.trim().trim_start_matches("W/"))
-        .any(|t| t == etag || t == "*")
-}
-
-pub fn not_modified_response(etag: &str) -> Response {
-    let mut r = StatusCode::NOT_MODIFIED.into_response();
-    if let Ok(v) = HeaderValue::from_str(etag) {
-        r.headers_mut().insert(header::ETAG, v);
-    }
-    r
 }
 
 /// The mesh as baked (vertex order = tree order).
@@ -478,7 +402,7 @@ pub fn not_modified_response(etag: &str) -> Response {
         (status = 410, description = "Deleted", body = ErrorBody),
     )
 )]
-pub async fn get_mesh(
+pub(crate) async fn get_mesh(
     State(st): State<Shared>,
     Path(id): Path<String>,
     RawQuery(q): RawQuery,
@@ -489,7 +413,7 @@ pub async fn get_mesh(
         return Err(gone(&id));
     }
     let mut format = "json";
-    for (k, v) in super::stream::query_pairs(q.as_deref())? {
+    for (k, v) in query_pairs(q.as_deref())? {
         match (k.as_str(), v.as_str()) {
             ("format", "json") => format = "json",
             ("format", "ply") => format = "ply",
@@ -546,7 +470,7 @@ pub async fn get_mesh(
         (status = 410, description = "Deleted", body = ErrorBody),
     )
 )]
-pub async fn get_scene_file(
+pub(crate) async fn get_scene_file(
     State(st): State<Shared>,
     Path(id): Path<String>,
     headers: HeaderMap,
@@ -606,17 +530,9 @@ fn immutable_response(
     r
 }
 
-pub fn gone(id: &str) -> ApiError {
-    ApiError::new(
-        StatusCode::GONE,
-        "deleted",
-        format!("scene {id} was deleted"),
-    )
-}
-
 /// A binary little-endian PLY of the mesh: float x y z nx ny nz per vertex, then per triangle
 /// a `uchar`-counted `uint` index list and its material id.
-pub fn ply_bytes(m: &bspvt_proto::Mesh) -> Vec<u8> {
+pub(crate) fn ply_bytes(m: &bspvt_proto::Mesh) -> Vec<u8> {
     let mut out = format!(
         "ply\nformat binary_little_endian 1.0\ncomment bspvt baked mesh {:016x}; vertex order = tree order\n\
          element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
@@ -645,7 +561,7 @@ pub fn ply_bytes(m: &bspvt_proto::Mesh) -> Vec<u8> {
 
 /// Health.
 #[derive(Serialize, ToSchema)]
-pub struct Health {
+pub(crate) struct Health {
     /// `ok`.
     pub status: String,
     pub generation: i64,
@@ -664,7 +580,7 @@ pub struct Health {
         (status = 503, description = "The database does not answer", body = ErrorBody),
     )
 )]
-pub async fn healthz(State(st): State<Shared>) -> ApiResult<Json<Health>> {
+pub(crate) async fn healthz(State(st): State<Shared>) -> ApiResult<Json<Health>> {
     let db = st.db.clone();
     blocking(move || db.ping())
         .await
@@ -686,7 +602,7 @@ pub async fn healthz(State(st): State<Shared>) -> ApiResult<Json<Health>> {
     tag = "service",
     responses((status = 200, description = "Metrics", content_type = "text/plain"))
 )]
-pub async fn metrics(State(st): State<Shared>) -> Response {
+pub(crate) async fn metrics(State(st): State<Shared>) -> Response {
     let text = st.metrics.render(&st.jobs.gauges());
     let mut r = text.into_response();
     r.headers_mut().insert(
@@ -696,19 +612,8 @@ pub async fn metrics(State(st): State<Shared>) -> Response {
     r
 }
 
-/// The OpenAPI 3 document of this API.
-#[utoipa::path(
-    get,
-    path = "/v1/openapi.json",
-    tag = "service",
-    responses((status = 200, description = "OpenAPI document", content_type = "application/json"))
-)]
-pub async fn openapi() -> Response {
-    Json(super::openapi::document()).into_response()
-}
-
 /// Unknown routes.
-pub async fn not_found() -> ApiError {
+pub(crate) async fn not_found() -> ApiError {
     ApiError::new(
         StatusCode::NOT_FOUND,
         "not_found",

@@ -2,7 +2,7 @@
 //! TOML file, merged in that order of precedence over the built-in defaults.
 //!
 //! Guarantees: every limit the service enforces is a field of [`Config`], has a default that
-//! is safe on a small machine, and is checked for sanity ([`Config::resolve`] refuses zero
+//! is safe on a small machine, and is checked for sanity (`Config::resolve` refuses zero
 //! workers, zero limits and an unparsable address before anything is opened).
 
 use std::net::SocketAddr;
@@ -111,32 +111,54 @@ struct FileConfig {
 /// Log output format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LogFormat {
+    /// Human-readable lines.
     Text,
+    /// One JSON object per line.
     Json,
 }
 
 /// The resolved configuration of a running service.
 #[derive(Clone, Debug)]
 pub struct Config {
+    /// Directory holding everything the service stores (database, scenes, chunks).
     pub data_dir: PathBuf,
+    /// Address to listen on (port 0 picks a free port).
     pub addr: SocketAddr,
+    /// When set, `Authorization: Bearer KEY` is required for writes.
     pub api_key: Option<String>,
+    /// Bake workers: chunks baked at the same time.
     pub workers: usize,
+    /// Threads of the shared bake pool (0 = one per core).
     pub threads: usize,
+    /// Largest request body in bytes.
     pub max_body_bytes: u64,
+    /// Largest mesh file in bytes, after zstd decompression.
     pub max_mesh_bytes: u64,
+    /// Most vertices of a submitted scene.
     pub max_mesh_vertices: u64,
+    /// Most triangles of a submitted mesh.
     pub max_mesh_triangles: u64,
+    /// Largest cube-map face resolution a submitted scene may ask for.
     pub max_face_res: u32,
+    /// Largest supersampling a submitted scene may ask for.
     pub max_supersampling: u32,
+    /// Most scenes queued or baking; further submissions get 429.
     pub max_queued_scenes: usize,
+    /// Most scenes baking at once.
     pub max_active_scenes: usize,
+    /// Most requests being handled at once.
     pub max_concurrent_requests: usize,
+    /// Most open tree and event streams.
     pub max_streams: usize,
+    /// Most uploads being read and parsed at once.
     pub max_uploads: usize,
+    /// Seconds a non-streaming request may take.
     pub request_timeout_s: u64,
+    /// Most open client connections.
     pub max_connections: usize,
+    /// Seconds a client may take to send a request's headers.
     pub header_read_timeout_s: u64,
+    /// Log format on stderr.
     pub log_format: LogFormat,
 }
 
@@ -169,7 +191,7 @@ impl Config {
 
     /// Merges flags/environment (already merged by clap), the `--config` file and defaults,
     /// then checks the result.
-    pub fn resolve(args: &ServeArgs) -> Result<Config> {
+    pub(crate) fn resolve(args: &ServeArgs) -> Result<Config> {
         let file = match &args.config {
             Some(p) => read_file(p)?,
             None => FileConfig::default(),
@@ -270,7 +292,7 @@ impl Config {
     }
 
     /// The database file.
-    pub fn db_path(&self) -> PathBuf {
+    pub(crate) fn db_path(&self) -> PathBuf {
         self.data_dir.join("bspvt.sqlite")
     }
 }

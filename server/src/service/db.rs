@@ -16,7 +16,7 @@ use std::sync::{Mutex, MutexGuard};
 use anyhow::{Context, Result};
 use rusqlite::{Connection, OptionalExtension, params};
 
-pub use bspvt_proto::api::JobState;
+pub(crate) use bspvt_proto::api::JobState;
 
 /// A state column's text as a [`JobState`].
 fn parse_state(s: &str) -> Result<JobState> {
@@ -25,7 +25,7 @@ fn parse_state(s: &str) -> Result<JobState> {
 
 /// What the database records of a durable chunk.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct ChunkMeta {
+pub(crate) struct ChunkMeta {
     /// Length of the chunk frame in bytes.
     pub bytes: u32,
     /// CRC-32 of the whole frame file.
@@ -34,7 +34,7 @@ pub struct ChunkMeta {
 
 /// A scene's row.
 #[derive(Clone, Debug)]
-pub struct SceneRow {
+pub(crate) struct SceneRow {
     pub id: String,
     pub seq: i64,
     pub state: JobState,
@@ -104,14 +104,14 @@ const SCENE_COLUMNS: &str = "id, seq, state, reason, created_ms, started_ms, fin
     upload_bytes, source, chunks_baked, chunks_corrupt";
 
 /// The database: one connection behind a mutex (every statement is short).
-pub struct Db {
+pub(crate) struct Db {
     conn: Mutex<Connection>,
     /// This process's generation (1 for the first start of a data directory).
     pub generation: i64,
 }
 
 /// Milliseconds since the Unix epoch.
-pub fn now_ms() -> i64 {
+pub(crate) fn now_ms() -> i64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_millis() as i64)
@@ -120,7 +120,7 @@ pub fn now_ms() -> i64 {
 
 impl Db {
     /// Opens (creating if needed) the database and starts a new generation.
-    pub fn open(path: &Path) -> Result<Db> {
+    pub(crate) fn open(path: &Path) -> Result<Db> {
         let conn = Connection::open(path)
             .with_context(|| format!("cannot open database {}", path.display()))?;
         // One process per data directory: the exclusive lock is taken by the first write below
@@ -166,13 +166,13 @@ impl Db {
     }
 
     /// Checks that the database answers.
-    pub fn ping(&self) -> Result<()> {
+    pub(crate) fn ping(&self) -> Result<()> {
         self.conn().query_row("SELECT 1", [], |_| Ok(()))?;
         Ok(())
     }
 
     /// Records a newly accepted scene (state `queued`); returns its submission sequence number.
-    pub fn insert_scene(&self, r: &SceneRow) -> Result<i64> {
+    pub(crate) fn insert_scene(&self, r: &SceneRow) -> Result<i64> {
         let c = self.conn();
         c.execute(
             "INSERT INTO scenes(id, state, reason, created_ms, vertex_count, triangle_count,
@@ -229,7 +229,7 @@ impl Db {
     }
 
     /// A scene's row.
-    pub fn scene(&self, id: &str) -> Result<Option<SceneRow>> {
+    pub(crate) fn scene(&self, id: &str) -> Result<Option<SceneRow>> {
         let c = self.conn();
         let r = c
             .query_row(
@@ -242,7 +242,7 @@ impl Db {
     }
 
     /// Scenes still to bake, those already baking first, then in submission order.
-    pub fn unfinished_scenes(&self) -> Result<Vec<SceneRow>> {
+    pub(crate) fn unfinished_scenes(&self) -> Result<Vec<SceneRow>> {
         let c = self.conn();
         let mut st = c.prepare(&format!(
             "SELECT {SCENE_COLUMNS} FROM scenes WHERE state IN ('queued', 'baking')
@@ -255,7 +255,7 @@ impl Db {
     }
 
     /// Ids of every scene that still owns files (not cancelled).
-    pub fn scene_ids_with_data(&self) -> Result<std::collections::HashSet<String>> {
+    pub(crate) fn scene_ids_with_data(&self) -> Result<std::collections::HashSet<String>> {
         let c = self.conn();
         let mut st = c.prepare("SELECT id FROM scenes WHERE state != 'cancelled'")?;
         let ids = st
@@ -265,7 +265,7 @@ impl Db {
     }
 
     /// The durable chunks of a scene, by index.
-    pub fn chunks(&self, id: &str) -> Result<Vec<(u32, ChunkMeta)>> {
+    pub(crate) fn chunks(&self, id: &str) -> Result<Vec<(u32, ChunkMeta)>> {
         let c = self.conn();
         let mut st =
             c.prepare("SELECT idx, bytes, crc32 FROM chunks WHERE scene_id = ?1 ORDER BY idx")?;
@@ -283,19 +283,9 @@ impl Db {
         Ok(rows)
     }
 
-    /// Number of durable chunks of a scene and their total size.
-    pub fn chunk_totals(&self, id: &str) -> Result<(u32, u64)> {
-        let c = self.conn();
-        Ok(c.query_row(
-            "SELECT COUNT(*), COALESCE(SUM(bytes), 0) FROM chunks WHERE scene_id = ?1",
-            [id],
-            |r| Ok((r.get(0)?, r.get::<_, i64>(1)? as u64)),
-        )?)
-    }
-
     /// Records a durable chunk, if its scene is still queued or baking; returns whether it was
     /// recorded.
-    pub fn insert_chunk(&self, id: &str, idx: u32, m: ChunkMeta) -> Result<bool> {
+    pub(crate) fn insert_chunk(&self, id: &str, idx: u32, m: ChunkMeta) -> Result<bool> {
         let mut c = self.conn();
         let tx = c.transaction()?;
         let n = tx.execute(
@@ -316,7 +306,13 @@ impl Db {
 
     /// Forgets a chunk (its file is missing or corrupt) so that it is baked again; a finished
     /// scene goes back to `baking`. Returns false when the row was already gone or differed.
-    pub fn drop_chunk(&self, id: &str, idx: u32, seen: ChunkMeta, corrupt: bool) -> Result<bool> {
+    pub(crate) fn drop_chunk(
+        &self,
+        id: &str,
+        idx: u32,
+        seen: ChunkMeta,
+        corrupt: bool,
+    ) -> Result<bool> {
         let mut c = self.conn();
         let tx = c.transaction()?;
         let n = tx.execute(
@@ -337,7 +333,7 @@ impl Db {
     }
 
     /// Moves a scene to `state` (with a reason for `failed`); stamps start and finish times.
-    pub fn set_state(&self, id: &str, state: JobState, reason: Option<&str>) -> Result<()> {
+    pub(crate) fn set_state(&self, id: &str, state: JobState, reason: Option<&str>) -> Result<()> {
         let now = now_ms();
         self.conn().execute(
             "UPDATE scenes SET state = ?2, reason = ?3,
@@ -351,7 +347,7 @@ impl Db {
 
     /// Cancels a scene: drops its chunk rows and keeps a `cancelled` tombstone. Returns the
     /// state it had, or `None` for an unknown id.
-    pub fn cancel(&self, id: &str) -> Result<Option<JobState>> {
+    pub(crate) fn cancel(&self, id: &str) -> Result<Option<JobState>> {
         let mut c = self.conn();
         let tx = c.transaction()?;
         let before: Option<String> = tx
@@ -368,18 +364,6 @@ impl Db {
         )?;
         tx.commit()?;
         Ok(Some(parse_state(&before)?))
-    }
-
-    /// Scenes per state (for metrics).
-    pub fn state_counts(&self) -> Result<Vec<(JobState, u64)>> {
-        let c = self.conn();
-        let mut st = c.prepare("SELECT state, COUNT(*) FROM scenes GROUP BY state")?;
-        let rows = st
-            .query_map([], |r| Ok((r.get::<_, String>(0)?, r.get::<_, i64>(1)?)))?
-            .collect::<rusqlite::Result<Vec<_>>>()?;
-        rows.into_iter()
-            .map(|(s, n)| Ok((parse_state(&s)?, n as u64)))
-            .collect()
     }
 }
 

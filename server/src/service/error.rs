@@ -13,11 +13,11 @@ use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use bspvt_proto::error::{MeshError, SceneError, chain_message};
 
-pub use bspvt_proto::api::ErrorBody;
+pub(crate) use bspvt_proto::api::ErrorBody;
 
 /// An error answered to a client.
 #[derive(Debug)]
-pub struct ApiError {
+pub(crate) struct ApiError {
     pub status: StatusCode,
     pub code: &'static str,
     pub detail: String,
@@ -25,10 +25,14 @@ pub struct ApiError {
     pub retry_after: Option<u64>,
 }
 
-pub type ApiResult<T> = Result<T, ApiError>;
+pub(crate) type ApiResult<T> = Result<T, ApiError>;
 
 impl ApiError {
-    pub fn new(status: StatusCode, code: &'static str, detail: impl Into<String>) -> ApiError {
+    pub(crate) fn new(
+        status: StatusCode,
+        code: &'static str,
+        detail: impl Into<String>,
+    ) -> ApiError {
         ApiError {
             status,
             code,
@@ -37,19 +41,19 @@ impl ApiError {
         }
     }
 
-    pub fn bad_request(code: &'static str, detail: impl Into<String>) -> ApiError {
+    pub(crate) fn bad_request(code: &'static str, detail: impl Into<String>) -> ApiError {
         ApiError::new(StatusCode::BAD_REQUEST, code, detail)
     }
 
-    pub fn unprocessable(code: &'static str, detail: impl Into<String>) -> ApiError {
+    pub(crate) fn unprocessable(code: &'static str, detail: impl Into<String>) -> ApiError {
         ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, code, detail)
     }
 
-    pub fn too_large(code: &'static str, detail: impl Into<String>) -> ApiError {
+    pub(crate) fn too_large(code: &'static str, detail: impl Into<String>) -> ApiError {
         ApiError::new(StatusCode::PAYLOAD_TOO_LARGE, code, detail)
     }
 
-    pub fn not_found(id: &str) -> ApiError {
+    pub(crate) fn not_found(id: &str) -> ApiError {
         ApiError::new(
             StatusCode::NOT_FOUND,
             "not_found",
@@ -57,7 +61,7 @@ impl ApiError {
         )
     }
 
-    pub fn too_many(detail: impl Into<String>) -> ApiError {
+    pub(crate) fn too_many(detail: impl Into<String>) -> ApiError {
         ApiError {
             retry_after: Some(1),
             ..ApiError::new(StatusCode::TOO_MANY_REQUESTS, "too_many_requests", detail)
@@ -65,7 +69,7 @@ impl ApiError {
     }
 
     /// A failure of the service itself (storage, database): logged, answered with 500.
-    pub fn internal(detail: impl Into<String>) -> ApiError {
+    pub(crate) fn internal(detail: impl Into<String>) -> ApiError {
         let detail = detail.into();
         tracing::error!(%detail, "internal error");
         ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", detail)
@@ -129,7 +133,7 @@ impl From<SceneError> for ApiError {
 }
 
 /// At most `n` characters of `s`.
-pub fn truncate(s: &str, n: usize) -> String {
+pub(crate) fn truncate(s: &str, n: usize) -> String {
     match s.char_indices().nth(n) {
         Some((i, _)) => format!("{}…", &s[..i]),
         None => s.to_string(),
@@ -138,7 +142,7 @@ pub fn truncate(s: &str, n: usize) -> String {
 
 /// Middleware: gives every error response that is not JSON yet (axum's own rejections: unknown
 /// route, wrong method, body limits, timeouts) the [`ErrorBody`] shape.
-pub async fn json_errors(response: Response) -> Response {
+pub(crate) async fn json_errors(response: Response) -> Response {
     let status = response.status();
     let is_json = response
         .headers()
@@ -175,4 +179,13 @@ pub async fn json_errors(response: Response) -> Response {
     );
     parts.headers.remove(header::CONTENT_LENGTH);
     Response::from_parts(parts, Body::from(body))
+}
+
+/// The answer about a deleted scene (410).
+pub(crate) fn gone(id: &str) -> ApiError {
+    ApiError::new(
+        StatusCode::GONE,
+        "deleted",
+        format!("scene {id} was deleted"),
+    )
 }

@@ -21,7 +21,7 @@ use bspvt_proto::{BakeSettings, Mesh, Scene, SceneError};
 use super::error::{ApiError, ApiResult};
 
 /// What a submission may contain.
-pub struct Upload {
+pub(crate) struct Upload {
     /// The `mesh` field: its file name and bytes as received.
     pub mesh: Option<(String, Vec<u8>)>,
     /// The `scene` field (scene JSON).
@@ -32,14 +32,14 @@ pub struct Upload {
 
 /// Limits applied while preparing a scene.
 #[derive(Clone, Copy, Debug)]
-pub struct InputLimits {
+pub(crate) struct InputLimits {
     pub mesh: Limits,
     pub max_face_res: u32,
     pub max_supersampling: u32,
 }
 
 /// A scene ready to be stored and baked.
-pub struct Prepared {
+pub(crate) struct Prepared {
     pub scene: Scene,
     /// How it was submitted, in words (for the status document).
     pub source: String,
@@ -51,7 +51,7 @@ pub struct Prepared {
 const ZSTD_WINDOW_LOG_MAX: u32 = 24;
 
 /// Builds the scene of an upload, applying every limit.
-pub fn prepare(up: Upload, lim: &InputLimits) -> ApiResult<Prepared> {
+pub(crate) fn prepare(up: Upload, lim: &InputLimits) -> ApiResult<Prepared> {
     let upload_bytes = up.mesh.as_ref().map_or(0, |m| m.1.len() as u64)
         + up.scene.as_ref().map_or(0, |s| s.len() as u64)
         + up.settings.as_ref().map_or(0, |s| s.len() as u64);
@@ -222,7 +222,7 @@ fn check_limits(scene: &Scene, lim: &InputLimits) -> ApiResult<()> {
     Ok(())
 }
 
-pub use bspvt_proto::api::{decode_scene, encode_scene};
+pub(crate) use bspvt_proto::api::{decode_scene, encode_scene};
 
 #[cfg(test)]
 mod tests {

@@ -43,7 +43,7 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 /// The scheduler and its workers.
-pub struct Jobs {
+pub(crate) struct Jobs {
     db: Arc<Db>,
     store: Arc<Store>,
     metrics: Arc<Metrics>,
@@ -71,7 +71,7 @@ struct Sched {
 }
 
 /// A scene as the scheduler and the streams see it.
-pub struct Live {
+pub(crate) struct Live {
     /// Metadata (its `state` field is the state when loaded; see [`Live::snapshot`]).
     pub row: SceneRow,
     progress: Mutex<Progress>,
@@ -100,7 +100,7 @@ struct Progress {
 
 /// A consistent copy of a scene's progress.
 #[derive(Clone, Debug)]
-pub struct Snapshot {
+pub(crate) struct Snapshot {
     pub state: JobState,
     pub reason: Option<String>,
     pub chunks_done: u32,
@@ -116,7 +116,7 @@ pub struct Snapshot {
 }
 
 /// What a stream sees of one chunk.
-pub enum ChunkState {
+pub(crate) enum ChunkState {
     Durable(ChunkMeta),
     /// Not baked yet; the scene is queued or baking.
     Waiting,
@@ -125,13 +125,13 @@ pub enum ChunkState {
 }
 
 /// Why a submission was not queued.
-pub enum SubmitError {
+pub(crate) enum SubmitError {
     QueueFull(usize),
     Db(anyhow::Error),
 }
 
 /// Vertices of chunk `c`.
-pub fn chunk_len(row: &SceneRow, c: u32) -> u64 {
+pub(crate) fn chunk_len(row: &SceneRow, c: u32) -> u64 {
     let start = c as u64 * row.chunk_vertices as u64;
     (row.vertex_count as u64)
         .saturating_sub(start)
@@ -183,12 +183,12 @@ impl Live {
         }
     }
 
-    pub fn id(&self) -> &str {
+    pub(crate) fn id(&self) -> &str {
         &self.row.id
     }
 
     /// A receiver that wakes on every change (subscribe before reading, to miss nothing).
-    pub fn subscribe(&self) -> watch::Receiver<u64> {
+    pub(crate) fn subscribe(&self) -> watch::Receiver<u64> {
         self.tx.subscribe()
     }
 
@@ -201,7 +201,7 @@ impl Live {
     }
 
     /// Where chunk `c` stands.
-    pub fn chunk(&self, c: u32) -> ChunkState {
+    pub(crate) fn chunk(&self, c: u32) -> ChunkState {
         let p = lock(&self.progress);
         match p.chunks.get(c as usize).copied().flatten() {
             Some(m) => ChunkState::Durable(m),
@@ -213,18 +213,18 @@ impl Live {
     }
 
     /// The metadata of chunks `range` if every one of them is durable.
-    pub fn durable(&self, range: std::ops::Range<u32>) -> Option<Vec<ChunkMeta>> {
+    pub(crate) fn durable(&self, range: std::ops::Range<u32>) -> Option<Vec<ChunkMeta>> {
         let p = lock(&self.progress);
         range
             .map(|c| p.chunks.get(c as usize).copied().flatten())
             .collect()
     }
 
-    pub fn state(&self) -> JobState {
+    pub(crate) fn state(&self) -> JobState {
         lock(&self.progress).state
     }
 
-    pub fn snapshot(&self) -> Snapshot {
+    pub(crate) fn snapshot(&self) -> Snapshot {
         let p = lock(&self.progress);
         let rate = match (p.state, p.first_start) {
             (JobState::Baking, Some(t)) if p.vertices_this_process > 0 => {
@@ -251,7 +251,7 @@ impl Live {
 
 impl Jobs {
     /// Resumes unfinished scenes from the database, cleans the store and starts the workers.
-    pub fn start(
+    pub(crate) fn start(
         db: Arc<Db>,
         store: Arc<Store>,
         metrics: Arc<Metrics>,
@@ -368,7 +368,7 @@ impl Jobs {
     }
 
     /// Records and queues a new scene (its files are already durable).
-    pub fn submit(&self, row: SceneRow) -> Result<Arc<Live>, SubmitError> {
+    pub(crate) fn submit(&self, row: SceneRow) -> Result<Arc<Live>, SubmitError> {
         let mut s = lock(&self.sched);
         if s.live.len() >= self.max_queued {
             return Err(SubmitError::QueueFull(self.max_queued));
@@ -387,12 +387,12 @@ impl Jobs {
     }
 
     /// Whether a submission would be queued now.
-    pub fn has_room(&self) -> bool {
+    pub(crate) fn has_room(&self) -> bool {
         lock(&self.sched).live.len() < self.max_queued
     }
 
     /// The scene `id`: the live one if queued or baking, else loaded from the database.
-    pub fn lookup(&self, id: &str) -> Result<Option<Arc<Live>>> {
+    pub(crate) fn lookup(&self, id: &str) -> Result<Option<Arc<Live>>> {
         if let Some(l) = lock(&self.sched).live.get(id) {
             return Ok(Some(l.clone()));
         }
@@ -413,17 +413,17 @@ impl Jobs {
     }
 
     /// Chunks of scene `id` baked by this process.
-    pub fn baked_this_process(&self, id: &str) -> u32 {
+    pub(crate) fn baked_this_process(&self, id: &str) -> u32 {
         lock(&self.baked_here).get(id).copied().unwrap_or(0)
     }
 
     /// Position in the waiting queue (0 = next), if queued.
-    pub fn queue_position(&self, id: &str) -> Option<usize> {
+    pub(crate) fn queue_position(&self, id: &str) -> Option<usize> {
         lock(&self.sched).queue.iter().position(|l| l.id() == id)
     }
 
     /// Cancels a scene and deletes its data. Returns its previous state, `None` if unknown.
-    pub fn delete(&self, id: &str) -> Result<Option<JobState>> {
+    pub(crate) fn delete(&self, id: &str) -> Result<Option<JobState>> {
         let mut s = lock(&self.sched);
         let live = s.live.remove(id);
         s.queue.retain(|l| l.id() != id);
@@ -457,7 +457,7 @@ impl Jobs {
 
     /// Chunk `c` of scene `id`, recorded as `seen`, failed verification on read: forget it,
     /// bake it again, and return the live scene to wait on (`None` if the scene is gone).
-    pub fn rebake(
+    pub(crate) fn rebake(
         &self,
         id: &str,
         c: u32,
@@ -508,7 +508,7 @@ impl Jobs {
     }
 
     /// Queue and bake gauges.
-    pub fn gauges(&self) -> Gauges {
+    pub(crate) fn gauges(&self) -> Gauges {
         let s = lock(&self.sched);
         let mut g = Gauges {
             scenes_queued: s.queue.len() as u64,
@@ -526,7 +526,7 @@ impl Jobs {
     }
 
     /// Stops handing out work and waits (up to `wait`) for chunks being baked to be stored.
-    pub fn shutdown(&self, wait: Duration) {
+    pub(crate) fn shutdown(&self, wait: Duration) {
         lock(&self.sched).stop = true;
         self.work.notify_all();
         let deadline = Instant::now() + wait;

@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicI64, AtomicU64, Ordering::Relaxed};
 use std::time::{Duration, Instant};
 
 /// Counters updated by the handlers and the bake workers.
-pub struct Metrics {
+pub(crate) struct Metrics {
     started: Instant,
     /// Responses by status class (index 1..=5).
     responses: [AtomicU64; 6],
@@ -33,7 +33,7 @@ pub struct Metrics {
 
 /// Values read from the scheduler when metrics are rendered.
 #[derive(Default)]
-pub struct Gauges {
+pub(crate) struct Gauges {
     pub scenes_queued: u64,
     pub scenes_baking: u64,
     pub chunks_pending: u64,
@@ -69,13 +69,13 @@ impl Default for Metrics {
 }
 
 impl Metrics {
-    pub fn response(&self, status: u16) {
+    pub(crate) fn response(&self, status: u16) {
         let class = (status / 100).clamp(1, 5) as usize;
         self.responses[class].fetch_add(1, Relaxed);
     }
 
     /// A chunk became durable.
-    pub fn chunk_baked(&self, vertices: u64, took: Duration) {
+    pub(crate) fn chunk_baked(&self, vertices: u64, took: Duration) {
         self.chunks_baked.fetch_add(1, Relaxed);
         self.vertices_baked.fetch_add(vertices, Relaxed);
         self.bake_micros.fetch_add(took.as_micros() as u64, Relaxed);
@@ -91,7 +91,7 @@ impl Metrics {
     }
 
     /// Chunks made durable per second over the last minute (or since start, if shorter).
-    pub fn chunks_per_second(&self) -> f64 {
+    pub(crate) fn chunks_per_second(&self) -> f64 {
         let now = Instant::now();
         let q = self.recent_chunks.lock().unwrap_or_else(|p| p.into_inner());
         let n = q
@@ -103,7 +103,7 @@ impl Metrics {
     }
 
     /// The exposition text.
-    pub fn render(&self, g: &Gauges) -> String {
+    pub(crate) fn render(&self, g: &Gauges) -> String {
         let mut o = String::new();
         let mut one = |name: &str, kind: &str, help: &str, value: String| {
             let _ = writeln!(

@@ -1,29 +1,36 @@
 //! The HTTP baking service (`bspvt-server serve`): axum on tokio, an embedded SQLite database
 //! for jobs and metadata, chunk files for the trees, all under one data directory.
 //!
-//! Modules: [`config`] (flags, environment, TOML), [`api`] (handlers), [`stream`] (tree
-//! streaming), [`sse`] (status events), [`jobs`] (scheduler and workers), [`store`] (files),
-//! [`db`] (SQLite), [`input`] (uploads → scenes), [`metrics`], [`error`], [`openapi`].
+//! Modules: [`config`] (flags, environment, TOML), `api` (handlers), `stream` (tree
+//! streaming), `sse` (status events), `openapi` (the API document and its handler),
+//! `state` (what every handler reaches: state, scene lookup, stream accounting), `http`
+//! (query strings, conditional requests), `jobs` (scheduler and workers), `store` (files),
+//! `db` (SQLite), `input` (uploads → scenes), `metrics`, `error`. Only [`config`] and
+//! the service handles below are public. The modules depend on each other without cycles, top
+//! to bottom: this module (router, server) → `openapi` → the handlers `api`, `stream`, `sse` →
+//! `state`, `http` → `jobs` → `store`, `input`, `metrics` → `db`, `error`, `config`.
 //! docs/service.md describes the API, the storage layout and the invariants.
 //!
 //! Guarantees of this module: every request runs in a tracing span (id, method, path) and is
 //! logged with its status and latency; requests beyond `max_concurrent_requests` get 429;
 //! non-streaming requests are cut at `request_timeout_s` (408); every error response is JSON
-//! ([`error::json_errors`]); on SIGINT/SIGTERM the server stops accepting, ends open streams,
+//! (`error::json_errors`); on SIGINT/SIGTERM the server stops accepting, ends open streams,
 //! lets the workers store the chunks they are baking, and exits (a SIGKILL instead loses
 //! nothing durable: see `jobs`).
 
-pub mod api;
+mod api;
 pub mod config;
-pub mod db;
-pub mod error;
-pub mod input;
-pub mod jobs;
-pub mod metrics;
-pub mod openapi;
-pub mod sse;
-pub mod store;
-pub mod stream;
+mod db;
+mod error;
+mod http;
+mod input;
+mod jobs;
+mod metrics;
+mod openapi;
+mod sse;
+mod state;
+mod store;
+mod stream;
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -37,70 +44,19 @@ use axum::http::StatusCode;
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
-use bspvt_proto::import::Limits;
 use tokio::sync::{Semaphore, watch};
 use tracing::Instrument;
 
 pub use config::{Config, ServeArgs};
 use db::Db;
-use error::{ApiError, ApiResult};
-use input::InputLimits;
+use error::ApiError;
 use jobs::Jobs;
 use metrics::Metrics;
+use state::{AppState, Shared};
 use store::Store;
 
-/// Everything a handler can reach.
-pub struct AppState {
-    pub cfg: Config,
-    pub db: Arc<Db>,
-    pub store: Arc<Store>,
-    pub jobs: Arc<Jobs>,
-    pub metrics: Arc<Metrics>,
-    /// Uploads being read or parsed.
-    pub uploads: Arc<Semaphore>,
-    /// Open tree and event streams.
-    pub streams: Arc<Semaphore>,
-    /// Requests being handled (streams count until their headers are sent).
-    pub requests: Arc<Semaphore>,
-    /// Face-filter re-encodes running at once.
-    pub reencode: Semaphore,
-    /// Becomes true when the server shuts down.
-    pub shutdown: watch::Receiver<bool>,
-    pub started: Instant,
-    next_request: AtomicU64,
-}
-
-pub type Shared = Arc<AppState>;
-
-impl AppState {
-    pub fn input_limits(&self) -> InputLimits {
-        InputLimits {
-            mesh: Limits {
-                max_vertices: self.cfg.max_mesh_vertices,
-                max_triangles: self.cfg.max_mesh_triangles,
-                max_bytes: self.cfg.max_mesh_bytes,
-            },
-            max_face_res: self.cfg.max_face_res,
-            max_supersampling: self.cfg.max_supersampling,
-        }
-    }
-}
-
-/// Runs blocking work (database, files, parsing) on tokio's blocking pool.
-pub async fn blocking<T, F>(f: F) -> ApiResult<T>
-where
-    F: FnOnce() -> Result<T> + Send + 'static,
-    T: Send + 'static,
-{
-    match tokio::task::spawn_blocking(f).await {
-        Ok(Ok(v)) => Ok(v),
-        Ok(Err(e)) => Err(ApiError::internal(format!("{e:#}"))),
-        Err(e) => Err(ApiError::internal(format!("background task failed: {e}"))),
-    }
-}
-
 /// The router with its middleware.
-pub fn router(state: Shared) -> Router {
+pub(crate) fn router(state: Shared) -> Router {
     let body_limit = usize::try_from(state.cfg.max_body_bytes).unwrap_or(usize::MAX);
     Router::new()
         .route("/v1/scenes", post(api::submit))
@@ -112,7 +68,7 @@ pub fn router(state: Shared) -> Router {
         .route("/v1/scenes/{id}/mesh", get(api::get_mesh))
         .route("/v1/scenes/{id}/scene", get(api::get_scene_file))
         .route("/v1/scenes/{id}/trees", get(stream::get_trees))
-        .route("/v1/openapi.json", get(api::openapi))
+        .route("/v1/openapi.json", get(openapi::openapi))
         .route("/healthz", get(api::healthz))
         .route("/metrics", get(api::metrics))
         .fallback(api::not_found)
@@ -172,7 +128,7 @@ async fn observe(State(st): State<Shared>, req: Request, next: Next) -> Response
 }
 
 /// A service that is running.
-pub struct Service {
+pub(crate) struct Service {
     pub state: Shared,
     pub addr: SocketAddr,
     listener: tokio::net::TcpListener,
@@ -182,7 +138,7 @@ pub struct Service {
 impl Service {
     /// Opens the data directory (database, store), resumes unfinished bakes, starts the
     /// workers and binds the listener.
-    pub async fn open(cfg: Config) -> Result<Service> {
+    pub(crate) async fn open(cfg: Config) -> Result<Service> {
         std::fs::create_dir_all(&cfg.data_dir)
             .with_context(|| format!("cannot create data dir {}", cfg.data_dir.display()))?;
         let db = Arc::new(Db::open(&cfg.db_path())?);
@@ -235,7 +191,7 @@ impl Service {
 
     /// Serves until `stop` resolves, then shuts down: streams end, connections get 10 s to
     /// finish, workers get 30 s to store the chunks they are baking.
-    pub async fn run(
+    pub(crate) async fn run(
         self,
         stop: impl std::future::Future<Output = ()> + Send + 'static,
     ) -> Result<()> {
@@ -342,7 +298,7 @@ async fn signal() {
 }
 
 /// Sets up logging on stderr (`RUST_LOG` filters; default `info`).
-pub fn init_logging(format: config::LogFormat) {
+pub(crate) fn init_logging(format: config::LogFormat) {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let builder = tracing_subscriber::fmt()
@@ -379,8 +335,14 @@ pub fn serve_command(args: &ServeArgs) -> Result<()> {
 
 /// A service running on its own runtime thread (benchmarks, embedding).
 pub struct Background {
+    /// The address the service listens on.
     pub addr: SocketAddr,
-    pub state: Shared,
+    /// Holds the shared state for as long as the handle lives (read by nothing outside).
+    #[expect(
+        dead_code,
+        reason = "kept alive with the handle, as before the API was narrowed"
+    )]
+    state: Shared,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
     thread: Option<std::thread::JoinHandle<Result<()>>>,
 }

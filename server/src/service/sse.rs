@@ -14,11 +14,9 @@ use axum::response::sse::{Event, KeepAlive, Sse};
 use futures_util::Stream;
 use tokio::sync::watch;
 
-use super::Shared;
-use super::api::{lookup, status_of};
 use super::error::{ApiError, ApiResult, ErrorBody};
 use super::jobs::Live;
-use super::stream::StreamGuard;
+use super::state::{Shared, StreamGuard, lookup, status_of};
 
 struct Events {
     st: Shared,
@@ -43,7 +41,7 @@ struct Events {
         (status = 429, description = "Too many open streams", body = ErrorBody),
     )
 )]
-pub async fn get_events(
+pub(crate) async fn get_events(
     State(st): State<Shared>,
     Path(id): Path<String>,
 ) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {

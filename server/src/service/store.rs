@@ -25,12 +25,12 @@ use bspvt_proto::encoding::peek_chunk;
 use super::db::ChunkMeta;
 
 /// The store rooted at the data directory.
-pub struct Store {
+pub(crate) struct Store {
     root: PathBuf,
 }
 
 /// The result of reading a stored chunk.
-pub enum ChunkRead {
+pub(crate) enum ChunkRead {
     Ok(Vec<u8>),
     /// The file is missing.
     Missing,
@@ -39,7 +39,7 @@ pub enum ChunkRead {
 }
 
 /// What [`Store::list_chunks`] finds.
-pub struct ChunkFiles {
+pub(crate) struct ChunkFiles {
     /// (chunk index, file length).
     pub chunks: Vec<(u32, u64)>,
     pub stray: Vec<PathBuf>,
@@ -49,7 +49,7 @@ const SCENE_MAGIC: &[u8; 4] = b"BSCN";
 
 impl Store {
     /// Opens the store, creating its directories, and empties the trash.
-    pub fn open(root: &Path) -> io::Result<Store> {
+    pub(crate) fn open(root: &Path) -> io::Result<Store> {
         fs::create_dir_all(root.join("scenes"))?;
         fs::create_dir_all(root.join("trash"))?;
         let s = Store {
@@ -59,11 +59,11 @@ impl Store {
         Ok(s)
     }
 
-    pub fn scene_dir(&self, id: &str) -> PathBuf {
+    pub(crate) fn scene_dir(&self, id: &str) -> PathBuf {
         self.root.join("scenes").join(id)
     }
 
-    pub fn chunk_path(&self, id: &str, chunk: u32) -> PathBuf {
+    pub(crate) fn chunk_path(&self, id: &str, chunk: u32) -> PathBuf {
         self.scene_dir(id)
             .join("chunks")
             .join(format!("{chunk}.bvck"))
@@ -71,7 +71,7 @@ impl Store {
 
     /// Writes a new scene's directory (its `scene.bin` and an empty `chunks/`) atomically:
     /// built under a temporary name, synced, then renamed into place.
-    pub fn create_scene(&self, id: &str, scene_bin: &[u8]) -> io::Result<()> {
+    pub(crate) fn create_scene(&self, id: &str, scene_bin: &[u8]) -> io::Result<()> {
         let scenes = self.root.join("scenes");
         let tmp = scenes.join(format!("{id}.tmp"));
         if tmp.exists() {
@@ -91,7 +91,7 @@ impl Store {
     }
 
     /// Reads a scene's `scene.bin` payload, checking its frame and CRC.
-    pub fn read_scene(&self, id: &str) -> Result<Vec<u8>, String> {
+    pub(crate) fn read_scene(&self, id: &str) -> Result<Vec<u8>, String> {
         let path = self.scene_dir(id).join("scene.bin");
         let data = fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
         let bad = |what: &str| format!("{} is corrupt: {what}", path.display());
@@ -115,7 +115,7 @@ impl Store {
 
     /// Makes chunk `chunk`'s frame durable at its final path (temp file, fsync, rename, fsync
     /// of the directory). Fails, writing nothing, when the scene directory is gone (deleted).
-    pub fn write_chunk(&self, id: &str, chunk: u32, frame: &[u8]) -> io::Result<()> {
+    pub(crate) fn write_chunk(&self, id: &str, chunk: u32, frame: &[u8]) -> io::Result<()> {
         let path = self.chunk_path(id, chunk);
         let dir = path
             .parent()
@@ -127,7 +127,7 @@ impl Store {
     }
 
     /// Reads and verifies chunk `chunk` against what the database recorded.
-    pub async fn read_chunk(
+    pub(crate) async fn read_chunk(
         &self,
         id: &str,
         chunk: u32,
@@ -146,13 +146,13 @@ impl Store {
     }
 
     /// Removes a chunk file (after it was found corrupt); a missing file is fine.
-    pub fn remove_chunk(&self, id: &str, chunk: u32) {
+    pub(crate) fn remove_chunk(&self, id: &str, chunk: u32) {
         let _ = fs::remove_file(self.chunk_path(id, chunk));
     }
 
     /// The chunk files present for a scene and stray files (temporary or unknown names) that
     /// no reader will ever use.
-    pub fn list_chunks(&self, id: &str) -> io::Result<ChunkFiles> {
+    pub(crate) fn list_chunks(&self, id: &str) -> io::Result<ChunkFiles> {
         let mut chunks = Vec::new();
         let mut stray = Vec::new();
         for e in fs::read_dir(self.scene_dir(id).join("chunks"))? {
@@ -171,7 +171,7 @@ impl Store {
     }
 
     /// Ids of the scene directories present (temporary ones are removed).
-    pub fn scene_ids(&self) -> io::Result<Vec<String>> {
+    pub(crate) fn scene_ids(&self) -> io::Result<Vec<String>> {
         let mut ids = Vec::new();
         for e in fs::read_dir(self.root.join("scenes"))? {
             let e = e?;
@@ -188,7 +188,7 @@ impl Store {
     }
 
     /// Deletes a scene's directory: renamed into the trash (atomic), then removed.
-    pub fn remove_scene(&self, id: &str) -> io::Result<()> {
+    pub(crate) fn remove_scene(&self, id: &str) -> io::Result<()> {
         let dir = self.scene_dir(id);
         if !dir.exists() {
             return Ok(());
@@ -212,7 +212,7 @@ impl Store {
 }
 
 /// Checks a chunk file against its database record and its own framing.
-pub fn verify_chunk(data: &[u8], meta: ChunkMeta, first_vertex: u32) -> Result<(), String> {
+pub(crate) fn verify_chunk(data: &[u8], meta: ChunkMeta, first_vertex: u32) -> Result<(), String> {
     if data.len() as u64 != meta.bytes as u64 {
         return Err(format!(
             "chunk file is {} bytes, the database says {}",

@@ -29,17 +29,17 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use bspvt_proto::cubemap::FACES;
 use bspvt_proto::encoding::{BakeHeader, decode_chunk, decode_header, encode_chunk};
-use tokio::sync::{OwnedSemaphorePermit, watch};
+use tokio::sync::watch;
 
-use super::api::{gone, lookup, not_modified, not_modified_response};
 use super::db::{ChunkMeta, JobState, SceneRow};
-use super::error::{ApiError, ApiResult, ErrorBody};
+use super::error::{ApiError, ApiResult, ErrorBody, gone};
+use super::http::{not_modified, not_modified_response, query_pairs};
 use super::jobs::{ChunkState, Live};
+use super::state::{Shared, StreamGuard, blocking, lookup};
 use super::store::ChunkRead;
-use super::{Shared, blocking};
 
 /// All six faces.
-pub const ALL_FACES: u8 = (1 << FACES) - 1;
+pub(crate) const ALL_FACES: u8 = (1 << FACES) - 1;
 
 /// Face names accepted by `faces=` (index = face).
 const FACE_NAMES: [[&str; 2]; FACES] = [
@@ -53,60 +53,16 @@ const FACE_NAMES: [[&str; 2]; FACES] = [
 
 /// What a tree request asks for.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Selection {
+pub(crate) struct Selection {
     /// Chunk indices.
     pub chunks: std::ops::Range<u32>,
     /// Bit f set = face f kept.
     pub faces: u8,
 }
 
-/// `k=v` pairs of a query string, percent-decoded (`+` is kept as `+`).
-pub fn query_pairs(q: Option<&str>) -> ApiResult<Vec<(String, String)>> {
-    let Some(q) = q.filter(|q| !q.is_empty()) else {
-        return Ok(Vec::new());
-    };
-    if q.len() > 2048 {
-        return Err(ApiError::bad_request(
-            "invalid_query",
-            "the query string is longer than 2048 bytes",
-        ));
-    }
-    q.split('&')
-        .filter(|p| !p.is_empty())
-        .map(|p| {
-            let (k, v) = p.split_once('=').unwrap_or((p, ""));
-            Ok((percent_decode(k)?, percent_decode(v)?))
-        })
-        .collect()
-}
-
-fn percent_decode(s: &str) -> ApiResult<String> {
-    let b = s.as_bytes();
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        if b[i] == b'%' {
-            let hex = b
-                .get(i + 1..i + 3)
-                .and_then(|h| std::str::from_utf8(h).ok())
-                .and_then(|h| u8::from_str_radix(h, 16).ok())
-                .ok_or_else(|| {
-                    ApiError::bad_request("invalid_query", "bad percent-encoding in the query")
-                })?;
-            out.push(hex);
-            i += 3;
-        } else {
-            out.push(b[i]);
-            i += 1;
-        }
-    }
-    String::from_utf8(out)
-        .map_err(|_| ApiError::bad_request("invalid_query", "the query is not UTF-8"))
-}
-
 impl Selection {
     /// Parses `vertices=A..B` (also `A..`, `..B`) and `faces=LIST` against a scene.
-    pub fn parse(q: Option<&str>, row: &SceneRow) -> ApiResult<Selection> {
+    pub(crate) fn parse(q: Option<&str>, row: &SceneRow) -> ApiResult<Selection> {
         let n = row.vertex_count;
         let (mut range, mut faces) = (None, None);
         for (k, v) in query_pairs(q)? {
@@ -235,7 +191,7 @@ fn etag(row: &SceneRow, sel: &Selection, chunks: &[ChunkMeta]) -> String {
         (status = 429, description = "Too many open streams", body = ErrorBody),
     )
 )]
-pub async fn get_trees(
+pub(crate) async fn get_trees(
     State(st): State<Shared>,
     Path(id): Path<String>,
     RawQuery(q): RawQuery,
@@ -326,28 +282,6 @@ pub async fn get_trees(
         h.insert(header::CONTENT_LENGTH, HeaderValue::from(n));
     }
     Ok(r)
-}
-
-/// Counts an open stream and holds its permit while it lives.
-pub struct StreamGuard {
-    st: Shared,
-    _permit: OwnedSemaphorePermit,
-}
-
-impl StreamGuard {
-    pub fn new(st: &Shared, permit: OwnedSemaphorePermit) -> StreamGuard {
-        st.metrics.streams_open.fetch_add(1, Ordering::Relaxed);
-        StreamGuard {
-            st: st.clone(),
-            _permit: permit,
-        }
-    }
-}
-
-impl Drop for StreamGuard {
-    fn drop(&mut self) {
-        self.st.metrics.streams_open.fetch_sub(1, Ordering::Relaxed);
-    }
 }
 
 struct TreeStream {

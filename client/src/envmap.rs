@@ -21,9 +21,9 @@ const MAX_SIDE: u32 = 16_384;
 /// An equirectangular radiance map (linear RGB, row-major from the top).
 #[derive(Clone, Debug)]
 pub struct EnvLight {
-    pub width: u32,
-    pub height: u32,
-    pub pixels: Vec<[f32; 3]>,
+    pub(crate) width: u32,
+    pub(crate) height: u32,
+    pub(crate) pixels: Vec<[f32; 3]>,
 }
 
 /// The test map's path ([`bspvt_proto::paths::default_env_map`]).
@@ -45,7 +45,11 @@ impl EnvLight {
     }
 
     /// A map from texels; checks the size and cleans the values.
-    pub fn from_pixels(width: u32, height: u32, mut pixels: Vec<[f32; 3]>) -> Result<EnvLight> {
+    pub(crate) fn from_pixels(
+        width: u32,
+        height: u32,
+        mut pixels: Vec<[f32; 3]>,
+    ) -> Result<EnvLight> {
         if width < 2 || height < 1 || width > MAX_SIDE || height > MAX_SIDE {
             bail!("unsupported size {width}×{height} (2×1 to {MAX_SIDE}² texels)");
         }
@@ -66,8 +70,9 @@ impl EnvLight {
         })
     }
 
+    #[cfg(test)]
     /// A constant map (tests, the furnace check).
-    pub fn constant(rgb: [f32; 3]) -> EnvLight {
+    pub(crate) fn constant(rgb: [f32; 3]) -> EnvLight {
         EnvLight {
             width: 2,
             height: 1,
@@ -77,7 +82,7 @@ impl EnvLight {
 
     /// The texel holding direction `d` (any length; zero or NaN reads as +y).
     #[inline]
-    pub fn texel_of(&self, d: DVec3) -> (usize, usize) {
+    pub(crate) fn texel_of(&self, d: DVec3) -> (usize, usize) {
         let d = d.normalize_or(DVec3::Y);
         let (w, h) = (self.width as f64, self.height as f64);
         let u = d.z.atan2(d.x) / (2.0 * PI) + 0.5;
@@ -89,7 +94,7 @@ impl EnvLight {
 
     /// Radiance arriving from direction `d` (piecewise constant).
     #[inline]
-    pub fn eval(&self, d: DVec3) -> DVec3 {
+    pub(crate) fn eval(&self, d: DVec3) -> DVec3 {
         let (x, y) = self.texel_of(d);
         let p = self.pixels[y * self.width as usize + x];
         DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
@@ -97,7 +102,7 @@ impl EnvLight {
 
     /// The unit direction at image position (u, v) ∈ [0, 1]² (v from the top).
     #[inline]
-    pub fn direction(u: f64, v: f64) -> DVec3 {
+    pub(crate) fn direction(u: f64, v: f64) -> DVec3 {
         let phi = 2.0 * PI * u - PI;
         let theta = PI * v;
         let (st, ct) = theta.sin_cos();
@@ -106,7 +111,7 @@ impl EnvLight {
 
     /// Solid angle of a texel of row `y`.
     #[inline]
-    pub fn texel_solid_angle(&self, y: usize) -> f64 {
+    pub(crate) fn texel_solid_angle(&self, y: usize) -> f64 {
         let h = f64::from(self.height);
         let (t0, t1) = (PI * y as f64 / h, PI * (y + 1) as f64 / h);
         2.0 * PI / f64::from(self.width) * (t0.cos() - t1.cos())
@@ -115,7 +120,7 @@ impl EnvLight {
     /// A `width`×`height` map whose texels are the solid-angle-weighted means of this map over
     /// the same regions (each target texel averages the source texels whose centres fall in
     /// it; sizes need not divide).
-    pub fn downsample(&self, width: u32, height: u32) -> EnvLight {
+    pub(crate) fn downsample(&self, width: u32, height: u32) -> EnvLight {
         let (width, height) = (width.clamp(2, self.width), height.clamp(1, self.height));
         let n = width as usize * height as usize;
         let mut sum = vec![[0.0f64; 3]; n];
@@ -151,8 +156,9 @@ impl EnvLight {
         }
     }
 
+    #[cfg(test)]
     /// ∫ L(ω) dω over the sphere, per channel.
-    pub fn power(&self) -> DVec3 {
+    pub(crate) fn power(&self) -> DVec3 {
         let mut s = DVec3::ZERO;
         for y in 0..self.height as usize {
             let w = self.texel_solid_angle(y);

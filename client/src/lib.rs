@@ -19,6 +19,8 @@
 //! embedded service that `bspvt demo` starts comes from the command line's `service` feature
 //! through [`stream::source::Embedded`].
 
+#![warn(unreachable_pub, missing_docs)]
+
 pub mod envmap;
 pub mod frame;
 pub mod ggx;

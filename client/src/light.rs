@@ -9,6 +9,7 @@ use glam::{DAffine3, DVec3};
 
 use crate::texture::{LightFrame, LightTexture};
 
+/// A polygonal light as posed for one frame.
 #[derive(Clone, Debug)]
 pub struct Light {
     /// Convex polygon, counter-clockwise seen from the emitting side.
@@ -17,12 +18,14 @@ pub struct Light {
     pub normal: DVec3,
     /// Linear RGB radiance.
     pub radiance: DVec3,
+    /// Emits from both sides.
     pub two_sided: bool,
     /// Prefiltered texture modulating the radiance (shared between frames).
     pub texture: Option<Arc<LightTexture>>,
 }
 
 impl Light {
+    /// The scene light at rest, without its texture (see `Light::load`).
     pub fn from_scene(l: &PolygonLight) -> Light {
         Light {
             vertices: l.points().iter().map(|p| p.as_dvec3()).collect(),
@@ -38,7 +41,7 @@ impl Light {
     pub fn load(l: &PolygonLight) -> Result<Light> {
         let mut light = Light::from_scene(l);
         if let Some(t) = &l.texture {
-            light.texture = Some(Arc::new(LightTexture::load(std::path::Path::new(t))?));
+            light.texture = Some(Arc::new(load_texture(std::path::Path::new(t))?));
         }
         Ok(light)
     }
@@ -58,6 +61,7 @@ impl Light {
         }
     }
 
+    /// The mean of the polygon's vertices.
     pub fn centroid(&self) -> DVec3 {
         self.vertices.iter().sum::<DVec3>() / self.vertices.len().max(1) as f64
     }
@@ -82,7 +86,7 @@ impl Light {
     }
 
     /// Area of the polygon.
-    pub fn area(&self) -> f64 {
+    pub(crate) fn area(&self) -> f64 {
         let v = &self.vertices;
         let mut a = DVec3::ZERO;
         for i in 1..v.len().saturating_sub(1) {
@@ -90,4 +94,17 @@ impl Light {
         }
         0.5 * a.length()
     }
+}
+
+/// Reads a light texture: a PNG (sRGB-decoded), EXR or HDR image, prefiltered
+/// ([`LightTexture::from_texels`]). The file reading lives here, not in the kernel.
+fn load_texture(path: &std::path::Path) -> anyhow::Result<LightTexture> {
+    use anyhow::Context;
+    let img = image::open(path)
+        .with_context(|| format!("cannot read light texture {}", path.display()))?
+        .into_rgb32f();
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let texels: Vec<[f32; 3]> = img.pixels().map(|p| p.0).collect();
+    LightTexture::from_texels(w, h, &texels)
+        .with_context(|| format!("light texture {}", path.display()))
 }

@@ -27,14 +27,14 @@ use crate::render::renderer::Renderer;
 
 /// The per-pixel Monte Carlo sums (channel means) with and without shadow rays.
 #[derive(Clone, Debug)]
-pub struct RatioSums {
-    pub shadowed: Vec<f32>,
-    pub unshadowed: Vec<f32>,
+pub(crate) struct RatioSums {
+    pub(crate) shadowed: Vec<f32>,
+    pub(crate) unshadowed: Vec<f32>,
 }
 
 /// Both sums at every covered pixel of `r`'s G-buffer, `spp` MIS samples per pixel,
 /// reproducible for a given `seed`. Background pixels: 0 and 0.
-pub fn ratio_sums(
+pub(crate) fn ratio_sums(
     r: &Renderer,
     light: &Light,
     occluder: &Occluder,
@@ -75,7 +75,7 @@ pub fn ratio_sums(
 /// The shadow factor Σ f V / Σ f per pixel, clamped to [0, 1]; 1 where the unshadowed sum
 /// is 0 (no sample reached the light: the analytic term is 0 or nearly so, and nothing is
 /// known about visibility).
-pub fn ratio(sums: &RatioSums) -> Vec<f32> {
+pub(crate) fn ratio(sums: &RatioSums) -> Vec<f32> {
     sums.shadowed
         .iter()
         .zip(&sums.unshadowed)
@@ -92,7 +92,7 @@ pub fn ratio(sums: &RatioSums) -> Vec<f32> {
 
 /// Both sums filtered with the same edge-aware box of `radius_px` pixels (at each pixel's own
 /// view depth: world half-width = radius × the pixel footprint), then divided.
-pub fn denoised_ratio(sums: &RatioSums, guide: &Guide, radius_px: f64) -> Vec<f32> {
+pub(crate) fn denoised_ratio(sums: &RatioSums, guide: &Guide, radius_px: f64) -> Vec<f32> {
     let params = Params {
         max_radius: radius_px,
         ..Params::default()

@@ -7,9 +7,7 @@
 //! light's plane, so a quad's texture covers it exactly; other polygons use the parallelogram
 //! spanned by their first and last edges. Outside [0, 1]² the texture is clamped to its edge.
 
-use std::path::Path;
-
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use glam::{DMat3, DVec2, DVec3};
 
 /// One level of the pyramid.
@@ -69,17 +67,6 @@ pub struct LightTexture {
 }
 
 impl LightTexture {
-    /// Loads a PNG (sRGB-decoded), EXR or HDR image.
-    pub fn load(path: &Path) -> Result<LightTexture> {
-        let img = image::open(path)
-            .with_context(|| format!("cannot read light texture {}", path.display()))?
-            .into_rgb32f();
-        let (w, h) = (img.width() as usize, img.height() as usize);
-        let texels: Vec<[f32; 3]> = img.pixels().map(|p| p.0).collect();
-        LightTexture::from_texels(w, h, &texels)
-            .with_context(|| format!("light texture {}", path.display()))
-    }
-
     /// From linear RGB texels (row-major from the top). Rejects empty or non-finite data.
     pub fn from_texels(w: usize, h: usize, texels: &[[f32; 3]]) -> Result<LightTexture> {
         if w == 0 || h == 0 || texels.len() != w * h {
@@ -104,12 +91,12 @@ impl LightTexture {
     }
 
     /// Resolution of the finest level (the larger side).
-    pub fn size(&self) -> usize {
+    pub(crate) fn size(&self) -> usize {
         self.levels[0].w.max(self.levels[0].h)
     }
 
     /// Trilinear lookup at `uv`, level `lod` (0 = finest; clamped).
-    pub fn sample(&self, uv: DVec2, lod: f64) -> DVec3 {
+    pub(crate) fn sample(&self, uv: DVec2, lod: f64) -> DVec3 {
         let top = (self.levels.len() - 1) as f64;
         let lod = if lod.is_nan() {
             top
@@ -132,21 +119,21 @@ impl LightTexture {
     }
 
     /// The texture's mean (the coarsest level).
-    pub fn average(&self) -> DVec3 {
+    pub(crate) fn average(&self) -> DVec3 {
         self.levels[self.levels.len() - 1].texels[0]
     }
 }
 
 /// The light's plane frame relative to a shading point: p₀ − p, e₁ = p₁ − p₀, e₂ = pₙ₋₁ − p₀.
 #[derive(Clone, Copy, Debug)]
-pub struct LightFrame {
-    pub origin: DVec3,
-    pub e1: DVec3,
-    pub e2: DVec3,
+pub(crate) struct LightFrame {
+    pub(crate) origin: DVec3,
+    pub(crate) e1: DVec3,
+    pub(crate) e2: DVec3,
 }
 
 impl LightFrame {
-    pub fn new(vertices: &[DVec3], p: DVec3) -> LightFrame {
+    pub(crate) fn new(vertices: &[DVec3], p: DVec3) -> LightFrame {
         let n = vertices.len();
         LightFrame {
             origin: vertices[0] - p,
@@ -156,14 +143,14 @@ impl LightFrame {
     }
 
     /// (u, v) of a point on the light's plane, `q` relative to the light's p₀.
-    pub fn uv(&self, q: DVec3) -> DVec2 {
+    pub(crate) fn uv(&self, q: DVec3) -> DVec2 {
         uv_in(self.e1, self.e2, q)
     }
 
     /// Heitz et al. 2016, §5.3 (`FetchFilteredTexture`): in the lobe's cosine space (the
     /// linear map `m`), the ray along the vector form factor `f` meets the light's plane at
     /// (u, v); the footprint d = distance / √area sets the level, log₂(d · size).
-    pub fn lookup(&self, m: &DMat3, f: DVec3, tex: &LightTexture) -> DVec3 {
+    pub(crate) fn lookup(&self, m: &DMat3, f: DVec3, tex: &LightTexture) -> DVec3 {
         let (o, e1, e2) = (*m * self.origin, *m * self.e1, *m * self.e2);
         let ortho = e1.cross(e2);
         let area = ortho.length();

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 /// The directions of a light polygon seen from `p`, clipped to the upper hemisphere of `n`.
 /// Empty when the light is wholly below the horizon or `p` is behind a one-sided light.
-pub fn light_directions(
+pub(crate) fn light_directions(
     light: &[DVec3],
     light_normal: DVec3,
     two_sided: bool,

@@ -18,92 +18,92 @@ use bspvt_client::session::connect::{Connected, connect};
 #[derive(clap::Args, Debug)]
 pub struct AnimateArgs {
     #[command(flatten)]
-    pub connect: ConnectArgs,
+    pub(crate) connect: ConnectArgs,
     /// Frames along the light's path (one full cycle).
     #[arg(long, default_value_t = 24)]
-    pub frames: usize,
+    pub(crate) frames: usize,
     /// Output folder: frame-NNN.png, first.png, preview.gif, stats.json.
     #[arg(long)]
-    pub out: PathBuf,
+    pub(crate) out: PathBuf,
     #[command(flatten)]
-    pub frame: FrameArgs,
+    pub(crate) frame: FrameArgs,
     /// GGX roughness α for every material (default: the scene's).
     #[arg(long)]
-    pub roughness: Option<f32>,
+    pub(crate) roughness: Option<f32>,
     /// Draw each frame with the trees that have arrived so far instead of waiting for all.
     #[arg(long)]
-    pub progressive: bool,
+    pub(crate) progressive: bool,
     /// Exposure before tone mapping.
     #[arg(long, default_value_t = 1.0)]
-    pub exposure: f32,
+    pub(crate) exposure: f32,
     /// Do not write preview.gif.
     #[arg(long)]
-    pub no_gif: bool,
+    pub(crate) no_gif: bool,
 }
 
 /// What a headless run measured (`stats.json`).
 #[derive(Clone, Debug, Default, Serialize)]
-pub struct AnimateReport {
-    pub scene_id: String,
-    pub method: String,
-    pub mode: String,
-    pub width: u32,
-    pub height: u32,
-    pub frames: usize,
-    pub threads: usize,
+pub(crate) struct AnimateReport {
+    pub(crate) scene_id: String,
+    pub(crate) method: String,
+    pub(crate) mode: String,
+    pub(crate) width: u32,
+    pub(crate) height: u32,
+    pub(crate) frames: usize,
+    pub(crate) threads: usize,
     /// From the command's start to the first shaded frame (drawn with what had arrived).
-    pub first_frame_ms: f64,
+    pub(crate) first_frame_ms: f64,
     /// Share of the vertices whose trees were in that first frame.
-    pub first_frame_trees: f64,
+    pub(crate) first_frame_trees: f64,
     /// From the command's start to every tree present (the first full-quality frame).
-    pub full_trees_ms: Option<f64>,
+    pub(crate) full_trees_ms: Option<f64>,
     /// Median and mean time of one frame along the path (shading only, no file writing).
-    pub ms_per_frame: f64,
-    pub ms_per_frame_mean: f64,
-    pub fps: f64,
+    pub(crate) ms_per_frame: f64,
+    pub(crate) ms_per_frame_mean: f64,
+    pub(crate) fps: f64,
     /// Scene bytes fetched (0 when it came from the cache).
-    pub scene_bytes: u64,
+    pub(crate) scene_bytes: u64,
     /// Tree-stream bytes fetched over the network, in all and before the trees were complete.
-    pub tree_bytes: u64,
-    pub tree_bytes_before_full: Option<u64>,
-    pub chunks_fetched: u64,
-    pub chunks_cached: u64,
-    pub requests: u64,
-    pub reconnects: u64,
-    pub trees_complete: bool,
-    pub stream_error: Option<String>,
+    pub(crate) tree_bytes: u64,
+    pub(crate) tree_bytes_before_full: Option<u64>,
+    pub(crate) chunks_fetched: u64,
+    pub(crate) chunks_cached: u64,
+    pub(crate) requests: u64,
+    pub(crate) reconnects: u64,
+    pub(crate) trees_complete: bool,
+    pub(crate) stream_error: Option<String>,
 }
 
 /// The frame sequence's settings.
-pub struct PathOptions<'a> {
-    pub frames: usize,
-    pub exposure: f32,
+pub(crate) struct PathOptions<'a> {
+    pub(crate) frames: usize,
+    pub(crate) exposure: f32,
     /// Folder for frame-NNN.png (`None`: not written).
-    pub frames_dir: Option<&'a Path>,
+    pub(crate) frames_dir: Option<&'a Path>,
     /// Collects a GIF preview.
-    pub preview: Option<&'a mut Preview>,
+    pub(crate) preview: Option<&'a mut Preview>,
     /// Keep applying stream updates between frames.
-    pub progressive: bool,
+    pub(crate) progressive: bool,
 }
 
 /// Per-frame times of [`render_path`].
-pub struct PathTimes {
-    pub ms: Vec<f64>,
+pub(crate) struct PathTimes {
+    pub(crate) ms: Vec<f64>,
 }
 
 impl PathTimes {
-    pub fn median(&self) -> f64 {
+    pub(crate) fn median(&self) -> f64 {
         median(&mut self.ms.clone())
     }
 
-    pub fn mean(&self) -> f64 {
+    pub(crate) fn mean(&self) -> f64 {
         self.ms.iter().sum::<f64>() / self.ms.len().max(1) as f64
     }
 }
 
 impl AnimateReport {
     /// A report on `session` (its method, mode and size) for `frames` frames.
-    pub fn new(connected: &Connected, session: &Session, frames: usize) -> AnimateReport {
+    pub(crate) fn new(connected: &Connected, session: &Session, frames: usize) -> AnimateReport {
         let method = session.method;
         AnimateReport {
             scene_id: connected.served.id.clone(),
@@ -124,7 +124,7 @@ impl AnimateReport {
 
     /// Draws the first frame at once, with whatever trees have arrived, records when (since
     /// `started`) and with how many trees, and saves it as `path`.
-    pub fn first_frame(
+    pub(crate) fn first_frame(
         &mut self,
         session: &mut Session,
         started: Instant,
@@ -141,7 +141,7 @@ impl AnimateReport {
 
 /// Renders one cycle of the light's path, frame `k` at path time k / frames.
 /// `on_frame` sees each frame's index and the session after it was drawn.
-pub fn render_path(
+pub(crate) fn render_path(
     session: &mut Session,
     opts: &mut PathOptions,
     mut on_frame: impl FnMut(usize, &Session),
@@ -169,7 +169,7 @@ pub fn render_path(
 }
 
 /// Fills the counters of `report` from the session's fetcher.
-pub fn fill_stream_counters(report: &mut AnimateReport, session: &Session) {
+pub(crate) fn fill_stream_counters(report: &mut AnimateReport, session: &Session) {
     if let Some(c) = &session.counters {
         report.tree_bytes = c.tree_bytes.load(Ordering::Relaxed);
         report.chunks_fetched = c.chunks_fetched.load(Ordering::Relaxed);
@@ -181,7 +181,7 @@ pub fn fill_stream_counters(report: &mut AnimateReport, session: &Session) {
     report.stream_error = session.streamed.failed.clone();
 }
 
-pub fn run(a: &AnimateArgs) -> Result<()> {
+pub(crate) fn run(a: &AnimateArgs) -> Result<()> {
     let started = Instant::now();
     if a.frames == 0 {
         bail!("--frames must be at least 1");
@@ -246,7 +246,7 @@ pub fn run(a: &AnimateArgs) -> Result<()> {
     Ok(())
 }
 
-pub fn print_summary(r: &AnimateReport, out: &Path) {
+pub(crate) fn print_summary(r: &AnimateReport, out: &Path) {
     println!(
         "first shaded frame after {:.0} ms ({:.0} % of the trees){}",
         r.first_frame_ms,

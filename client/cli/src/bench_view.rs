@@ -26,61 +26,61 @@ use bspvt_client::stream::remote::Remote;
 pub struct BenchViewArgs {
     /// Mesh to serve (default: the bunny from $BSPVT_ASSETS/meshes or ../shared/assets/meshes).
     #[arg(long)]
-    pub mesh: Option<PathBuf>,
+    pub(crate) mesh: Option<PathBuf>,
     /// Service data and client caches (a bake made before is reused).
     #[arg(long, default_value = "out/bench-view")]
-    pub dir: PathBuf,
+    pub(crate) dir: PathBuf,
     #[arg(long, default_value_t = 512)]
-    pub size: u32,
+    pub(crate) size: u32,
     /// Frames along the light's path per mode.
     #[arg(long, default_value_t = 64)]
-    pub frames: usize,
+    pub(crate) frames: usize,
     /// Cold (empty cache) trials; each is followed by a warm one.
     #[arg(long, default_value_t = 3)]
-    pub trials: usize,
+    pub(crate) trials: usize,
     #[arg(long)]
-    pub json: Option<PathBuf>,
+    pub(crate) json: Option<PathBuf>,
 }
 
 #[derive(Clone, Debug, Serialize)]
-pub struct Trial {
-    pub cache: &'static str,
+pub(crate) struct Trial {
+    pub(crate) cache: &'static str,
     /// Connect: status and scene (fetched or from the cache).
-    pub connect_ms: f64,
+    pub(crate) connect_ms: f64,
     /// The first frame drawn (with whatever trees were here).
-    pub first_frame_ms: f64,
-    pub first_frame_trees: f64,
+    pub(crate) first_frame_ms: f64,
+    pub(crate) first_frame_trees: f64,
     /// The first frame in which every vertex the camera sees had its trees.
-    pub view_ready_ms: f64,
+    pub(crate) view_ready_ms: f64,
     /// The first frame with every tree.
-    pub full_ms: f64,
-    pub scene_bytes: u64,
-    pub tree_bytes_at_view_ready: u64,
-    pub tree_bytes_at_full: u64,
-    pub frames_while_streaming: u64,
+    pub(crate) full_ms: f64,
+    pub(crate) scene_bytes: u64,
+    pub(crate) tree_bytes_at_view_ready: u64,
+    pub(crate) tree_bytes_at_full: u64,
+    pub(crate) frames_while_streaming: u64,
 }
 
 #[derive(Clone, Debug, Serialize)]
-pub struct FrameRate {
-    pub method: &'static str,
-    pub mode: &'static str,
-    pub ms_per_frame: f64,
-    pub fps: f64,
+pub(crate) struct FrameRate {
+    pub(crate) method: &'static str,
+    pub(crate) mode: &'static str,
+    pub(crate) ms_per_frame: f64,
+    pub(crate) fps: f64,
 }
 
 #[derive(Clone, Debug, Serialize)]
-pub struct Report {
-    pub mesh: String,
-    pub vertices: usize,
-    pub visible_vertices: usize,
-    pub stream_bytes: u64,
-    pub size: u32,
-    pub threads: usize,
-    pub trials: Vec<Trial>,
-    pub frame_rates: Vec<FrameRate>,
+pub(crate) struct Report {
+    pub(crate) mesh: String,
+    pub(crate) vertices: usize,
+    pub(crate) visible_vertices: usize,
+    pub(crate) stream_bytes: u64,
+    pub(crate) size: u32,
+    pub(crate) threads: usize,
+    pub(crate) trials: Vec<Trial>,
+    pub(crate) frame_rates: Vec<FrameRate>,
 }
 
-pub fn run(a: &BenchViewArgs) -> Result<()> {
+pub(crate) fn run(a: &BenchViewArgs) -> Result<()> {
     let mesh = a
         .mesh
         .clone()

@@ -16,22 +16,22 @@ use bspvt_client::session::connect::connect;
 use bspvt_client::viewer::{self, ViewerOptions};
 
 #[derive(clap::Args, Debug)]
-pub struct DemoArgs {
+pub(crate) struct DemoArgs {
     /// Output folder (service data, client cache, frames).
     #[arg(long, default_value = "out/demo")]
-    pub out: PathBuf,
+    pub(crate) out: PathBuf,
     /// Scene to bake and show (scene file or builtin:NAME).
     #[arg(long, default_value = "builtin:plate")]
-    pub scene: String,
+    pub(crate) scene: String,
     /// Frames of the light's path (headless).
     #[arg(long, default_value_t = 48)]
-    pub frames: usize,
+    pub(crate) frames: usize,
     /// Frame size in pixels (square).
     #[arg(long, default_value_t = 512)]
-    pub size: u32,
+    pub(crate) size: u32,
     /// Never open a window, even when a display is available.
     #[arg(long)]
-    pub headless: bool,
+    pub(crate) headless: bool,
 }
 
 /// Whether a window can be opened (an X display; the viewer is X11).
@@ -39,7 +39,7 @@ fn display_available() -> bool {
     std::env::var_os("DISPLAY").is_some_and(|d| !d.is_empty())
 }
 
-pub fn run(a: &DemoArgs) -> Result<()> {
+pub(crate) fn run(a: &DemoArgs) -> Result<()> {
     let started = Instant::now();
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;

@@ -5,10 +5,10 @@ use bspvt_client::stream::source::Embedded;
 
 /// This build's embedded service, if it has one.
 #[cfg(feature = "service")]
-pub const EMBEDDED: Option<&'static dyn Embedded> = Some(&InProcess);
+pub(crate) const EMBEDDED: Option<&'static dyn Embedded> = Some(&InProcess);
 /// This build's embedded service, if it has one.
 #[cfg(not(feature = "service"))]
-pub const EMBEDDED: Option<&'static dyn Embedded> = None;
+pub(crate) const EMBEDDED: Option<&'static dyn Embedded> = None;
 
 /// `bspvt_server::service::Background` on 127.0.0.1, a free port.
 #[cfg(feature = "service")]

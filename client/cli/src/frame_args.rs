@@ -10,7 +10,7 @@ use bspvt_client::session::connect::ConnectOptions;
 use clap::builder::{PossibleValue, PossibleValuesParser};
 
 /// `--method`'s accepted values, each with its description: read from the registry.
-pub fn method_values() -> PossibleValuesParser {
+pub(crate) fn method_values() -> PossibleValuesParser {
     PossibleValuesParser::new(
         METHODS
             .iter()
@@ -19,27 +19,27 @@ pub fn method_values() -> PossibleValuesParser {
 }
 
 /// The registered method called `name` (the parser already checked it).
-pub fn method(name: &str) -> Result<&'static dyn FrameMethod> {
+pub(crate) fn method(name: &str) -> Result<&'static dyn FrameMethod> {
     registry::lookup(name)
 }
 
 /// Frame size, method and mode: what `view` and `animate` share.
 #[derive(clap::Args, Clone, Debug)]
-pub struct FrameArgs {
+pub(crate) struct FrameArgs {
     #[arg(long, default_value_t = 512)]
-    pub width: u32,
+    pub(crate) width: u32,
     #[arg(long, default_value_t = 512)]
-    pub height: u32,
+    pub(crate) height: u32,
     /// Rendering method (`bspvt methods` lists them with what they need).
     #[arg(long, default_value = "bspvt", value_parser = method_values())]
-    pub method: String,
+    pub(crate) method: String,
     #[arg(long, value_enum, default_value = "vertex")]
-    pub mode: ModeArg,
+    pub(crate) mode: ModeArg,
 }
 
 /// `--mode` of the streaming commands.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum ModeArg {
+pub(crate) enum ModeArg {
     /// Per-vertex shading interpolated over triangles (the paper's).
     Vertex,
     /// Unshadowed LTC per pixel × the interpolated per-vertex shadow ratio.
@@ -57,31 +57,31 @@ impl From<ModeArg> for Mode {
 
 /// Where to find the scene and where to keep things.
 #[derive(clap::Args, Clone, Debug)]
-pub struct ConnectArgs {
+pub(crate) struct ConnectArgs {
     /// `http://HOST:PORT/v1/scenes/ID`, a scene id (with --server), a scene file or builtin:NAME.
-    pub source: Option<String>,
+    pub(crate) source: Option<String>,
     /// A bare mesh (.glb/.gltf/.obj/.ply) with the default scene around it.
     #[arg(long)]
-    pub mesh: Option<PathBuf>,
+    pub(crate) mesh: Option<PathBuf>,
     /// Service for scene ids and local scenes (default for local scenes: an embedded service).
     #[arg(long, env = "BSPVT_SERVER")]
-    pub server: Option<String>,
+    pub(crate) server: Option<String>,
     #[arg(long, env = "BSPVT_API_KEY")]
-    pub api_key: Option<String>,
+    pub(crate) api_key: Option<String>,
     /// Data folder of the embedded service.
     #[arg(long, default_value = "out/service")]
-    pub data_dir: PathBuf,
+    pub(crate) data_dir: PathBuf,
     /// Where received trees are cached (by scene id).
     #[arg(long, default_value = "out/cache")]
-    pub cache_dir: PathBuf,
+    pub(crate) cache_dir: PathBuf,
     /// Do not use or fill the cache.
     #[arg(long)]
-    pub no_cache: bool,
+    pub(crate) no_cache: bool,
 }
 
 impl ConnectArgs {
     /// The library's options, with this build's embedded service.
-    pub fn options(&self) -> ConnectOptions {
+    pub(crate) fn options(&self) -> ConnectOptions {
         ConnectOptions {
             source: self.source.clone(),
             mesh: self.mesh.clone(),

@@ -14,12 +14,12 @@ const PREVIEW_SIZE: u32 = 256;
 
 /// Collects tone-mapped frames and writes them as one looping GIF.
 #[derive(Default)]
-pub struct Preview {
+pub(crate) struct Preview {
     frames: Vec<image::RgbaImage>,
 }
 
 impl Preview {
-    pub fn push(&mut self, img: &Image, exposure: f32) {
+    pub(crate) fn push(&mut self, img: &Image, exposure: f32) {
         let rgb = DynamicImage::ImageRgb8(img.to_srgb8(exposure));
         let scale = f64::from(PREVIEW_SIZE) / f64::from(img.width.max(img.height).max(1));
         let rgb = if scale < 1.0 {
@@ -32,12 +32,12 @@ impl Preview {
         self.frames.push(rgb.to_rgba8());
     }
 
-    pub fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         self.frames.is_empty()
     }
 
     /// Writes the GIF, `frame_ms` per frame.
-    pub fn save(self, path: &Path, frame_ms: u32) -> Result<()> {
+    pub(crate) fn save(self, path: &Path, frame_ms: u32) -> Result<()> {
         let file = std::fs::File::create(path)
             .with_context(|| format!("cannot create {}", path.display()))?;
         let mut enc = GifEncoder::new_with_speed(std::io::BufWriter::new(file), 10);

@@ -9,20 +9,20 @@ use bspvt_client::session::connect::connect;
 use bspvt_client::viewer::{self, ViewerOptions};
 
 #[derive(clap::Args, Debug)]
-pub struct ViewArgs {
+pub(crate) struct ViewArgs {
     #[command(flatten)]
-    pub connect: ConnectArgs,
+    pub(crate) connect: ConnectArgs,
     #[command(flatten)]
-    pub frame: FrameArgs,
+    pub(crate) frame: FrameArgs,
     /// Start with the light moving along its path (P toggles).
     #[arg(long)]
-    pub moving: bool,
+    pub(crate) moving: bool,
     /// Close the window after this many frames (scripted runs).
     #[arg(long)]
-    pub max_frames: Option<u64>,
+    pub(crate) max_frames: Option<u64>,
 }
 
-pub fn run(a: &ViewArgs) -> Result<()> {
+pub(crate) fn run(a: &ViewArgs) -> Result<()> {
     let started = Instant::now();
     let opts = a.connect.options();
     let connected = connect(&opts)?;

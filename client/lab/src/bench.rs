@@ -26,72 +26,74 @@ use bspvt_client::render::renderer::{Mode, Trees};
 use bspvt_client::shade::bspvt::shade_vertex;
 use bspvt_client::shade::{Lobes, unshadowed};
 
+/// `bspvt bench`: shading speed on real meshes (kernel µs per vertex, frame times).
 #[derive(clap::Args, Clone, Debug)]
 pub struct BenchArgs {
     /// Folder holding the meshes (default: $BSPVT_ASSETS/meshes or ../shared/assets/meshes).
     #[arg(long)]
-    pub meshes_dir: Option<PathBuf>,
+    pub(crate) meshes_dir: Option<PathBuf>,
     #[arg(
         long,
         value_delimiter = ',',
         default_value = "bunny.ply,dragon_res4.ply"
     )]
-    pub meshes: Vec<String>,
+    pub(crate) meshes: Vec<String>,
     /// Also measure the built-in scene.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
-    pub builtin: bool,
+    pub(crate) builtin: bool,
     #[arg(long, default_value_t = 512)]
-    pub size: u32,
+    pub(crate) size: u32,
     /// Frames per sequence (the light moves along its path).
     #[arg(long, default_value_t = 32)]
-    pub frames: usize,
+    pub(crate) frames: usize,
     /// Where baked trees are cached.
     #[arg(long, default_value = "out/bench")]
-    pub cache: PathBuf,
+    pub(crate) cache: PathBuf,
     #[arg(long)]
-    pub json: Option<PathBuf>,
+    pub(crate) json: Option<PathBuf>,
 }
 
 #[derive(Clone, Debug, Serialize)]
-pub struct KernelRow {
-    pub scene: String,
-    pub vertices: usize,
+pub(crate) struct KernelRow {
+    pub(crate) scene: String,
+    pub(crate) vertices: usize,
     /// Vertices that see the light (the rest cost only the horizon test).
-    pub lit_vertices: usize,
-    pub bspvt_us_per_vertex: f64,
+    pub(crate) lit_vertices: usize,
+    pub(crate) bspvt_us_per_vertex: f64,
     /// The same light with a 256² texture (prefiltered, fetched per piece and lobe).
-    pub bspvt_textured_us_per_vertex: f64,
-    pub ltc_us_per_vertex: f64,
-    pub bspvt_us_per_lit_vertex: f64,
-    pub pieces_per_lit_vertex: f64,
+    pub(crate) bspvt_textured_us_per_vertex: f64,
+    pub(crate) ltc_us_per_vertex: f64,
+    pub(crate) bspvt_us_per_lit_vertex: f64,
+    pub(crate) pieces_per_lit_vertex: f64,
     /// Boundary experiment (diffuse lobe, visible leaves v̄ ≥ ½ taken as 1): edges integrated
     /// per lit vertex piece by piece vs boundary only, and the time of each (µs/lit vertex).
-    pub edges_per_piece_sum: f64,
-    pub edges_boundary_only: f64,
-    pub us_pieces: f64,
-    pub us_boundary: f64,
-    pub boundary_max_rel_diff: f64,
+    pub(crate) edges_per_piece_sum: f64,
+    pub(crate) edges_boundary_only: f64,
+    pub(crate) us_pieces: f64,
+    pub(crate) us_boundary: f64,
+    pub(crate) boundary_max_rel_diff: f64,
 }
 
 #[derive(Clone, Debug, Serialize)]
-pub struct FrameRow {
-    pub scene: String,
+pub(crate) struct FrameRow {
+    pub(crate) scene: String,
     #[serde(serialize_with = "bspvt_client::method::serialize_name")]
     pub method: &'static dyn bspvt_client::method::FrameMethod,
     pub mode: Mode,
     pub ms_per_frame: f64,
     pub fps: f64,
-    pub us_per_vertex_per_core: f64,
-    pub vertices_shaded: usize,
-    pub threads: usize,
+    pub(crate) us_per_vertex_per_core: f64,
+    pub(crate) vertices_shaded: usize,
+    pub(crate) threads: usize,
 }
 
 #[derive(Clone, Debug, Serialize)]
-pub struct Report {
-    pub kernel: Vec<KernelRow>,
-    pub frames: Vec<FrameRow>,
+pub(crate) struct Report {
+    pub(crate) kernel: Vec<KernelRow>,
+    pub(crate) frames: Vec<FrameRow>,
 }
 
+/// Runs `bspvt bench`: prints the rows and writes them as JSON when asked.
 pub fn run(a: &BenchArgs) -> Result<()> {
     let dir = a
         .meshes_dir
@@ -189,20 +191,20 @@ pub fn run(a: &BenchArgs) -> Result<()> {
 /// A bake in the benchmarks' cache: the file, and what making it cost (measured when it was
 /// baked, kept beside it in `<file>.json`).
 #[derive(Clone, Debug, Serialize, serde::Deserialize)]
-pub struct CachedBake {
+pub(crate) struct CachedBake {
     pub path: PathBuf,
-    pub vertices: usize,
-    pub bytes: usize,
+    pub(crate) vertices: usize,
+    pub(crate) bytes: usize,
     /// Wall time of the bake, and the number of threads it ran on.
-    pub seconds: f64,
-    pub threads: usize,
+    pub(crate) seconds: f64,
+    pub(crate) threads: usize,
     /// False when the file was baked by this call.
     #[serde(skip)]
-    pub from_cache: bool,
+    pub(crate) from_cache: bool,
 }
 
 /// Bakes `scene` once into `cache` (reused while the mesh and settings are unchanged).
-pub fn cached_bake(name: &str, scene: &Scene, cache: &Path) -> Result<CachedBake> {
+pub(crate) fn cached_bake(name: &str, scene: &Scene, cache: &Path) -> Result<CachedBake> {
     let mut h = bspvt_proto::hash::Fnv1a::default();
     h.write(format!("{:x}{:?}", scene.mesh.content_hash(), scene.bake).as_bytes());
     let key = h.finish();
@@ -242,7 +244,7 @@ pub fn cached_bake(name: &str, scene: &Scene, cache: &Path) -> Result<CachedBake
 
 /// The file a scene name stands for: `teapot`, `bunny`, `dragon` name the shared meshes;
 /// a name with an extension is looked up in `meshes_dir` first, then as a path.
-pub fn named_scene_path(name: &str, meshes_dir: &Path) -> PathBuf {
+pub(crate) fn named_scene_path(name: &str, meshes_dir: &Path) -> PathBuf {
     match name {
         "teapot" => meshes_dir.join("teapot.obj"),
         "bunny" => meshes_dir.join("bunny.ply"),
@@ -261,7 +263,7 @@ pub fn named_scene_path(name: &str, meshes_dir: &Path) -> PathBuf {
 /// A scene by name: a built-in scene (`plate`, `plate-small`), a shared mesh (see
 /// [`named_scene_path`]) as its default `--mesh` scene, or a scene JSON file. `None` when the
 /// file does not exist (the caller says so and skips it).
-pub fn load_named_scene(name: &str, meshes_dir: &Path) -> Result<Option<Scene>> {
+pub(crate) fn load_named_scene(name: &str, meshes_dir: &Path) -> Result<Option<Scene>> {
     if let Some(s) = bspvt_proto::builtin::scene(name) {
         return Ok(Some(s));
     }
@@ -281,7 +283,7 @@ pub fn load_named_scene(name: &str, meshes_dir: &Path) -> Result<Option<Scene>> 
 }
 
 /// A scene name usable as a file or folder name.
-pub fn file_stem(name: &str) -> String {
+pub(crate) fn file_stem(name: &str) -> String {
     let base = Path::new(name)
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -298,7 +300,7 @@ pub fn file_stem(name: &str) -> String {
 }
 
 /// Median wall time (ms) of `frames` calls of `f`, and the last result.
-pub fn median_ms<T>(frames: usize, mut f: impl FnMut() -> Result<T>) -> Result<(f64, T)> {
+pub(crate) fn median_ms<T>(frames: usize, mut f: impl FnMut() -> Result<T>) -> Result<(f64, T)> {
     let mut ms = Vec::with_capacity(frames);
     let mut last = None;
     for _ in 0..frames.max(1) {

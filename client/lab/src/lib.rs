@@ -8,6 +8,8 @@
 //! Depends on `bspvt-client` and the bake engine; nothing but the command line depends on it.
 //! Its argument structs derive clap's `Args` (the command line flattens them).
 
+#![warn(unreachable_pub, missing_docs)]
+
 pub mod bench;
 pub mod compare;
 pub mod ltc_fit;

@@ -52,11 +52,11 @@ use bspvt_client::ltc::table::{
 };
 
 /// Default number of lattice points per sampling strategy in the error estimate.
-pub const DEFAULT_LATTICE: usize = 2048;
+pub(crate) const DEFAULT_LATTICE: usize = 2048;
 /// Default grading depth of the moment quadrature (see [`brdf_moments`]).
-pub const DEFAULT_MOMENT_LEVELS: u32 = 16;
+pub(crate) const DEFAULT_MOMENT_LEVELS: u32 = 16;
 /// Default Nelder–Mead simplex tolerance.
-pub const DEFAULT_TOLERANCE: f64 = 1e-7;
+pub(crate) const DEFAULT_TOLERANCE: f64 = 1e-7;
 
 /// The default fit settings (what `bspvt ltc-fit` uses unless told otherwise).
 pub fn default_settings() -> FitRecord {
@@ -64,7 +64,7 @@ pub fn default_settings() -> FitRecord {
 }
 
 /// Fit settings with the given sample counts and error norm.
-pub fn settings(
+pub(crate) fn settings(
     lattice_points: usize,
     moment_levels: u32,
     error_power: i32,
@@ -94,29 +94,29 @@ pub fn settings(
 pub struct FitArgs {
     /// Nodes per axis (roughness × view angle).
     #[arg(long, default_value_t = 64)]
-    pub size: usize,
+    pub(crate) size: usize,
     /// Where to write the table.
     #[arg(long, default_value = "assets/ltc/ggx.json")]
-    pub out: PathBuf,
+    pub(crate) out: PathBuf,
     /// Lattice points per sampling strategy in the fit's error estimate.
     #[arg(long, default_value_t = DEFAULT_LATTICE)]
-    pub lattice: usize,
+    pub(crate) lattice: usize,
     /// Grading depth of the magnitude / Fresnel / average-direction quadrature.
     #[arg(long, default_value_t = DEFAULT_MOMENT_LEVELS)]
-    pub moment_levels: u32,
+    pub(crate) moment_levels: u32,
     /// p of the Lᵖ distance the fit minimises (1, 2 or 3; Heitz et al. use 3).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(i32).range(1..=3))]
-    pub power: i32,
+    pub(crate) power: i32,
     /// Measure the distance over the whole sphere (as `fitLTC.cpp`) instead of the upper
     /// hemisphere.
     #[arg(long)]
-    pub whole_sphere: bool,
+    pub(crate) whole_sphere: bool,
     /// Also write per-entry fit diagnostics (CSV: i, j, α, θ°, L1, upper mass, evaluations).
     #[arg(long)]
-    pub report: Option<PathBuf>,
+    pub(crate) report: Option<PathBuf>,
     /// No progress bar.
     #[arg(long)]
-    pub quiet: bool,
+    pub(crate) quiet: bool,
 }
 
 /// Runs `bspvt ltc-fit`: fits the table and writes it.
@@ -210,16 +210,16 @@ pub struct FitReport {
     pub objective: f64,
     /// MIS estimate of the L¹ distance ∫ |f/‖f‖ − D| dω ∈ [0, 2] (scale free: twice the largest
     /// error of the normalised lobe's integral over any region).
-    pub l1: f64,
+    pub(crate) l1: f64,
     /// Fraction of the LTC's mass above the horizon.
-    pub upper_mass: f64,
+    pub(crate) upper_mass: f64,
     /// Objective evaluations.
-    pub evaluations: usize,
+    pub(crate) evaluations: usize,
 }
 
 /// Fits the whole table: rows (roughness nodes) in parallel, each swept from θ = 0 to θ_max.
 /// `tick` is called once per entry. Returns entries and reports, index i·size + j.
-pub fn fit_table(
+pub(crate) fn fit_table(
     size: usize,
     settings: &FitRecord,
     tick: &(dyn Fn() + Sync),
@@ -387,7 +387,7 @@ pub fn brdf_moments(alpha: f64, wo: DVec3, levels: u32) -> Moments {
 
 /// The `n` points of the lattice that drives both sampling strategies:
 /// ((i + ½)/n, frac(½ + i/φ)) with φ the golden ratio.
-pub fn lattice(n: usize) -> Vec<[f64; 2]> {
+pub(crate) fn lattice(n: usize) -> Vec<[f64; 2]> {
     let g = (5f64.sqrt() - 1.0) / 2.0;
     (0..n)
         .map(|i| [(i as f64 + 0.5) / n as f64, (0.5 + i as f64 * g).fract()])

@@ -47,25 +47,25 @@ use bspvt_client::light::Light;
 #[derive(clap::Args, Debug)]
 pub struct ExportArgs {
     /// Scene file or builtin:NAME.
-    pub scene: Option<String>,
+    pub(crate) scene: Option<String>,
     /// …or a bare mesh (gets the default scene: ground plane, quad light, framing camera).
     #[arg(long)]
-    pub mesh: Option<PathBuf>,
+    pub(crate) mesh: Option<PathBuf>,
     /// Output folder (created).
     #[arg(long)]
-    pub out: PathBuf,
+    pub(crate) out: PathBuf,
     /// Image width in pixels.
     #[arg(long, default_value_t = 640)]
-    pub width: u32,
+    pub(crate) width: u32,
     /// Image height in pixels.
     #[arg(long, default_value_t = 480)]
-    pub height: u32,
+    pub(crate) height: u32,
     /// Samples per pixel (the sampler's `sample_count`).
     #[arg(long, default_value_t = 256)]
-    pub spp: u32,
+    pub(crate) spp: u32,
     /// Which of the scene's lights (Mitsuba renders one polygon light, like our renderers).
     #[arg(long, default_value_t = 0)]
-    pub light: usize,
+    pub(crate) light: usize,
 }
 
 /// Runs `bspvt export-mitsuba`.
@@ -101,23 +101,27 @@ pub fn run(args: &ExportArgs) -> Result<()> {
 /// Image settings of the exported scene.
 #[derive(Clone, Copy, Debug)]
 pub struct ExportOptions {
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
+    /// Samples per pixel Mitsuba renders.
     pub spp: u32,
 }
 
 /// What [`export`] wrote.
 #[derive(Clone, Debug)]
 pub struct ExportSummary {
+    /// The Mitsuba 3 scene file.
     pub scene_xml: PathBuf,
     /// Every file written (scene.xml first).
-    pub files: Vec<PathBuf>,
+    pub(crate) files: Vec<PathBuf>,
     /// Where the Mitsuba scene is not exactly our BRDF (α < 1e-3 with F0 < 1).
     pub warnings: Vec<String>,
 }
 
 /// Smallest α Mitsuba's `principled` BSDF represents (it clamps roughness² to this).
-pub const PRINCIPLED_MIN_ALPHA: f64 = 1e-3;
+pub(crate) const PRINCIPLED_MIN_ALPHA: f64 = 1e-3;
 
 /// Writes `scene` lit by `light` (world space; e.g. one frame of a moving light) as a Mitsuba 3
 /// scene in `dir`.

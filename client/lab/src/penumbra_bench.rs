@@ -29,6 +29,7 @@ use bspvt_client::light::Light;
 use bspvt_client::penumbra::{self, Params, Technique};
 use bspvt_client::render::renderer::Renderer;
 
+/// `bspvt bench-penumbra`: rt-penumbra and the shadow-map baselines against Monte Carlo area-light shadows.
 #[derive(clap::Args, Clone, Debug)]
 pub struct BenchPenumbraArgs {
     /// Scenes: built-in names (plate-small, plate), mesh names in the assets folder (teapot,
@@ -58,6 +59,7 @@ pub struct BenchPenumbraArgs {
     /// Folder holding the meshes (default: $BSPVT_ASSETS/meshes or ../shared/assets/meshes).
     #[arg(long)]
     pub meshes_dir: Option<PathBuf>,
+    /// Output folder: results.csv/.md/.json and the images.
     #[arg(long, default_value = "out/bench-penumbra")]
     pub out: PathBuf,
 }
@@ -65,14 +67,14 @@ pub struct BenchPenumbraArgs {
 /// The settings a run resolves from [`BenchPenumbraArgs`].
 #[derive(Clone, Debug, Serialize)]
 pub struct Settings {
-    pub size: u32,
-    pub ref_spp: u32,
-    pub frames: usize,
-    pub mc_spp: Vec<u32>,
+    pub(crate) size: u32,
+    pub(crate) ref_spp: u32,
+    pub(crate) frames: usize,
+    pub(crate) mc_spp: Vec<u32>,
 }
 
 impl Settings {
-    pub fn from_args(a: &BenchPenumbraArgs) -> Result<Settings> {
+    pub(crate) fn from_args(a: &BenchPenumbraArgs) -> Result<Settings> {
         let size = a.size.unwrap_or(if a.quick { 128 } else { 512 });
         let ref_spp = a.ref_spp.unwrap_or(if a.quick { 128 } else { 1024 });
         let frames = a.frames.unwrap_or(if a.quick { 1 } else { 3 });
@@ -96,14 +98,17 @@ impl Settings {
 /// One measured method in one scene/case.
 #[derive(Clone, Debug, Serialize)]
 pub struct Row {
-    pub scene: String,
-    pub case: String,
+    pub(crate) scene: String,
+    pub(crate) case: String,
     /// `rt-penumbra`, `rt-hard`, `pcf`, `vsm`, `pcss`, `unshadowed` or `ltc-exact`.
-    pub method: String,
+    pub(crate) method: String,
     /// Shadow rays per pixel (`ltc-exact` only).
-    pub spp: Option<u32>,
+    pub(crate) spp: Option<u32>,
+    /// Median frame time, ms.
     pub ms_per_frame: f64,
+    /// RMSE against the reference over covered pixels.
     pub rmse: f64,
+    /// Mean absolute error against the reference.
     pub mae: f64,
 }
 
@@ -112,11 +117,24 @@ pub struct Row {
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum SpeedUp {
     /// MC time at rt-penumbra's RMSE (log-log interpolation) / rt-penumbra's time.
-    Interpolated { spp: f64, factor: f64 },
+    Interpolated {
+        /// The spp at which MC reaches rt-penumbra's RMSE.
+        spp: f64,
+        /// The speed-up.
+        factor: f64,
+    },
     /// MC never reaches rt-penumbra's RMSE within the largest spp: at least this factor.
-    AtLeast { max_spp: u32, factor: f64 },
+    AtLeast {
+        /// The largest spp measured.
+        max_spp: u32,
+        /// The speed-up's lower bound.
+        factor: f64,
+    },
     /// rt-penumbra is worse than 1 spp: MC at 1 spp / rt-penumbra's time is an upper bound.
-    WorseThanOneSpp { factor: f64 },
+    WorseThanOneSpp {
+        /// MC's time at 1 spp over rt-penumbra's.
+        factor: f64,
+    },
 }
 
 impl SpeedUp {
@@ -138,22 +156,31 @@ impl SpeedUp {
 /// The results of one scene/case.
 #[derive(Clone, Debug, Serialize)]
 pub struct CaseReport {
-    pub scene: String,
+    pub(crate) scene: String,
+    /// The case: `default`, or which assumption it breaks.
     pub case: String,
     /// Which of the paper's assumptions the case breaks (or "none").
-    pub breaks: String,
+    pub(crate) breaks: String,
+    /// Pixels the scene covers.
     pub pixels_covered: usize,
     /// RMSE between the two reference estimates, and the reference's own RMSE (half of it).
-    pub ref_rmse_between_seeds: f64,
+    pub(crate) ref_rmse_between_seeds: f64,
+    /// The reference's own RMSE (half the RMSE between its two estimates).
     pub ref_rmse: f64,
+    /// One row per method (and Monte Carlo spp).
     pub rows: Vec<Row>,
+    /// rt-penumbra's speed-up over Monte Carlo at equal RMSE.
     pub speed_up: SpeedUp,
 }
 
+/// What `bspvt bench-penumbra` measured.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
+    /// The settings it ran with.
     pub settings: Settings,
+    /// Worker threads.
     pub threads: usize,
+    /// Every scene and case.
     pub cases: Vec<CaseReport>,
     /// Scenes skipped (missing assets), with the reason.
     pub skipped: Vec<String>,
@@ -391,7 +418,7 @@ fn measure_case(scene_name: &str, case: &Case, st: &Settings, out: &Path) -> Res
 /// rt-penumbra RMSE and (e_i, t_i), (e_j, t_j) the MC points bracketing it,
 /// log t = log t_i + (log e − log e_i) / (log e_j − log e_i) · (log t_j − log t_i)
 /// (and the same for spp); factor = t / t_rt.
-pub fn equal_rmse_speed_up(rows: &[Row]) -> Result<SpeedUp> {
+pub(crate) fn equal_rmse_speed_up(rows: &[Row]) -> Result<SpeedUp> {
     let rt = rows
         .iter()
         .find(|r| r.method == "rt-penumbra")

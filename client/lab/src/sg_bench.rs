@@ -17,124 +17,117 @@ use bspvt_client::render::posed::Posed;
 use bspvt_client::render::renderer::Renderer;
 use bspvt_client::sg::{self, SgEnv, SgOptions, SsdfMode, fit};
 
+/// `bspvt bench-sg`: speed and error of SG environment lighting against its Monte Carlo reference.
 #[derive(clap::Args, Clone, Debug)]
 pub struct BenchSgArgs {
     /// Scene file or builtin:NAME [default: builtin:plate].
-    pub scene: Option<String>,
+    pub(crate) scene: Option<String>,
     /// A bare mesh with the default scene around it (instead of SCENE).
     #[arg(long)]
-    pub mesh: Option<PathBuf>,
+    pub(crate) mesh: Option<PathBuf>,
     /// Environment map [default: env/royal_esplanade_1k.hdr under BSPVT_ASSETS or
     /// ../shared/assets].
     #[arg(long)]
-    pub env: Option<PathBuf>,
+    pub(crate) env: Option<PathBuf>,
     /// Image sides.
     #[arg(long, value_delimiter = ',', default_values_t = vec![256u32, 512])]
-    pub sizes: Vec<u32>,
+    pub(crate) sizes: Vec<u32>,
     /// Lobe counts.
     #[arg(long, value_delimiter = ',', default_values_t = vec![16usize, 32])]
-    pub lobes: Vec<usize>,
+    pub(crate) lobes: Vec<usize>,
     /// Timed frames per configuration (median reported; the exact SSDF runs once).
     #[arg(long, default_value_t = 5)]
-    pub frames: usize,
+    pub(crate) frames: usize,
     /// Monte Carlo samples per pixel of the reference.
     #[arg(long, default_value_t = 256)]
-    pub spp: u32,
+    pub(crate) spp: u32,
     /// Side of the screen-space depth maps.
     #[arg(long, default_value_t = 128)]
-    pub depth_res: u32,
+    pub(crate) depth_res: u32,
     /// SSDF sharing stride (1: search at every pixel, the paper's).
     #[arg(long, default_value_t = 2)]
-    pub stride: u32,
+    pub(crate) stride: u32,
     /// Neighbourhood of the screen-space search at each finer level (the paper's 6).
     #[arg(long, default_value_t = 6)]
-    pub window: u32,
+    pub(crate) window: u32,
     /// Skip the exact SSDF above this image side (it is slow).
     #[arg(long, default_value_t = 256)]
-    pub exact_max_size: u32,
+    pub(crate) exact_max_size: u32,
     /// Output folder.
     #[arg(long, default_value = "bench-sg")]
     pub out: PathBuf,
     /// Exposure of the PNGs.
     #[arg(long, default_value_t = 1.0)]
-    pub exposure: f32,
+    pub(crate) exposure: f32,
     /// Cycle time at which a moving scene is measured (its meshes frozen there). A moving
     /// scene also gets a `moving` row per size and K: screen-space frames along the cycle
     /// from this time, each re-posed and re-rasterised inside its time.
     #[arg(long, default_value_t = 0.0)]
-    pub time: f32,
+    pub(crate) time: f32,
 }
 
 /// One measured configuration.
 #[derive(Clone, Debug, Serialize)]
 pub struct Row {
-    pub size: u32,
-    pub lobes: usize,
-    pub ssdf: SsdfMode,
+    pub(crate) size: u32,
+    pub(crate) lobes: usize,
+    pub(crate) ssdf: SsdfMode,
+    /// Median frame time, ms.
     pub ms_per_frame: f64,
-    pub fps: f64,
-    pub maps_ms: f64,
+    pub(crate) fps: f64,
+    pub(crate) maps_ms: f64,
     /// RMSE over covered pixels and channels against the reference, absolute and relative to
     /// the reference's mean.
     pub rmse: f64,
-    pub rel_rmse: f64,
+    pub(crate) rel_rmse: f64,
     /// RMSE against the exact-SSDF image of the same configuration (screen mode only).
-    pub rmse_vs_exact: Option<f64>,
+    pub(crate) rmse_vs_exact: Option<f64>,
     /// Frames along a moving scene's cycle (posing, G-buffer and depth maps every frame);
     /// the error is that of the frame at `--time`.
-    pub moving: bool,
+    pub(crate) moving: bool,
     /// Posing and rasterising, median per frame (moving rows), ms.
-    pub pose_ms: Option<f64>,
+    pub(crate) pose_ms: Option<f64>,
 }
 
+/// What `bspvt bench-sg` measured.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
-    pub scene: String,
-    pub env: String,
-    pub threads: usize,
-    pub fits: Vec<FitRow>,
-    pub references: Vec<RefRow>,
+    pub(crate) scene: String,
+    pub(crate) env: String,
+    pub(crate) threads: usize,
+    pub(crate) fits: Vec<FitRow>,
+    pub(crate) references: Vec<RefRow>,
+    /// One row per image size, lobe count and SSDF mode.
     pub rows: Vec<Row>,
 }
 
 #[derive(Clone, Debug, Serialize)]
-pub struct FitRow {
-    pub lobes: usize,
-    pub fit_error: f64,
-    pub seconds: f64,
+pub(crate) struct FitRow {
+    pub(crate) lobes: usize,
+    pub(crate) fit_error: f64,
+    pub(crate) seconds: f64,
 }
 
 #[derive(Clone, Debug, Serialize)]
-pub struct RefRow {
-    pub size: u32,
-    pub spp: u32,
-    pub seconds: f64,
-    pub mean_rel_stderr: f64,
+pub(crate) struct RefRow {
+    pub(crate) size: u32,
+    pub(crate) spp: u32,
+    pub(crate) seconds: f64,
+    pub(crate) mean_rel_stderr: f64,
     /// RMS of the per-pixel standard error (the noise floor of the RMSE numbers).
-    pub rms_stderr: f64,
+    pub(crate) rms_stderr: f64,
 }
 
-/// RMSE of `a` against `b` over pixels where `b` or `a` is non-zero, per channel.
-pub fn rmse(a: &Image, b: &Image) -> f64 {
-    let (mut s, mut n) = (0.0, 0usize);
-    for (p, q) in a.pixels.iter().zip(&b.pixels) {
-        if p == &[0.0; 3] && q == &[0.0; 3] {
-            continue;
-        }
-        for c in 0..3 {
-            let d = f64::from(p[c]) - f64::from(q[c]);
-            s += d * d;
-        }
-        n += 3;
-    }
-    (s / n.max(1) as f64).sqrt()
+/// RMSE over the pixels not black in both images (the background is left out).
+fn rmse(a: &Image, b: &Image) -> f64 {
+    bspvt_client::frame::stats::rmse(a, b, |i| a.pixels[i] != [0.0; 3] || b.pixels[i] != [0.0; 3])
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(0.0)
+    bspvt_client::frame::stats::median(&mut v)
 }
 
+/// Runs `bspvt bench-sg` and writes results.json/.md and images.
 pub fn run(a: &BenchSgArgs) -> Result<Report> {
     let scene_name = a.scene.clone().unwrap_or_else(|| "builtin:plate".into());
     let moving_scene = if a.mesh.is_some() {

@@ -571,7 +571,10 @@ fn print_worst(results: &[PointResult], n: usize) {
 fn table() -> &'static LtcTable {
     static T: std::sync::OnceLock<LtcTable> = std::sync::OnceLock::new();
     T.get_or_init(|| match std::env::var_os("BSPVT_LTC_TABLE") {
-        Some(p) => LtcTable::load(std::path::Path::new(&p)).expect("BSPVT_LTC_TABLE loads"),
+        Some(p) => {
+            LtcTable::from_json(&std::fs::read_to_string(&p).expect("BSPVT_LTC_TABLE reads"))
+                .expect("BSPVT_LTC_TABLE parses")
+        }
         None => LtcTable::builtin().clone(),
     })
 }

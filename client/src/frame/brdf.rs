@@ -15,13 +15,14 @@ use crate::ggx;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Brdf {
     /// GGX α, clamped to [`ggx::MIN_ALPHA`]..=1.
-    pub alpha: f64,
-    pub albedo: DVec3,
+    pub(crate) alpha: f64,
+    pub(crate) albedo: DVec3,
     /// F0 (specular colour at normal incidence).
-    pub f0: DVec3,
+    pub(crate) f0: DVec3,
 }
 
 impl Brdf {
+    /// The BRDF of GGX `alpha`, diffuse `albedo` and F0 `f0`; non-finite or negative colours become 0, α is clamped.
     pub fn new(alpha: f64, albedo: DVec3, f0: DVec3) -> Brdf {
         let clean = |c: DVec3| {
             DVec3::new(
@@ -37,7 +38,7 @@ impl Brdf {
         }
     }
 
-    pub fn from_material(m: &Material) -> Brdf {
+    pub(crate) fn from_material(m: &Material) -> Brdf {
         Brdf::new(
             f64::from(m.roughness),
             glam::Vec3::from(m.albedo).as_dvec3(),
@@ -72,7 +73,7 @@ impl Brdf {
     }
 
     /// Draws ωi from the BRDF sampling mixture. May be below the horizon (weight 0).
-    pub fn sample(&self, wo: DVec3, u_lobe: f64, u: [f64; 2]) -> DVec3 {
+    pub(crate) fn sample(&self, wo: DVec3, u_lobe: f64, u: [f64; 2]) -> DVec3 {
         if u_lobe < self.spec_prob(wo) {
             ggx::sample_vndf(self.alpha, wo, u)
         } else {
@@ -81,7 +82,7 @@ impl Brdf {
     }
 
     /// Density per solid angle of [`Brdf::sample`].
-    pub fn pdf(&self, wo: DVec3, wi: DVec3) -> f64 {
+    pub(crate) fn pdf(&self, wo: DVec3, wi: DVec3) -> f64 {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return 0.0;
         }
@@ -101,7 +102,7 @@ fn finite_or_zero(x: f64) -> f64 {
 
 /// Cosine-weighted direction on the upper hemisphere.
 #[inline]
-pub fn cosine_hemisphere(u: [f64; 2]) -> DVec3 {
+pub(crate) fn cosine_hemisphere(u: [f64; 2]) -> DVec3 {
     let r = u[0].sqrt();
     let (s, c) = (2.0 * PI * u[1]).sin_cos();
     DVec3::new(r * c, r * s, (1.0 - u[0]).max(0.0).sqrt())
@@ -112,13 +113,15 @@ pub fn cosine_hemisphere(u: [f64; 2]) -> DVec3 {
 /// and segments stop ε short of the light.
 #[derive(Clone, Copy)]
 pub struct Shadows<'a> {
+    /// The scene's BVH (`None`: nothing casts shadows).
     pub occluder: Option<&'a Occluder>,
+    /// Offset along the geometric normal and short of the light.
     pub epsilon: f64,
 }
 
 impl<'a> Shadows<'a> {
     /// ε = 1e-4 × the mesh's bounding-box diagonal.
-    pub fn for_scene(scene: &Scene, occluder: Option<&'a Occluder>) -> Shadows<'a> {
+    pub(crate) fn for_scene(scene: &Scene, occluder: Option<&'a Occluder>) -> Shadows<'a> {
         let diag = f64::from(scene.mesh.bounds().diagonal());
         Shadows {
             occluder,
@@ -132,7 +135,7 @@ impl<'a> Shadows<'a> {
     }
 
     /// True when nothing blocks the segment from `p` along unit `w` to distance `dist`.
-    pub fn visible(&self, p: DVec3, ng: DVec3, w: DVec3, dist: f64) -> bool {
+    pub(crate) fn visible(&self, p: DVec3, ng: DVec3, w: DVec3, dist: f64) -> bool {
         let Some(occ) = self.occluder else {
             return true;
         };

@@ -7,15 +7,17 @@ use glam::{DVec3, Vec3};
 /// pixel centres are at half-integers.
 #[derive(Clone, Copy, Debug)]
 pub struct View {
-    pub eye: DVec3,
+    pub(crate) eye: DVec3,
     /// Unit viewing direction.
-    pub forward: DVec3,
+    pub(crate) forward: DVec3,
     /// Unit right and up vectors of the image plane.
-    pub right: DVec3,
-    pub up: DVec3,
+    pub(crate) right: DVec3,
+    pub(crate) up: DVec3,
     /// tan(fov_y / 2).
-    pub tan_half_fov: f64,
+    pub(crate) tan_half_fov: f64,
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
 }
 
@@ -45,7 +47,7 @@ impl View {
     }
 
     /// Unit direction of the primary ray through image point (x, y) in pixels.
-    pub fn ray_dir(&self, x: f64, y: f64) -> DVec3 {
+    pub(crate) fn ray_dir(&self, x: f64, y: f64) -> DVec3 {
         let sx = (2.0 * x / f64::from(self.width) - 1.0) * self.tan_half_fov * self.aspect();
         let sy = (1.0 - 2.0 * y / f64::from(self.height)) * self.tan_half_fov;
         (self.forward + sx * self.right + sy * self.up).normalize()

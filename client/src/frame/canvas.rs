@@ -3,15 +3,19 @@
 
 use font8x8::{BASIC_FONTS, UnicodeFonts};
 
+/// A 0RGB framebuffer to draw text and widgets into.
 pub struct Canvas<'a> {
+    /// Pixels, row by row, 0x00RRGGBB.
     pub buf: &'a mut [u32],
+    /// Width in pixels.
     pub width: usize,
+    /// Height in pixels.
     pub height: usize,
 }
 
 impl Canvas<'_> {
     /// Darkens a rectangle (the text's background) by half.
-    pub fn shade(&mut self, x0: usize, y0: usize, w: usize, h: usize) {
+    pub(crate) fn shade(&mut self, x0: usize, y0: usize, w: usize, h: usize) {
         for y in y0..(y0 + h).min(self.height) {
             for x in x0..(x0 + w).min(self.width) {
                 let p = &mut self.buf[y * self.width + x];
@@ -20,7 +24,7 @@ impl Canvas<'_> {
         }
     }
 
-    pub fn fill(&mut self, x0: usize, y0: usize, w: usize, h: usize, rgb: u32) {
+    pub(crate) fn fill(&mut self, x0: usize, y0: usize, w: usize, h: usize, rgb: u32) {
         for y in y0..(y0 + h).min(self.height) {
             for x in x0..(x0 + w).min(self.width) {
                 self.buf[y * self.width + x] = rgb;
@@ -48,7 +52,7 @@ impl Canvas<'_> {
     }
 
     /// Lines of text on a darkened panel; returns the panel's height.
-    pub fn panel(&mut self, x: usize, y: usize, lines: &[String]) -> usize {
+    pub(crate) fn panel(&mut self, x: usize, y: usize, lines: &[String]) -> usize {
         let w = lines.iter().map(|l| l.chars().count()).max().unwrap_or(0) * 8 + 8;
         let h = lines.len() * 10 + 6;
         self.shade(x, y, w, h);
@@ -59,7 +63,7 @@ impl Canvas<'_> {
     }
 
     /// A horizontal slider: track, filled part, label. `t` in [0, 1].
-    pub fn slider(&mut self, x: usize, y: usize, w: usize, t: f64, label: &str) {
+    pub(crate) fn slider(&mut self, x: usize, y: usize, w: usize, t: f64, label: &str) {
         self.shade(x, y, w, 14);
         let filled = ((w as f64) * t.clamp(0.0, 1.0)) as usize;
         self.fill(x, y + 10, filled, 4, 0x00f0_b040);

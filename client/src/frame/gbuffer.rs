@@ -21,12 +21,14 @@ const BAND: usize = 16;
 /// What each pixel sees.
 #[derive(Clone, Debug)]
 pub struct GBuffer {
+    /// Width in pixels.
     pub width: u32,
+    /// Height in pixels.
     pub height: u32,
     /// Triangle index per pixel (row-major), or [`NONE`].
     pub tri: Vec<u32>,
     /// Barycentrics (of vertices 1 and 2) of the primary-ray hit per pixel.
-    pub bary: Vec<[f32; 2]>,
+    pub(crate) bary: Vec<[f32; 2]>,
 }
 
 /// A near-clipped triangle in screen space: its index, vertices (pixels, 1/z) and the pixel
@@ -35,15 +37,15 @@ type ScreenPoly = (u32, Vec<(DVec2, f64)>, [usize; 4]);
 
 /// A shading point on the mesh.
 #[derive(Clone, Copy, Debug)]
-pub struct Surface {
-    pub tri: u32,
+pub(crate) struct Surface {
+    pub(crate) tri: u32,
     /// Barycentric weights of the triangle's three vertices.
-    pub weights: [f64; 3],
-    pub position: DVec3,
+    pub(crate) weights: [f64; 3],
+    pub(crate) position: DVec3,
     /// Interpolated, normalised shading normal, flipped to face the viewer side of `geometric`.
-    pub normal: DVec3,
+    pub(crate) normal: DVec3,
     /// Unit geometric normal, facing the viewer.
-    pub geometric: DVec3,
+    pub(crate) geometric: DVec3,
 }
 
 impl GBuffer {
@@ -150,7 +152,7 @@ impl GBuffer {
     }
 
     /// The surface seen through pixel `i` (row-major), if any.
-    pub fn surface(&self, mesh: &Mesh, view: &View, i: usize) -> Option<Surface> {
+    pub(crate) fn surface(&self, mesh: &Mesh, view: &View, i: usize) -> Option<Surface> {
         let t = *self.tri.get(i)?;
         if t == NONE {
             return None;
@@ -181,7 +183,7 @@ impl GBuffer {
     }
 
     /// Marks the vertices of every triangle seen by some pixel.
-    pub fn visible_vertices(&self, mesh: &Mesh) -> Vec<bool> {
+    pub(crate) fn visible_vertices(&self, mesh: &Mesh) -> Vec<bool> {
         let mut seen_tri = vec![false; mesh.triangles.len()];
         for &t in &self.tri {
             if t != NONE {
@@ -200,7 +202,7 @@ impl GBuffer {
     }
 
     /// Pixels that see a surface.
-    pub fn covered(&self) -> usize {
+    pub(crate) fn covered(&self) -> usize {
         self.tri.iter().filter(|&&t| t != NONE).count()
     }
 }

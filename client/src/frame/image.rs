@@ -7,12 +7,16 @@ use anyhow::{Context, Result, bail};
 /// A linear-RGB image, row-major from the top left.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Image {
+    /// Width in pixels.
     pub width: u32,
+    /// Height in pixels.
     pub height: u32,
+    /// Linear RGB radiance, row by row from the top.
     pub pixels: Vec<[f32; 3]>,
 }
 
 impl Image {
+    /// A black image.
     pub fn new(width: u32, height: u32) -> Image {
         Image {
             width,

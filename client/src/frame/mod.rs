@@ -8,5 +8,5 @@ pub mod camera;
 pub mod canvas;
 pub mod gbuffer;
 pub mod image;
-pub mod shading;
+pub(crate) mod shading;
 pub mod stats;

@@ -5,17 +5,17 @@
 use glam::DVec3;
 
 #[derive(Clone, Copy, Debug)]
-pub struct ShadingFrame {
-    pub x: DVec3,
-    pub y: DVec3,
-    pub z: DVec3,
+pub(crate) struct ShadingFrame {
+    pub(crate) x: DVec3,
+    pub(crate) y: DVec3,
+    pub(crate) z: DVec3,
 }
 
 impl ShadingFrame {
     /// The frame of unit normal `n` and unit view direction `wo` (pointing away from the
     /// surface). When the view is along the normal (or NaN-free but degenerate), any tangent
     /// works: the lobe is then rotationally symmetric.
-    pub fn new(n: DVec3, wo: DVec3) -> ShadingFrame {
+    pub(crate) fn new(n: DVec3, wo: DVec3) -> ShadingFrame {
         let t = wo - n * n.dot(wo);
         let x = if t.length_squared() > 1e-24 {
             t.normalize()
@@ -31,19 +31,19 @@ impl ShadingFrame {
 
     /// World → local.
     #[inline]
-    pub fn to_local(&self, w: DVec3) -> DVec3 {
+    pub(crate) fn to_local(self, w: DVec3) -> DVec3 {
         DVec3::new(w.dot(self.x), w.dot(self.y), w.dot(self.z))
     }
 
     /// Local → world.
     #[inline]
-    pub fn to_world(&self, l: DVec3) -> DVec3 {
+    pub(crate) fn to_world(self, l: DVec3) -> DVec3 {
         l.x * self.x + l.y * self.y + l.z * self.z
     }
 
     /// cos θ of the view in this frame, clamped to [0, 1].
     #[inline]
-    pub fn cos_view(&self, wo: DVec3) -> f64 {
+    pub(crate) fn cos_view(&self, wo: DVec3) -> f64 {
         wo.dot(self.z).clamp(0.0, 1.0)
     }
 }

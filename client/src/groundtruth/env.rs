@@ -40,13 +40,13 @@ pub struct EnvSampler {
 }
 
 fn luminance(p: [f32; 3]) -> f64 {
-    0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2])
+    crate::frame::stats::luminance(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))
 }
 
 impl EnvSampler {
     /// `None` when the map is black (nothing to sample; the BRDF strategy alone is exact then:
     /// the radiance is zero).
-    pub fn new(env: &EnvLight) -> Option<EnvSampler> {
+    pub(crate) fn new(env: &EnvLight) -> Option<EnvSampler> {
         let (w, h) = (env.width as usize, env.height as usize);
         let omega: Vec<f64> = (0..h).map(|y| env.texel_solid_angle(y)).collect();
         let mut conditional = vec![0.0; h * (w + 1)];
@@ -103,7 +103,7 @@ impl EnvSampler {
     }
 
     /// A direction and its density per solid angle from four uniform numbers.
-    pub fn sample(&self, u: [f64; 4]) -> Option<(DVec3, f64)> {
+    pub(crate) fn sample(&self, u: [f64; 4]) -> Option<(DVec3, f64)> {
         let y = Self::pick(&self.marginal, u[0]);
         let row = &self.conditional[y * (self.width + 1)..(y + 1) * (self.width + 1)];
         let x = Self::pick(row, u[1]);
@@ -123,7 +123,7 @@ impl EnvSampler {
     }
 
     /// Density per solid angle of [`EnvSampler::sample`] producing `d`.
-    pub fn pdf(&self, env: &EnvLight, d: DVec3) -> f64 {
+    pub(crate) fn pdf(&self, env: &EnvLight, d: DVec3) -> f64 {
         let (x, y) = env.texel_of(d);
         self.prob[y * self.width + x] / self.omega[y]
     }

@@ -67,7 +67,7 @@ pub fn builtin_lookup(alpha: f64, cos_theta: f64) -> LtcLobe {
 
 /// The normalised LTC density at unit direction `w` (local frame):
 /// D(ω) = D_o(ω_o) |det M⁻¹| / |M⁻¹ω|³ with ω_o = M⁻¹ω / |M⁻¹ω| and D_o = max(z, 0)/π.
-pub fn ltc_density(m_inv: &DMat3, w: DVec3) -> f64 {
+pub(crate) fn ltc_density(m_inv: &DMat3, w: DVec3) -> f64 {
     let o = *m_inv * w;
     let l2 = o.length_squared();
     let l = l2.sqrt();

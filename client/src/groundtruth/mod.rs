@@ -40,11 +40,11 @@
 //! squaring; numerically failed samples contribute 0. `client/tests/groundtruth.rs` checks
 //! random α, views to 89.99°, lights from 1e-8 sr to nearly 2π and scales 1e-4…1e4.
 
-pub mod env;
+pub(crate) mod env;
 pub mod ltcvis;
-pub mod primary;
-pub mod rng;
-pub mod sampling;
+pub(crate) mod primary;
+pub(crate) mod rng;
+pub(crate) mod sampling;
 
 use std::fmt;
 
@@ -72,6 +72,7 @@ use sampling::PolygonSampler;
 /// A point to shade.
 #[derive(Clone, Copy, Debug)]
 pub struct ShadingPoint {
+    /// World position.
     pub position: DVec3,
     /// Unit shading normal (the BRDF's z), on the viewer's side.
     pub normal: DVec3,
@@ -82,7 +83,7 @@ pub struct ShadingPoint {
 }
 
 impl ShadingPoint {
-    pub fn from_surface(s: &Surface, eye: DVec3) -> ShadingPoint {
+    pub(crate) fn from_surface(s: &Surface, eye: DVec3) -> ShadingPoint {
         ShadingPoint {
             position: s.position,
             normal: s.normal,
@@ -95,14 +96,15 @@ impl ShadingPoint {
 /// Running mean and variance of i.i.d. per-sample values (Welford; Chan et al. to merge).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Estimate {
-    pub n: u64,
+    pub(crate) n: u64,
+    /// The running mean per channel.
     pub mean: DVec3,
     m2: DVec3,
 }
 
 impl Estimate {
     #[inline]
-    pub fn push(&mut self, x: DVec3) {
+    pub(crate) fn push(&mut self, x: DVec3) {
         self.n += 1;
         let d = x - self.mean;
         self.mean += d / self.n as f64;
@@ -110,7 +112,7 @@ impl Estimate {
     }
 
     /// `k` samples of value zero.
-    pub fn push_zeros(&mut self, k: u64) {
+    pub(crate) fn push_zeros(&mut self, k: u64) {
         self.merge(&Estimate {
             n: k,
             mean: DVec3::ZERO,
@@ -118,7 +120,7 @@ impl Estimate {
         });
     }
 
-    pub fn merge(&mut self, o: &Estimate) {
+    pub(crate) fn merge(&mut self, o: &Estimate) {
         if o.n == 0 {
             return;
         }
@@ -135,7 +137,7 @@ impl Estimate {
     }
 
     /// Sample variance of one sample (per channel).
-    pub fn variance(&self) -> DVec3 {
+    pub(crate) fn variance(&self) -> DVec3 {
         if self.n < 2 {
             return DVec3::ZERO;
         }
@@ -244,9 +246,9 @@ impl McPoint {
 
 /// One Monte Carlo sample's contribution with visibility (shadow rays) and without.
 #[derive(Clone, Copy, Debug, Default)]
-pub struct SamplePair {
-    pub shadowed: DVec3,
-    pub unshadowed: DVec3,
+pub(crate) struct SamplePair {
+    pub(crate) shadowed: DVec3,
+    pub(crate) unshadowed: DVec3,
 }
 
 /// Veach's power heuristic (β = 2) for the strategy with density `pa` against `pb`.
@@ -292,25 +294,28 @@ pub fn shade_mc(
 pub struct NoiseReport {
     /// Pixels that see a surface (box-filtered images: any sample did).
     pub covered: usize,
-    pub spp_min: u64,
+    pub(crate) spp_min: u64,
+    /// Most samples any pixel took.
     pub spp_max: u64,
+    /// Mean samples per covered pixel.
     pub spp_mean: f64,
+    /// Mean relative standard error r over covered pixels.
     pub mean_rel_stderr: f64,
-    pub p95_rel_stderr: f64,
-    pub max_rel_stderr: f64,
+    pub(crate) p95_rel_stderr: f64,
+    pub(crate) max_rel_stderr: f64,
     /// τ: the floor of the relative error's denominator.
-    pub rel_floor: f64,
+    pub(crate) rel_floor: f64,
     /// Mean over covered pixels of s (absolute standard error, same units as the image).
-    pub mean_stderr: f64,
+    pub(crate) mean_stderr: f64,
     /// [`render_mc_until`] only: pixels still above the target relative error (they reached
     /// `max_spp`).
-    pub unconverged: Option<usize>,
+    pub(crate) unconverged: Option<usize>,
     /// Standard error of each pixel, per channel.
     pub stderr: Image,
 }
 
 /// τ / image mean in [`NoiseReport`].
-pub const REL_FLOOR: f64 = 0.01;
+pub(crate) const REL_FLOOR: f64 = 0.01;
 
 impl fmt::Display for NoiseReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -356,7 +361,7 @@ fn rel_stderr(e: &Estimate, floor: f64) -> f64 {
 }
 
 /// The image and its noise report from per-pixel estimates (`None`: no surface).
-pub fn finish(width: u32, height: u32, est: &[Option<Estimate>]) -> (Image, NoiseReport) {
+pub(crate) fn finish(width: u32, height: u32, est: &[Option<Estimate>]) -> (Image, NoiseReport) {
     let mut img = Image::new(width, height);
     let mut se = Image::new(width, height);
     let floor = rel_floor(est);

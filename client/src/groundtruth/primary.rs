@@ -27,6 +27,7 @@ pub struct Tracer {
 }
 
 impl Tracer {
+    /// Builds the BVH of `mesh` for primary rays.
     pub fn new(mesh: &Mesh) -> Tracer {
         let tris = mesh_triangles(mesh);
         let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
@@ -44,7 +45,7 @@ impl Tracer {
 
     /// The surface hit first by the ray from `eye` along unit `dir`, shaded like
     /// [`crate::frame::gbuffer::GBuffer::surface`] (interpolated normal facing the viewer).
-    pub fn surface(&self, mesh: &Mesh, eye: DVec3, dir: DVec3) -> Option<Surface> {
+    pub(crate) fn surface(&self, mesh: &Mesh, eye: DVec3, dir: DVec3) -> Option<Surface> {
         let ray = Ray::new(
             Vec3A::from(eye.as_vec3()),
             Vec3A::from(dir.as_vec3()),

@@ -29,10 +29,11 @@ impl Pcg32 {
 
     /// A generator for `(seed, key)`: `key` (e.g. a pixel index) is mixed into both the seed and
     /// the stream.
-    pub fn for_key(seed: u64, key: u64) -> Pcg32 {
+    pub(crate) fn for_key(seed: u64, key: u64) -> Pcg32 {
         Pcg32::new(splitmix64(seed ^ splitmix64(key)), key)
     }
 
+    /// The next 32 random bits (PCG-XSH-RR) [ONeill14].
     #[inline]
     pub fn next_u32(&mut self) -> u32 {
         let old = self.state;
@@ -51,14 +52,14 @@ impl Pcg32 {
     }
 
     #[inline]
-    pub fn next_2d(&mut self) -> [f64; 2] {
+    pub(crate) fn next_2d(&mut self) -> [f64; 2] {
         [self.next_f64(), self.next_f64()]
     }
 }
 
 /// SplitMix64's finaliser (Steele, Lea, Flood 2014): a bijective 64-bit mixer.
 #[inline]
-pub fn splitmix64(x: u64) -> u64 {
+pub(crate) fn splitmix64(x: u64) -> u64 {
     let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);

@@ -25,22 +25,22 @@ use std::f64::consts::PI;
 use glam::DVec3;
 
 /// Below this solid angle (steradians) the polygon is sampled by area.
-pub const AREA_SAMPLING_BELOW_SR: f64 = 1e-4;
+pub(crate) const AREA_SAMPLING_BELOW_SR: f64 = 1e-4;
 
 /// A direction drawn toward the light.
 #[derive(Clone, Copy, Debug)]
-pub struct LightSample {
+pub(crate) struct LightSample {
     /// Unit direction from the shading point.
-    pub dir: DVec3,
+    pub(crate) dir: DVec3,
     /// Distance to the light plane along `dir`.
-    pub dist: f64,
+    pub(crate) dist: f64,
     /// Density per unit solid angle.
-    pub pdf: f64,
+    pub(crate) pdf: f64,
 }
 
 /// A light polygon seen from one shading point, ready for sampling and pdf queries.
 #[derive(Clone, Debug)]
-pub struct PolygonSampler {
+pub(crate) struct PolygonSampler {
     /// Unit normal of the light's plane and `n·x` for its points `x` (offsets); `h ≠ 0`.
     plane_n: DVec3,
     plane_h: f64,
@@ -82,7 +82,11 @@ impl PolygonSampler {
     /// `plane_n`: unit normal of its plane; `clip`: keep only the part with `clip·x ≥ 0`.
     /// `None` when nothing is left or it subtends no solid angle (the point lies in the light's
     /// plane, or the input is degenerate or not finite).
-    pub fn new(offsets: &[DVec3], plane_n: DVec3, clip: Option<DVec3>) -> Option<PolygonSampler> {
+    pub(crate) fn new(
+        offsets: &[DVec3],
+        plane_n: DVec3,
+        clip: Option<DVec3>,
+    ) -> Option<PolygonSampler> {
         if offsets.len() < 3 || !offsets.iter().all(|x| x.is_finite()) || !plane_n.is_finite() {
             return None;
         }
@@ -170,19 +174,15 @@ impl PolygonSampler {
         })
     }
 
+    #[cfg(test)]
     /// Solid angle of the (clipped) polygon.
-    pub fn solid_angle(&self) -> f64 {
+    pub(crate) fn solid_angle(&self) -> f64 {
         self.solid_angle
-    }
-
-    /// True when this polygon is sampled by area (small solid angle), false for solid angle.
-    pub fn by_area(&self) -> bool {
-        matches!(self.mode, Mode::Area { .. })
     }
 
     /// Draws a direction toward the polygon from `u` in [0, 1)². `None` on a numerically
     /// failed draw (it then contributes nothing; such draws have probability ~0).
-    pub fn sample(&self, u: [f64; 2]) -> Option<LightSample> {
+    pub(crate) fn sample(&self, u: [f64; 2]) -> Option<LightSample> {
         match &self.mode {
             Mode::Spherical { tris, cdf } => {
                 let (i, u0) = pick(cdf, u[0]);
@@ -211,7 +211,7 @@ impl PolygonSampler {
 
     /// For a unit direction `w`: `(distance to the light, pdf of [`Self::sample`] for w)` when
     /// `w` points into the (clipped) polygon, else `None`.
-    pub fn pdf(&self, w: DVec3) -> Option<(f64, f64)> {
+    pub(crate) fn pdf(&self, w: DVec3) -> Option<(f64, f64)> {
         if self.edges.iter().any(|e| e.dot(w) < 0.0) {
             return None;
         }
@@ -245,7 +245,7 @@ fn pick(cdf: &[f64], u: f64) -> (usize, f64) {
 }
 
 /// Sutherland–Hodgman: the part of a convex polygon with `n·x ≥ 0`.
-pub fn clip_polygon(poly: &[DVec3], n: DVec3) -> Vec<DVec3> {
+pub(crate) fn clip_polygon(poly: &[DVec3], n: DVec3) -> Vec<DVec3> {
     let k = poly.len();
     let mut out = Vec::with_capacity(k + 1);
     for i in 0..k {

@@ -30,7 +30,7 @@ use glam::{DMat3, DVec3};
 /// unit) of the LTC distribution with inverse matrix `m_inv`, normalised (∫ over the sphere = 1):
 /// the polygon is transformed by M⁻¹, clipped to the horizon z ≥ 0 in LTC space and integrated
 /// against cos/π. Non-negative whatever the winding; 0 for degenerate or non-finite input.
-pub fn integrate(m_inv: &DMat3, poly: &[DVec3]) -> f64 {
+pub(crate) fn integrate(m_inv: &DMat3, poly: &[DVec3]) -> f64 {
     if poly.len() > sphere::MAX_VERTS - 8 {
         // More vertices than any clipped light can have: integrate as a fan instead.
         return fan(m_inv, poly);
@@ -47,7 +47,7 @@ pub fn integrate(m_inv: &DMat3, poly: &[DVec3]) -> f64 {
 /// §5.3; Snyder 1996): F = 1/(2π) Σᵢ θᵢ (pᵢ × pᵢ₊₁)/|pᵢ × pᵢ₊₁|, oriented so that F·z ≥ 0.
 /// Its z is [`integrate`]; its direction is the average direction of the light the lobe sees,
 /// where textured lights are fetched. `None` when nothing is above the horizon.
-pub fn vector_form_factor(m_inv: &DMat3, poly: &[DVec3]) -> Option<DVec3> {
+pub(crate) fn vector_form_factor(m_inv: &DMat3, poly: &[DVec3]) -> Option<DVec3> {
     let (mut t, mut c) = (SphPoly::new(), SphPoly::new());
     let c = transform_and_clip(m_inv, poly, &mut t, &mut c)?;
     let mut f = DVec3::ZERO;

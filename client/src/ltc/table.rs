@@ -62,7 +62,6 @@
 //! det M⁻¹ > 0.
 
 use std::f64::consts::PI;
-use std::path::Path;
 use std::sync::OnceLock;
 
 use anyhow::{Context, bail, ensure};
@@ -91,7 +90,7 @@ pub fn alpha_node(i: usize, n: usize) -> f64 {
 
 /// The continuous node coordinate s ∈ [0, 1] of a (clamped) α: α = α_min^(1 − s).
 #[inline]
-pub fn alpha_coord(alpha: f64) -> f64 {
+pub(crate) fn alpha_coord(alpha: f64) -> f64 {
     (1.0 - ggx::clamp_alpha(alpha).ln() / MIN_ALPHA.ln()).clamp(0.0, 1.0)
 }
 
@@ -104,7 +103,7 @@ pub fn theta_node(j: usize, n: usize) -> f64 {
 /// The continuous node coordinate v ∈ [0, 1] of a view angle θ (radians), clamped to
 /// [0, θ_max]: v = 1 − √(1 − θ/θ_max).
 #[inline]
-pub fn theta_coord(theta: f64) -> f64 {
+pub(crate) fn theta_coord(theta: f64) -> f64 {
     let t = (theta / theta_max()).clamp(0.0, 1.0);
     (1.0 - (1.0 - t).sqrt()).clamp(0.0, 1.0)
 }
@@ -185,8 +184,9 @@ impl LtcShape {
             && self.xz_det() > 0.0
     }
 
+    #[cfg(test)]
     /// M (maps the clamped cosine's frame to the lobe), column-major.
-    pub fn m(&self) -> DMat3 {
+    pub(crate) fn m(&self) -> DMat3 {
         let (x, z) = self.frame();
         DMat3::from_cols(
             self.m11 * x + self.m31 * z,
@@ -197,7 +197,7 @@ impl LtcShape {
 
     /// M⁻¹ normalised so that its (1, 1) entry is 1: rows (m22/Δ)(X − m13 Z), Y,
     /// (m22/Δ)(m11 Z − m31 X) with Δ = m11 − m13 m31. Its determinant is m22²/Δ > 0.
-    pub fn m_inv(&self) -> DMat3 {
+    pub(crate) fn m_inv(&self) -> DMat3 {
         let (x, z) = self.frame();
         let k = self.m22 / self.xz_det();
         let r0 = k * (x - self.m13 * z);
@@ -233,7 +233,7 @@ impl TableEntry {
     }
 
     /// The inverse of [`TableEntry::to_array`].
-    pub fn from_array(a: [f64; 7]) -> Self {
+    pub(crate) fn from_array(a: [f64; 7]) -> Self {
         TableEntry {
             shape: LtcShape {
                 rho: a[0],
@@ -398,13 +398,6 @@ impl LtcTable {
     pub fn from_json(text: &str) -> anyhow::Result<LtcTable> {
         let file: TableFile = serde_json::from_str(text).context("not an LTC table file")?;
         Self::from_file(file)
-    }
-
-    /// Reads a table file from disk.
-    pub fn load(path: &Path) -> anyhow::Result<LtcTable> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read {}", path.display()))?;
-        Self::from_json(&text).with_context(|| format!("in {}", path.display()))
     }
 
     /// Validates a parsed file: format, axes (must match the formulas of this module), and

@@ -52,13 +52,13 @@ pub struct Stats {
     /// Worker threads.
     pub threads: usize,
     /// Whole run: setup + all frames (excluding image writing).
-    pub seconds: f64,
+    pub(crate) seconds: f64,
     /// Rasterising the G-buffer (once per camera) and preparing the method.
-    pub setup_seconds: f64,
+    pub(crate) setup_seconds: f64,
     /// Median shading time per frame.
     pub ms_per_frame: f64,
     /// Mean shading time per frame.
-    pub ms_per_frame_mean: f64,
+    pub(crate) ms_per_frame_mean: f64,
     /// 1000 / `ms_per_frame`.
     pub fps: f64,
     /// Median frame time per vertex shaded (µs, wall clock on `threads` threads).
@@ -68,29 +68,29 @@ pub struct Stats {
     /// Vertices shaded in the last frame.
     pub vertices_shaded: usize,
     /// Pixels the scene covers.
-    pub pixels_covered: usize,
+    pub(crate) pixels_covered: usize,
     /// BSPVT pieces integrated (v̄ > 0) per shaded vertex.
-    pub pieces_per_vertex: f64,
+    pub(crate) pieces_per_vertex: f64,
     /// BSPVT pieces dropped (v̄ = 0) per shaded vertex.
-    pub dropped_per_vertex: f64,
+    pub(crate) dropped_per_vertex: f64,
     /// Samples per pixel of the stochastic methods.
-    pub spp: Option<u32>,
+    pub(crate) spp: Option<u32>,
     /// Monte Carlo: mean relative standard error per covered pixel (last frame).
-    pub mean_rel_stderr: Option<f64>,
+    pub(crate) mean_rel_stderr: Option<f64>,
     /// SG: the lobes.
-    pub sg_lobes: Option<usize>,
+    pub(crate) sg_lobes: Option<usize>,
     /// SG: the fit's relative L2 error over the sphere.
-    pub sg_fit_error: Option<f64>,
+    pub(crate) sg_fit_error: Option<f64>,
     /// SG: the fit's time (in setup).
-    pub sg_fit_seconds: Option<f64>,
+    pub(crate) sg_fit_seconds: Option<f64>,
     /// SG: how visibility was found.
-    pub ssdf: Option<crate::sg::SsdfMode>,
+    pub(crate) ssdf: Option<crate::sg::SsdfMode>,
     /// SG: median depth-map time per frame (screen SSDF), ms.
-    pub sg_maps_ms: Option<f64>,
+    pub(crate) sg_maps_ms: Option<f64>,
     /// A moving scene (environment methods): median time per frame to pose the meshes,
     /// rasterise the G-buffer and rebuild the BVH when rays are used, ms (inside
     /// `ms_per_frame`).
-    pub pose_ms: Option<f64>,
+    pub(crate) pose_ms: Option<f64>,
 }
 
 /// Renders `opts.frames` frames, handing each image to `sink` (frame index, image).

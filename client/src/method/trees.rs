@@ -33,21 +33,21 @@ pub struct CachedBake {
     /// The bake file.
     pub path: PathBuf,
     /// Vertices baked.
-    pub vertices: usize,
+    pub(crate) vertices: usize,
     /// The file's size.
-    pub bytes: usize,
+    pub(crate) bytes: usize,
     /// Wall time of the bake.
-    pub seconds: f64,
+    pub(crate) seconds: f64,
     /// Threads it ran on.
-    pub threads: usize,
+    pub(crate) threads: usize,
     /// False when the file was baked by this call.
     #[serde(skip)]
-    pub from_cache: bool,
+    pub(crate) from_cache: bool,
 }
 
 /// `name` as a file-name stem: its file stem, with anything but ASCII letters, digits and
 /// `-` replaced by `_`.
-pub fn file_stem(name: &str) -> String {
+pub(crate) fn file_stem(name: &str) -> String {
     let base = Path::new(name)
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())

@@ -30,7 +30,12 @@ type Widths = [f64];
 
 /// The half-width of occluded pixels (`hard` < 1) with a same-surface 4-neighbour that is lit;
 /// 0 elsewhere.
-pub fn edge_radius(hard: &[f32], radius: &Widths, guide: &Guide, params: &Params) -> Vec<f64> {
+pub(crate) fn edge_radius(
+    hard: &[f32],
+    radius: &Widths,
+    guide: &Guide,
+    params: &Params,
+) -> Vec<f64> {
     let (w, h) = (guide.width as isize, guide.height as isize);
     (0..hard.len())
         .into_par_iter()
@@ -61,7 +66,7 @@ pub fn edge_radius(hard: &[f32], radius: &Widths, guide: &Guide, params: &Params
 /// Largest half-width among same-surface pixels q whose box reaches p (|p − q| ≤ q's radius in
 /// pixels along each axis; p's own included), in two separable passes. The search reaches
 /// `params.max_radius` pixels.
-pub fn spread_radius(radius: &Widths, guide: &Guide, params: &Params) -> Vec<f64> {
+pub(crate) fn spread_radius(radius: &Widths, guide: &Guide, params: &Params) -> Vec<f64> {
     let reach = params.max_radius.max(0.0).ceil() as isize;
     let h = spread_pass(radius, guide, params, reach, true);
     spread_pass(&h, guide, params, reach, false)
@@ -107,7 +112,7 @@ fn spread_pass(
 
 /// Box blur of world half-width `radius[p]` at every pixel p, separable and edge-aware.
 /// Background pixels keep their value and are never sampled.
-pub fn blur(values: &[f32], radius: &Widths, guide: &Guide, params: &Params) -> Vec<f32> {
+pub(crate) fn blur(values: &[f32], radius: &Widths, guide: &Guide, params: &Params) -> Vec<f32> {
     let h = blur_pass(values, radius, guide, params, true);
     blur_pass(&h, radius, guide, params, false)
 }
@@ -160,7 +165,7 @@ fn blur_pass(
 /// `params.max_radius` pixels it is scaled down to it (the cap). Taps on other surfaces are
 /// skipped ([`Guide::same_surface`]).
 #[allow(clippy::too_many_arguments)]
-pub fn light_blur(
+pub(crate) fn light_blur(
     hard: &[f32],
     half_width: &Widths,
     guide: &Guide,
@@ -238,7 +243,7 @@ pub fn light_blur(
 
 /// `n` × `n` points q − c spread over the light polygon (a grid over its bounding rectangle
 /// in its plane, kept where inside the convex polygon), relative to its centroid c.
-pub fn light_offsets(light: &Light, n: usize) -> Vec<DVec3> {
+pub(crate) fn light_offsets(light: &Light, n: usize) -> Vec<DVec3> {
     let v = &light.vertices;
     if v.len() < 3 || n == 0 {
         return Vec::new();

@@ -18,9 +18,9 @@
 //! - [`shadowmap`]: a depth map rendered from the light; PCF (fixed kernel), VSM (moments,
 //!   Chebyshev bound, light-bleeding reduction) and PCSS (blocker search, then PCF of width W).
 
-pub mod blur;
+pub(crate) mod blur;
 pub mod rt;
-pub mod shadowmap;
+pub(crate) mod shadowmap;
 
 use anyhow::{Result, bail};
 use bspvt_raytrace::Occluder;
@@ -39,14 +39,17 @@ pub enum Technique {
     RtPenumbra,
     /// The same hard shadow, unblurred.
     RtHard,
+    /// Shadow map with percentage-closer filtering [Reeves87].
     Pcf,
+    /// Variance shadow map [Donnelly06].
     Vsm,
+    /// Percentage-closer soft shadows [Fernando05].
     Pcss,
 }
 
 impl Technique {
     /// True when the technique traces rays (needs an [`Occluder`]).
-    pub fn needs_rays(self) -> bool {
+    pub(crate) fn needs_rays(self) -> bool {
         matches!(self, Technique::RtPenumbra | Technique::RtHard)
     }
 }
@@ -149,7 +152,7 @@ impl Default for Params {
 /// W = (Z_receiver − Z_occluder) / Z_occluder · W_light, Z measured from the light.
 /// Always finite and ≥ 0: an occluder at (or behind) the light gives `f64::MAX`, to be capped
 /// by the caller; Z_occluder ≥ Z_receiver (no occluder in between) gives 0.
-pub fn penumbra_width(z_receiver: f64, z_occluder: f64, w_light: f64) -> f64 {
+pub(crate) fn penumbra_width(z_receiver: f64, z_occluder: f64, w_light: f64) -> f64 {
     let d = z_receiver - z_occluder;
     if !(d > 0.0) || !(w_light > 0.0) {
         return 0.0;
@@ -162,7 +165,7 @@ pub fn penumbra_width(z_receiver: f64, z_occluder: f64, w_light: f64) -> f64 {
 }
 
 /// The light's width W_light: the side of the square of the same area.
-pub fn light_width(light: &Light) -> f64 {
+pub(crate) fn light_width(light: &Light) -> f64 {
     let a = light.area();
     if a.is_finite() && a > 0.0 {
         a.sqrt()
@@ -175,23 +178,27 @@ pub fn light_width(light: &Light) -> f64 {
 /// depth (along the camera's forward axis). `None`: background.
 #[derive(Clone, Debug)]
 pub struct Guide {
-    pub width: usize,
-    pub height: usize,
+    pub(crate) width: usize,
+    pub(crate) height: usize,
+    /// Per pixel, row by row: the visible surface (`None`: background).
     pub pixels: Vec<Option<GuidePixel>>,
     /// World size of one pixel at view depth 1: 2 tan(fov_y / 2) / height.
     pub footprint_per_depth: f64,
 }
 
+/// One pixel's visible surface, as the edge-aware filters see it.
 #[derive(Clone, Copy, Debug)]
 pub struct GuidePixel {
+    /// World position.
     pub position: DVec3,
+    /// Unit shading normal on the viewer's side.
     pub normal: DVec3,
     /// Unit geometric normal on the viewer's side (shadow-ray offsets).
     pub geometric: DVec3,
-    pub depth: f64,
+    pub(crate) depth: f64,
     /// World length on the tangent plane covered by one pixel along x and along y: the
     /// footprint grown by the receiver's slope (`f64::MAX` at grazing incidence).
-    pub step: [f64; 2],
+    pub(crate) step: [f64; 2],
 }
 
 impl GuidePixel {
@@ -210,6 +217,7 @@ impl GuidePixel {
 }
 
 impl Guide {
+    /// The guide of `r`'s G-buffer (once per camera).
     pub fn new(r: &Renderer) -> Guide {
         let g = &r.gbuffer;
         let w = g.width.max(1) as usize;
@@ -257,7 +265,7 @@ impl Guide {
     /// to c's view depth) and with a similar normal. Rejects taps across depth and normal
     /// discontinuities.
     #[inline]
-    pub fn same_surface(&self, c: &GuidePixel, q: &GuidePixel, p: &Params) -> bool {
+    pub(crate) fn same_surface(&self, c: &GuidePixel, q: &GuidePixel, p: &Params) -> bool {
         let plane = c.normal.dot(q.position - c.position).abs();
         plane <= p.plane_tolerance * c.depth && c.normal.dot(q.normal) >= p.normal_cos
     }
@@ -265,7 +273,7 @@ impl Guide {
 
 /// The shadowed image: unshadowed × shadow factor, per pixel (factors are clamped to [0, 1];
 /// a non-finite factor counts as lit).
-pub fn compose(unshadowed: &Image, factor: &[f32]) -> Image {
+pub(crate) fn compose(unshadowed: &Image, factor: &[f32]) -> Image {
     let mut out = unshadowed.clone();
     out.pixels
         .par_iter_mut()

@@ -15,11 +15,11 @@ use crate::light::Light;
 #[derive(Clone, Debug)]
 pub struct RtBuffers {
     /// Hard shadow: 1 when the ray to the light's centroid is clear, else 0.
-    pub hard: Vec<f32>,
+    pub(crate) hard: Vec<f32>,
     /// Distance from the light's centroid to the receiver, Z_receiver.
-    pub z_receiver: Vec<f64>,
+    pub(crate) z_receiver: Vec<f64>,
     /// Distance from the light's centroid to the occluder hit, Z_occluder (`NAN`: none).
-    pub z_occluder: Vec<f64>,
+    pub(crate) z_occluder: Vec<f64>,
     /// Half the penumbra width, W / 2, in world units (0 where unoccluded; `f64::MAX` for an
     /// occluder at the light — the blur caps it in pixels).
     pub radius: Vec<f64>,
@@ -87,7 +87,7 @@ pub fn hard_shadows(guide: &Guide, light: &Light, occluder: &Occluder, epsilon: 
 
 /// The soft shadow factor: the hard shadow blurred by the per-pixel radius spread from the
 /// hard shadow's edge ([`blur::edge_radius`], [`blur::spread_radius`]).
-pub fn soft_shadows(
+pub(crate) fn soft_shadows(
     buffers: &RtBuffers,
     guide: &Guide,
     view: &View,

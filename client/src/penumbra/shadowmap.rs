@@ -28,7 +28,7 @@ const MAX_TAN_HALF: f64 = 3.732;
 
 /// Shadow-map filtering.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Filter {
+pub(crate) enum Filter {
     Pcf,
     Vsm,
     Pcss,
@@ -36,21 +36,21 @@ pub enum Filter {
 
 /// A depth map seen from the light.
 #[derive(Clone, Debug)]
-pub struct LightMap {
-    pub view: View,
-    pub res: usize,
+pub(crate) struct LightMap {
+    pub(crate) view: View,
+    pub(crate) res: usize,
     /// Depth along the light's normal per texel (row-major); `INFINITY`: nothing.
-    pub depth: Vec<f64>,
+    pub(crate) depth: Vec<f64>,
     /// Nearest and farthest finite depth.
-    pub z_min: f64,
-    pub z_max: f64,
+    pub(crate) z_min: f64,
+    pub(crate) z_max: f64,
 }
 
 impl LightMap {
     /// Renders the depth of `mesh` from `light`'s centroid looking along its normal, with a
     /// square field of view that covers the mesh's bounds in front of the light (at most
     /// ±75°). `None` when nothing lies in front of the light.
-    pub fn render(mesh: &Mesh, light: &Light, res: u32) -> Option<LightMap> {
+    pub(crate) fn render(mesh: &Mesh, light: &Light, res: u32) -> Option<LightMap> {
         let eye = light.centroid();
         let forward = light.normal.normalize_or(DVec3::NEG_Y);
         if !eye.is_finite() || !forward.is_finite() {
@@ -182,7 +182,7 @@ impl LightMap {
 
     /// Depth moments (μ, E[z²]) box-filtered over (2k+1)² texels; empty texels count as the
     /// far depth 2 z_max.
-    pub fn moments(&self, k: u32) -> Vec<[f64; 2]> {
+    pub(crate) fn moments(&self, k: u32) -> Vec<[f64; 2]> {
         let far = 2.0 * self.z_max.max(self.z_min);
         let m: Vec<[f64; 2]> = self
             .depth
@@ -226,7 +226,7 @@ fn linstep(a: f64, b: f64, x: f64) -> f64 {
 
 /// VSM visibility: Chebyshev's one-sided bound on P(depth ≥ z), with light-bleeding
 /// reduction; `min_var` keeps σ² off 0 (flat, fully lit regions).
-pub fn chebyshev(m: [f64; 2], z: f64, min_var: f64, bleed: f64) -> f64 {
+pub(crate) fn chebyshev(m: [f64; 2], z: f64, min_var: f64, bleed: f64) -> f64 {
     let [mu, m2] = m;
     if !(z > mu) {
         return 1.0;
@@ -240,7 +240,7 @@ pub fn chebyshev(m: [f64; 2], z: f64, min_var: f64, bleed: f64) -> f64 {
 
 /// The shadow factor per pixel for `filter` (1 for background pixels and when nothing lies in
 /// front of the light).
-pub fn shadow_factor(
+pub(crate) fn shadow_factor(
     guide: &Guide,
     mesh: &Mesh,
     light: &Light,

@@ -7,6 +7,7 @@ use glam::{DAffine3, DQuat, DVec3};
 use crate::light::Light;
 use bspvt_proto::scene::PolygonLight;
 
+/// The light's default motion: around a horizontal circle, turning as it goes.
 #[derive(Clone, Debug)]
 pub struct LightPath {
     base: Light,

@@ -10,12 +10,14 @@ use crate::frame::gbuffer::GBuffer;
 
 /// The scene as it is in one frame.
 pub struct Posed {
+    /// The scene posed at `t`.
     pub scene: Scene,
+    /// Its G-buffer for the view it was posed for.
     pub gbuffer: GBuffer,
     /// Ray-traced visibility of this pose (when asked for).
-    pub occluder: Option<Occluder>,
+    pub(crate) occluder: Option<Occluder>,
     /// The cycle time of this pose.
-    pub t: f32,
+    pub(crate) t: f32,
 }
 
 impl Posed {

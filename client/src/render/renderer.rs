@@ -34,11 +34,13 @@ pub enum Mode {
 
 /// Baked visibility for the BSPVT method.
 pub struct Trees<'a> {
+    /// One tree set per vertex, in vertex order.
     pub trees: &'a [VertexTrees],
+    /// The bake's line codec.
     pub codec: LineCodec,
     /// While trees stream in: which vertices have theirs. The others are shaded unshadowed
     /// (shadow ratio 1) until they arrive. `None`: all are present.
-    pub present: Option<&'a [bool]>,
+    pub(crate) present: Option<&'a [bool]>,
 }
 
 impl<'a> Trees<'a> {
@@ -61,26 +63,33 @@ impl<'a> Trees<'a> {
 /// Counters of one frame.
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]
 pub struct FrameCounts {
+    /// Vertices shaded (per-vertex shading).
     pub vertices_shaded: usize,
-    pub pixels_shaded: usize,
+    pub(crate) pixels_shaded: usize,
+    /// BSPVT pieces integrated (v̄ > 0).
     pub pieces: u64,
+    /// BSPVT pieces dropped (v̄ = 0).
     pub pieces_dropped: u64,
 }
 
+/// A camera on a scene: its G-buffer, and per-vertex or per-pixel LTC and BSPVT frames.
 pub struct Renderer<'a> {
-    pub scene: &'a Scene,
+    pub(crate) scene: &'a Scene,
+    /// The camera.
     pub view: View,
+    /// Primary visibility of the camera.
     pub gbuffer: GBuffer,
     /// Vertices of the triangles the camera sees.
-    pub visible_vertices: Vec<u32>,
+    pub(crate) visible_vertices: Vec<u32>,
     /// Material of each vertex (that of the first triangle using it).
-    pub vertex_material: Vec<u32>,
-    pub table: &'static LtcTable,
+    pub(crate) vertex_material: Vec<u32>,
+    pub(crate) table: &'static LtcTable,
     /// The scene's materials, with the roughness override applied.
     materials: Vec<Material>,
 }
 
 impl<'a> Renderer<'a> {
+    /// A renderer with the scene's camera at `width`×`height`.
     pub fn new(scene: &'a Scene, width: u32, height: u32) -> Renderer<'a> {
         Renderer::with_camera(scene, &scene.camera, width, height)
     }
@@ -117,7 +126,7 @@ impl<'a> Renderer<'a> {
     }
 
     /// Moves the camera: the G-buffer and the visible vertices follow.
-    pub fn set_camera(&mut self, camera: &Camera) {
+    pub(crate) fn set_camera(&mut self, camera: &Camera) {
         let (w, h) = (self.gbuffer.width, self.gbuffer.height);
         self.view = View::new(camera, w, h);
         self.gbuffer = GBuffer::rasterize(&self.scene.mesh, &self.view);
@@ -131,7 +140,7 @@ impl<'a> Renderer<'a> {
     }
 
     /// Overrides every material's GGX roughness α (`None`: the scene's own).
-    pub fn set_roughness(&mut self, alpha: Option<f32>) {
+    pub(crate) fn set_roughness(&mut self, alpha: Option<f32>) {
         self.materials = self.scene.materials.clone();
         if let Some(a) = alpha {
             for m in &mut self.materials {
@@ -157,7 +166,7 @@ impl<'a> Renderer<'a> {
 
     /// BSPVT per vertex: for every visible vertex, (shadowed radiance, shadow ratios).
     /// Vertices the camera does not see are left at zero.
-    pub fn shade_vertices(
+    pub(crate) fn shade_vertices(
         &self,
         light: &Light,
         trees: &Trees,
@@ -209,7 +218,7 @@ impl<'a> Renderer<'a> {
     }
 
     /// Unshadowed LTC per vertex (the "ltc" method in vertex mode).
-    pub fn shade_vertices_unshadowed(&self, light: &Light) -> Vec<[f32; 3]> {
+    pub(crate) fn shade_vertices_unshadowed(&self, light: &Light) -> Vec<[f32; 3]> {
         let n = self.scene.mesh.vertex_count();
         let shaded: Vec<(u32, [f32; 3])> = self
             .visible_vertices
@@ -228,7 +237,7 @@ impl<'a> Renderer<'a> {
     }
 
     /// Interpolates per-vertex colours over the visible triangles.
-    pub fn interpolate(&self, colour: &[[f32; 3]]) -> Image {
+    pub(crate) fn interpolate(&self, colour: &[[f32; 3]]) -> Image {
         let mesh = &self.scene.mesh;
         let g = &self.gbuffer;
         let mut img = Image::new(g.width, g.height);

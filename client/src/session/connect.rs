@@ -2,7 +2,6 @@
 //! the scene (cached), build the session, start the fetcher with the camera's vertices first.
 
 use std::path::PathBuf;
-use std::time::Instant;
 
 use anyhow::Result;
 use bspvt_proto::Scene;
@@ -42,15 +41,16 @@ impl std::fmt::Debug for dyn Embedded {
 
 /// A served scene and its bytes.
 pub struct Connected {
+    /// The service and the scene id.
     pub served: Served,
+    /// The scene as the service baked it.
     pub scene: Scene,
+    /// Scene bytes fetched (0 when it came from the cache).
     pub scene_bytes_fetched: u64,
-    pub started: Instant,
 }
 
 /// Resolves the source and fetches the scene.
 pub fn connect(a: &ConnectOptions) -> Result<Connected> {
-    let started = Instant::now();
     let src = Source::parse(a.source.as_deref(), a.mesh.as_deref())?;
     let served = source::open(
         &src,
@@ -71,7 +71,6 @@ pub fn connect(a: &ConnectOptions) -> Result<Connected> {
         served,
         scene,
         scene_bytes_fetched,
-        started,
     })
 }
 

@@ -23,16 +23,16 @@ use crate::stream::trees::StreamedTrees;
 
 /// An orbit camera around a target.
 #[derive(Clone, Copy, Debug)]
-pub struct Orbit {
-    pub target: DVec3,
-    pub yaw: f64,
-    pub pitch: f64,
-    pub distance: f64,
-    pub fov_y_deg: f32,
+pub(crate) struct Orbit {
+    pub(crate) target: DVec3,
+    pub(crate) yaw: f64,
+    pub(crate) pitch: f64,
+    pub(crate) distance: f64,
+    pub(crate) fov_y_deg: f32,
 }
 
 impl Orbit {
-    pub fn from_camera(c: &Camera) -> Orbit {
+    pub(crate) fn from_camera(c: &Camera) -> Orbit {
         let target = DVec3::from(c.target.map(f64::from));
         let d = DVec3::from(c.position.map(f64::from)) - target;
         let distance = d.length().max(1e-6);
@@ -45,7 +45,7 @@ impl Orbit {
         }
     }
 
-    pub fn camera(&self) -> Camera {
+    pub(crate) fn camera(&self) -> Camera {
         let pitch = self.pitch.clamp(-1.5, 1.5);
         let d = DVec3::new(
             pitch.cos() * self.yaw.sin(),
@@ -65,11 +65,11 @@ impl Orbit {
 /// The user's pose of the light relative to its rest pose: a translation and a rotation about
 /// its centroid, and a radiance scale.
 #[derive(Clone, Copy, Debug)]
-pub struct LightPose {
-    pub offset: DVec3,
-    pub yaw: f64,
-    pub tilt: f64,
-    pub radiance_scale: f64,
+pub(crate) struct LightPose {
+    pub(crate) offset: DVec3,
+    pub(crate) yaw: f64,
+    pub(crate) tilt: f64,
+    pub(crate) radiance_scale: f64,
 }
 
 impl Default for LightPose {
@@ -86,7 +86,7 @@ impl Default for LightPose {
 /// A scene being viewed: what the window, `animate` and `demo` draw through.
 pub struct Session<'a> {
     /// The scene (at t = 0 for moving scenes).
-    pub scene: &'a Scene,
+    pub(crate) scene: &'a Scene,
     /// The camera's G-buffer and the shading of polygon lights.
     pub renderer: Renderer<'a>,
     /// The trees that have arrived.
@@ -99,16 +99,16 @@ pub struct Session<'a> {
     /// Per vertex or per pixel.
     pub mode: Mode,
     /// The camera.
-    pub orbit: Orbit,
+    pub(crate) orbit: Orbit,
     rest: Light,
     path: LightPath,
     /// The user's pose of the light.
-    pub pose: LightPose,
+    pub(crate) pose: LightPose,
     /// Position on the light's default path in [0, 1) (`None`: the user's pose alone); also
     /// the cycle time of a moving scene for the run-time methods.
     pub path_t: Option<f64>,
     /// The roughness override (`None`: the materials').
-    pub roughness: Option<f32>,
+    pub(crate) roughness: Option<f32>,
     data: SceneData<'a>,
     /// What the methods read; the environment map defaults to the shared test map.
     settings: Settings,
@@ -119,7 +119,7 @@ pub struct Session<'a> {
 
 impl<'a> Session<'a> {
     /// A session on `scene` at `width`×`height`, drawing BSPVT per vertex.
-    pub fn new(
+    pub(crate) fn new(
         scene: &'a Scene,
         width: u32,
         height: u32,
@@ -156,14 +156,6 @@ impl<'a> Session<'a> {
             },
             states: HashMap::new(),
         })
-    }
-
-    /// Sets the environment map and lobe count of the environment methods (prepared again on
-    /// their next frame).
-    pub fn set_environment(&mut self, path: Option<std::path::PathBuf>, lobes: usize) {
-        self.settings.env.path = path.unwrap_or_else(crate::envmap::default_env_path);
-        self.settings.env.lobes = lobes;
-        self.states.retain(|_, _| false);
     }
 
     /// Applies the updates that arrived; returns whether the trees changed.
@@ -209,12 +201,13 @@ impl<'a> Session<'a> {
         }
     }
 
-    pub fn set_camera(&mut self, orbit: Orbit) {
+    pub(crate) fn set_camera(&mut self, orbit: Orbit) {
         self.orbit = orbit;
         self.renderer.set_camera(&orbit.camera());
         self.invalidate();
     }
 
+    /// Overrides every material's GGX α (`None`: the materials' own).
     pub fn set_roughness(&mut self, alpha: Option<f32>) {
         self.roughness = alpha.map(|a| a.clamp(1e-3, 1.0));
         self.renderer.set_roughness(self.roughness);
@@ -277,7 +270,7 @@ impl<'a> Session<'a> {
     }
 
     /// Passes accumulated in the current image by a progressive method (Monte Carlo).
-    pub fn passes(&self) -> u32 {
+    pub(crate) fn passes(&self) -> u32 {
         match self.states.get(self.method.name()) {
             Some(Ok(s)) => s.passes(),
             _ => 0,
@@ -293,7 +286,7 @@ impl<'a> Session<'a> {
 impl Session<'_> {
     /// Connects a fetcher's updates (after [`Session::new`], so the fetcher can be told which
     /// vertices the camera sees first).
-    pub fn attach(&mut self, updates: Receiver<Update>, counters: Arc<Counters>) {
+    pub(crate) fn attach(&mut self, updates: Receiver<Update>, counters: Arc<Counters>) {
         self.updates = Some(updates);
         self.counters = Some(counters);
     }

@@ -22,29 +22,29 @@ use super::Sg;
 use crate::ggx;
 
 /// The clamped cosine as an SG: sharpness and amplitude.
-pub const COS_LAMBDA: f64 = 2.133;
-pub const COS_MU: f64 = 1.170;
+pub(crate) const COS_LAMBDA: f64 = 2.133;
+pub(crate) const COS_MU: f64 = 1.170;
 
 /// Smallest n·ωo the specular warp uses (grazing views: the lobe is then very sharp and
 /// masked to nearly nothing).
 const MIN_COS_VIEW: f64 = 1e-4;
 
 /// max(n·ωi, 0) ≈ this SG.
-pub fn cosine_lobe(n: DVec3) -> Sg {
+pub(crate) fn cosine_lobe(n: DVec3) -> Sg {
     Sg::new(n, COS_LAMBDA, COS_MU)
 }
 
 /// The specular lobe of one point: `sg` is D·G₁G₁/(4 n·ωo) warped to ωi (Fresnel excluded);
 /// the Fresnel of channel c is f0_c + (1 − f0_c) · `fresnel_weight`.
 #[derive(Clone, Copy, Debug)]
-pub struct SpecLobe {
-    pub sg: Sg,
-    pub fresnel_weight: f64,
+pub(crate) struct SpecLobe {
+    pub(crate) sg: Sg,
+    pub(crate) fresnel_weight: f64,
 }
 
 /// The warped GGX lobe for roughness `alpha`, unit normal `n` and unit view `wo` (world
 /// space). `None` when the view is below the horizon.
-pub fn ggx_lobe(alpha: f64, n: DVec3, wo: DVec3) -> Option<SpecLobe> {
+pub(crate) fn ggx_lobe(alpha: f64, n: DVec3, wo: DVec3) -> Option<SpecLobe> {
     let a = ggx::clamp_alpha(alpha);
     let cos_o = n.dot(wo);
     if !(cos_o > 0.0) {

@@ -25,11 +25,11 @@ use super::halfspace;
 /// Table entries over c ∈ [−1, 1].
 const N: usize = 1024;
 /// Sharpest lobe tabulated (the horizon step is then ≥ 0.03 wide in c, 16 entries).
-pub const MAX_LAMBDA: f64 = 1000.0;
+pub(crate) const MAX_LAMBDA: f64 = 1000.0;
 
 /// One lobe's diffuse tables.
 #[derive(Clone, Debug)]
-pub struct DiffuseTable {
+pub(crate) struct DiffuseTable {
     /// ∫ G_k C over the sphere, at c_i = −1 + 2i/N.
     full: Vec<f32>,
     /// ∫ G_k C over the horizon's half-space.
@@ -37,7 +37,7 @@ pub struct DiffuseTable {
 }
 
 /// The two integrals for a shading normal `n` (exact path, the renderer's own formulas).
-pub fn exact(g: &Sg, n: DVec3) -> (f64, f64) {
+pub(crate) fn exact(g: &Sg, n: DVec3) -> (f64, f64) {
     let (p, full) = g.product_and_integral_f32(&cosine_lobe(n));
     let d = p.axis.dot(n).clamp(-1.0, 1.0).asin();
     (
@@ -48,7 +48,7 @@ pub fn exact(g: &Sg, n: DVec3) -> (f64, f64) {
 
 impl DiffuseTable {
     /// The tables of `g` (`None` when it is sharper than [`MAX_LAMBDA`]).
-    pub fn new(g: &Sg) -> Option<DiffuseTable> {
+    pub(crate) fn new(g: &Sg) -> Option<DiffuseTable> {
         if !(g.lambda <= MAX_LAMBDA) {
             return None;
         }
@@ -66,7 +66,7 @@ impl DiffuseTable {
 
     /// (∫ G_k C, ∫_horizon G_k C) at c = n·ξ.
     #[inline]
-    pub fn lookup(&self, c: f64) -> (f64, f64) {
+    pub(crate) fn lookup(&self, c: f64) -> (f64, f64) {
         let x = (c.clamp(-1.0, 1.0) + 1.0) * 0.5 * N as f64;
         let i = (x as usize).min(N - 1);
         let w = (x - i as f64) as f32;
@@ -77,7 +77,7 @@ impl DiffuseTable {
 
 /// The product's axis p (unit) for lobe `g` and normal `n`: what the occluder test needs.
 #[inline]
-pub fn product_axis(g: &Sg, n: DVec3) -> DVec3 {
+pub(crate) fn product_axis(g: &Sg, n: DVec3) -> DVec3 {
     (g.axis * g.lambda + n * COS_LAMBDA).normalize_or(n)
 }
 

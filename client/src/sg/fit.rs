@@ -31,24 +31,24 @@ use super::Sg;
 use crate::envmap::EnvLight;
 
 /// Sharpness bounds of the fit.
-pub const LN_LAMBDA_MIN: f64 = -6.907_755_278_982_137; // ln 1e-3
-pub const LN_LAMBDA_MAX: f64 = 11.512_925_464_970_229; // ln 1e5
+pub(crate) const LN_LAMBDA_MIN: f64 = -6.907_755_278_982_137; // ln 1e-3
+pub(crate) const LN_LAMBDA_MAX: f64 = 11.512_925_464_970_229; // ln 1e5
 
 /// One lighting lobe: an SG of unit amplitude times an RGB radiance.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LightLobe {
-    pub axis: [f64; 3],
-    pub lambda: f64,
-    pub rgb: [f64; 3],
+    pub(crate) axis: [f64; 3],
+    pub(crate) lambda: f64,
+    pub(crate) rgb: [f64; 3],
 }
 
 impl LightLobe {
     /// The lobe's shape (μ = 1).
-    pub fn sg(&self) -> Sg {
+    pub(crate) fn sg(&self) -> Sg {
         Sg::new(DVec3::from(self.axis), self.lambda, 1.0)
     }
 
-    pub fn rgb(&self) -> DVec3 {
+    pub(crate) fn rgb(&self) -> DVec3 {
         DVec3::from(self.rgb)
     }
 }
@@ -56,33 +56,26 @@ impl LightLobe {
 /// An environment map as a sum of SGs, with the fit's report.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct SgEnv {
-    pub lobes: Vec<LightLobe>,
+    pub(crate) lobes: Vec<LightLobe>,
     /// Relative L2 error over the sphere (full-resolution map).
     pub fit_error: f64,
     /// The same on the downsampled map the optimiser saw.
-    pub fit_error_fitted_map: f64,
-    pub iterations: usize,
+    pub(crate) fit_error_fitted_map: f64,
+    pub(crate) iterations: usize,
+    /// Time the fit took, s.
     pub seconds: f64,
-}
-
-impl SgEnv {
-    /// Σ_k rgb_k G_k(d).
-    pub fn eval(&self, d: DVec3) -> DVec3 {
-        let d = d.normalize_or(DVec3::Y);
-        self.lobes.iter().map(|l| l.rgb() * l.sg().eval(d)).sum()
-    }
 }
 
 /// Fit settings.
 #[derive(Clone, Copy, Debug)]
 pub struct FitOptions {
     /// Width of the downsampled map the optimiser sees (height = width / 2).
-    pub map_width: u32,
+    pub(crate) map_width: u32,
     /// Adam iterations.
-    pub iterations: usize,
+    pub(crate) iterations: usize,
     /// Adam step for the axes (radians) and for ln λ, decayed ×0.1 over the run.
-    pub step_axis: f64,
-    pub step_ln_lambda: f64,
+    pub(crate) step_axis: f64,
+    pub(crate) step_ln_lambda: f64,
 }
 
 impl Default for FitOptions {
@@ -197,7 +190,7 @@ impl Samples {
 
 /// Luminance (Rec. 709).
 fn luminance(c: DVec3) -> f64 {
-    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+    crate::frame::stats::luminance(c.x, c.y, c.z)
 }
 
 /// Basis values G_k(d_i) for all samples, sample-major (row i holds K values).

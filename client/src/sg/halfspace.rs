@@ -123,7 +123,7 @@ fn kept_azimuths(s: f64, sin_d: f64, cos_d: f64) -> f64 {
 
 /// The kept fraction F(λ, d) by numerical integration (f64 reference; slow). `d` is clamped
 /// to [−π/2, π/2]; NaN input gives 0.
-pub fn fraction_exact(lambda: f64, d: f64) -> f64 {
+pub(crate) fn fraction_exact(lambda: f64, d: f64) -> f64 {
     if lambda.is_nan() || d.is_nan() {
         return 0.0;
     }
@@ -161,8 +161,9 @@ pub fn fraction_exact(lambda: f64, d: f64) -> f64 {
     (total / norm).clamp(0.0, 1.0)
 }
 
+#[cfg(test)]
 /// The kept integral I(λ, d) = S(λ) F(λ, d) by numerical integration (f64 reference).
-pub fn integral_exact(lambda: f64, d: f64) -> f64 {
+pub(crate) fn integral_exact(lambda: f64, d: f64) -> f64 {
     super::lobe::sphere_integral(lambda) * fraction_exact(lambda, d)
 }
 
@@ -238,7 +239,7 @@ pub fn warm_up() {
 /// The kept fraction F(λ, d) from the table (f32, for shading). `d` is clamped to
 /// [−π/2, π/2]; NaN input gives 0.
 #[inline]
-pub fn fraction(lambda: f32, d: f32) -> f32 {
+pub(crate) fn fraction(lambda: f32, d: f32) -> f32 {
     if lambda.is_nan() || d.is_nan() {
         return 0.0;
     }
@@ -248,15 +249,17 @@ pub fn fraction(lambda: f32, d: f32) -> f32 {
     if d >= 0.0 { f } else { 1.0 - f }
 }
 
+#[cfg(test)]
 /// ∫ G over the half-space at signed distance `d` from G's axis (see the module docs).
 #[inline]
-pub fn integral(g: &super::Sg, d: f64) -> f64 {
+pub(crate) fn integral(g: &super::Sg, d: f64) -> f64 {
     g.integral() * f64::from(fraction(g.lambda as f32, d as f32))
 }
 
+#[cfg(test)]
 /// ∫ G over the hemisphere of unit normal `n` (v·n ≥ 0).
 #[inline]
-pub fn hemisphere(g: &super::Sg, n: glam::DVec3) -> f64 {
+pub(crate) fn hemisphere(g: &super::Sg, n: glam::DVec3) -> f64 {
     integral(g, g.axis.dot(n).clamp(-1.0, 1.0).asin())
 }
 

@@ -15,10 +15,12 @@
 //!   which tends to 4π as λ → 0 (series 4π(1 − λ + …) below 1e-8).
 //! - Inner product ∫ G₁G₂ = integral of the product.
 
+#[cfg(test)]
 use std::f64::consts::PI;
 
 use glam::DVec3;
 
+#[cfg(test)]
 /// Sharpness below this is treated by its series (the closed forms are 0/0 at λ = 0).
 const TINY_LAMBDA: f64 = 1e-8;
 
@@ -26,17 +28,17 @@ const TINY_LAMBDA: f64 = 1e-8;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sg {
     /// Unit axis p.
-    pub axis: DVec3,
+    pub(crate) axis: DVec3,
     /// Sharpness λ ≥ 0.
-    pub lambda: f64,
+    pub(crate) lambda: f64,
     /// Amplitude μ (the value on the axis).
-    pub mu: f64,
+    pub(crate) mu: f64,
 }
 
 impl Sg {
     /// An SG; the axis is normalised (a zero or non-finite axis becomes +z), a negative or NaN
     /// sharpness becomes 0 and a non-finite amplitude 0.
-    pub fn new(axis: DVec3, lambda: f64, mu: f64) -> Sg {
+    pub(crate) fn new(axis: DVec3, lambda: f64, mu: f64) -> Sg {
         let axis = if axis.is_finite() {
             axis.normalize_or(DVec3::Z)
         } else {
@@ -55,7 +57,7 @@ impl Sg {
 
     /// G(v) for a unit direction `v`.
     #[inline]
-    pub fn eval(&self, v: DVec3) -> f64 {
+    pub(crate) fn eval(&self, v: DVec3) -> f64 {
         // p·v − 1 = −‖p − v‖²/2: exact near the axis, where the dot product would round.
         let e = -0.5 * (self.axis - v).length_squared();
         self.mu * (self.lambda * e).exp()
@@ -82,8 +84,9 @@ impl Sg {
         (axis, r, expo)
     }
 
+    #[cfg(test)]
     /// The product G₁·G₂ as one SG (exact).
-    pub fn product(&self, o: &Sg) -> Sg {
+    pub(crate) fn product(&self, o: &Sg) -> Sg {
         let (axis, r, expo) = self.product_shape(o);
         Sg {
             axis,
@@ -96,7 +99,7 @@ impl Sg {
     /// formulas with the exponentials in f32 (relative error ≈ 1e-6; tested against the f64
     /// forms).
     #[inline]
-    pub fn product_and_integral_f32(&self, o: &Sg) -> (Sg, f64) {
+    pub(crate) fn product_and_integral_f32(&self, o: &Sg) -> (Sg, f64) {
         let (axis, r, expo) = self.product_shape(o);
         let mu = self.mu * o.mu * f64::from((expo.max(-150.0) as f32).exp());
         let g = Sg {
@@ -107,21 +110,24 @@ impl Sg {
         (g, mu * f64::from(sphere_integral_f32(r as f32)))
     }
 
+    #[cfg(test)]
     /// ∫ G(v) dv over the sphere.
     #[inline]
-    pub fn integral(&self) -> f64 {
+    pub(crate) fn integral(&self) -> f64 {
         self.mu * sphere_integral(self.lambda)
     }
 
+    #[cfg(test)]
     /// ∫ G₁(v) G₂(v) dv over the sphere.
-    pub fn inner_product(&self, o: &Sg) -> f64 {
+    pub(crate) fn inner_product(&self, o: &Sg) -> f64 {
         self.product(o).integral()
     }
 }
 
+#[cfg(test)]
 /// ∫ exp(λ(p·v − 1)) dv over the whole sphere = 2π (−expm1(−2λ)) / λ; 4π at λ = 0.
 #[inline]
-pub fn sphere_integral(lambda: f64) -> f64 {
+pub(crate) fn sphere_integral(lambda: f64) -> f64 {
     if !(lambda > TINY_LAMBDA) {
         // 2π(1 − e^{−2λ})/λ = 4π (1 − λ + 2λ²/3 − …); NaN and negative λ read as 0.
         let l = if lambda > 0.0 { lambda } else { 0.0 };
@@ -136,7 +142,7 @@ pub fn sphere_integral(lambda: f64) -> f64 {
 
 /// f32 version of [`sphere_integral`] for the shading loops.
 #[inline]
-pub fn sphere_integral_f32(lambda: f32) -> f32 {
+pub(crate) fn sphere_integral_f32(lambda: f32) -> f32 {
     if !(lambda > 1e-4) {
         let l = if lambda > 0.0 { lambda } else { 0.0 };
         return 4.0 * std::f32::consts::PI * (1.0 - l);

@@ -2,13 +2,13 @@
 //! function (paper 001; Wang et al. 2009 for the SG shading, Xu et al. 2013 for SSDF
 //! visibility). Pure math lives in [`lobe`], [`halfspace`] and [`brdf`].
 
-pub mod brdf;
-pub mod diffuse;
+pub(crate) mod brdf;
+pub(crate) mod diffuse;
 pub mod fit;
 pub mod halfspace;
-pub mod lobe;
-pub mod render;
-pub mod ssdf;
+pub(crate) mod lobe;
+pub(crate) mod render;
+pub(crate) mod ssdf;
 
 pub use fit::{FitOptions, LightLobe, SgEnv, fit, fit_cached, fit_with};
 pub use lobe::Sg;
@@ -23,7 +23,7 @@ pub(crate) mod testutil {
     /// ∫ f over the sphere in polar coordinates about `axis`: midpoint rule in φ (256 cells)
     /// and, per φ, the tanh-sinh rule in θ over intervals [0, 1e-6, 2e-6, …, π] that resolve
     /// lobes up to λ ≈ 1e10 around `axis`.
-    pub fn quad_about(axis: DVec3, f: &dyn Fn(DVec3) -> f64) -> f64 {
+    pub(crate) fn quad_about(axis: DVec3, f: &dyn Fn(DVec3) -> f64) -> f64 {
         let (t1, t2) = axis.any_orthonormal_pair();
         let n_phi = 256;
         let mut edges = vec![0.0];

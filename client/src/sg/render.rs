@@ -49,6 +49,7 @@ pub enum SsdfMode {
 /// Renderer settings.
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct SgOptions {
+    /// How the SSDF (visibility) is found.
     pub ssdf: SsdfMode,
     /// Side of the screen-space depth maps (rounded up to a power of two; paper: 256).
     pub depth_res: u32,
@@ -78,12 +79,12 @@ pub struct SgTimings {
     /// Rendering the depth maps and their pyramids (screen mode).
     pub maps_ms: f64,
     /// The per-pixel pass (SSDF search + shading).
-    pub pixels_ms: f64,
-    pub pixels_shaded: usize,
-    pub lobes: usize,
+    pub(crate) pixels_ms: f64,
+    pub(crate) pixels_shaded: usize,
+    pub(crate) lobes: usize,
     /// SSDF searches run (pixel × lobe), and those reused from a block's representative.
-    pub searches: u64,
-    pub reused: u64,
+    pub(crate) searches: u64,
+    pub(crate) reused: u64,
 }
 
 /// A lobe whose unshadowed bound (full-sphere integral of its products) is below this fraction

@@ -30,7 +30,7 @@ use glam::Vec3;
 
 /// A lobe's visibility at one point.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Boundary {
+pub(crate) enum Boundary {
     /// No occluder boundary within π/2 of the axis; the axis is unoccluded.
     Visible,
     /// No boundary within π/2; the axis is occluded.
@@ -42,7 +42,7 @@ pub enum Boundary {
 impl Boundary {
     /// The half-space through boundary direction `t` for an axis `xi` whose state is
     /// `occluded`: m ∝ ξ − (ξ·t)t, flipped when ξ is occluded so that ξ·m = ±sin δ.
-    pub fn from_direction(xi: Vec3, t: Vec3, occluded: bool) -> Boundary {
+    pub(crate) fn from_direction(xi: Vec3, t: Vec3, occluded: bool) -> Boundary {
         let m = xi - t * xi.dot(t);
         let len = m.length();
         // δ beyond π/2 (t behind ξ) or degenerate: no usable boundary.
@@ -60,7 +60,7 @@ impl Boundary {
     /// Signed angular distance of a lobe axis `p` from the boundary: +∞ when visible, −∞ when
     /// occluded, asin(p·m) for a plane.
     #[inline]
-    pub fn distance(&self, p: Vec3) -> f32 {
+    pub(crate) fn distance(&self, p: Vec3) -> f32 {
         match self {
             Boundary::Visible => f32::INFINITY,
             Boundary::Occluded => f32::NEG_INFINITY,
@@ -71,10 +71,10 @@ impl Boundary {
 
 /// A shading point as the searches see it.
 #[derive(Clone, Copy, Debug)]
-pub struct Point {
-    pub position: Vec3,
+pub(crate) struct Point {
+    pub(crate) position: Vec3,
     /// Unit geometric normal (viewer's side).
-    pub geometric: Vec3,
+    pub(crate) geometric: Vec3,
 }
 
 /// Ring radii of the exact search (radians): doubling up to 0.39, then steps of ≈ 0.2 to the
@@ -92,7 +92,7 @@ fn ray_occluded(occ: &Occluder, p: &Point, w: Vec3, eps: f32) -> bool {
 }
 
 /// The nearest boundary to `xi` by ray casting (see the module docs). `eps`: ray offset.
-pub fn exact_boundary(occ: &Occluder, p: &Point, xi: Vec3, eps: f32) -> Boundary {
+pub(crate) fn exact_boundary(occ: &Occluder, p: &Point, xi: Vec3, eps: f32) -> Boundary {
     if !(xi.dot(p.geometric) > 0.0) {
         return Boundary::Visible;
     }
@@ -169,8 +169,8 @@ struct Level {
 
 /// An orthographic depth map looking along −ξ, with its MIN/MAX pyramid.
 #[derive(Clone, Debug)]
-pub struct DepthMap {
-    pub xi: Vec3,
+pub(crate) struct DepthMap {
+    pub(crate) xi: Vec3,
     centre: Vec3,
     right: Vec3,
     up: Vec3,
@@ -182,12 +182,12 @@ pub struct DepthMap {
 /// Side of the coarsest pyramid level.
 const TOP: usize = 8;
 /// Neighbourhood searched at each finer level by default (the paper's 6×6).
-pub const DEFAULT_WINDOW: u32 = 6;
+pub(crate) const DEFAULT_WINDOW: u32 = 6;
 
 impl DepthMap {
     /// Renders `mesh` (bounding sphere `centre`, `radius`) along −`xi` at `res`² (a power of
     /// two ≥ 8 is used: `res` rounded up).
-    pub fn render(mesh: &Mesh, centre: Vec3, radius: f32, xi: Vec3, res: usize) -> DepthMap {
+    pub(crate) fn render(mesh: &Mesh, centre: Vec3, radius: f32, xi: Vec3, res: usize) -> DepthMap {
         let res = res.clamp(TOP, 4096).next_power_of_two();
         let (right, up) = xi.any_orthonormal_pair();
         let half = radius.max(1e-6) * 1.001;
@@ -305,7 +305,7 @@ impl DepthMap {
     }
 
     /// Side of the finest level.
-    pub fn res(&self) -> usize {
+    pub(crate) fn res(&self) -> usize {
         self.levels[0].res
     }
 
@@ -324,7 +324,7 @@ impl DepthMap {
     /// The nearest boundary to ξ seen from `p` (see the module docs). `bias_abs`: depth bias
     /// in world units added to the slope-scaled texel bias; `window`: side of the
     /// neighbourhood searched at each finer level (clamped to 2..=16; the paper's is 6).
-    pub fn boundary(&self, p: &Point, bias_abs: f32, window: u32) -> Boundary {
+    pub(crate) fn boundary(&self, p: &Point, bias_abs: f32, window: u32) -> Boundary {
         let neigh = window.clamp(2, 16) as isize;
         let xi = self.xi;
         let cos_l = xi.dot(p.geometric);

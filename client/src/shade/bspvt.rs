@@ -11,10 +11,13 @@ use crate::light::Light;
 
 /// Shadowed and unshadowed integrals of `light` at a vertex with baked `trees`.
 pub struct VertexLight {
+    /// With the trees' visibility: Σ v̄ᵢ ∫ over the pieces [paper000 §3.1 eq. 2].
     pub shadowed: Shaded,
+    /// Without visibility (the whole light above the horizon).
     pub unshadowed: Shaded,
-    /// Pieces integrated (v̄ > 0) and dropped (v̄ = 0).
+    /// Pieces integrated (v̄ > 0).
     pub pieces: u32,
+    /// Pieces dropped (v̄ = 0).
     pub dropped: u32,
 }
 

@@ -26,7 +26,9 @@ use crate::texture::LightFrame;
 /// The two integrals of a light at a point: diffuse D = ∫ V cos/π and specular S = ∫ V D_ltc.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Integrals {
+    /// ∫ V cos θ / π over the light.
     pub diffuse: f64,
+    /// ∫ V D_ltc over the light [Heitz16].
     pub specular: f64,
 }
 
@@ -51,15 +53,18 @@ impl std::ops::Mul<f64> for Integrals {
 /// lights), likewise `specular_rgb`. The scalar `integrals` give the shadow ratios.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Shaded {
+    /// The scalar integrals (shadow ratios).
     pub integrals: Integrals,
+    /// Σ v̄ᵢ Dᵢ · texᵢ per channel.
     pub diffuse_rgb: DVec3,
+    /// Σ v̄ᵢ Sᵢ · texᵢ per channel.
     pub specular_rgb: DVec3,
 }
 
 impl Shaded {
     /// Adds `v` × one piece.
     #[inline]
-    pub fn add_weighted(&mut self, piece: &Shaded, v: f64) {
+    pub(crate) fn add_weighted(&mut self, piece: &Shaded, v: f64) {
         self.integrals += piece.integrals * v;
         self.diffuse_rgb += piece.diffuse_rgb * v;
         self.specular_rgb += piece.specular_rgb * v;
@@ -69,7 +74,7 @@ impl Shaded {
 impl Integrals {
     /// Shadowed / unshadowed per lobe, 1 where the unshadowed integral is zero (the ratio
     /// then multiplies nothing).
-    pub fn ratio(&self, unshadowed: &Integrals) -> [f32; 2] {
+    pub(crate) fn ratio(&self, unshadowed: &Integrals) -> [f32; 2] {
         let r = |s: f64, u: f64| {
             if u > 0.0 {
                 (s / u).clamp(0.0, 1.0) as f32
@@ -91,11 +96,11 @@ pub struct Lobes {
     /// World direction → local frame (rows: tangent, bitangent, normal).
     pub to_local: DMat3,
     /// World direction → the specular LTC's cosine space: M⁻¹ · to_local.
-    pub to_ltc: DMat3,
+    pub(crate) to_ltc: DMat3,
     /// Albedo (diffuse weight).
-    pub albedo: DVec3,
+    pub(crate) albedo: DVec3,
     /// F0 · magnitude + (1 − F0) · fresnel, per channel.
-    pub specular: DVec3,
+    pub(crate) specular: DVec3,
 }
 
 impl Lobes {
@@ -116,7 +121,7 @@ impl Lobes {
 
     /// Both integrals over one spherical polygon of world directions (from the point).
     #[inline]
-    pub fn integrate(&self, poly: &[DVec3]) -> Integrals {
+    pub(crate) fn integrate(&self, poly: &[DVec3]) -> Integrals {
         Integrals {
             diffuse: integrate(&self.to_local, poly),
             specular: integrate(&self.to_ltc, poly),
@@ -126,7 +131,7 @@ impl Lobes {
     /// Both integrals over one polygon, with the light's texture fetched per lobe where its
     /// vector form factor points (Heitz et al. 2016, §5.3).
     #[inline]
-    pub fn shade(&self, poly: &[DVec3], emitter: &Emitter) -> Shaded {
+    pub(crate) fn shade(&self, poly: &[DVec3], emitter: &Emitter) -> Shaded {
         match emitter.texture {
             None => {
                 let i = self.integrate(poly);
@@ -153,26 +158,26 @@ impl Lobes {
 
     /// Outgoing radiance for light radiance `l`.
     #[inline]
-    pub fn radiance(&self, l: DVec3, s: &Shaded) -> DVec3 {
+    pub(crate) fn radiance(&self, l: DVec3, s: &Shaded) -> DVec3 {
         l * (self.albedo * s.diffuse_rgb + self.specular * s.specular_rgb)
     }
 
     /// Outgoing radiance with separate shadow ratios [diffuse, specular] (per-pixel mode).
     #[inline]
-    pub fn radiance_scaled(&self, l: DVec3, s: &Shaded, ratio: [f32; 2]) -> DVec3 {
+    pub(crate) fn radiance_scaled(&self, l: DVec3, s: &Shaded, ratio: [f32; 2]) -> DVec3 {
         l * (self.albedo * s.diffuse_rgb * f64::from(ratio[0])
             + self.specular * s.specular_rgb * f64::from(ratio[1]))
     }
 }
 
 /// What a shading point needs of the light beyond its polygon: its plane frame and texture.
-pub struct Emitter<'a> {
-    pub frame: LightFrame,
-    pub texture: Option<&'a crate::texture::LightTexture>,
+pub(crate) struct Emitter<'a> {
+    pub(crate) frame: LightFrame,
+    pub(crate) texture: Option<&'a crate::texture::LightTexture>,
 }
 
 impl<'a> Emitter<'a> {
-    pub fn new(light: &'a Light, p: DVec3) -> Emitter<'a> {
+    pub(crate) fn new(light: &'a Light, p: DVec3) -> Emitter<'a> {
         Emitter {
             frame: LightFrame::new(&light.vertices, p),
             texture: light.texture.as_deref(),
@@ -185,7 +190,7 @@ impl<'a> Emitter<'a> {
 /// Carlo ground truth and Mitsuba's one-sided BSDFs — so the per-pixel shaders return black
 /// there instead of clamping ωo to the horizon.
 #[inline]
-pub fn sees_viewer(n: DVec3, wo: DVec3) -> bool {
+pub(crate) fn sees_viewer(n: DVec3, wo: DVec3) -> bool {
     n.dot(wo) > 0.0
 }
 

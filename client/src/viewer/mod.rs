@@ -20,7 +20,9 @@ use crate::method::METHODS;
 use crate::render::renderer::Mode;
 use crate::session::Session;
 
+/// How the window runs.
 pub struct ViewerOptions {
+    /// Window title.
     pub title: String,
     /// Close after this many frames (scripted runs, tests).
     pub max_frames: Option<u64>,
@@ -30,11 +32,13 @@ pub struct ViewerOptions {
 
 /// What a viewer run measured.
 pub struct ViewerReport {
+    /// Frames drawn.
     pub frames: u64,
     /// From the session's creation to the first frame on screen.
-    pub first_frame: Option<Duration>,
+    pub(crate) first_frame: Option<Duration>,
     /// From the session's creation to the first frame with every tree present.
     pub first_full_frame: Option<Duration>,
+    /// Mean frames per second over the run.
     pub mean_fps: f64,
 }
 

@@ -5,14 +5,19 @@ use bspvt_client::frame::image::Image;
 use super::metrics::covered_mean;
 
 /// The error that saturates the heat map: half the reference's mean over covered pixels.
-pub fn error_scale(reference: &Image, covered: &[bool]) -> f32 {
+pub(crate) fn error_scale(reference: &Image, covered: &[bool]) -> f32 {
     let m = (0.5 * covered_mean(reference, covered)) as f32;
     if m.is_finite() && m > 0.0 { m } else { 1.0 }
 }
 
 /// |method − reference| (channel mean) / `scale` on a black → blue → red → yellow → white
 /// ramp; background pixels grey.
-pub fn heat_map(img: &Image, reference: &Image, covered: &[bool], scale: f32) -> image::RgbImage {
+pub(crate) fn heat_map(
+    img: &Image,
+    reference: &Image,
+    covered: &[bool],
+    scale: f32,
+) -> image::RgbImage {
     let mut out = image::RgbImage::new(img.width, img.height);
     let it = img.pixels.iter().zip(&reference.pixels).zip(covered);
     for (o, ((a, b), &c)) in out.pixels_mut().zip(it) {
@@ -27,7 +32,7 @@ pub fn heat_map(img: &Image, reference: &Image, covered: &[bool], scale: f32) ->
 }
 
 /// Piecewise-linear colour ramp on t ∈ [0, 1] (clamped; NaN saturates).
-pub fn ramp(t: f32) -> [u8; 3] {
+pub(crate) fn ramp(t: f32) -> [u8; 3] {
     const STOPS: [[f32; 3]; 5] = [
         [0.0, 0.0, 0.0],
         [0.0, 0.0, 1.0],

@@ -18,13 +18,16 @@ use bspvt_client::frame::image::Image;
 pub const DISPLAY_THRESHOLD: f64 = 0.08;
 
 /// τ / reference mean in the relative MSE.
-pub const REL_MSE_FLOOR: f64 = 0.01;
+pub(crate) const REL_MSE_FLOOR: f64 = 0.01;
 
 /// The errors of one image against its reference.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct Metrics {
+    /// Root-mean-square error over covered pixels and channels.
     pub rmse: f64,
+    /// Relative MSE: squared error over (reference² + 1e-2), averaged.
     pub rel_mse: f64,
+    /// Mean absolute error over covered pixels and channels.
     pub mae: f64,
     /// Mean LDR-FLIP over covered pixels (0 = identical, 1 = maximally different).
     pub flip: f64,
@@ -39,7 +42,7 @@ pub fn covered(gbuffer: &GBuffer) -> Vec<bool> {
 
 /// Every metric of `img` against `reference` over `covered` pixels; PNG-like tone mapping at
 /// `exposure` for the display metrics.
-pub fn measure(img: &Image, reference: &Image, covered: &[bool], exposure: f32) -> Metrics {
+pub(crate) fn measure(img: &Image, reference: &Image, covered: &[bool], exposure: f32) -> Metrics {
     let (rmse, mae) = rmse_mae(img, reference, covered);
     let a = img.to_srgb8(exposure);
     let b = reference.to_srgb8(exposure);
@@ -90,7 +93,7 @@ pub fn rmse_mae(a: &Image, b: &Image, covered: &[bool]) -> (f64, f64) {
 }
 
 /// Relative MSE with the floor τ = [`REL_MSE_FLOOR`] × the reference's covered mean.
-pub fn rel_mse(img: &Image, reference: &Image, covered: &[bool]) -> f64 {
+pub(crate) fn rel_mse(img: &Image, reference: &Image, covered: &[bool]) -> f64 {
     let tau = REL_MSE_FLOOR * covered_mean(reference, covered);
     let tau2 = (tau * tau).max(f64::MIN_POSITIVE);
     let (mut s, mut n) = (0.0, 0usize);
@@ -120,7 +123,7 @@ pub fn covered_mean(img: &Image, covered: &[bool]) -> f64 {
 
 /// √(mean σ²) over covered pixels and channels of a per-pixel standard-error image: a Monte
 /// Carlo reference's own RMSE.
-pub fn rmse_floor(stderr: &Image, covered: &[bool]) -> f64 {
+pub(crate) fn rmse_floor(stderr: &Image, covered: &[bool]) -> f64 {
     let (mut s2, mut n) = (0.0, 0usize);
     for (p, &c) in stderr.pixels.iter().zip(covered) {
         if c {
@@ -132,7 +135,7 @@ pub fn rmse_floor(stderr: &Image, covered: &[bool]) -> f64 {
 }
 
 /// Per-pixel mean of two images (two independent estimates → one with half the variance).
-pub fn mean_image(a: &Image, b: &Image) -> Image {
+pub(crate) fn mean_image(a: &Image, b: &Image) -> Image {
     let mut m = a.clone();
     for (p, q) in m.pixels.iter_mut().zip(&b.pixels) {
         for k in 0..3 {

@@ -1,5 +1,5 @@
 //! Comparing a rendered image with its reference: error metrics ([`metrics`]) and error heat
 //! maps ([`heatmap`]). Shared by the error-vs-time report and the benchmarks.
 
-pub mod heatmap;
+pub(crate) mod heatmap;
 pub mod metrics;

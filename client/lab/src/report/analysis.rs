@@ -8,12 +8,12 @@ use super::scene::Entry;
 use bspvt_client::render::renderer::Mode;
 
 /// The target of the visibility part: ≤ 0.5 % of the unshadowed radiance (mean absolute).
-pub const VISIBILITY_TARGET: f64 = 0.005;
+pub(crate) const VISIBILITY_TARGET: f64 = 0.005;
 /// The equal-time target: BSPVT's RMSE ≤ ¼ of the best stochastic method's.
-pub const EQUAL_TIME_TARGET: f64 = 0.25;
+pub(crate) const EQUAL_TIME_TARGET: f64 = 0.25;
 
 /// The stochastic methods BSPVT is compared with at equal time.
-pub const STOCHASTIC: [&str; 3] = ["mc", "ratio", "ratio-denoised"];
+pub(crate) const STOCHASTIC: [&str; 3] = ["mc", "ratio", "ratio-denoised"];
 
 /// BSPVT's mean absolute error against the ground truth, split in two (per bake and mode):
 ///
@@ -27,22 +27,22 @@ pub const STOCHASTIC: [&str; 3] = ["mc", "ratio", "ratio-denoised"];
 /// per-vertex mode the visibility part also holds the interpolation across triangles.
 #[derive(Clone, Debug, Serialize)]
 pub struct Budget {
-    pub face_res: u32,
-    pub epsilon: f32,
-    pub mode: Mode,
-    pub total_mae: f64,
-    pub visibility_mae: f64,
-    pub ltc_fit_mae: f64,
-    pub reference_noise_mae: f64,
+    pub(crate) face_res: u32,
+    pub(crate) epsilon: f32,
+    pub(crate) mode: Mode,
+    pub(crate) total_mae: f64,
+    pub(crate) visibility_mae: f64,
+    pub(crate) ltc_fit_mae: f64,
+    pub(crate) reference_noise_mae: f64,
     /// The parts over the mean unshadowed radiance.
     pub visibility_share: f64,
     pub ltc_fit_share: f64,
     /// `visibility_share` ≤ [`VISIBILITY_TARGET`].
-    pub visibility_target_met: bool,
+    pub(crate) visibility_target_met: bool,
 }
 
 #[allow(clippy::too_many_arguments)]
-pub fn budget(
+pub(crate) fn budget(
     face_res: u32,
     epsilon: f32,
     mode: Mode,
@@ -77,7 +77,7 @@ pub fn budget(
 /// How a stochastic method's RMSE at a given frame time was obtained.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 #[serde(rename_all = "kebab-case")]
-pub enum Reading {
+pub(crate) enum Reading {
     /// Log-log interpolation between the two sample counts whose times bracket it.
     Interpolated,
     /// The time is below the method's 1-sample frame time: the method cannot run that fast;
@@ -91,20 +91,20 @@ pub enum Reading {
 /// BSPVT at one setting against the best stochastic method at the same frame time.
 #[derive(Clone, Debug, Serialize)]
 pub struct EqualTime {
-    pub bspvt: String,
-    pub ms_per_frame: f64,
-    pub rmse: f64,
+    pub(crate) bspvt: String,
+    pub(crate) ms_per_frame: f64,
+    pub(crate) rmse: f64,
     /// The stochastic method with the lowest RMSE at that time, its RMSE and how it was read.
-    pub best: String,
-    pub best_rmse: f64,
-    pub reading: Reading,
+    pub(crate) best: String,
+    pub(crate) best_rmse: f64,
+    pub(crate) reading: Reading,
     /// `rmse / best_rmse`; the target is ≤ [`EQUAL_TIME_TARGET`].
-    pub ratio: f64,
-    pub target_met: bool,
+    pub(crate) ratio: f64,
+    pub(crate) target_met: bool,
 }
 
 /// The equal-time comparison for every BSPVT entry of one scene.
-pub fn equal_time(entries: &[Entry]) -> Vec<EqualTime> {
+pub(crate) fn equal_time(entries: &[Entry]) -> Vec<EqualTime> {
     entries
         .iter()
         .filter(|e| e.method == "bspvt")
@@ -138,7 +138,7 @@ pub fn equal_time(entries: &[Entry]) -> Vec<EqualTime> {
 /// A stochastic method's RMSE at frame time `t` from its (time, RMSE) points (any order).
 /// Times are made non-decreasing in sample order first: a noisy timing of a cheap point must
 /// not fold the curve back.
-pub fn rmse_at_time(curve: &[(f64, f64)], t: f64) -> Option<(f64, Reading)> {
+pub(crate) fn rmse_at_time(curve: &[(f64, f64)], t: f64) -> Option<(f64, Reading)> {
     let mut pts: Vec<(f64, f64)> = curve
         .iter()
         .copied()

@@ -28,13 +28,13 @@ const SEED_MC: u64 = 0x5e6e_1000;
 /// The environment section of one scene.
 #[derive(Clone, Debug, Serialize)]
 pub struct EnvReport {
-    pub map: String,
+    pub(crate) map: String,
     /// Ground truth: Monte Carlo spp, mean relative standard error, its own RMSE, seconds.
-    pub gt_spp: u32,
-    pub gt_mean_rel_stderr: f64,
-    pub gt_rmse_floor: f64,
-    pub gt_seconds: f64,
-    pub gt_from_cache: bool,
+    pub(crate) gt_spp: u32,
+    pub(crate) gt_mean_rel_stderr: f64,
+    pub(crate) gt_rmse_floor: f64,
+    pub(crate) gt_seconds: f64,
+    pub(crate) gt_from_cache: bool,
     /// Per lobe count: the fit's relative L2 error and its time (precompute per map).
     pub fits: Vec<(usize, f64, f64)>,
     pub entries: Vec<Entry>,
@@ -49,7 +49,7 @@ struct GtMeta {
 
 /// Measures the environment-lit methods of `scene` under the map at `map`.
 #[allow(clippy::too_many_arguments)]
-pub fn measure_env(
+pub(crate) fn measure_env(
     name: &str,
     scene: &Scene,
     r: &Renderer,

@@ -11,14 +11,18 @@ const LABEL: usize = 12;
 /// Tiles per row.
 const COLUMNS: usize = 5;
 
-pub struct Tile {
-    pub label: String,
-    pub image: image::RgbImage,
-    pub heat_map: Option<image::RgbImage>,
+pub(crate) struct Tile {
+    pub(crate) label: String,
+    pub(crate) image: image::RgbImage,
+    pub(crate) heat_map: Option<image::RgbImage>,
 }
 
 impl Tile {
-    pub fn new(label: &str, image: image::RgbImage, heat_map: Option<image::RgbImage>) -> Tile {
+    pub(crate) fn new(
+        label: &str,
+        image: image::RgbImage,
+        heat_map: Option<image::RgbImage>,
+    ) -> Tile {
         Tile {
             label: label.to_string(),
             image,
@@ -28,26 +32,26 @@ impl Tile {
 }
 
 /// Square tiles of `size` pixels.
-pub struct Grid {
+pub(crate) struct Grid {
     size: usize,
     tiles: Vec<Tile>,
 }
 
 impl Grid {
-    pub fn new(size: u32) -> Grid {
+    pub(crate) fn new(size: u32) -> Grid {
         Grid {
             size: size as usize,
             tiles: Vec::new(),
         }
     }
 
-    pub fn push(&mut self, t: Tile) {
+    pub(crate) fn push(&mut self, t: Tile) {
         self.tiles.push(t);
     }
 
     /// Composes the grid: per tile a label, the image, and the heat map below it (blank for
     /// the reference).
-    pub fn render(&self) -> image::RgbImage {
+    pub(crate) fn render(&self) -> image::RgbImage {
         let s = self.size;
         let cols = self.tiles.len().clamp(1, COLUMNS);
         let rows = self.tiles.len().div_ceil(cols).max(1);
@@ -76,7 +80,7 @@ impl Grid {
         out
     }
 
-    pub fn save(&self, path: &Path) -> Result<()> {
+    pub(crate) fn save(&self, path: &Path) -> Result<()> {
         self.render()
             .save(path)
             .with_context(|| format!("cannot write {}", path.display()))

@@ -10,12 +10,12 @@
 //! equal-time comparison and the error budget; [`write`], [`plot`] and [`grid`] write
 //! `report.md`, `results.csv`, the log-log plots and the image grids.
 
-pub mod analysis;
-pub mod env;
-pub mod grid;
-pub mod plot;
-pub mod scene;
-pub mod write;
+pub(crate) mod analysis;
+pub(crate) mod env;
+pub(crate) mod grid;
+pub(crate) mod plot;
+pub(crate) mod scene;
+pub(crate) mod write;
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -25,6 +25,7 @@ use serde::Serialize;
 
 use crate::bench::{file_stem, load_named_scene, named_scene_path};
 
+/// `bspvt report`: error against run time of every method on real scenes.
 #[derive(clap::Args, Clone, Debug)]
 pub struct ReportArgs {
     /// Scenes: built-in names (plate, plate-small), shared meshes (teapot, bunny, dragon, or a
@@ -62,31 +63,31 @@ pub struct ReportArgs {
 /// What a run measures, resolved from [`ReportArgs`].
 #[derive(Clone, Debug, Serialize)]
 pub struct Settings {
-    pub quick: bool,
-    pub size: u32,
-    pub frames: usize,
+    pub(crate) quick: bool,
+    pub(crate) size: u32,
+    pub(crate) frames: usize,
     /// Ground truth: per-pixel relative standard error target, first and last sample counts.
-    pub gt_target_rel_stderr: f64,
-    pub gt_min_spp: u32,
-    pub gt_max_spp: u32,
+    pub(crate) gt_target_rel_stderr: f64,
+    pub(crate) gt_min_spp: u32,
+    pub(crate) gt_max_spp: u32,
     /// LTC with ray-traced visibility: shadow rays per pixel of each of its two estimates.
-    pub exact_spp: u32,
+    pub(crate) exact_spp: u32,
     /// Sample counts of the stochastic methods.
     pub spp: Vec<u32>,
     /// Bakes: (face resolution, ε).
-    pub bakes: Vec<(u32, f32)>,
+    pub(crate) bakes: Vec<(u32, f32)>,
     /// Radius in pixels of the ratio estimator's edge-aware denoiser.
     pub denoise_radius: f64,
     /// Environment lighting: the map (`None`: left out), lobe counts, ground-truth spp and
     /// the Monte Carlo sample counts.
-    pub env_map: Option<PathBuf>,
-    pub env_lobes: Vec<usize>,
-    pub env_gt_spp: u32,
-    pub env_spp: Vec<u32>,
+    pub(crate) env_map: Option<PathBuf>,
+    pub(crate) env_lobes: Vec<usize>,
+    pub(crate) env_gt_spp: u32,
+    pub(crate) env_spp: Vec<u32>,
 }
 
 impl Settings {
-    pub fn from_args(a: &ReportArgs) -> Result<Settings> {
+    pub(crate) fn from_args(a: &ReportArgs) -> Result<Settings> {
         let q = a.quick;
         let size = a.size.unwrap_or(if q { 96 } else { 256 });
         if !(8..=4096).contains(&size) {
@@ -127,7 +128,7 @@ impl Settings {
     }
 
     /// The default bake of the error budget: 64² at ε = 10⁻³ when measured, else the first.
-    pub fn budget_bake(&self) -> (u32, f32) {
+    pub(crate) fn budget_bake(&self) -> (u32, f32) {
         self.bakes
             .iter()
             .copied()
@@ -140,8 +141,11 @@ impl Settings {
 /// The whole report.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
+    /// The settings it ran with.
     pub settings: Settings,
+    /// Worker threads.
     pub threads: usize,
+    /// Every scene measured.
     pub scenes: Vec<scene::SceneReport>,
     /// Scenes skipped (missing assets), with the reason.
     pub skipped: Vec<String>,

@@ -26,7 +26,7 @@ const FONT_CANDIDATES: [&str; 4] = [
 ];
 
 /// Registers the font once per process; the error says which files were tried.
-pub fn ensure_font() -> Result<()> {
+pub(crate) fn ensure_font() -> Result<()> {
     static FONT: OnceLock<Result<PathBuf, String>> = OnceLock::new();
     let r = FONT.get_or_init(|| {
         let candidates: Vec<PathBuf> = match std::env::var_os("BSPVT_FONT") {
@@ -56,7 +56,7 @@ pub fn ensure_font() -> Result<()> {
 
 /// Which error a plot shows.
 #[derive(Clone, Copy, Debug)]
-pub enum Metric {
+pub(crate) enum Metric {
     Rmse,
     Flip,
 }
@@ -159,7 +159,7 @@ fn series(s: &SceneReport) -> Vec<Series<'_>> {
 }
 
 /// Writes the scene's plot of `metric` against ms per frame into `dir`; returns its path.
-pub fn plot(s: &SceneReport, metric: Metric, dir: &Path) -> Result<PathBuf> {
+pub(crate) fn plot(s: &SceneReport, metric: Metric, dir: &Path) -> Result<PathBuf> {
     let floor = match metric {
         Metric::Rmse => Some(s.ground_truth.rmse_floor),
         Metric::Flip => None,
@@ -169,7 +169,7 @@ pub fn plot(s: &SceneReport, metric: Metric, dir: &Path) -> Result<PathBuf> {
 }
 
 /// The environment-lighting plot (RMSE) of a scene, `dir/env/rmse-vs-time.png`.
-pub fn env_plot(s: &SceneReport, env: &EnvReport, dir: &Path) -> Result<PathBuf> {
+pub(crate) fn env_plot(s: &SceneReport, env: &EnvReport, dir: &Path) -> Result<PathBuf> {
     let of = |m: &str| -> Vec<&Entry> {
         let mut v: Vec<&Entry> = env.entries.iter().filter(|e| e.method == m).collect();
         v.sort_by_key(|e| (e.lobes.unwrap_or(0), e.spp.unwrap_or(0)));
@@ -314,7 +314,7 @@ fn draw(
 }
 
 /// Both plots of a scene; the error (e.g. no font) when they cannot be drawn.
-pub fn plots(s: &SceneReport, dir: &Path) -> Result<Vec<PathBuf>> {
+pub(crate) fn plots(s: &SceneReport, dir: &Path) -> Result<Vec<PathBuf>> {
     let mut out: Vec<PathBuf> = [Metric::Rmse, Metric::Flip]
         .iter()
         .map(|&m| plot(s, m, dir))

@@ -25,7 +25,7 @@ use bspvt_client::ratio::render_ratio;
 use bspvt_client::render::renderer::{Mode, Renderer, Trees};
 
 /// Exposure of every PNG and of the display metrics (FLIP, share over 8 %).
-pub const EXPOSURE: f32 = 1.0;
+pub(crate) const EXPOSURE: f32 = 1.0;
 
 /// Samples per pixel of the stochastic methods shown in the image grid.
 const GRID_SPP: u32 = 16;
@@ -39,18 +39,18 @@ const SEED_STOCHASTIC: u64 = 0x6a7e_1000;
 /// One method at one setting in one scene.
 #[derive(Clone, Debug, Serialize)]
 pub struct Entry {
-    pub scene: String,
+    pub(crate) scene: String,
     /// `bspvt`, `ltc` (unshadowed), `ltc-exact`, `mc`, `ratio`, `ratio-denoised`,
     /// `rt-penumbra`, `rt-hard`, `pcf`, `vsm` or `pcss`.
     pub method: String,
     /// `vertex` or `pixel` (BSPVT and unshadowed LTC).
-    pub mode: Option<Mode>,
-    pub face_res: Option<u32>,
-    pub epsilon: Option<f32>,
+    pub(crate) mode: Option<Mode>,
+    pub(crate) face_res: Option<u32>,
+    pub(crate) epsilon: Option<f32>,
     /// Spherical Gaussians of the environment fit (the `sg-*` methods).
-    pub lobes: Option<u32>,
+    pub(crate) lobes: Option<u32>,
     /// Samples (or shadow rays) per pixel.
-    pub spp: Option<u32>,
+    pub(crate) spp: Option<u32>,
     /// Median wall time of one frame on all threads (the G-buffer, made once per camera, and
     /// the trees' decoding, done once per stream, are not included).
     pub ms_per_frame: f64,
@@ -100,13 +100,13 @@ impl Entry {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct GroundTruth {
     pub spp_mean: f64,
-    pub spp_max: u64,
-    pub mean_rel_stderr: f64,
+    pub(crate) spp_max: u64,
+    pub(crate) mean_rel_stderr: f64,
     /// √(mean σ²) over covered pixels and channels: the reference's own RMSE, the floor under
     /// every method's measured RMSE.
-    pub rmse_floor: f64,
-    pub seconds: f64,
-    pub threads: usize,
+    pub(crate) rmse_floor: f64,
+    pub(crate) seconds: f64,
+    pub(crate) threads: usize,
     #[serde(skip_deserializing)]
     pub from_cache: bool,
 }
@@ -114,15 +114,15 @@ pub struct GroundTruth {
 /// The cost of one bake (amortised precompute).
 #[derive(Clone, Debug, Serialize)]
 pub struct BakeCost {
-    pub face_res: u32,
-    pub epsilon: f32,
-    pub vertices: usize,
-    pub seconds: f64,
-    pub threads: usize,
+    pub(crate) face_res: u32,
+    pub(crate) epsilon: f32,
+    pub(crate) vertices: usize,
+    pub(crate) seconds: f64,
+    pub(crate) threads: usize,
     /// Wall seconds × threads / vertices, in ms.
-    pub ms_per_vertex_per_thread: f64,
+    pub(crate) ms_per_vertex_per_thread: f64,
     pub bytes: usize,
-    pub bytes_per_vertex: f64,
+    pub(crate) bytes_per_vertex: f64,
     pub from_cache: bool,
 }
 
@@ -130,21 +130,21 @@ pub struct BakeCost {
 #[derive(Clone, Debug, Serialize)]
 pub struct ExactReference {
     /// Shadow rays per pixel in all (two estimates).
-    pub spp: u32,
+    pub(crate) spp: u32,
     /// RMSE and mean absolute error of their mean, from the difference of the two:
     /// RMSE(A, B) / 2 and MAE(A, B) / 2 (independent noise; see `analysis`).
-    pub rmse_noise: f64,
-    pub mae_noise: f64,
+    pub(crate) rmse_noise: f64,
+    pub(crate) mae_noise: f64,
 }
 
 #[derive(Clone, Debug, Serialize)]
 pub struct SceneReport {
-    pub name: String,
-    pub vertices: usize,
-    pub triangles: usize,
-    pub pixels_covered: usize,
+    pub(crate) name: String,
+    pub(crate) vertices: usize,
+    pub(crate) triangles: usize,
+    pub(crate) pixels_covered: usize,
     /// Mean unshadowed radiance (per-pixel LTC) over covered pixels: the unit of the budget.
-    pub unshadowed_mean: f64,
+    pub(crate) unshadowed_mean: f64,
     pub ground_truth: GroundTruth,
     pub exact: ExactReference,
     pub bakes: Vec<BakeCost>,
@@ -159,7 +159,7 @@ pub struct SceneReport {
 }
 
 /// Measures every method on `scene`; images go to `out/<scene>/`.
-pub fn measure(
+pub(crate) fn measure(
     name: &str,
     scene: &Scene,
     st: &Settings,

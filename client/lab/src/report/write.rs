@@ -11,7 +11,7 @@ use super::analysis::{EQUAL_TIME_TARGET, Reading, VISIBILITY_TARGET};
 use super::scene::SceneReport;
 use crate::bench::file_stem;
 
-pub fn write_all(report: &Report, out: &Path) -> Result<()> {
+pub(crate) fn write_all(report: &Report, out: &Path) -> Result<()> {
     let write = |name: &str, text: String| {
         let p = out.join(name);
         std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))
@@ -26,7 +26,7 @@ fn opt<T: std::fmt::Display>(v: Option<T>) -> String {
     v.map(|x| x.to_string()).unwrap_or_default()
 }
 
-pub fn results_csv(report: &Report) -> String {
+pub(crate) fn results_csv(report: &Report) -> String {
     let mut s = String::from(
         "scene,method,mode,face_res,epsilon,lobes,spp,ms_per_frame,rmse,rel_mse,mae,flip,share_over_8,image\n",
     );
@@ -57,7 +57,7 @@ pub fn results_csv(report: &Report) -> String {
     s
 }
 
-pub fn bakes_csv(report: &Report) -> String {
+pub(crate) fn bakes_csv(report: &Report) -> String {
     let mut s = String::from(
         "scene,face_res,epsilon,vertices,seconds,threads,ms_per_vertex_per_thread,bytes,bytes_per_vertex\n",
     );
@@ -85,7 +85,7 @@ fn pct(x: f64) -> String {
     format!("{:.2} %", 100.0 * x)
 }
 
-pub fn markdown(report: &Report) -> String {
+pub(crate) fn markdown(report: &Report) -> String {
     let st = &report.settings;
     let mut s = String::new();
     let _ = writeln!(

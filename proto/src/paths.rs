@@ -3,10 +3,11 @@
 //!
 //! The shared test data (meshes, the HDR map): `$BSPVT_ASSETS` when set, else the first of
 //! `../shared/assets` and `../../shared/assets` (from the working directory: the project
-//! root, or a crate folder when cargo runs tests) and `<executable's folder>/assets` that
-//! exists (made absolute); else `../shared/assets` (the error then names it).
+//! root, or a crate folder when cargo runs tests), then `../shared/assets` from the
+//! executable's folder and up to four folders above it, the first that exists (made
+//! absolute); else `../shared/assets` (the error then names it).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// The environment variable that points at the shared test data.
 pub(crate) const ASSETS_ENV: &str = "BSPVT_ASSETS";
@@ -21,11 +22,12 @@ pub fn assets_dir() -> PathBuf {
         PathBuf::from("../../shared/assets"),
         PathBuf::from("../../../shared/assets"),
     ];
-    if let Some(dir) = std::env::current_exe()
-        .ok()
-        .and_then(|e| e.parent().map(Path::to_path_buf))
-    {
-        candidates.push(dir.join("assets"));
+    // Next to the checkout a binary was built in
+    // (`<checkout>/target/release/bspvt` → `<checkout>/../shared/assets`).
+    if let Some(exe) = std::env::current_exe().ok().and_then(|e| e.canonicalize().ok()) {
+        for dir in exe.ancestors().skip(1).take(5) {
+            candidates.push(dir.join("../shared/assets"));
+        }
     }
     candidates
         .into_iter()

@@ -8,7 +8,6 @@
 //!   on all threads (ms per frame, fps), with unshadowed LTC in the same run as the ratio.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -16,6 +15,8 @@ use bspvt_proto::Scene;
 use bspvt_proto::encoding::decode_bake;
 use rayon::prelude::*;
 use serde::Serialize;
+
+pub(crate) use bspvt_client::method::trees::{cached_bake, file_stem};
 
 use bspvt_client::light::Light;
 use bspvt_client::ltc::table::LtcTable;
@@ -121,7 +122,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         frames: Vec::new(),
     };
     for (name, scene) in &scenes {
-        let bake_path = cached_bake(name, scene, &a.cache)?.path;
+        let bake_path = cached_bake(name, scene, &a.cache, &|_, _| {})?.path;
         let bytes = std::fs::read(&bake_path)?;
         let bake = decode_bake(&bytes)?;
         let trees = Trees::full(&bake.trees, bake.header.codec());
@@ -188,60 +189,6 @@ pub fn run(a: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// A bake in the benchmarks' cache: the file, and what making it cost (measured when it was
-/// baked, kept beside it in `<file>.json`).
-#[derive(Clone, Debug, Serialize, serde::Deserialize)]
-pub(crate) struct CachedBake {
-    pub path: PathBuf,
-    pub(crate) vertices: usize,
-    pub(crate) bytes: usize,
-    /// Wall time of the bake, and the number of threads it ran on.
-    pub(crate) seconds: f64,
-    pub(crate) threads: usize,
-    /// False when the file was baked by this call.
-    #[serde(skip)]
-    pub(crate) from_cache: bool,
-}
-
-/// Bakes `scene` once into `cache` (reused while the mesh and settings are unchanged).
-pub(crate) fn cached_bake(name: &str, scene: &Scene, cache: &Path) -> Result<CachedBake> {
-    let mut h = bspvt_proto::hash::Fnv1a::default();
-    h.write(format!("{:x}{:?}", scene.mesh.content_hash(), scene.bake).as_bytes());
-    let key = h.finish();
-    let path = cache.join(format!("{}-{key:016x}.bspvt", file_stem(name)));
-    let meta = path.with_extension("bspvt.json");
-    if path.exists()
-        && let Ok(text) = std::fs::read_to_string(&meta)
-        && let Ok(mut b) = serde_json::from_str::<CachedBake>(&text)
-    {
-        b.path = path;
-        b.from_cache = true;
-        return Ok(b);
-    }
-    std::fs::create_dir_all(cache).with_context(|| format!("cannot create {}", cache.display()))?;
-    let baker = bspvt_bake::Baker::new(scene);
-    let vertices = baker.header().vertex_count as usize;
-    eprintln!(
-        "baking {name} ({vertices} vertices, {}² faces, ε = {}) once…",
-        scene.bake.face_res, scene.bake.epsilon
-    );
-    let out = baker.bake_all(&|_, _| {}, &AtomicBool::new(false))?;
-    eprintln!("baked in {:.1} s", out.seconds);
-    std::fs::write(&path, &out.bytes)
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    let b = CachedBake {
-        path,
-        vertices,
-        bytes: out.bytes.len(),
-        seconds: out.seconds,
-        threads: rayon::current_num_threads(),
-        from_cache: false,
-    };
-    std::fs::write(&meta, serde_json::to_string_pretty(&b)?)
-        .with_context(|| format!("cannot write {}", meta.display()))?;
-    Ok(b)
-}
-
 /// The file a scene name stands for: `teapot`, `bunny`, `dragon` name the shared meshes;
 /// a name with an extension is looked up in `meshes_dir` first, then as a path.
 pub(crate) fn named_scene_path(name: &str, meshes_dir: &Path) -> PathBuf {
@@ -280,23 +227,6 @@ pub(crate) fn load_named_scene(name: &str, meshes_dir: &Path) -> Result<Option<S
     scene
         .map(Some)
         .with_context(|| format!("cannot load scene {name} ({})", file.display()))
-}
-
-/// A scene name usable as a file or folder name.
-pub(crate) fn file_stem(name: &str) -> String {
-    let base = Path::new(name)
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| name.to_string());
-    base.chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect()
 }
 
 /// Median wall time (ms) of `frames` calls of `f`, and the last result.

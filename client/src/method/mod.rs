@@ -45,11 +45,11 @@ pub struct Needs {
     /// The scene's baked BSPVT trees (baked and cached when not given).
     pub trees: bool,
     /// A BVH of the scene for rays (built in setup).
-    pub(crate) rays: bool,
+    pub rays: bool,
     /// An environment map (`--env`).
     pub env_map: bool,
     /// A polygonal light of the scene.
-    pub(crate) polygon_light: bool,
+    pub polygon_light: bool,
 }
 
 impl Needs {
@@ -132,13 +132,13 @@ impl Default for Settings {
 /// The scene a method draws, with what several methods share built once, on first use.
 pub struct SceneData<'a> {
     /// The scene (at t = 0 for moving scenes).
-    pub(crate) scene: &'a Scene,
+    pub scene: &'a Scene,
     occluder: OnceLock<Occluder>,
 }
 
 impl<'a> SceneData<'a> {
     /// Wraps `scene`; nothing is built yet.
-    pub(crate) fn new(scene: &'a Scene) -> SceneData<'a> {
+    pub fn new(scene: &'a Scene) -> SceneData<'a> {
         SceneData {
             scene,
             occluder: OnceLock::new(),
@@ -146,7 +146,7 @@ impl<'a> SceneData<'a> {
     }
 
     /// The scene's BVH for rays (built on first use: the highest-quality build).
-    pub(crate) fn occluder(&self) -> &Occluder {
+    pub fn occluder(&self) -> &Occluder {
         self.occluder
             .get_or_init(|| Occluder::new(&self.scene.mesh, &mesh_triangles(&self.scene.mesh)))
     }
@@ -155,24 +155,24 @@ impl<'a> SceneData<'a> {
 /// One frame's inputs.
 pub struct FrameInput<'a> {
     /// The scene and its shared BVH.
-    pub(crate) scene: &'a SceneData<'a>,
+    pub scene: &'a SceneData<'a>,
     /// The camera: view, G-buffer, visible vertices, roughness override.
-    pub(crate) renderer: &'a Renderer<'a>,
+    pub renderer: &'a Renderer<'a>,
     /// The polygonal light as posed for this frame (`None`: the scene has none).
-    pub(crate) light: Option<&'a Light>,
+    pub light: Option<&'a Light>,
     /// Baked trees (all or those streamed so far); `None`: none yet.
-    pub(crate) trees: Option<&'a Trees<'a>>,
+    pub trees: Option<&'a Trees<'a>>,
     /// The frame's number (seeds the stochastic methods).
-    pub(crate) index: u64,
+    pub index: u64,
     /// Cycle time of a moving scene in [0, 1) (the run-time methods pose the meshes at it).
-    pub(crate) time: f32,
+    pub time: f32,
     /// Per-vertex or per-pixel (methods that offer both).
-    pub(crate) mode: Mode,
+    pub mode: Mode,
 }
 
 impl FrameInput<'_> {
     /// The light, or an error saying the method needs one.
-    pub(crate) fn light(&self) -> Result<&Light> {
+    pub fn light(&self) -> Result<&Light> {
         self.light.ok_or_else(|| {
             anyhow::anyhow!("this method needs a polygonal light; the scene has none")
         })
@@ -182,20 +182,20 @@ impl FrameInput<'_> {
 /// A drawn frame and what it cost.
 pub struct Frame {
     /// Linear radiance.
-    pub(crate) image: Image,
+    pub image: Image,
     /// Vertices, pixels and pieces shaded.
-    pub(crate) counts: FrameCounts,
+    pub counts: FrameCounts,
     /// Monte Carlo: the mean relative standard error per covered pixel.
-    pub(crate) noise: Option<f64>,
+    pub noise: Option<f64>,
     /// SG: the depth maps' time (screen SSDF), ms.
-    pub(crate) maps_ms: Option<f64>,
+    pub maps_ms: Option<f64>,
     /// A moving scene: the time to pose it, ms (inside the frame).
-    pub(crate) pose_ms: Option<f64>,
+    pub pose_ms: Option<f64>,
 }
 
 impl Frame {
     /// A frame with its counts and nothing else to report.
-    pub(crate) fn new(image: Image, counts: FrameCounts) -> Frame {
+    pub fn new(image: Image, counts: FrameCounts) -> Frame {
         Frame {
             image,
             counts,
@@ -210,15 +210,15 @@ impl Frame {
 #[derive(Clone, Debug, Default)]
 pub struct SetupReport {
     /// Samples per pixel, for the stochastic methods.
-    pub(crate) spp: Option<u32>,
+    pub spp: Option<u32>,
     /// SG: lobes, the fit's relative L2 error over the sphere and its time.
-    pub(crate) sg_lobes: Option<usize>,
+    pub sg_lobes: Option<usize>,
     /// See `sg_lobes`.
-    pub(crate) sg_fit_error: Option<f64>,
+    pub sg_fit_error: Option<f64>,
     /// See `sg_lobes`.
-    pub(crate) sg_fit_seconds: Option<f64>,
+    pub sg_fit_seconds: Option<f64>,
     /// SG: how visibility is found.
-    pub(crate) ssdf: Option<crate::sg::SsdfMode>,
+    pub ssdf: Option<crate::sg::SsdfMode>,
 }
 
 /// A rendering method: what the registry lists.

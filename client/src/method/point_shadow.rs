@@ -1,49 +1,62 @@
-//! What the point-light shadow methods (paper 003 and its shadow-map baselines) share: the
-//! unshadowed per-pixel LTC × one technique's shadow factor ([`crate::penumbra::render`]).
+//! The point-light shadow methods (paper 003 and its shadow-map baselines) as one
+//! [`FrameMethod`]: the unshadowed per-pixel LTC × one technique's shadow factor
+//! ([`crate::penumbra::render`]). Each technique is one static in its own file.
 
 use anyhow::Result;
 
-use super::{Frame, FrameInput, MethodState, SceneData, Settings};
+use super::{Frame, FrameInput, FrameMethod, MethodState, Needs, SceneData, Settings};
 use crate::penumbra::{self, Params, Technique};
-use crate::render::renderer::FrameCounts;
+use crate::render::renderer::{FrameCounts, Mode};
 
-/// A technique and whether it traces rays.
+/// A point-light shadow technique, registered under its name.
 pub(crate) struct PointShadow {
-    technique: Technique,
-    rays: bool,
+    pub(crate) name: &'static str,
+    pub(crate) label: &'static str,
+    pub(crate) description: &'static str,
+    pub(crate) technique: Technique,
 }
 
-impl PointShadow {
-    pub(crate) fn new(technique: Technique, rays: bool) -> PointShadow {
-        debug_assert_eq!(rays, technique.needs_rays());
-        PointShadow { technique, rays }
+impl FrameMethod for PointShadow {
+    fn name(&self) -> &'static str {
+        self.name
     }
-}
-
-/// The prepared state: the BVH is built now when the technique traces rays.
-pub(crate) fn prepare(
-    p: PointShadow,
-    scene: &SceneData,
-    settings: &Settings,
-) -> Box<dyn MethodState> {
-    if p.rays {
-        scene.occluder();
+    fn label(&self) -> &'static str {
+        self.label
     }
-    Box::new(State {
-        p,
-        params: settings.penumbra,
-    })
+    fn description(&self) -> &'static str {
+        self.description
+    }
+    fn needs(&self) -> Needs {
+        Needs {
+            rays: self.technique.needs_rays(),
+            polygon_light: true,
+            ..Needs::default()
+        }
+    }
+    fn fixed_mode(&self) -> Option<Mode> {
+        Some(Mode::Pixel)
+    }
+    /// The BVH is built now when the technique traces rays.
+    fn prepare(&self, scene: &SceneData, settings: &Settings) -> Result<Box<dyn MethodState>> {
+        if self.technique.needs_rays() {
+            scene.occluder();
+        }
+        Ok(Box::new(State {
+            technique: self.technique,
+            params: settings.penumbra,
+        }))
+    }
 }
 
 struct State {
-    p: PointShadow,
+    technique: Technique,
     params: Params,
 }
 
 impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
-        let occ = self.p.rays.then(|| f.scene.occluder());
-        let image = penumbra::render(f.renderer, f.light()?, self.p.technique, occ, &self.params)?;
+        let occ = self.technique.needs_rays().then(|| f.scene.occluder());
+        let image = penumbra::render(f.renderer, f.light()?, self.technique, occ, &self.params)?;
         Ok(Frame::new(
             image,
             FrameCounts {

@@ -10,31 +10,45 @@ use crate::ratio::render_ratio;
 use crate::render::renderer::{FrameCounts, Mode};
 
 /// The ratio estimator, not denoised.
-pub(crate) struct Ratio;
+pub(crate) static RATIO: Ratio = Ratio {
+    name: "ratio",
+    label: "ratio estimator",
+    description: "unshadowed LTC × ratio of MC sums with and without shadow rays (Heitz, Hill, McGuire 2018; --spp)",
+    denoised: false,
+};
 
 /// The ratio estimator with both sums filtered edge-aware before dividing.
-pub(crate) struct RatioDenoised;
+pub(crate) static RATIO_DENOISED: Ratio = Ratio {
+    name: "ratio-denoised",
+    label: "ratio + denoise",
+    description: "the ratio estimator with both sums filtered edge-aware before dividing (--spp)",
+    denoised: true,
+};
 
-fn needs() -> Needs {
-    Needs {
-        rays: true,
-        polygon_light: true,
-        ..Needs::default()
-    }
+/// The ratio estimator, denoised or not.
+pub(crate) struct Ratio {
+    name: &'static str,
+    label: &'static str,
+    description: &'static str,
+    denoised: bool,
 }
 
 impl FrameMethod for Ratio {
     fn name(&self) -> &'static str {
-        "ratio"
+        self.name
     }
     fn label(&self) -> &'static str {
-        "ratio estimator"
+        self.label
     }
     fn description(&self) -> &'static str {
-        "unshadowed LTC × ratio of MC sums with and without shadow rays (Heitz, Hill, McGuire 2018; --spp)"
+        self.description
     }
     fn needs(&self) -> Needs {
-        needs()
+        Needs {
+            rays: true,
+            polygon_light: true,
+            ..Needs::default()
+        }
     }
     fn fixed_mode(&self) -> Option<Mode> {
         Some(Mode::Pixel)
@@ -43,32 +57,7 @@ impl FrameMethod for Ratio {
         scene.occluder();
         Ok(Box::new(State {
             spp: settings.spp,
-            denoise: None,
-        }))
-    }
-}
-
-impl FrameMethod for RatioDenoised {
-    fn name(&self) -> &'static str {
-        "ratio-denoised"
-    }
-    fn label(&self) -> &'static str {
-        "ratio + denoise"
-    }
-    fn description(&self) -> &'static str {
-        "the ratio estimator with both sums filtered edge-aware before dividing (--spp)"
-    }
-    fn needs(&self) -> Needs {
-        needs()
-    }
-    fn fixed_mode(&self) -> Option<Mode> {
-        Some(Mode::Pixel)
-    }
-    fn prepare(&self, scene: &SceneData, settings: &Settings) -> Result<Box<dyn MethodState>> {
-        scene.occluder();
-        Ok(Box::new(State {
-            spp: settings.spp,
-            denoise: Some(settings.denoise_radius),
+            denoise: self.denoised.then_some(settings.denoise_radius),
         }))
     }
 }

@@ -8,16 +8,16 @@ pub static METHODS: &[&dyn FrameMethod] = &[
     &super::bspvt::Bspvt,
     &super::ltc::Ltc,
     &super::mc::Mc,
-    &super::rt_penumbra::RtPenumbra,
-    &super::pcss::Pcss,
-    &super::pcf::Pcf,
-    &super::vsm::Vsm,
+    &super::rt_penumbra::RT_PENUMBRA,
+    &super::pcss::PCSS,
+    &super::pcf::PCF,
+    &super::vsm::VSM,
     &super::sg::SgEnvironment,
     &super::mc_env::McEnv,
     &super::ltc_exact::LtcExact,
-    &super::rt_hard::RtHard,
-    &super::ratio::Ratio,
-    &super::ratio::RatioDenoised,
+    &super::rt_hard::RT_HARD,
+    &super::ratio::RATIO,
+    &super::ratio::RATIO_DENOISED,
 ];
 
 /// The method called `name`.

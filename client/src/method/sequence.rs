@@ -52,13 +52,13 @@ pub struct Stats {
     /// Worker threads.
     pub threads: usize,
     /// Whole run: setup + all frames (excluding image writing).
-    pub(crate) seconds: f64,
+    pub seconds: f64,
     /// Rasterising the G-buffer (once per camera) and preparing the method.
-    pub(crate) setup_seconds: f64,
+    pub setup_seconds: f64,
     /// Median shading time per frame.
     pub ms_per_frame: f64,
     /// Mean shading time per frame.
-    pub(crate) ms_per_frame_mean: f64,
+    pub ms_per_frame_mean: f64,
     /// 1000 / `ms_per_frame`.
     pub fps: f64,
     /// Median frame time per vertex shaded (µs, wall clock on `threads` threads).
@@ -68,29 +68,29 @@ pub struct Stats {
     /// Vertices shaded in the last frame.
     pub vertices_shaded: usize,
     /// Pixels the scene covers.
-    pub(crate) pixels_covered: usize,
+    pub pixels_covered: usize,
     /// BSPVT pieces integrated (v̄ > 0) per shaded vertex.
-    pub(crate) pieces_per_vertex: f64,
+    pub pieces_per_vertex: f64,
     /// BSPVT pieces dropped (v̄ = 0) per shaded vertex.
-    pub(crate) dropped_per_vertex: f64,
+    pub dropped_per_vertex: f64,
     /// Samples per pixel of the stochastic methods.
-    pub(crate) spp: Option<u32>,
+    pub spp: Option<u32>,
     /// Monte Carlo: mean relative standard error per covered pixel (last frame).
-    pub(crate) mean_rel_stderr: Option<f64>,
+    pub mean_rel_stderr: Option<f64>,
     /// SG: the lobes.
-    pub(crate) sg_lobes: Option<usize>,
+    pub sg_lobes: Option<usize>,
     /// SG: the fit's relative L2 error over the sphere.
-    pub(crate) sg_fit_error: Option<f64>,
+    pub sg_fit_error: Option<f64>,
     /// SG: the fit's time (in setup).
-    pub(crate) sg_fit_seconds: Option<f64>,
+    pub sg_fit_seconds: Option<f64>,
     /// SG: how visibility was found.
-    pub(crate) ssdf: Option<crate::sg::SsdfMode>,
+    pub ssdf: Option<crate::sg::SsdfMode>,
     /// SG: median depth-map time per frame (screen SSDF), ms.
-    pub(crate) sg_maps_ms: Option<f64>,
+    pub sg_maps_ms: Option<f64>,
     /// A moving scene (environment methods): median time per frame to pose the meshes,
     /// rasterise the G-buffer and rebuild the BVH when rays are used, ms (inside
     /// `ms_per_frame`).
-    pub(crate) pose_ms: Option<f64>,
+    pub pose_ms: Option<f64>,
 }
 
 /// Renders `opts.frames` frames, handing each image to `sink` (frame index, image).

@@ -33,21 +33,21 @@ pub struct CachedBake {
     /// The bake file.
     pub path: PathBuf,
     /// Vertices baked.
-    pub(crate) vertices: usize,
+    pub vertices: usize,
     /// The file's size.
-    pub(crate) bytes: usize,
+    pub bytes: usize,
     /// Wall time of the bake.
-    pub(crate) seconds: f64,
+    pub seconds: f64,
     /// Threads it ran on.
-    pub(crate) threads: usize,
+    pub threads: usize,
     /// False when the file was baked by this call.
     #[serde(skip)]
-    pub(crate) from_cache: bool,
+    pub from_cache: bool,
 }
 
 /// `name` as a file-name stem: its file stem, with anything but ASCII letters, digits and
 /// `-` replaced by `_`.
-pub(crate) fn file_stem(name: &str) -> String {
+pub fn file_stem(name: &str) -> String {
     let base = Path::new(name)
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())

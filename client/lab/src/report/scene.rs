@@ -17,11 +17,9 @@ use crate::compare::heatmap::{error_scale, heat_map};
 use crate::compare::metrics::{Metrics, covered as covered_pixels, covered_mean, mean_image};
 use crate::compare::metrics::{measure as measure_metrics, rmse_mae};
 use bspvt_client::frame::image::Image;
-use bspvt_client::groundtruth::ltcvis::{builtin_lookup, render_ltc_exact_visibility};
-use bspvt_client::groundtruth::{Convergence, render_mc, render_mc_until};
+use bspvt_client::groundtruth::{Convergence, render_mc_until};
 use bspvt_client::light::Light;
-use bspvt_client::penumbra::{self, Guide, Params, Technique};
-use bspvt_client::ratio::render_ratio;
+use bspvt_client::method::{FrameInput, SceneData, registry};
 use bspvt_client::render::renderer::{Mode, Renderer, Trees};
 
 /// Exposure of every PNG and of the display metrics (FLIP, share over 8 %).
@@ -176,7 +174,14 @@ pub(crate) fn measure(
     let r = Renderer::new(scene, st.size, st.size);
     let covered = covered_pixels(&r.gbuffer);
     let occ = Occluder::new(&scene.mesh, &mesh_triangles(&scene.mesh));
-    let guide = Guide::new(&r);
+    // Every method draws through the registry's interface, on one shared BVH.
+    let data = SceneData::new(scene);
+    let draw = Draw {
+        data: &data,
+        r: &r,
+        light: &light,
+        frames: st.frames,
+    };
 
     let (gt_img, gt) = ground_truth(name, scene, &r, &light, &occ, st, cache)?;
     gt_img.save(&dir.join("ground-truth.png"), EXPOSURE)?;
@@ -211,7 +216,7 @@ pub(crate) fn measure(
     // Unshadowed LTC: the cost floor of every analytic method, and the budget's unit.
     let mut unshadowed_pixel = None;
     for mode in [Mode::Vertex, Mode::Pixel] {
-        let (ms, img) = timed(st.frames, || Ok(r.ltc(&light, mode).0))?;
+        let (ms, img) = draw.timed("ltc", &draw.settings(1), None, 0, mode)?;
         record(
             Entry {
                 mode: Some(mode),
@@ -228,22 +233,10 @@ pub(crate) fn measure(
 
     // LTC × ray-traced visibility: two independent estimates, their mean is the reference of
     // the visibility error.
-    let exact = |seed: u64| {
-        let b = &builtin_lookup;
-        render_ltc_exact_visibility(
-            scene,
-            &r.view,
-            &r.gbuffer,
-            &light,
-            &occ,
-            b,
-            st.exact_spp,
-            seed,
-        )
-    };
     let t = Instant::now();
-    let exact_a = exact(SEED_EXACT_A);
-    let exact_b = exact(SEED_EXACT_B);
+    let exact_settings = draw.settings(st.exact_spp);
+    let exact_a = draw.once("ltc-exact", &exact_settings, SEED_EXACT_A)?;
+    let exact_b = draw.once("ltc-exact", &exact_settings, SEED_EXACT_B)?;
     let exact_ms = t.elapsed().as_secs_f64() * 1e3;
     let (rmse_ab, mae_ab) = rmse_mae(&exact_a, &exact_b, &covered);
     let exact_ref = mean_image(&exact_a, &exact_b);
@@ -267,7 +260,7 @@ pub(crate) fn measure(
         let mut s = scene.clone();
         s.bake.face_res = face_res;
         s.bake.epsilon = epsilon;
-        let b = cached_bake(name, &s, &cache.join("bakes"))?;
+        let b = cached_bake(name, &s, &cache.join("bakes"), &|_, _| {})?;
         let bytes =
             std::fs::read(&b.path).with_context(|| format!("cannot read {}", b.path.display()))?;
         let decoded = decode_bake(&bytes).with_context(|| format!("{}", b.path.display()))?;
@@ -285,7 +278,7 @@ pub(crate) fn measure(
             from_cache: b.from_cache,
         });
         for mode in [Mode::Vertex, Mode::Pixel] {
-            let (ms, img) = timed(st.frames, || Ok(r.bspvt(&light, &trees, mode).0))?;
+            let (ms, img) = draw.timed("bspvt", &draw.settings(1), Some(&trees), 0, mode)?;
             budget.push(analysis::budget(
                 face_res,
                 epsilon,
@@ -311,9 +304,9 @@ pub(crate) fn measure(
     // Stochastic shadows at every sample count.
     for (k, &spp) in st.spp.iter().enumerate() {
         let seed = SEED_STOCHASTIC + 16 * k as u64;
-        let (ms, img) = timed(st.frames, || {
-            Ok(render_mc(scene, &r.view, &r.gbuffer, &light, &occ, spp, seed).0)
-        })?;
+        let mut settings = draw.settings(spp);
+        settings.denoise_radius = st.denoise_radius;
+        let (ms, img) = draw.timed("mc", &settings, None, seed, Mode::Pixel)?;
         record(
             Entry {
                 spp: Some(spp),
@@ -321,18 +314,8 @@ pub(crate) fn measure(
             },
             &img,
         )?;
-        for (method, denoise) in [("ratio", None), ("ratio-denoised", Some(st.denoise_radius))] {
-            let (ms, img) = timed(st.frames, || {
-                Ok(render_ratio(
-                    &r,
-                    &guide,
-                    &light,
-                    &occ,
-                    spp,
-                    seed + 1,
-                    denoise,
-                ))
-            })?;
+        for method in ["ratio", "ratio-denoised"] {
+            let (ms, img) = draw.timed(method, &settings, None, seed + 1, Mode::Pixel)?;
             record(
                 Entry {
                     spp: Some(spp),
@@ -345,17 +328,8 @@ pub(crate) fn measure(
 
     // The point-light methods (paper 003 and the shadow-map baselines) against the area
     // light's ground truth: the light they stand in for.
-    let params = Params::default();
-    for (t, method) in [
-        (Technique::RtPenumbra, "rt-penumbra"),
-        (Technique::RtHard, "rt-hard"),
-        (Technique::Pcf, "pcf"),
-        (Technique::Vsm, "vsm"),
-        (Technique::Pcss, "pcss"),
-    ] {
-        let (ms, img) = timed(st.frames, || {
-            penumbra::render(&r, &light, t, Some(&occ), &params)
-        })?;
+    for method in ["rt-penumbra", "rt-hard", "pcf", "vsm", "pcss"] {
+        let (ms, img) = draw.timed(method, &draw.settings(1), None, 0, Mode::Pixel)?;
         record(entry(method, ms), &img)?;
     }
 
@@ -517,4 +491,67 @@ pub(super) fn load_exr(path: &Path) -> Result<Image> {
         height,
         pixels,
     })
+}
+
+/// Frames of registered methods on the report's camera and light.
+struct Draw<'a> {
+    data: &'a SceneData<'a>,
+    r: &'a Renderer<'a>,
+    light: &'a Light,
+    frames: usize,
+}
+
+impl Draw<'_> {
+    /// The methods' settings with `spp` samples per pixel (defaults otherwise).
+    fn settings(&self, spp: u32) -> bspvt_client::method::Settings {
+        bspvt_client::method::Settings {
+            spp,
+            ..bspvt_client::method::Settings::default()
+        }
+    }
+
+    /// One frame of method `name` (prepared first), with seed `index`, per pixel.
+    fn once(
+        &self,
+        name: &str,
+        settings: &bspvt_client::method::Settings,
+        index: u64,
+    ) -> Result<Image> {
+        Ok(self.timed_n(name, settings, None, index, Mode::Pixel, 1)?.1)
+    }
+
+    /// The median time of `self.frames` frames of method `name` and the last image; the
+    /// preparation (BVH, …) is not timed.
+    fn timed(
+        &self,
+        name: &str,
+        settings: &bspvt_client::method::Settings,
+        trees: Option<&Trees>,
+        index: u64,
+        mode: Mode,
+    ) -> Result<(f64, Image)> {
+        self.timed_n(name, settings, trees, index, mode, self.frames)
+    }
+
+    fn timed_n(
+        &self,
+        name: &str,
+        settings: &bspvt_client::method::Settings,
+        trees: Option<&Trees>,
+        index: u64,
+        mode: Mode,
+        frames: usize,
+    ) -> Result<(f64, Image)> {
+        let mut state = registry::lookup(name)?.prepare(self.data, settings)?;
+        let input = FrameInput {
+            scene: self.data,
+            renderer: self.r,
+            light: Some(self.light),
+            trees,
+            index,
+            time: 0.0,
+            mode,
+        };
+        timed(frames, || state.frame(&input).map(|f| f.image))
+    }
 }

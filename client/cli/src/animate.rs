@@ -16,7 +16,7 @@ use bspvt_client::session::Session;
 use bspvt_client::session::connect::{Connected, connect};
 
 #[derive(clap::Args, Debug)]
-pub struct AnimateArgs {
+pub(crate) struct AnimateArgs {
     #[command(flatten)]
     pub(crate) connect: ConnectArgs,
     /// Frames along the light's path (one full cycle).

@@ -23,7 +23,7 @@ use bspvt_client::session::connect::connect;
 use bspvt_client::stream::remote::Remote;
 
 #[derive(clap::Args, Debug)]
-pub struct BenchViewArgs {
+pub(crate) struct BenchViewArgs {
     /// Mesh to serve (default: the bunny from $BSPVT_ASSETS/meshes or ../shared/assets/meshes).
     #[arg(long)]
     pub(crate) mesh: Option<PathBuf>,

@@ -74,6 +74,19 @@ impl Aabb {
         let exit = tmax.x.min(tmax.y).min(tmax.z);
         enter <= exit
     }
+
+    /// Where the ray `origin + t·dir` enters the box: `Some(t)` with t > 0 when it does from
+    /// outside; `None` when it misses the box or starts inside it.
+    pub fn ray_entry(&self, origin: Vec3, dir: Vec3) -> Option<f32> {
+        let inv = dir.recip();
+        let t0 = (self.min - origin) * inv;
+        let t1 = (self.max - origin) * inv;
+        let tmin = t0.min(t1);
+        let tmax = t0.max(t1);
+        let enter = tmin.x.max(tmin.y).max(tmin.z);
+        let exit = tmax.x.min(tmax.y).min(tmax.z);
+        (enter > 0.0 && enter <= exit).then_some(enter)
+    }
 }
 
 impl Mesh {

@@ -24,7 +24,10 @@ pub fn assets_dir() -> PathBuf {
     ];
     // Next to the checkout a binary was built in
     // (`<checkout>/target/release/bspvt` → `<checkout>/../shared/assets`).
-    if let Some(exe) = std::env::current_exe().ok().and_then(|e| e.canonicalize().ok()) {
+    if let Some(exe) = std::env::current_exe()
+        .ok()
+        .and_then(|e| e.canonicalize().ok())
+    {
         for dir in exe.ancestors().skip(1).take(5) {
             candidates.push(dir.join("../shared/assets"));
         }

@@ -77,7 +77,13 @@ impl Occluder {
     /// `skip` (the vertex the ray starts from: its own triangles cannot shadow it).
     #[inline]
     pub fn occluded(&self, origin: Vec3, dir: Vec3, skip: u32) -> bool {
-        let ray = Ray::new(origin.into(), dir.into(), 0.0, f32::INFINITY);
+        self.occluded_until(origin, dir, f32::INFINITY, skip)
+    }
+
+    /// Whether a triangle not touching vertex `skip` blocks the ray from `origin` along `dir`
+    /// before distance `t_max` (in units of `dir`).
+    pub fn occluded_until(&self, origin: Vec3, dir: Vec3, t_max: f32, skip: u32) -> bool {
+        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
         !self.bvh.ray_traverse_miss(ray, |ray, id| {
             if self.indices[id].contains(&skip) {
                 f32::INFINITY

@@ -85,7 +85,8 @@ pub struct Region {
 }
 
 impl Region {
-    pub(crate) fn aabb(&self) -> Aabb {
+    /// The region as a box.
+    pub fn aabb(&self) -> Aabb {
         Aabb {
             min: Vec3::from(self.min),
             max: Vec3::from(self.max),

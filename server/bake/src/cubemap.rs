@@ -74,6 +74,60 @@ pub struct FacePixels {
     pub visible: Vec<u16>,
 }
 
+/// Where a visibility ray ends: at the light it looks for. V(p, ω) = 1 when the ray from p
+/// along ω reaches the light before any occluder, so geometry beyond the light (a ceiling over
+/// a lamp, the wall behind it) never shadows it. With several lights a ray ends at the first
+/// stop it reaches. Occluders inside a light's region, between the region's boundary and the
+/// light itself, are not seen (documented in docs/bake.md).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightStop {
+    /// A light's declared region: the ray ends where it enters the box (a vertex inside the
+    /// box casts its rays unbounded).
+    Region(Aabb),
+    /// A light without a region: the ray ends where it crosses the light polygon's plane (the
+    /// plane the light moves in when it is dragged or follows its path).
+    Plane {
+        /// A point of the plane (the polygon's centroid).
+        point: Vec3,
+        /// The plane's unit normal.
+        normal: Vec3,
+    },
+}
+
+impl LightStop {
+    /// The stops of a scene's lights: its region where it declares one, else its plane.
+    pub fn of_scene(scene: &bspvt_proto::Scene) -> Vec<LightStop> {
+        scene
+            .lights
+            .iter()
+            .map(|l| match l.region {
+                Some(r) => LightStop::Region(r.aabb()),
+                None => {
+                    let pts = l.points();
+                    let c = pts.iter().copied().sum::<Vec3>() / pts.len().max(1) as f32;
+                    LightStop::Plane {
+                        point: c,
+                        normal: l.normal(),
+                    }
+                }
+            })
+            .collect()
+    }
+
+    /// The distance along unit `d` from `origin` at which the ray ends here, if it does.
+    #[inline]
+    fn distance(&self, origin: Vec3, d: Vec3) -> Option<f32> {
+        match *self {
+            LightStop::Region(b) => b.ray_entry(origin, d),
+            LightStop::Plane { point, normal } => {
+                let den = d.dot(normal);
+                let t = (point - origin).dot(normal) / den;
+                (den != 0.0 && t > 0.0 && t.is_finite()).then_some(t)
+            }
+        }
+    }
+}
+
 /// Where a vertex's rays start and which directions can matter.
 pub(crate) struct VertexRays<'a> {
     pub position: Vec3,
@@ -83,6 +137,8 @@ pub(crate) struct VertexRays<'a> {
     pub offset: f32,
     /// Light regions; `None` when a light may go anywhere.
     pub regions: Option<&'a [Aabb]>,
+    /// Where rays end (at the first stop they reach).
+    pub stops: &'a [LightStop],
 }
 
 impl VertexRays<'_> {
@@ -100,6 +156,15 @@ impl VertexRays<'_> {
         subs.iter()
             .filter(|&&d| self.escapes_below_horizon(d) || !hit(d))
             .count() as u16
+    }
+
+    /// How far a ray from `origin` along unit `d` is traced: to the first light it reaches.
+    #[inline]
+    fn t_max(&self, origin: Vec3, d: Vec3) -> f32 {
+        self.stops
+            .iter()
+            .filter_map(|s| s.distance(origin, d))
+            .fold(f32::INFINITY, f32::min)
     }
 
     /// Whether direction `d` can matter: above the horizon and toward a light region.
@@ -181,8 +246,9 @@ impl VertexRays<'_> {
                 if self.matters(origin, d) {
                     let subs = &table.sub[f][p * s..(p + 1) * s];
                     px.index.push(p as u32);
-                    px.visible
-                        .push(self.escaping(subs, |d| occ.occluded(origin, d, self.vertex)));
+                    px.visible.push(self.escaping(subs, |d| {
+                        occ.occluded_until(origin, d, self.t_max(origin, d), self.vertex)
+                    }));
                 }
             }
             (!px.index.is_empty()).then_some(px)
@@ -291,11 +357,15 @@ impl BlockWalk<'_> {
             self.rays_cast += s as u64;
             let subs = &self.table.sub[f][p * s..(p + 1) * s];
             self.vis[p] = if kept {
-                self.rays
-                    .escaping(subs, |d| self.culler.ray_hits_any(self.origin, d, &list))
+                self.rays.escaping(subs, |d| {
+                    let t_max = self.rays.t_max(self.origin, d);
+                    self.culler.ray_hits_any(self.origin, d, t_max, &list)
+                })
             } else {
                 self.rays.escaping(subs, |d| {
-                    self.occ.occluded(self.origin, d, self.rays.vertex)
+                    let t_max = self.rays.t_max(self.origin, d);
+                    self.occ
+                        .occluded_until(self.origin, d, t_max, self.rays.vertex)
                 })
             };
         }

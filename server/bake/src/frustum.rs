@@ -122,8 +122,8 @@ impl FrustumCuller {
 
     /// Whether the ray hits any primitive of the list.
     #[inline]
-    pub(crate) fn ray_hits_any(&self, origin: Vec3, dir: Vec3, list: &[u32]) -> bool {
-        let ray = Ray::new(origin.into(), dir.into(), 0.0, f32::INFINITY);
+    pub(crate) fn ray_hits_any(&self, origin: Vec3, dir: Vec3, t_max: f32, list: &[u32]) -> bool {
+        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
         list.iter()
             .any(|&p| self.rt[p as usize].intersect(&ray) < f32::INFINITY)
     }

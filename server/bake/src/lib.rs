@@ -28,6 +28,7 @@ use bspvt_proto::{Aabb, BakeSettings, Mesh, Scene, SplitMethod};
 use rayon::prelude::*;
 
 use bspvt_raytrace::Occluder;
+pub use cubemap::LightStop;
 use cubemap::{RayTable, VertexRays};
 use fit::{FitStats, Fitter};
 
@@ -39,6 +40,8 @@ pub struct Baker {
     mesh: Mesh,
     settings: BakeSettings,
     regions: Option<Vec<Aabb>>,
+    /// Where the rays end: at the lights (see [`LightStop`]).
+    stops: Vec<LightStop>,
     occluder: Occluder,
     culler: frustum::FrustumCuller,
     table: RayTable,
@@ -112,12 +115,31 @@ pub struct BakeOutput {
 impl Baker {
     /// Prepares a scene's bake (builds the BVH).
     pub fn new(scene: &Scene) -> Baker {
-        Baker::with_settings(scene.mesh.clone(), scene.bake.clone(), scene.light_region())
+        Baker::build(
+            scene.mesh.clone(),
+            scene.bake.clone(),
+            scene.light_region(),
+            LightStop::of_scene(scene),
+        )
     }
 
     /// Prepares the bake of `mesh` with `settings`; `regions`: the boxes the lights may occupy
-    /// (`None`: anywhere), which decide the pixels that matter.
+    /// (`None`: anywhere), which decide the pixels that matter; rays end where they enter one.
     pub fn with_settings(mesh: Mesh, settings: BakeSettings, regions: Option<Vec<Aabb>>) -> Baker {
+        let stops = regions
+            .iter()
+            .flatten()
+            .map(|&r| LightStop::Region(r))
+            .collect();
+        Baker::build(mesh, settings, regions, stops)
+    }
+
+    fn build(
+        mesh: Mesh,
+        settings: BakeSettings,
+        regions: Option<Vec<Aabb>>,
+        stops: Vec<LightStop>,
+    ) -> Baker {
         let tris = bspvt_raytrace::mesh_triangles(&mesh);
         let occluder = Occluder::new(&mesh, &tris);
         let culler = frustum::FrustumCuller::new(&mesh, &tris);
@@ -129,6 +151,7 @@ impl Baker {
             mesh,
             settings,
             regions,
+            stops,
             occluder,
             culler,
             table,
@@ -168,6 +191,7 @@ impl Baker {
             vertex: v,
             offset: self.offset,
             regions: self.regions.as_deref(),
+            stops: &self.stops,
         }
     }
 

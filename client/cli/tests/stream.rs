@@ -181,3 +181,67 @@ fn a_partial_stream_renders_survives_a_server_crash_and_converges() {
         "the converged frame differs from the offline bake's"
     );
 }
+
+/// A final answer ends the stream at once: a scene the service does not know is not retried
+/// (404 is not a dropped connection), and a scene deleted while it streams ends the stream
+/// with the reason instead of reconnecting until the retries run out.
+#[test]
+fn not_found_and_deleted_scenes_end_the_stream_without_retries() {
+    use bspvt_client::stream::fetch::Update;
+
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let flags = ["--workers", "1", "--threads", "1"];
+    let srv = Server::start(&tmp.path().join("data"), "127.0.0.1:0", &flags);
+    let remote = Remote::new(&srv.base, None);
+
+    // An id nobody submitted.
+    let t = Instant::now();
+    let (rx, k, thread) = fetch::spawn(
+        remote.clone(),
+        "0123456789abcdef0123456789abcdef".into(),
+        FetchOptions::default(),
+    );
+    thread.join().expect("fetcher");
+    let last = rx.try_iter().last();
+    match last {
+        Some(Update::Failed(e)) => assert!(e.contains("404"), "{e}"),
+        _ => panic!("an unknown scene did not fail"),
+    }
+    assert_eq!(k.reconnects.load(Ordering::Relaxed), 0);
+    assert!(t.elapsed() < Duration::from_secs(5), "{:?}", t.elapsed());
+
+    // A scene deleted while its trees stream (one slow bake thread, small chunks).
+    let scene_path = plate_small(tmp.path(), "plate", 48, 64);
+    let id = remote
+        .submit(Some(&scene_path.to_string_lossy()), None)
+        .expect("submit");
+    let (rx, k, thread) = fetch::spawn(remote.clone(), id.clone(), FetchOptions::default());
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while k.chunks_fetched.load(Ordering::Relaxed) < 1 {
+        assert!(Instant::now() < deadline, "no chunk arrived");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let agent: ureq::Agent = ureq::Agent::config_builder()
+        .http_status_as_error(false)
+        .build()
+        .into();
+    let r = agent
+        .delete(format!("{}/v1/scenes/{id}", srv.base))
+        .call()
+        .expect("delete");
+    assert_eq!(r.status(), 200);
+    let t = Instant::now();
+    thread.join().expect("fetcher");
+    let msgs: Vec<Update> = rx.try_iter().collect();
+    match msgs.last() {
+        Some(Update::Failed(e)) => assert!(
+            e.contains("deleted") || e.contains("410") || e.contains("404"),
+            "{e}"
+        ),
+        _ => panic!("the deleted scene's stream did not fail"),
+    }
+    // At most the one reconnect the cut connection itself causes; never a retry of a final
+    // answer (the retry budget would take 8 attempts with backoff).
+    assert!(k.reconnects.load(Ordering::Relaxed) <= 1);
+    assert!(t.elapsed() < Duration::from_secs(5), "{:?}", t.elapsed());
+}

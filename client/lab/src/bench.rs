@@ -99,7 +99,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
     let dir = a
         .meshes_dir
         .clone()
-        .unwrap_or_else(|| bspvt_proto::paths::meshes_dir());
+        .unwrap_or_else(bspvt_proto::paths::meshes_dir);
     let mut scenes: Vec<(String, Scene)> = Vec::new();
     if a.builtin {
         scenes.push((

@@ -10,6 +10,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 
+/// The on-disk cache of one scene: its scene bytes, bake header, chunks and the stream's
+/// validator, each written atomically.
 pub struct Cache {
     dir: PathBuf,
 }
@@ -22,10 +24,6 @@ impl Cache {
             "scene id {id:?} is not a valid id"
         );
         Ok(Cache { dir: root.join(id) })
-    }
-
-    pub fn dir(&self) -> &Path {
-        &self.dir
     }
 
     fn read(&self, name: &str) -> Option<Vec<u8>> {
@@ -44,26 +42,26 @@ impl Cache {
         fs::rename(&tmp, &path).with_context(|| format!("cannot write {}", path.display()))
     }
 
-    pub fn scene(&self) -> Option<(Vec<u8>, String)> {
+    pub(crate) fn scene(&self) -> Option<(Vec<u8>, String)> {
         let etag = String::from_utf8(self.read("scene.etag")?).ok()?;
         Some((self.read("scene.bin")?, etag))
     }
 
-    pub fn put_scene(&self, bytes: &[u8], etag: &str) -> Result<()> {
+    pub(crate) fn put_scene(&self, bytes: &[u8], etag: &str) -> Result<()> {
         self.write("scene.bin", bytes)?;
         self.write("scene.etag", etag.as_bytes())
     }
 
-    pub fn header(&self) -> Option<Vec<u8>> {
+    pub(crate) fn header(&self) -> Option<Vec<u8>> {
         self.read("header.bin")
     }
 
-    pub fn put_header(&self, bytes: &[u8]) -> Result<()> {
+    pub(crate) fn put_header(&self, bytes: &[u8]) -> Result<()> {
         self.write("header.bin", bytes)
     }
 
     /// Chunk frames present, by index.
-    pub fn chunks(&self) -> Vec<(u32, Vec<u8>)> {
+    pub(crate) fn chunks(&self) -> Vec<(u32, Vec<u8>)> {
         let Ok(dir) = fs::read_dir(self.dir.join("chunks")) else {
             return Vec::new();
         };
@@ -79,20 +77,20 @@ impl Cache {
         out
     }
 
-    pub fn put_chunk(&self, index: u32, frame: &[u8]) -> Result<()> {
+    pub(crate) fn put_chunk(&self, index: u32, frame: &[u8]) -> Result<()> {
         self.write(&format!("chunks/{index}.bvck"), frame)
     }
 
-    pub fn etag(&self) -> Option<String> {
+    pub(crate) fn etag(&self) -> Option<String> {
         String::from_utf8(self.read("etag")?).ok()
     }
 
-    pub fn put_etag(&self, etag: &str) -> Result<()> {
+    pub(crate) fn put_etag(&self, etag: &str) -> Result<()> {
         self.write("etag", etag.as_bytes())
     }
 
     /// Forgets everything (the server no longer matches the cache).
-    pub fn clear(&self) -> Result<()> {
+    pub(crate) fn clear(&self) -> Result<()> {
         match fs::remove_dir_all(&self.dir) {
             Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
                 Err(e).with_context(|| format!("cannot clear {}", self.dir.display()))

@@ -15,6 +15,8 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use anyhow::{Result, bail};
+
+use super::error::StreamError;
 use bspvt_proto::api::JobState;
 use bspvt_proto::api::SceneStatus;
 use bspvt_proto::encoding::{BakeHeader, Chunk, decode_chunk, decode_header};
@@ -25,12 +27,16 @@ use super::remote::Remote;
 
 /// What the fetcher tells the renderer.
 pub enum Update {
+    /// The bake's header (first).
     Header(BakeHeader),
-    /// Trees of one chunk; `cached`: read from the disk cache.
+    /// Trees of one chunk.
     Chunk {
+        /// The chunk's trees.
         chunk: Chunk,
+        /// Read from the disk cache (not the network).
         cached: bool,
     },
+    /// The bake's status, as the service reports it.
     Status(Box<SceneStatus>),
     /// Every chunk is here.
     Done,
@@ -43,19 +49,25 @@ pub enum Update {
 pub struct Counters {
     /// Tree-stream bytes received from the network (frames; HTTP framing not counted).
     pub tree_bytes: AtomicU64,
+    /// Chunks received from the network.
     pub chunks_fetched: AtomicU64,
+    /// Chunks read from the disk cache.
     pub chunks_cached: AtomicU64,
+    /// Tree-stream requests made.
     pub requests: AtomicU64,
+    /// Requests made again after a transient failure (dropped connection, busy service).
     pub reconnects: AtomicU64,
     /// Set by the caller to stop the fetcher.
-    pub stop: AtomicBool,
+    pub(crate) stop: AtomicBool,
     /// Set by the fetcher when it has sent its last update (`Done` or `Failed`).
-    pub finished: AtomicBool,
+    pub(crate) finished: AtomicBool,
 }
 
+/// How the fetcher works.
 pub struct FetchOptions {
     /// Vertices wanted first (the camera's).
     pub priority: Vec<u32>,
+    /// The on-disk cache of this scene (`None`: none).
     pub cache: Option<Cache>,
     /// Give up after this many chunks from the network (tests: a connection that drops).
     pub max_chunks: Option<u64>,
@@ -240,7 +252,11 @@ impl Fetcher {
                 match self.fetch_missing(&status) {
                     Ok(()) => failures = 0,
                     Err(e) => {
-                        if self.counters.stop.load(Ordering::Relaxed) {
+                        // Final answers (no such scene, gone, refused) end the stream at
+                        // once; dropped connections and a busy service are retried.
+                        if self.counters.stop.load(Ordering::Relaxed)
+                            || StreamError::of(&e).is_some_and(StreamError::is_final)
+                        {
                             return Err(e);
                         }
                         let progressed =
@@ -260,20 +276,25 @@ impl Fetcher {
                     status = s;
                     self.send(Update::Status(Box::new(status.clone())))?;
                 }
-                Err(e) if failures < self.opts.max_retries => {
+                Err(e) if !e.is_final() && failures < self.opts.max_retries => {
                     failures += 1;
                     tracing::warn!("status: {e:#}");
                     std::thread::sleep(Duration::from_millis(100 << failures.min(5)));
                     continue;
                 }
-                Err(e) => return Err(e),
+                Err(e) => return Err(e.into()),
             }
             match status.state {
-                JobState::Failed => bail!(
-                    "the bake failed: {}",
-                    status.reason.as_deref().unwrap_or("no reason given")
-                ),
-                JobState::Cancelled => bail!("the scene was deleted"),
+                JobState::Failed => {
+                    return Err(StreamError::BakeFailed(
+                        status
+                            .reason
+                            .clone()
+                            .unwrap_or_else(|| "no reason given".into()),
+                    )
+                    .into());
+                }
+                JobState::Cancelled => return Err(StreamError::Deleted.into()),
                 _ => {}
             }
             if self.complete() {
@@ -337,7 +358,13 @@ impl Fetcher {
         let mut reader = FrameReader::new();
         let mut buf = vec![0u8; 64 << 10];
         loop {
-            let k = r.body.read(&mut buf)?;
+            let k = r
+                .body
+                .read(&mut buf)
+                .map_err(|source| StreamError::Interrupted {
+                    what: format!("trees of scene {}", self.id),
+                    source,
+                })?;
             if k == 0 {
                 if reader.pending() > 0 {
                     bail!("the tree stream ended in the middle of a frame");

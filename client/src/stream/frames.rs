@@ -5,7 +5,7 @@ use bspvt_proto::encoding::{BakeHeader, Chunk, decode_chunk, decode_header, peek
 use bspvt_proto::error::DecodeError;
 
 /// One complete frame.
-pub enum Frame {
+pub(crate) enum Frame {
     Header(BakeHeader, Vec<u8>),
     /// A decoded chunk and its frame bytes exactly as received (for the cache).
     Chunk(Chunk, Vec<u8>),
@@ -13,27 +13,27 @@ pub enum Frame {
 
 /// Buffers bytes and cuts them into frames.
 #[derive(Default)]
-pub struct FrameReader {
+pub(crate) struct FrameReader {
     buf: Vec<u8>,
     header: Option<BakeHeader>,
 }
 
 impl FrameReader {
-    pub fn new() -> FrameReader {
+    pub(crate) fn new() -> FrameReader {
         FrameReader::default()
     }
 
-    pub fn push(&mut self, bytes: &[u8]) {
+    pub(crate) fn push(&mut self, bytes: &[u8]) {
         self.buf.extend_from_slice(bytes);
     }
 
     /// Bytes received but not yet part of a complete frame.
-    pub fn pending(&self) -> usize {
+    pub(crate) fn pending(&self) -> usize {
         self.buf.len()
     }
 
     /// The next complete frame, `Ok(None)` when more bytes are needed.
-    pub fn next_frame(&mut self) -> Result<Option<Frame>, DecodeError> {
+    pub(crate) fn next_frame(&mut self) -> Result<Option<Frame>, DecodeError> {
         if self.buf.is_empty() {
             return Ok(None);
         }

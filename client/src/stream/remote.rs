@@ -12,6 +12,7 @@ use bspvt_proto::api::decode_scene;
 use bspvt_proto::scene::{MeshRef, SceneFile};
 
 use super::cache::Cache;
+use super::error::StreamError;
 
 /// A bspvt service, e.g. `http://127.0.0.1:8080`.
 #[derive(Clone)]
@@ -22,16 +23,16 @@ pub struct Remote {
 }
 
 /// The answer to a tree-stream request.
-pub struct TreesResponse {
+pub(crate) struct TreesResponse {
     /// 200, or 304 when the validator matched.
-    pub status: u16,
-    pub etag: Option<String>,
-    pub body: Box<dyn Read + Send>,
+    pub(crate) status: u16,
+    pub(crate) body: Box<dyn Read + Send>,
 }
 
 const BOUNDARY: &str = "----bspvt-client-9f2c41";
 
 impl Remote {
+    /// A client of the service at `base` (`http://HOST:PORT`), sending `api_key` on writes.
     pub fn new(base: &str, api_key: Option<String>) -> Remote {
         let agent = ureq::Agent::config_builder()
             .http_status_as_error(false)
@@ -47,6 +48,7 @@ impl Remote {
         }
     }
 
+    /// The service's address.
     pub fn base(&self) -> &str {
         &self.base
     }
@@ -56,72 +58,90 @@ impl Remote {
     }
 
     /// Reads a whole body, refusing more than `limit` bytes.
-    fn body(mut r: ureq::http::Response<ureq::Body>, limit: u64) -> Result<Vec<u8>> {
+    fn body(
+        what: &str,
+        mut r: ureq::http::Response<ureq::Body>,
+        limit: u64,
+    ) -> Result<Vec<u8>, StreamError> {
         let mut out = Vec::new();
         r.body_mut()
             .as_reader()
             .take(limit)
             .read_to_end(&mut out)
-            .context("reading the response")?;
+            .map_err(|source| StreamError::Interrupted {
+                what: what.to_string(),
+                source,
+            })?;
         Ok(out)
     }
 
-    fn error(what: &str, r: ureq::http::Response<ureq::Body>) -> anyhow::Error {
-        let status = r.status();
-        let text = Self::body(r, 4096)
-            .map(|b| String::from_utf8_lossy(&b).into_owned())
-            .unwrap_or_default();
-        anyhow::anyhow!("{what}: the server answered {status}: {text}")
+    /// The typed error of a non-success answer (its `ErrorBody` read for the detail).
+    fn error(what: &str, r: ureq::http::Response<ureq::Body>) -> StreamError {
+        let status = r.status().as_u16();
+        let retry_after = header(&r, "retry-after").and_then(|v| v.trim().parse().ok());
+        let body = Self::body(what, r, 4096).unwrap_or_default();
+        StreamError::from_status(what, status, &body, retry_after)
     }
 
-    pub fn status(&self, id: &str) -> Result<SceneStatus> {
+    /// A transport failure (nothing answered).
+    fn unreachable(&self, e: ureq::Error) -> StreamError {
+        StreamError::Unreachable {
+            base: self.base.clone(),
+            source: Box::new(e),
+        }
+    }
+
+    /// `GET /v1/scenes/{id}`: where the scene's bake stands.
+    pub fn status(&self, id: &str) -> Result<SceneStatus, StreamError> {
+        let what = format!("status of scene {id}");
         let r = self
             .agent
             .get(self.url(&format!("/v1/scenes/{id}")))
             .call()
-            .with_context(|| format!("cannot reach {}", self.base))?;
+            .map_err(|e| self.unreachable(e))?;
         if r.status() != 200 {
-            return Err(Self::error(&format!("status of scene {id}"), r));
+            return Err(Self::error(&what, r));
         }
-        let bytes = Self::body(r, 1 << 20)?;
-        serde_json::from_slice(&bytes).context("the status is not the expected JSON")
+        let bytes = Self::body(&what, r, 1 << 20)?;
+        serde_json::from_slice(&bytes)
+            .map_err(|e| StreamError::Invalid(format!("{what}: not the expected JSON: {e}")))
     }
 
     /// The scene as baked, from the cache when the server says it is current. Returns the
     /// scene and the bytes fetched.
-    pub fn scene(&self, id: &str, cache: Option<&Cache>) -> Result<(Scene, u64)> {
+    pub(crate) fn scene(&self, id: &str, cache: Option<&Cache>) -> Result<(Scene, u64)> {
+        let what = format!("scene {id}");
         let cached = cache.and_then(Cache::scene);
         let mut req = self.agent.get(self.url(&format!("/v1/scenes/{id}/scene")));
         if let Some((_, etag)) = &cached {
             req = req.header("If-None-Match", etag.as_str());
         }
-        let r = req
-            .call()
-            .with_context(|| format!("cannot reach {}", self.base))?;
+        let r = req.call().map_err(|e| self.unreachable(e))?;
         let (bytes, fetched) = match (r.status().as_u16(), cached) {
             (304, Some((bytes, _))) => (bytes, 0),
             (200, _) => {
                 let etag = header(&r, "etag");
-                let bytes = Self::body(r, 4 << 30)?;
+                let bytes = Self::body(&what, r, 4 << 30)?;
                 if let (Some(c), Some(e)) = (cache, etag) {
                     c.put_scene(&bytes, &e)?;
                 }
                 let n = bytes.len() as u64;
                 (bytes, n)
             }
-            _ => return Err(Self::error(&format!("scene {id}"), r)),
+            _ => return Err(Self::error(&what, r).into()),
         };
-        let scene = decode_scene(&bytes).map_err(|e| anyhow::anyhow!("scene {id}: {e}"))?;
+        let scene =
+            decode_scene(&bytes).map_err(|e| StreamError::Invalid(format!("{what}: {e}")))?;
         Ok((scene, fetched))
     }
 
     /// `GET /v1/scenes/{id}/trees` for chunks `first..end` (all when `None`).
-    pub fn trees(
+    pub(crate) fn trees(
         &self,
         id: &str,
         vertices: Option<(u32, u32)>,
         if_none_match: Option<&str>,
-    ) -> Result<TreesResponse> {
+    ) -> Result<TreesResponse, StreamError> {
         let query = match vertices {
             Some((a, b)) => format!("?vertices={a}..{b}"),
             None => String::new(),
@@ -132,28 +152,24 @@ impl Remote {
         if let Some(e) = if_none_match {
             req = req.header("If-None-Match", e);
         }
-        let r = req
-            .call()
-            .with_context(|| format!("cannot reach {}", self.base))?;
+        let r = req.call().map_err(|e| self.unreachable(e))?;
         let status = r.status().as_u16();
         if status != 200 && status != 304 {
             return Err(Self::error(&format!("trees of scene {id}"), r));
         }
-        let etag = header(&r, "etag");
         Ok(TreesResponse {
             status,
-            etag,
             body: Box::new(r.into_body().into_reader()),
         })
     }
 
     /// The validator of the complete tree stream, when the bake is done (`HEAD`).
-    pub fn trees_etag(&self, id: &str) -> Result<Option<String>> {
+    pub(crate) fn trees_etag(&self, id: &str) -> Result<Option<String>, StreamError> {
         let r = self
             .agent
             .head(self.url(&format!("/v1/scenes/{id}/trees")))
             .call()
-            .with_context(|| format!("cannot reach {}", self.base))?;
+            .map_err(|e| self.unreachable(e))?;
         Ok((r.status() == 200).then(|| header(&r, "etag")).flatten())
     }
 
@@ -231,13 +247,11 @@ impl Remote {
         if let Some(k) = &self.api_key {
             req = req.header("Authorization", format!("Bearer {k}"));
         }
-        let r = req
-            .send(&body[..])
-            .with_context(|| format!("cannot reach {}", self.base))?;
+        let r = req.send(&body[..]).map_err(|e| self.unreachable(e))?;
         if r.status() != 202 {
-            return Err(Self::error("submit", r));
+            return Err(Self::error("submit", r).into());
         }
-        let v: serde_json::Value = serde_json::from_slice(&Self::body(r, 1 << 20)?)?;
+        let v: serde_json::Value = serde_json::from_slice(&Self::body("submit", r, 1 << 20)?)?;
         v["id"]
             .as_str()
             .map(str::to_string)
@@ -253,7 +267,7 @@ fn header(r: &ureq::http::Response<ureq::Body>, name: &str) -> Option<String> {
 }
 
 /// A built-in scene as a scene file the service accepts (the same meshes, lights and camera).
-pub fn builtin_scene_file(name: &str) -> Result<SceneFile> {
+pub(crate) fn builtin_scene_file(name: &str) -> Result<SceneFile> {
     bspvt_proto::builtin::scene_file(name).with_context(|| {
         format!(
             "unknown built-in scene {name:?} (known: {})",

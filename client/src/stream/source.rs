@@ -15,7 +15,7 @@ use super::remote::Remote;
 
 /// What the user asked to view.
 #[derive(Clone, Debug, PartialEq)]
-pub enum Source {
+pub(crate) enum Source {
     /// `http://HOST:PORT/v1/scenes/ID`.
     Url { base: String, id: String },
     /// A scene id on `--server`.
@@ -28,7 +28,7 @@ pub enum Source {
 }
 
 impl Source {
-    pub fn parse(arg: Option<&str>, mesh: Option<&Path>) -> Result<Source> {
+    pub(crate) fn parse(arg: Option<&str>, mesh: Option<&Path>) -> Result<Source> {
         match (arg, mesh) {
             (Some(_), Some(_)) => bail!("give either a scene (URL, id, file) or --mesh, not both"),
             (None, Some(m)) => Ok(Source::Local {
@@ -88,27 +88,30 @@ pub struct EmbeddedService {
 
 /// A scene on a service, and the embedded service when this process runs it.
 pub struct Served {
+    /// The service.
     pub remote: Remote,
+    /// The scene's id on it.
     pub id: String,
+    /// The embedded service, when this process runs it (stops when dropped).
     pub embedded: Option<EmbeddedService>,
     /// Whether this call submitted the scene (false: already on the service).
     pub submitted: bool,
 }
 
 /// Where the embedded service and the client cache live.
-pub struct Places {
+pub(crate) struct Places {
     /// `--server URL` for ids and local scenes (local scenes otherwise go to an embedded one).
-    pub server: Option<String>,
-    pub api_key: Option<String>,
+    pub(crate) server: Option<String>,
+    pub(crate) api_key: Option<String>,
     /// Data folder of the embedded service.
-    pub data_dir: PathBuf,
+    pub(crate) data_dir: PathBuf,
     /// The embedded service for local scenes when no `server` is given (`None`: this build
     /// has none, and local scenes need `--server`).
-    pub embedded: Option<&'static dyn Embedded>,
+    pub(crate) embedded: Option<&'static dyn Embedded>,
 }
 
 /// Resolves `src` to a scene on a service, submitting local scenes.
-pub fn open(src: &Source, places: &Places) -> Result<Served> {
+pub(crate) fn open(src: &Source, places: &Places) -> Result<Served> {
     match src {
         Source::Url { base, id } => Ok(Served {
             remote: Remote::new(base, places.api_key.clone()),

@@ -10,13 +10,16 @@ use crate::render::renderer::Trees;
 /// Trees received so far. Vertices without trees are shaded unshadowed until theirs arrive.
 #[derive(Default)]
 pub struct StreamedTrees {
-    pub header: Option<BakeHeader>,
+    pub(crate) header: Option<BakeHeader>,
     codec: Option<LineCodec>,
     trees: Vec<VertexTrees>,
     present: Vec<bool>,
+    /// Vertices whose trees have arrived.
     pub vertices_present: usize,
+    /// The bake's last reported status.
     pub status: Option<SceneStatus>,
-    pub done: bool,
+    pub(crate) done: bool,
+    /// Why the fetcher gave up, if it did (what arrived stays usable).
     pub failed: Option<String>,
 }
 
@@ -62,6 +65,7 @@ impl StreamedTrees {
         }
     }
 
+    /// Vertices of the baked mesh (0 before the header arrives).
     pub fn vertex_count(&self) -> usize {
         self.trees.len()
     }
@@ -72,7 +76,7 @@ impl StreamedTrees {
     }
 
     /// The trees for the renderer (`None` before the header).
-    pub fn view(&self) -> Option<Trees<'_>> {
+    pub(crate) fn view(&self) -> Option<Trees<'_>> {
         Some(Trees {
             trees: &self.trees,
             codec: self.codec.clone()?,
@@ -80,6 +84,7 @@ impl StreamedTrees {
         })
     }
 
+    /// The share of vertices whose trees have arrived, in [0, 1].
     pub fn fraction(&self) -> f64 {
         if self.trees.is_empty() {
             0.0

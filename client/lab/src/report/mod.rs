@@ -179,7 +179,7 @@ pub fn run(a: &ReportArgs) -> Result<Report> {
     let meshes_dir = a
         .meshes_dir
         .clone()
-        .unwrap_or_else(|| bspvt_proto::paths::meshes_dir());
+        .unwrap_or_else(bspvt_proto::paths::meshes_dir);
     let cache = a.cache.clone().unwrap_or_else(|| a.out.join("cache"));
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;

@@ -31,7 +31,7 @@ fn builtin_scene_bakes_streams_and_matches_the_offline_bake() {
     let tmp = tempfile::tempdir().expect("temp dir");
     // One bake thread: the bake lasts long enough on any machine for the early clients below
     // to connect while it runs.
-    let srv = Server::start(
+    let srv = start(
         &tmp.path().join("data"),
         &["--workers", "2", "--threads", "1"],
     );
@@ -223,7 +223,7 @@ fn builtin_scene_bakes_streams_and_matches_the_offline_bake() {
 fn corrupt_or_missing_chunks_are_rebaked_never_served() {
     let tmp = tempfile::tempdir().expect("temp dir");
     let data = tmp.path().join("data");
-    let srv = Server::start(&data, &["--workers", "1"]);
+    let srv = start(&data, &["--workers", "1"]);
     let a = agent();
     let json = plate_small_json(16, 512);
     let id = submit_ok(&a, &srv, &[("scene", None, json.as_bytes())], None);
@@ -262,7 +262,7 @@ fn corrupt_or_missing_chunks_are_rebaked_never_served() {
 #[test]
 fn bare_mesh_upload_with_settings_matches_offline_mesh_bake() {
     let tmp = tempfile::tempdir().expect("temp dir");
-    let srv = Server::start(&tmp.path().join("data"), &[]);
+    let srv = start(&tmp.path().join("data"), &[]);
     let a = agent();
     // A bumpy 12×12 grid with a box on it, as OBJ, sent zstd-compressed.
     let mut obj = String::new();
@@ -322,7 +322,7 @@ fn bare_mesh_upload_with_settings_matches_offline_mesh_bake() {
 fn delete_cancels_a_bake_and_aborts_its_streams() {
     let tmp = tempfile::tempdir().expect("temp dir");
     let data = tmp.path().join("data");
-    let srv = Server::start(
+    let srv = start(
         &data,
         &["--workers", "1", "--threads", "1", "--api-key", API_KEY],
     );

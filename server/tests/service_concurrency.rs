@@ -21,7 +21,7 @@ fn fifty_streaming_clients_during_a_bake_all_get_correct_data() {
     let offline = Arc::new(offline_bake(tmp.path(), &json, "ref"));
     let reference = decode_bake(&offline).expect("reference decodes");
     // One bake thread, so that the bake outlasts the clients' start on any machine.
-    let srv = Server::start(
+    let srv = start(
         &tmp.path().join("data"),
         &["--workers", "2", "--threads", "1"],
     );

@@ -553,7 +553,7 @@ fn resp(mut r: ureq::http::Response<ureq::Body>) -> Resp {
 #[test]
 fn hostile_requests_get_json_4xx_and_the_server_stays_healthy_and_bounded() {
     let tmp = tempfile::tempdir().expect("temp dir");
-    let srv = Server::start(
+    let srv = start(
         &tmp.path().join("data"),
         &[
             "--api-key",
@@ -665,7 +665,7 @@ fn hostile_requests_get_json_4xx_and_the_server_stays_healthy_and_bounded() {
 #[test]
 fn a_full_queue_answers_429_until_a_scene_leaves() {
     let tmp = tempfile::tempdir().expect("temp dir");
-    let srv = Server::start(
+    let srv = start(
         &tmp.path().join("data"),
         &[
             "--max-queued-scenes",
@@ -701,7 +701,7 @@ fn slow_and_excess_connections_are_cut_off() {
     use std::time::Instant;
 
     let tmp = tempfile::tempdir().expect("temp dir");
-    let srv = Server::start(
+    let srv = start(
         &tmp.path().join("data"),
         &["--header-read-timeout-s", "1", "--max-connections", "4"],
     );

@@ -36,7 +36,7 @@ fn sigkill_mid_bake_then_restart_resumes_without_recomputing() {
     let total_a = 81;
     let total_b = 26;
 
-    let mut srv = Server::start(&data, &["--workers", "1", "--threads", "1"]);
+    let mut srv = start(&data, &["--workers", "1", "--threads", "1"]);
     let a = agent();
     let id_a = submit_ok(&a, &srv, &[("scene", None, json_a.as_bytes())], None);
     let id_b = submit_ok(&a, &srv, &[("scene", None, json_b.as_bytes())], None);
@@ -68,7 +68,7 @@ fn sigkill_mid_bake_then_restart_resumes_without_recomputing() {
     let offline_a = offline_bake(tmp.path(), &json_a, "a");
     let offline_b = offline_bake(tmp.path(), &json_b, "b");
 
-    let srv = Server::start(&data, &["--workers", "2"]);
+    let srv = start(&data, &["--workers", "2"]);
     let sa = wait_done(&a, &srv, &id_a);
     let sb = wait_done(&a, &srv, &id_b);
     assert_eq!(

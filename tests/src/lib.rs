@@ -1,6 +1,8 @@
-//! Shared helpers for the tests of this crate: a seeded random generator, random leaf values,
-//! random visibility cube maps, and a checker for the split of a spherical polygon by a
-//! vertex's trees.
+//! Shared helpers for the tests: a seeded random generator, random leaf values, random
+//! visibility cube maps, and a checker for the split of a spherical polygon by a vertex's
+//! trees; and [`service`], the one harness of every test that runs the baking service.
+
+pub mod service;
 
 use bspvt_bake::cubemap::subpixel_offsets;
 use bspvt_proto::bspvt::{

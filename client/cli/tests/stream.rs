@@ -24,7 +24,7 @@ const SIZE: u32 = 96;
 #[test]
 fn streamed_frames_equal_offline_frames_and_a_second_start_fetches_nothing() {
     let tmp = tempfile::tempdir().expect("temp dir");
-    let srv = Server::start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
+    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
     let scene_path = plate_small(tmp.path(), "plate", 32, 256);
     let args = connect_args(&scene_path, &srv, tmp.path());
 
@@ -119,8 +119,8 @@ fn a_partial_stream_renders_survives_a_server_crash_and_converges() {
     let data = tmp.path().join("data");
     // One bake thread and small chunks: the bake lasts long enough to draw while it runs.
     let flags = ["--workers", "1", "--threads", "1"];
-    let mut srv = Server::start(&data, "127.0.0.1:0", &flags);
-    let addr = srv.addr().to_string();
+    let mut srv = start(&data, "127.0.0.1:0", &flags);
+    let addr = srv.addr.clone();
     let scene_path = plate_small(tmp.path(), "plate", 48, 128);
     let mut args = connect_args(&scene_path, &srv, tmp.path());
     args.cache_dir = None;
@@ -146,7 +146,7 @@ fn a_partial_stream_renders_survives_a_server_crash_and_converges() {
         if !crashed && f > 0.2 {
             srv.kill();
             std::thread::sleep(Duration::from_millis(300));
-            srv = Server::start(&data, &addr, &flags);
+            srv = start(&data, &addr, &flags);
             crashed = true;
         }
         std::thread::sleep(Duration::from_millis(20));
@@ -191,7 +191,7 @@ fn not_found_and_deleted_scenes_end_the_stream_without_retries() {
 
     let tmp = tempfile::tempdir().expect("temp dir");
     let flags = ["--workers", "1", "--threads", "1"];
-    let srv = Server::start(&tmp.path().join("data"), "127.0.0.1:0", &flags);
+    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &flags);
     let remote = Remote::new(&srv.base, None);
 
     // An id nobody submitted.

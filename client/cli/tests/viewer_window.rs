@@ -97,7 +97,7 @@ fn the_viewer_window_shows_the_shaded_scene() {
         return;
     };
     let tmp = tempfile::tempdir().expect("temp dir");
-    let srv = Server::start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
+    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
     let scene_path = plate_small(tmp.path(), "plate", 32, 256);
     let args = connect_args(&scene_path, &srv, tmp.path());
 

@@ -2,6 +2,8 @@
 //! visibility cube maps, and a checker for the split of a spherical polygon by a vertex's
 //! trees; and [`service`], the one harness of every test that runs the baking service.
 
+#![warn(unreachable_pub, missing_docs)]
+
 pub mod service;
 
 use bspvt_bake::cubemap::subpixel_offsets;
@@ -20,6 +22,7 @@ use glam::{DVec3, Vec2};
 pub struct Rng(pub u64);
 
 impl Rng {
+    /// The next 64 random bits.
     pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
@@ -31,6 +34,7 @@ impl Rng {
     pub fn f64(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
+    /// Uniform in [lo, hi).
     pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
         lo + (hi - lo) * self.f64()
     }
@@ -38,6 +42,7 @@ impl Rng {
     pub fn below(&mut self, n: u64) -> u64 {
         self.next_u64() % n.max(1)
     }
+    /// True with probability `p`.
     pub fn chance(&mut self, p: f64) -> bool {
         self.f64() < p
     }
@@ -66,10 +71,13 @@ pub fn random_value(rng: &mut Rng) -> u8 {
 /// What a random face looks like, for messages.
 #[derive(Clone, Debug)]
 pub struct FaceSpec {
+    /// Face resolution (pixels a side).
     pub res: u32,
     /// Supersampling per side (`s² ` rays per pixel).
     pub s: u32,
+    /// The visibility pattern drawn.
     pub pattern: &'static str,
+    /// Which pixels matter.
     pub subset: &'static str,
 }
 
@@ -249,10 +257,15 @@ pub const QUERY_MARGIN: f64 = 1e-5;
 /// Figures of one split.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct SplitReport {
+    /// Pieces the split produced.
     pub pieces: usize,
+    /// Pieces of (numerically) zero solid angle.
     pub zero_area_pieces: usize,
+    /// Pieces whose leaf value was checked by a point query.
     pub query_checked: usize,
+    /// Pieces too close to a line or face edge to check (see [`QUERY_MARGIN`]).
     pub query_skipped: usize,
+    /// |Σ piece solid angles − polygon solid angle| / polygon solid angle.
     pub rel_sum_error: f64,
 }
 

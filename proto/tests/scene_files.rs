@@ -296,3 +296,20 @@ fn transforms_place_meshes_and_bad_motion_is_refused() {
             .all(|n| (n.length() - 1.0).abs() < 1e-3)
     );
 }
+
+/// A one-sided light wound away from the scene lights nothing: it is named, so that the
+/// front ends warn instead of drawing a silent black image. Turned round, or two-sided, it is
+/// not; the shipped scenes have none.
+#[test]
+fn lights_facing_away_are_found() {
+    let mut s = bspvt_proto::builtin::scene("plate-small").expect("builtin");
+    assert!(s.lights_facing_away().is_empty());
+    s.lights[0].vertices.reverse();
+    assert_eq!(s.lights_facing_away(), vec![0]);
+    s.lights[0].two_sided = true;
+    assert!(s.lights_facing_away().is_empty());
+    for name in bspvt_proto::builtin::NAMES {
+        let s = bspvt_proto::builtin::scene(name).expect("builtin");
+        assert!(s.lights_facing_away().is_empty(), "{name}");
+    }
+}

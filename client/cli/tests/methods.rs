@@ -123,3 +123,26 @@ fn the_methods_page_agrees_with_the_registry() {
         );
     }
 }
+
+/// A light wound away from the scene lights nothing: the render says so on stderr instead
+/// of writing a silent black image.
+#[test]
+fn a_light_facing_away_is_reported() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut file = bspvt_proto::builtin::scene_file("plate-small").expect("builtin");
+    file.lights[0].vertices.reverse();
+    let scene = dir.path().join("away.json");
+    std::fs::write(&scene, serde_json::to_string(&file).expect("json")).expect("write");
+    let out = Command::new(BIN)
+        .current_dir(dir.path())
+        .arg("render")
+        .arg(&scene)
+        .args([
+            "--method", "ltc", "--width", "16", "--height", "16", "--out", "a.png",
+        ])
+        .output()
+        .expect("run bspvt render");
+    assert!(out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("faces away from every vertex"), "{err}");
+}

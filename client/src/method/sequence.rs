@@ -119,6 +119,14 @@ pub fn render_sequence(
                 method.name()
             );
         }
+        if scene.lights_facing_away().contains(&opts.light) {
+            tracing::warn!(
+                "light {} faces away from every vertex of the scene: it lights nothing and the \
+                 image will be black (wind its vertices the other way round, or make it \
+                 two_sided)",
+                opts.light
+            );
+        }
         let rest = Light::load(light)?;
         Some((LightPath::new(light, rest.clone()), rest))
     } else {

@@ -131,6 +131,12 @@ impl<'a> Session<'a> {
             .lights
             .first()
             .ok_or_else(|| anyhow::anyhow!("the scene has no light"))?;
+        if scene.lights_facing_away().contains(&0) {
+            tracing::warn!(
+                "light 0 faces away from every vertex of the scene: it lights nothing (wind its \
+                 vertices the other way round, or make it two_sided)"
+            );
+        }
         let rest = Light::load(light)?;
         let path = LightPath::new(light, rest.clone());
         Ok(Session {

@@ -447,6 +447,25 @@ impl Scene {
         self.bake.validate()
     }
 
+    /// The lights that light nothing where they rest: one-sided lights with every vertex of the
+    /// mesh behind or in their plane (typically a polygon wound the wrong way round). A render
+    /// with such a light is black; the front ends say so instead of drawing it silently.
+    pub fn lights_facing_away(&self) -> Vec<usize> {
+        self.lights
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| {
+                let n = l.normal();
+                let p = l.points();
+                let c = p.iter().copied().sum::<Vec3>() / p.len().max(1) as f32;
+                !l.two_sided
+                    && n != Vec3::ZERO
+                    && !self.mesh.positions.iter().any(|&v| (v - c).dot(n) > 0.0)
+            })
+            .map(|(i, _)| i)
+            .collect()
+    }
+
     /// The union of the declared light regions, or `None` when any light may go anywhere.
     pub fn light_region(&self) -> Option<Vec<Aabb>> {
         self.lights

@@ -164,6 +164,10 @@ pub struct SceneStatus {
     pub mesh_hash: String,
     /// How the scene was submitted.
     pub source: String,
+    /// What the importer did not use (textures, extensions, punctual lights) or added on its
+    /// own (a default light and ground), one sentence each.
+    #[serde(default)]
+    pub warnings: Vec<String>,
     // When the scene was accepted (ms since the Unix epoch).
     pub created_ms: i64,
     // When its bake started (ms since the Unix epoch).
@@ -281,6 +285,7 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
         camera: s.camera,
         bake: s.bake,
         motion: s.motion,
+        warnings: Vec::new(),
     };
     scene
         .validate()

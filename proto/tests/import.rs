@@ -59,7 +59,6 @@ fn ok(r: Result<Mesh, MeshError>) -> Mesh {
 fn check_invariants(m: &Mesh) {
     m.validate().expect("validate");
     assert_eq!(m.normals.len(), m.positions.len());
-    assert!(m.material_ids.iter().all(|&id| id == 0));
     for n in &m.normals {
         assert!((n.length() - 1.0).abs() < 1e-4, "normal {n} is not unit");
     }
@@ -1223,8 +1222,21 @@ fn must_not_panic(bytes: &[u8], format: Format) {
         max_triangles: 100_000,
         max_bytes: 1 << 20,
     };
-    if let Ok(m) = load_mesh_bytes(bytes, format, &limits) {
-        check_invariants(&m);
+    if let Ok(a) = bspvt_proto::import::load_asset_bytes(bytes, format, &limits) {
+        check_invariants(&a.mesh);
+        // Material ids index the file's materials (all 0 when it has none); every light and
+        // material the importer made is valid.
+        let n = a.materials.len().max(1) as u32;
+        assert!(a.mesh.material_ids.iter().all(|&id| id < n));
+        for m in &a.materials {
+            assert!(m.roughness > 0.0 && m.roughness <= 1.0, "{m:?}");
+            let unit = |c: &[f32; 3]| c.iter().all(|x| (0.0..=1.0).contains(x));
+            assert!(unit(&m.albedo) && unit(&m.specular), "{m:?}");
+        }
+        for l in &a.lights {
+            assert!(l.vertices.len() >= 3 && l.vertices.len() <= 8);
+            assert!(l.radiance.iter().all(|x| x.is_finite() && *x >= 0.0));
+        }
     }
 }
 

@@ -74,6 +74,9 @@ fn main() -> std::process::ExitCode {
 
 fn bake(a: BakeArgs) -> Result<()> {
     let mut scene = open_scene(a.scene.as_deref(), a.mesh.as_deref())?;
+    for w in &scene.warnings {
+        tracing::warn!("{w}");
+    }
     let b = &mut scene.bake;
     if let Some(r) = a.face_res {
         b.face_res = r;

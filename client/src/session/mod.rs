@@ -131,6 +131,9 @@ impl<'a> Session<'a> {
             .lights
             .first()
             .ok_or_else(|| anyhow::anyhow!("the scene has no light"))?;
+        for w in &scene.warnings {
+            tracing::warn!("{w}");
+        }
         if scene.lights_facing_away().contains(&0) {
             tracing::warn!(
                 "light 0 faces away from every vertex of the scene: it lights nothing (wind its \

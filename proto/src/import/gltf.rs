@@ -27,6 +27,15 @@
 //! integer `VEC3`; normals `FLOAT` or normalised `BYTE`/`SHORT`; sparse accessors are applied.
 //! Skins and morph targets are ignored (the bind pose is used). A primitive whose normals are
 //! missing or unusable gets computed normals.
+//!
+//! Materials (metallic-roughness, per primitive): GGX α = roughness², diffuse albedo =
+//! baseColor · (1 − metallic), F0 = mix(0.04, baseColor, metallic) (the glTF 2.0
+//! specification's appendix B BRDF); a primitive without a material gets the specification's
+//! default material. A material whose `emissiveFactor` × `KHR_materials_emissive_strength` is
+//! non-zero makes its triangles lamps (`lamps.rs`), two-sided when the material is
+//! `doubleSided`. The first perspective camera instanced by the scene becomes the scene's
+//! camera (looking down its node's −Z with +Y up). Textures, other extensions, punctual lights
+//! and orthographic cameras are not used; each kind is named in the warnings.
 
 use std::borrow::Cow;
 use std::collections::HashMap;
@@ -39,9 +48,11 @@ use ::gltf::buffer::View;
 use ::gltf::mesh::{Mode, Semantic};
 use glam::{Mat3, Mat4, Vec3};
 
-use super::{Limits, finish, is_degenerate, usable_normals};
+use super::mtl::MIN_ALPHA;
+use super::{FileMaterial, Limits, Raw, is_degenerate, usable_normals};
 use crate::error::MeshError;
 use crate::mesh::Mesh;
+use crate::scene::{Camera, Material};
 
 fn malformed(message: impl Into<String>) -> MeshError {
     MeshError::Malformed {
@@ -54,7 +65,7 @@ pub(super) fn parse(
     bytes: &[u8],
     base_dir: Option<&Path>,
     limits: &Limits,
-) -> Result<Mesh, MeshError> {
+) -> Result<Raw, MeshError> {
     let (json, bin) = if bytes.starts_with(b"glTF") {
         split_glb(bytes)?
     } else {
@@ -89,9 +100,139 @@ pub(super) fn parse(
             .max_vertices
             .saturating_add(limits.max_triangles.saturating_mul(3))
             .saturating_mul(2),
+        materials: doc.materials().map(|m| material(&m)).collect(),
+        default_material: None,
+        camera: None,
+        warnings: Vec::new(),
     };
     reader.read_scenes(&doc)?;
-    finish(reader.mesh)
+    let mut warnings = unused_features(&doc);
+    warnings.append(&mut reader.warnings);
+    Ok(Raw {
+        mesh: reader.mesh,
+        materials: reader.materials,
+        camera: reader.camera,
+        warnings,
+    })
+}
+
+/// A glTF metallic-roughness material in bspvt's GGX model (see the module documentation).
+fn material(m: &::gltf::Material<'_>) -> FileMaterial {
+    let pbr = m.pbr_metallic_roughness();
+    let [r, g, b, _] = pbr.base_color_factor();
+    let base = [r, g, b].map(|x| {
+        if x.is_finite() {
+            x.clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    });
+    let fin = |x: f32, d: f32| if x.is_finite() { x.clamp(0.0, 1.0) } else { d };
+    let metallic = fin(pbr.metallic_factor(), 1.0);
+    let roughness = fin(pbr.roughness_factor(), 1.0);
+    let strength = m
+        .emissive_strength()
+        .filter(|s| s.is_finite() && *s >= 0.0)
+        .unwrap_or(1.0);
+    let emission = m.emissive_factor().map(|e| {
+        if e.is_finite() {
+            (e.max(0.0) * strength).min(1e30)
+        } else {
+            0.0
+        }
+    });
+    FileMaterial {
+        material: Material {
+            name: m.name().map_or_else(
+                || format!("material {}", m.index().unwrap_or(0)),
+                str::to_string,
+            ),
+            roughness: (roughness * roughness).clamp(MIN_ALPHA, 1.0),
+            albedo: base.map(|c| c * (1.0 - metallic)),
+            specular: base.map(|c| 0.04 + (c - 0.04) * metallic),
+        },
+        emission,
+        two_sided: m.double_sided(),
+    }
+}
+
+/// Warnings for what the file holds and bspvt does not use: extensions, textures, punctual
+/// lights, non-opaque materials.
+fn unused_features(doc: &Document) -> Vec<String> {
+    const READ: &[&str] = &["KHR_materials_emissive_strength", "KHR_mesh_quantization"];
+    let mut w: Vec<String> = doc
+        .extensions_used()
+        .filter(|e| !READ.contains(e) && *e != "KHR_lights_punctual")
+        .map(|e| format!("extension {e} is not supported and was ignored"))
+        .collect();
+    let count = |f: &dyn Fn(&::gltf::Material) -> bool| doc.materials().filter(|m| f(m)).count();
+    let textures = [
+        (
+            count(&|m| m.pbr_metallic_roughness().base_color_texture().is_some()),
+            "base-colour textures (the base-colour factor is used)",
+        ),
+        (
+            count(&|m| {
+                m.pbr_metallic_roughness()
+                    .metallic_roughness_texture()
+                    .is_some()
+            }),
+            "metallic-roughness textures (the factors are used)",
+        ),
+        (
+            count(&|m| m.normal_texture().is_some()),
+            "normal maps (the mesh normals are used)",
+        ),
+        (
+            count(&|m| m.occlusion_texture().is_some()),
+            "occlusion textures",
+        ),
+        (
+            count(&|m| m.emissive_texture().is_some()),
+            "emissive textures (the emissive factor is the lamp's radiance)",
+        ),
+        (
+            count(&|m| m.alpha_mode() != ::gltf::material::AlphaMode::Opaque),
+            "alpha modes MASK and BLEND (surfaces are opaque)",
+        ),
+    ];
+    for (n, what) in textures {
+        if n > 0 {
+            w.push(format!("{n} materials have {what}: ignored"));
+        }
+    }
+    if let Some(lights) = doc.lights()
+        && lights.len() > 0
+    {
+        w.push(format!(
+            "{} KHR_lights_punctual lights were ignored (only emissive surfaces become lights)",
+            lights.len()
+        ));
+    }
+    w
+}
+
+/// The camera a node's world transform places: at its origin, looking down its −Z, +Y up.
+fn node_camera(world: &Mat4, cam: &::gltf::Camera) -> Result<Camera, String> {
+    let ::gltf::camera::Projection::Perspective(p) = cam.projection() else {
+        return Err(
+            "an orthographic camera was ignored (only perspective cameras are read)".into(),
+        );
+    };
+    let eye = affine_point(world, Vec3::ZERO);
+    let forward = Mat3::from_mat4(*world) * Vec3::NEG_Z;
+    let up = Mat3::from_mat4(*world) * Vec3::Y;
+    let fov_y_deg = p.yfov().to_degrees();
+    let camera = Camera {
+        position: eye.to_array(),
+        target: (eye + forward.normalize_or_zero()).to_array(),
+        up: up.normalize_or_zero().to_array(),
+        fov_y_deg,
+    };
+    camera
+        .validate()
+        .map(|()| camera)
+        .map_err(|e| format!("camera {} was ignored: {e}", cam.index()))
 }
 
 fn short(s: &str) -> String {
@@ -404,6 +545,12 @@ struct Builder<'a> {
     vec3s: HashMap<(usize, bool), Rc<Vec<Vec3>>>,
     indices: HashMap<usize, Rc<Vec<u32>>>,
     primitives: HashMap<(usize, usize), Option<Rc<Primitive>>>,
+    /// The file's materials, then (when a primitive has none) the default material.
+    materials: Vec<FileMaterial>,
+    default_material: Option<u32>,
+    /// The first valid perspective camera met.
+    camera: Option<Camera>,
+    warnings: Vec<String>,
     /// Accessor elements decoded and indices assembled so far, and the most allowed. Output is
     /// bounded by the limits; this bounds the work spent on input that yields no output (for
     /// example many primitives sharing one large accessor of degenerate triangles).
@@ -449,6 +596,14 @@ impl Builder<'_> {
                 let Some(node) = nodes.get(i) else { continue };
                 let local = Mat4::from_cols_array_2d(&node.transform().matrix());
                 let world = parent * local;
+                if self.camera.is_none()
+                    && let Some(cam) = node.camera()
+                {
+                    match node_camera(&world, &cam) {
+                        Ok(c) => self.camera = Some(c),
+                        Err(w) => self.warnings.push(w),
+                    }
+                }
                 if let Some(mesh) = node.mesh() {
                     self.add_mesh(&mesh, world)?;
                 }
@@ -475,6 +630,10 @@ impl Builder<'_> {
         for prim in mesh.primitives() {
             let Some(p) = self.primitive(mesh, &prim)? else {
                 continue;
+            };
+            let material = match prim.material().index() {
+                Some(i) if i < self.materials.len() => i as u32,
+                _ => self.default_material(),
             };
             let n = p.positions.len();
             self.limits
@@ -518,7 +677,7 @@ impl Builder<'_> {
                     .as_ref()
                     .map(|ns| ns.iter().map(|&v| normal_matrix * v).collect())
                     .unwrap_or_default(),
-                material_ids: vec![0; triangles.len()],
+                material_ids: vec![material; triangles.len()],
                 triangles,
             };
             if usable_normals(&piece.normals, n) {
@@ -529,6 +688,28 @@ impl Builder<'_> {
             self.mesh.append(&piece, 0);
         }
         Ok(())
+    }
+
+    /// The index of glTF's default material (white, metallic 1, roughness 1), appended once
+    /// when first needed. A file that defines no material at all is read as geometry only
+    /// (no materials: the scene chooses, as for a PLY).
+    fn default_material(&mut self) -> u32 {
+        if self.materials.is_empty() {
+            return 0;
+        }
+        *self.default_material.get_or_insert_with(|| {
+            self.materials.push(FileMaterial {
+                material: Material {
+                    name: "glTF default material".into(),
+                    roughness: 1.0,
+                    albedo: [0.0; 3],
+                    specular: [1.0; 3],
+                },
+                emission: [0.0; 3],
+                two_sided: false,
+            });
+            self.materials.len() as u32 - 1
+        })
     }
 
     /// Counts `n` units of decoding work against the budget.

@@ -10,7 +10,10 @@
 //! - triangles only (polygons are fan-triangulated; points and lines are skipped), with
 //!   degenerate triangles (a repeated vertex index) dropped;
 //! - vertices that no triangle uses dropped, the rest kept in file order;
-//! - `material_ids` all 0 (files carry no materials bspvt reads; a scene assigns them);
+//! - `material_ids` index [`Asset::materials`] (all 0 when the file has no materials: PLY, an
+//!   OBJ without `usemtl`);
+//! - triangles whose material emits are not in the mesh: they are the asset's lamps
+//!   ([`Asset::lights`], merged by `lamps.rs`), and a lamp is not an occluder;
 //! - unit normals: the file's own when every vertex has a finite, non-zero one, otherwise
 //!   [`Mesh::compute_normals`];
 //! - [`Mesh::validate`] passes.
@@ -28,10 +31,50 @@ use glam::Vec3;
 
 use crate::error::MeshError;
 use crate::mesh::Mesh;
+use crate::scene::{Camera, Material, PolygonLight};
 
 mod gltf;
+mod lamps;
+mod mtl;
 mod obj;
 mod ply;
+
+/// An imported file: its geometry and what it says about materials, lamps and the camera.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Asset {
+    /// The geometry without the emitting triangles; `material_ids` index `materials`.
+    pub mesh: Mesh,
+    /// The file's materials (empty when it has none; then every id is 0).
+    pub materials: Vec<Material>,
+    /// The lamps: emitting triangles merged into convex polygons, most powerful first.
+    pub lights: Vec<PolygonLight>,
+    /// The file's first perspective camera, placed by its node.
+    pub camera: Option<Camera>,
+    /// What the file holds that was not used (textures, extensions, punctual lights, …), one
+    /// sentence each.
+    pub warnings: Vec<String>,
+}
+
+/// A material as read from a file, before the emitters are split out.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct FileMaterial {
+    pub material: Material,
+    /// Emitted radiance, linear RGB (zero: not a lamp).
+    pub emission: [f32; 3],
+    /// Emits (and is seen) from both sides.
+    pub two_sided: bool,
+}
+
+/// What a format's reader hands to [`finish_asset`].
+#[derive(Default)]
+pub(crate) struct Raw {
+    /// Positions, triangles, optional per-position normals; `material_ids` one per triangle
+    /// (indexing `materials`) or empty.
+    pub mesh: Mesh,
+    pub materials: Vec<FileMaterial>,
+    pub camera: Option<Camera>,
+    pub warnings: Vec<String>,
+}
 
 /// Mesh file formats bspvt reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -148,14 +191,19 @@ impl Limits {
     }
 }
 
-/// Loads a mesh file with the default [`Limits`], choosing the format by extension. Relative
-/// external glTF buffers are resolved next to the file.
+/// Loads a mesh file's geometry with the default [`Limits`] ([`load_asset`]'s mesh).
 pub fn load_mesh(path: &Path) -> Result<Mesh, MeshError> {
-    load_mesh_with_limits(path, &Limits::default())
+    load_asset(path).map(|a| a.mesh)
 }
 
-/// [`load_mesh`] with explicit limits.
-pub(crate) fn load_mesh_with_limits(path: &Path, limits: &Limits) -> Result<Mesh, MeshError> {
+/// Loads an asset file with the default [`Limits`], choosing the format by extension. Relative
+/// external glTF buffers and OBJ material libraries are resolved next to the file.
+pub fn load_asset(path: &Path) -> Result<Asset, MeshError> {
+    load_asset_with_limits(path, &Limits::default())
+}
+
+/// [`load_asset`] with explicit limits.
+pub(crate) fn load_asset_with_limits(path: &Path, limits: &Limits) -> Result<Asset, MeshError> {
     let format = Format::from_path(path)?;
     let io = |source| MeshError::Io {
         path: path.display().to_string(),
@@ -173,9 +221,15 @@ pub(crate) fn load_mesh_with_limits(path: &Path, limits: &Limits) -> Result<Mesh
     load(&bytes, format, limits, Some(&base_dir))
 }
 
-/// Loads a mesh from memory (an HTTP upload). glTF files must be self-contained: external
-/// buffer and image URIs are rejected; only `data:` URIs and a GLB's BIN chunk are read.
+/// A mesh's geometry from memory ([`load_asset_bytes`]'s mesh).
 pub fn load_mesh_bytes(bytes: &[u8], format: Format, limits: &Limits) -> Result<Mesh, MeshError> {
+    load(bytes, format, limits, None).map(|a| a.mesh)
+}
+
+/// Loads an asset from memory (an HTTP upload). glTF files must be self-contained: external
+/// buffer and image URIs are rejected; only `data:` URIs and a GLB's BIN chunk are read. An
+/// OBJ's `mtllib` cannot be read from memory (a warning says so).
+pub fn load_asset_bytes(bytes: &[u8], format: Format, limits: &Limits) -> Result<Asset, MeshError> {
     load(bytes, format, limits, None)
 }
 
@@ -184,7 +238,7 @@ fn load(
     format: Format,
     limits: &Limits,
     base_dir: Option<&Path>,
-) -> Result<Mesh, MeshError> {
+) -> Result<Asset, MeshError> {
     limits.check_bytes(bytes.len() as u64)?;
     if bytes.is_empty() {
         return Err(MeshError::Malformed {
@@ -193,17 +247,97 @@ fn load(
         });
     }
     match format {
-        Format::Gltf | Format::Glb => gltf::parse(bytes, base_dir, limits),
-        Format::Obj => obj::parse(bytes, limits),
-        Format::Ply => ply::parse(bytes, limits),
+        Format::Gltf | Format::Glb => finish_asset(gltf::parse(bytes, base_dir, limits)?),
+        Format::Obj => finish_asset(obj::parse(bytes, base_dir, limits)?),
+        Format::Ply => Ok(Asset {
+            mesh: ply::parse(bytes, limits)?,
+            ..Asset::default()
+        }),
     }
 }
 
-/// Shared last step of every importer: checks indices and coordinates, drops unused vertices,
-/// settles the normals (the file's when complete and usable, else computed) and validates.
-///
-/// `mesh.normals` is either one per position (the file's normals) or empty.
-pub(crate) fn finish(mut mesh: Mesh) -> Result<Mesh, MeshError> {
+/// The last step of the glTF and OBJ readers: checks indices and coordinates, takes the
+/// emitting triangles out as lamps, then settles the mesh as [`finish`] does (material ids
+/// kept).
+pub(crate) fn finish_asset(raw: Raw) -> Result<Asset, MeshError> {
+    let Raw {
+        mut mesh,
+        materials,
+        camera,
+        mut warnings,
+    } = raw;
+    check_indices(&mesh)?;
+    if mesh.material_ids.len() != mesh.triangles.len() || materials.is_empty() {
+        mesh.material_ids = vec![0; mesh.triangles.len()];
+    }
+    let file_normals = usable_normals(&mesh.normals, mesh.positions.len());
+    let emits = |m: u32| {
+        materials
+            .get(m as usize)
+            .is_some_and(|f| f.emission.iter().any(|&e| e > 0.0))
+    };
+    let mut emitters = Vec::new();
+    let mut kept = Mesh {
+        positions: std::mem::take(&mut mesh.positions),
+        normals: std::mem::take(&mut mesh.normals),
+        ..Mesh::default()
+    };
+    for (t, &m) in mesh.triangles.iter().zip(&mesh.material_ids) {
+        if !emits(m) {
+            kept.triangles.push(*t);
+            kept.material_ids.push(m);
+            continue;
+        }
+        let corners = t.map(|i| kept.positions[i as usize]);
+        let normal_hint = if file_normals {
+            t.iter()
+                .map(|&i| kept.normals[i as usize].normalize())
+                .sum()
+        } else {
+            (corners[1] - corners[0]).cross(corners[2] - corners[0])
+        };
+        let f = &materials[m as usize];
+        emitters.push(lamps::Emitter {
+            corners,
+            normal_hint,
+            radiance: f.emission,
+            two_sided: f.two_sided,
+        });
+    }
+    let lamps = lamps::merge(&emitters);
+    if lamps.dropped > 0 {
+        warnings.push(format!(
+            "{} emitting polygons beyond the {} most powerful were not made lights",
+            lamps.dropped,
+            lamps::MAX_LAMPS
+        ));
+    }
+    if lamps.degenerate > 0 {
+        warnings.push(format!(
+            "{} emitting triangles have no area and were skipped",
+            lamps.degenerate
+        ));
+    }
+    if kept.triangles.is_empty() {
+        return Err(MeshError::Invalid(format!(
+            "every one of the {} triangles emits light: nothing is left to light",
+            mesh.triangles.len()
+        )));
+    }
+    let ids = std::mem::take(&mut kept.material_ids);
+    let mut mesh = finish(kept)?;
+    mesh.material_ids = ids;
+    Ok(Asset {
+        mesh,
+        materials: materials.into_iter().map(|f| f.material).collect(),
+        lights: lamps.lights,
+        camera,
+        warnings,
+    })
+}
+
+/// Every triangle's indices in range and every position finite.
+fn check_indices(mesh: &Mesh) -> Result<(), MeshError> {
     if mesh.triangles.is_empty() {
         return Err(MeshError::NoTriangles);
     }
@@ -220,6 +354,16 @@ pub(crate) fn finish(mut mesh: Mesh) -> Result<Mesh, MeshError> {
             });
         }
     }
+    Ok(())
+}
+
+/// Shared last step of every importer: checks indices and coordinates, drops unused vertices,
+/// settles the normals (the file's when complete and usable, else computed) and validates.
+///
+/// `mesh.normals` is either one per position (the file's normals) or empty.
+pub(crate) fn finish(mut mesh: Mesh) -> Result<Mesh, MeshError> {
+    check_indices(&mesh)?;
+    let n = mesh.positions.len();
     if mesh.normals.len() != n {
         mesh.normals.clear();
     }

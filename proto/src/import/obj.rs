@@ -14,9 +14,10 @@
 //!
 //! OBJ is a simple line format, so this module reads it directly: `v` (x y z, any further
 //! numbers ignored), `vn`, and `f` with corners `v`, `v/vt`, `v//vn` or `v/vt/vn`, 1-based or
-//! negative (relative to the elements defined so far). Polygons are fan-triangulated. Groups,
-//! objects, smoothing groups, materials, texture coordinates, lines and points are ignored, so
-//! every group lands in one mesh. Lines may end in `\n` or `\r\n`, a trailing `\` continues a
+//! negative (relative to the elements defined so far). Polygons are fan-triangulated. `usemtl`
+//! gives the faces after it their material, read from the `mtllib` files next to the OBJ
+//! (`mtl.rs`; a material with `Ke` makes its faces lamps). Groups, objects, smoothing groups,
+//! texture coordinates, lines and points are ignored, so every group lands in one mesh. Lines may end in `\n` or `\r\n`, a trailing `\` continues a
 //! line, and `#` starts a comment.
 //!
 //! Vertices: without complete normals (some face corner names none), a mesh vertex is an OBJ
@@ -25,9 +26,14 @@
 
 use glam::Vec3;
 
-use super::{Limits, finish, is_degenerate};
+use std::collections::HashMap;
+use std::path::Path;
+
+use super::mtl::Library;
+use super::{FileMaterial, Limits, Raw, is_degenerate};
 use crate::error::MeshError;
 use crate::mesh::Mesh;
+use crate::scene::Material;
 
 fn malformed(line: usize, message: impl std::fmt::Display) -> MeshError {
     MeshError::Malformed {
@@ -39,8 +45,18 @@ fn malformed(line: usize, message: impl std::fmt::Display) -> MeshError {
 /// "No normal" in a corner.
 const NONE: u32 = u32::MAX;
 
-pub(super) fn parse(bytes: &[u8], limits: &Limits) -> Result<Mesh, MeshError> {
+pub(super) fn parse(
+    bytes: &[u8],
+    base_dir: Option<&Path>,
+    limits: &Limits,
+) -> Result<Raw, MeshError> {
     let mut positions: Vec<Vec3> = Vec::new();
+    // Material names in order of first `usemtl`, the current one, and each triangle's.
+    let mut material_names: Vec<String> = Vec::new();
+    let mut material_index: HashMap<String, u32> = HashMap::new();
+    let mut current_material: Option<u32> = None;
+    let mut triangle_materials: Vec<u32> = Vec::new();
+    let mut libraries: Vec<String> = Vec::new();
     let mut normals: Vec<Vec3> = Vec::new();
     // Triangles as (v, vn) corners; positive indices are checked once the file is read (OBJ
     // readers conventionally accept forward references), relative ones when met.
@@ -141,8 +157,29 @@ pub(super) fn parse(bytes: &[u8], limits: &Limits) -> Result<Mesh, MeshError> {
                     if !is_degenerate(&t.map(|c| c.0)) {
                         limits.check_triangles(corners.len() as u64 + 1)?;
                         corners.push(t);
+                        triangle_materials.push(current_material.unwrap_or(0));
                     }
                 }
+            }
+            b"usemtl" | b"mtllib" => {
+                let name = words
+                    .map(String::from_utf8_lossy)
+                    .collect::<Vec<_>>()
+                    .join(" ");
+                if keyword == b"mtllib" {
+                    libraries.push(name);
+                    continue;
+                }
+                // Faces before the first `usemtl` (if any) use material 0, the default.
+                if material_names.is_empty() && !corners.is_empty() {
+                    material_names.push(String::new());
+                    material_index.insert(String::new(), 0);
+                }
+                let next = material_names.len() as u32;
+                current_material = Some(*material_index.entry(name.clone()).or_insert_with(|| {
+                    material_names.push(name);
+                    next
+                }));
             }
             _ => {}
         }
@@ -174,7 +211,7 @@ pub(super) fn parse(bytes: &[u8], limits: &Limits) -> Result<Mesh, MeshError> {
         return Err(MeshError::NoTriangles);
     }
 
-    let mesh = if all_have_normals {
+    let mut mesh = if all_have_normals {
         // One vertex per distinct (v, vn) pair, ordered by v then vn.
         let mut pairs: Vec<(u32, u32)> = corners.iter().flatten().copied().collect();
         pairs.sort_unstable();
@@ -195,7 +232,97 @@ pub(super) fn parse(bytes: &[u8], limits: &Limits) -> Result<Mesh, MeshError> {
             material_ids: Vec::new(),
         }
     };
-    finish(mesh)
+    let mut warnings = Vec::new();
+    let materials = if material_names.is_empty() {
+        Vec::new()
+    } else {
+        mesh.material_ids = triangle_materials;
+        resolve_materials(&material_names, &libraries, base_dir, &mut warnings)
+    };
+    if material_names.is_empty() && !libraries.is_empty() {
+        warnings.push(format!(
+            "mtllib {} is named but no face uses a material (no `usemtl`)",
+            libraries.join(", ")
+        ));
+    }
+    Ok(Raw {
+        mesh,
+        materials,
+        camera: None,
+        warnings,
+    })
+}
+
+/// The materials of `names` (index 0: faces before any `usemtl`), from the libraries next to
+/// the file. Whatever cannot be found gets the default material and a warning.
+fn resolve_materials(
+    names: &[String],
+    libraries: &[String],
+    base_dir: Option<&Path>,
+    warnings: &mut Vec<String>,
+) -> Vec<FileMaterial> {
+    let mut libs: Vec<Library> = Vec::new();
+    for name in libraries {
+        // Only a file next to the OBJ (or below it) is read: never an absolute path or `..`.
+        let safe = !name.is_empty()
+            && Path::new(name)
+                .components()
+                .all(|c| matches!(c, std::path::Component::Normal(_)));
+        match base_dir {
+            None => warnings.push(format!(
+                "mtllib {name:?} was not read (an uploaded OBJ cannot name other files); its                  materials get default values"
+            )),
+            Some(_) if !safe => warnings.push(format!(
+                "mtllib {name:?} was not read (only files next to the OBJ are read)"
+            )),
+            Some(dir) => match std::fs::read(dir.join(name)) {
+                // A material library is small; a huge one is refused rather than read.
+                Ok(bytes) if bytes.len() <= 16 << 20 => {
+                    let lib = Library::parse(&bytes);
+                    for what in &lib.ignored {
+                        warnings.push(format!("{name}: {what} ignored"));
+                    }
+                    libs.push(lib);
+                }
+                Ok(bytes) => warnings.push(format!(
+                    "mtllib {name:?} was not read: {} bytes is over 16 MiB",
+                    bytes.len()
+                )),
+                Err(e) => warnings.push(format!("mtllib {name:?} could not be read: {e}")),
+            },
+        }
+    }
+    names
+        .iter()
+        .enumerate()
+        .map(|(i, name)| {
+            if i == 0 && name.is_empty() {
+                return FileMaterial {
+                    material: Material {
+                        name: "(no usemtl)".into(),
+                        ..Material::default()
+                    },
+                    ..FileMaterial::default()
+                };
+            }
+            libs.iter()
+                .find_map(|l| l.material(name))
+                .unwrap_or_else(|| {
+                    if !libs.is_empty() {
+                        warnings.push(format!(
+                            "usemtl {name:?}: no such material in the material libraries;                              default values used"
+                        ));
+                    }
+                    FileMaterial {
+                        material: Material {
+                            name: name.clone(),
+                            ..Material::default()
+                        },
+                        ..FileMaterial::default()
+                    }
+                })
+        })
+        .collect()
 }
 
 fn read_vec3<'a>(words: &mut impl Iterator<Item = &'a [u8]>) -> Option<Vec3> {

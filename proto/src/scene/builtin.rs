@@ -58,7 +58,7 @@ pub fn scene_file(name: &str) -> Option<SceneFile> {
     Some(SceneFile {
         meshes: vec![MeshRef {
             path: format!("builtin:{name}"),
-            material: 0,
+            material: Some(0),
             transform: None,
             motion: None,
         }],
@@ -66,6 +66,7 @@ pub fn scene_file(name: &str) -> Option<SceneFile> {
         ground_material: 0,
         materials: s.materials,
         lights: s.lights,
+        asset_lights: true,
         camera: Some(s.camera),
         bake: s.bake,
     })
@@ -133,6 +134,7 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
         },
         bake: BakeSettings::default(),
         motion: Vec::new(),
+        warnings: Vec::new(),
     }
 }
 

@@ -9,6 +9,7 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::SceneError;
+use crate::import::Asset;
 use crate::mesh::{Aabb, Mesh};
 use crate::motion::{Motion, MovingPart, Transform};
 
@@ -225,9 +226,11 @@ impl BakeSettings {
 pub struct MeshRef {
     /// Path relative to the scene file, or `builtin:NAME` for a procedural scene mesh.
     pub path: String,
-    /// Material index for the whole mesh (files carry no materials bspvt reads).
-    #[serde(default)]
-    pub material: u32,
+    /// Material index (into the scene file's `materials`) for the whole mesh. Without it, the
+    /// file's own materials are used (glTF, OBJ/MTL; appended after the scene file's), or
+    /// material 0 when the file has none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub material: Option<u32>,
     /// Where the mesh sits (default: as in its file).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub transform: Option<Transform>,
@@ -252,14 +255,22 @@ pub struct SceneFile {
     /// The materials (default: one).
     #[serde(default = "default_materials")]
     pub materials: Vec<Material>,
-    /// The polygonal lights.
+    /// The polygonal lights (added to the lamps of the mesh files, see `asset_lights`).
+    #[serde(default)]
     pub lights: Vec<PolygonLight>,
-    /// Without a camera the scene is framed automatically.
+    /// Also light the scene with the mesh files' own lamps (emissive materials); default true.
+    #[serde(default = "default_true")]
+    pub asset_lights: bool,
+    /// Without a camera, the first mesh file's camera is used, else the scene is framed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub camera: Option<Camera>,
     /// Settings of the visibility bake.
     #[serde(default)]
     pub bake: BakeSettings,
+}
+
+fn default_true() -> bool {
+    true
 }
 
 fn default_materials() -> Vec<Material> {
@@ -281,6 +292,9 @@ pub struct Scene {
     pub bake: BakeSettings,
     /// The meshes that move (empty: a static scene). `mesh` is the pose at t = 0.
     pub motion: Vec<MovingPart>,
+    /// What the loader did not use or added on its own (ignored textures, a default light),
+    /// one sentence each, for the front ends to show. Not part of the scene's identity.
+    pub warnings: Vec<String>,
 }
 
 impl PolygonLight {
@@ -496,23 +510,30 @@ impl Scene {
             .meshes
             .iter()
             .map(|m| match m.path.strip_prefix("builtin:") {
-                Some(name) => builtin::mesh(name).ok_or_else(|| {
-                    SceneError::Invalid(format!(
-                        "unknown built-in mesh {name:?} (known: {})",
-                        builtin::mesh_names().join(", ")
-                    ))
-                }),
-                None => Ok(crate::import::load_mesh(&base_dir.join(&m.path))?),
+                Some(name) => builtin::mesh(name)
+                    .map(|mesh| Asset {
+                        mesh,
+                        ..Asset::default()
+                    })
+                    .ok_or_else(|| {
+                        SceneError::Invalid(format!(
+                            "unknown built-in mesh {name:?} (known: {})",
+                            builtin::mesh_names().join(", ")
+                        ))
+                    }),
+                None => Ok(crate::import::load_asset(&base_dir.join(&m.path))?),
             })
-            .collect::<Result<Vec<Mesh>, SceneError>>()?;
+            .collect::<Result<Vec<Asset>, SceneError>>()?;
         Scene::assemble(file, parts)
     }
 
-    /// A scene from its file and the meshes it names (`parts`, in the order of
-    /// `file.meshes`): each mesh placed by its transform, the moving ones recorded, the ground
-    /// plane added, the camera framed, the whole posed at t = 0 and validated. Every loader
-    /// (files here, uploads in the server) goes through this.
-    pub fn assemble(file: SceneFile, parts: Vec<Mesh>) -> Result<Scene, SceneError> {
+    /// A scene from its file and the assets it names (`parts`, in the order of
+    /// `file.meshes`): each mesh placed by its transform with its materials (the entry's, or
+    /// the file's own appended after the scene file's, a scene-file material of the same name
+    /// replacing an asset's), its lamps added (placed by the same transform), the moving ones
+    /// recorded, the ground plane added, the camera taken or framed, the whole posed at t = 0
+    /// and validated. Every loader (files here, uploads in the server) goes through this.
+    pub fn assemble(mut file: SceneFile, parts: Vec<Asset>) -> Result<Scene, SceneError> {
         if file.meshes.is_empty() {
             return Err(SceneError::Invalid("scene names no meshes".into()));
         }
@@ -525,11 +546,75 @@ impl Scene {
         }
         let mut mesh = Mesh::default();
         let mut motion = Vec::new();
-        for (i, (m, mut part)) in file.meshes.iter().zip(parts).enumerate() {
-            if let Some(t) = &m.transform {
-                t.validate_entry(i)?;
-                part.transform(&t.affine(glam::Vec3::ZERO));
+        let mut warnings = Vec::new();
+        let mut lights = std::mem::take(&mut file.lights);
+        let mut asset_camera = None;
+        let mut materials = std::mem::take(&mut file.materials);
+        for (i, (m, asset)) in file.meshes.iter().zip(parts).enumerate() {
+            let Asset {
+                mesh: mut part,
+                materials: own,
+                lights: lamps,
+                camera,
+                warnings: w,
+            } = asset;
+            warnings.extend(w.into_iter().map(|w| format!("{}: {w}", m.path)));
+            let affine = match &m.transform {
+                Some(t) => {
+                    t.validate_entry(i)?;
+                    let a = t.affine(glam::Vec3::ZERO);
+                    part.transform(&a);
+                    Some(a)
+                }
+                None => None,
+            };
+            let place = |p: [f32; 3]| match &affine {
+                Some(a) => a.transform_point3(Vec3::from(p)).to_array(),
+                None => p,
+            };
+            if file.asset_lights {
+                for mut l in lamps {
+                    l.vertices = l.vertices.iter().map(|&v| place(v)).collect();
+                    lights.push(l);
+                }
+            } else if !lamps.is_empty() {
+                warnings.push(format!(
+                    "{}: its {} lamps are not used (asset_lights is false)",
+                    m.path,
+                    lamps.len()
+                ));
             }
+            if asset_camera.is_none() && affine.is_none() {
+                asset_camera = camera;
+            }
+            // The entry's material for the whole mesh, else the file's own materials.
+            let offset = match m.material {
+                Some(id) => {
+                    part.material_ids.iter_mut().for_each(|x| *x = id);
+                    0
+                }
+                None if own.is_empty() => 0,
+                None => {
+                    let mut remap = Vec::with_capacity(own.len());
+                    for o in own {
+                        // A scene-file material of the same name overrides the asset's.
+                        match materials
+                            .iter()
+                            .position(|f| !o.name.is_empty() && f.name == o.name)
+                        {
+                            Some(j) => remap.push(j as u32),
+                            None => {
+                                remap.push(materials.len() as u32);
+                                materials.push(o);
+                            }
+                        }
+                    }
+                    part.material_ids
+                        .iter_mut()
+                        .for_each(|x| *x = remap.get(*x as usize).copied().unwrap_or(0));
+                    0
+                }
+            };
             if let Some(mo) = &m.motion {
                 mo.validate(i)?;
                 motion.push(MovingPart::new(
@@ -541,22 +626,28 @@ impl Scene {
                     mo.clone(),
                 ));
             }
-            mesh.append(&part, m.material);
+            mesh.append(&part, offset);
         }
+        let model = mesh.bounds();
         if file.ground_plane {
-            let ground = builtin::ground_under(&mesh.bounds(), file.ground_material);
+            let ground = builtin::ground_under(&model, file.ground_material);
             mesh.append(&ground, 0);
         }
         let camera = file
             .camera
-            .unwrap_or_else(|| Camera::framing(&mesh.bounds()));
+            .or(asset_camera)
+            .unwrap_or_else(|| Camera::framing(&model));
+        if materials.is_empty() {
+            materials = default_materials();
+        }
         let mut scene = Scene {
             mesh,
-            materials: file.materials,
-            lights: file.lights,
+            materials,
+            lights,
             camera,
             bake: file.bake,
             motion,
+            warnings,
         };
         let mut at0 = std::mem::take(&mut scene.mesh);
         scene.pose_into(0.0, &mut at0);
@@ -587,47 +678,80 @@ impl Scene {
             camera: self.camera.clone(),
             bake: self.bake.clone(),
             motion: Vec::new(),
+            warnings: self.warnings.clone(),
         };
         self.pose_into(t, &mut s.mesh);
         s
     }
 
-    /// The default scene for a bare mesh: the mesh, a tessellated ground plane under it, a
-    /// quad light above it and a camera framing both.
-    pub fn from_mesh(mut mesh: Mesh) -> Result<Scene, SceneError> {
-        mesh.validate()?;
-        mesh.material_ids.iter_mut().for_each(|m| *m = 0);
-        let bounds = mesh.bounds();
-        let ground = builtin::ground_under(&bounds, 1);
-        mesh.append(&ground, 0);
-        let all = mesh.bounds();
-        let light = builtin::quad_light_above(&bounds, [8.0, 8.0, 8.0]);
-        let scene = Scene {
-            camera: Camera::framing(&all),
+    /// The default scene for a bare mesh (an asset without lamps, materials or camera).
+    pub fn from_mesh(mesh: Mesh) -> Result<Scene, SceneError> {
+        Scene::from_asset(Asset {
             mesh,
-            materials: vec![
-                Material {
-                    name: "model".into(),
-                    ..Material::default()
-                },
-                Material {
-                    name: "ground".into(),
-                    roughness: 0.5,
-                    albedo: [0.5, 0.5, 0.5],
-                    specular: [0.04; 3],
-                },
-            ],
-            lights: vec![light],
+            ..Asset::default()
+        })
+    }
+
+    /// The scene of an asset given alone (`--mesh`, or an upload without a scene file).
+    ///
+    /// With lamps (emissive materials) the asset is the whole scene: its lamps, its materials,
+    /// its camera or one framing it, no ground. Without, it gets a tessellated ground plane
+    /// under it and a quad light above it, and a warning says so. Without materials of its
+    /// own, it gets a grey GGX (and the ground a slightly rougher grey).
+    pub fn from_asset(asset: Asset) -> Result<Scene, SceneError> {
+        let Asset {
+            mut mesh,
+            materials,
+            lights,
+            camera,
+            mut warnings,
+        } = asset;
+        mesh.validate()?;
+        let bounds = mesh.bounds();
+        let mut materials = if materials.is_empty() {
+            mesh.material_ids.iter_mut().for_each(|m| *m = 0);
+            vec![Material {
+                name: "model".into(),
+                ..Material::default()
+            }]
+        } else {
+            materials
+        };
+        let lights = if lights.is_empty() {
+            let ground_id = materials.len() as u32;
+            materials.push(Material {
+                name: "ground".into(),
+                roughness: 0.5,
+                albedo: [0.5, 0.5, 0.5],
+                specular: [0.04; 3],
+            });
+            mesh.append(&builtin::ground_under(&bounds, ground_id), 0);
+            let light = builtin::quad_light_above(&bounds, [8.0, 8.0, 8.0]);
+            warnings.push(
+                "the mesh has no lamp (no emissive material): a quad light above it and a \
+                 ground plane under it were added"
+                    .into(),
+            );
+            vec![light]
+        } else {
+            lights
+        };
+        let scene = Scene {
+            camera: camera.unwrap_or_else(|| Camera::framing(&bounds)),
+            mesh,
+            materials,
+            lights,
             bake: BakeSettings::default(),
             motion: Vec::new(),
+            warnings,
         };
         scene.validate()?;
         Ok(scene)
     }
 
-    /// Loads `path` as a bare mesh and builds its default scene.
+    /// Loads `path` as an asset given alone ([`Scene::from_asset`]).
     pub fn from_mesh_path(path: &Path) -> Result<Scene, SceneError> {
-        Scene::from_mesh(crate::import::load_mesh(path)?)
+        Scene::from_asset(crate::import::load_asset(path)?)
     }
 }
 

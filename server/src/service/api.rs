@@ -206,6 +206,7 @@ fn accept(st: &Shared, up: Upload) -> ApiResult<Arc<Live>> {
         source: p.source,
         chunks_baked: 0,
         chunks_corrupt: 0,
+        warnings: scene.warnings.clone(),
     };
     match st.jobs.submit(row) {
         Ok(live) => {

@@ -58,9 +58,12 @@ pub(crate) struct SceneRow {
     pub chunks_baked: u64,
     /// Stored chunks found corrupt and re-baked.
     pub chunks_corrupt: u64,
+    /// What the importer did not use or added (JSON list of sentences).
+    pub warnings: Vec<String>,
 }
 
-const SCHEMA_VERSION: i64 = 1;
+/// 2: adds `scenes.warnings` (a version-1 database gains the column on open).
+const SCHEMA_VERSION: i64 = 2;
 
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS meta (
@@ -85,7 +88,8 @@ CREATE TABLE IF NOT EXISTS scenes (
     upload_bytes INTEGER NOT NULL,
     source TEXT NOT NULL,
     chunks_baked INTEGER NOT NULL DEFAULT 0,
-    chunks_corrupt INTEGER NOT NULL DEFAULT 0
+    chunks_corrupt INTEGER NOT NULL DEFAULT 0,
+    warnings TEXT NOT NULL DEFAULT '[]'
 );
 CREATE INDEX IF NOT EXISTS scenes_state ON scenes(state);
 CREATE TABLE IF NOT EXISTS chunks (
@@ -101,7 +105,7 @@ CREATE TABLE IF NOT EXISTS chunks (
 
 const SCENE_COLUMNS: &str = "id, seq, state, reason, created_ms, started_ms, finished_ms, \
     vertex_count, triangle_count, chunk_count, chunk_vertices, settings, mesh_hash, header, \
-    upload_bytes, source, chunks_baked, chunks_corrupt";
+    upload_bytes, source, chunks_baked, chunks_corrupt, warnings";
 
 /// The database: one connection behind a mutex (every statement is short).
 pub(crate) struct Db {
@@ -143,6 +147,13 @@ impl Db {
                 path.display()
             )
         })?;
+        if version == 1 {
+            conn.execute(
+                "ALTER TABLE scenes ADD COLUMN warnings TEXT NOT NULL DEFAULT '[]'",
+                [],
+            )
+            .with_context(|| format!("cannot upgrade database {}", path.display()))?;
+        }
         conn.pragma_update(None, "user_version", SCHEMA_VERSION)?;
         conn.execute(
             "INSERT INTO meta(key, value) VALUES('generation', 1)
@@ -176,8 +187,9 @@ impl Db {
         let c = self.conn();
         c.execute(
             "INSERT INTO scenes(id, state, reason, created_ms, vertex_count, triangle_count,
-                 chunk_count, chunk_vertices, settings, mesh_hash, header, upload_bytes, source)
-             VALUES(?1, ?2, NULL, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)",
+                 chunk_count, chunk_vertices, settings, mesh_hash, header, upload_bytes, source,
+                 warnings)
+             VALUES(?1, ?2, NULL, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13)",
             params![
                 r.id,
                 JobState::Queued.as_str(),
@@ -191,6 +203,7 @@ impl Db {
                 r.header,
                 r.upload_bytes as i64,
                 r.source,
+                serde_json::to_string(&r.warnings).unwrap_or_else(|_| "[]".into()),
             ],
         )?;
         Ok(c.last_insert_rowid())
@@ -218,6 +231,8 @@ impl Db {
                 source: r.get(15)?,
                 chunks_baked: r.get::<_, i64>(16)? as u64,
                 chunks_corrupt: r.get::<_, i64>(17)? as u64,
+                // Written by this module as a JSON list; anything else reads as none.
+                warnings: serde_json::from_str(&r.get::<_, String>(18)?).unwrap_or_default(),
             },
             state,
         ))
@@ -389,6 +404,7 @@ mod tests {
             header: vec![1, 2, 3],
             upload_bytes: 10,
             source: "test".into(),
+            warnings: Vec::new(),
             chunks_baked: 0,
             chunks_corrupt: 0,
         }

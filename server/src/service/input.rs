@@ -14,9 +14,9 @@
 
 use std::io::Read;
 
-use bspvt_proto::import::{Format, Limits, load_mesh_bytes};
+use bspvt_proto::import::{Asset, Format, Limits, load_asset_bytes};
 use bspvt_proto::scene::SceneFile;
-use bspvt_proto::{BakeSettings, Mesh, Scene, SceneError};
+use bspvt_proto::{BakeSettings, Scene, SceneError};
 
 use super::error::{ApiError, ApiResult};
 
@@ -65,15 +65,23 @@ pub(crate) fn prepare(up: Upload, lim: &InputLimits) -> ApiResult<Prepared> {
             let source = match &mesh {
                 Some((name, m)) => format!(
                     "scene JSON with mesh {name} ({} vertices)",
-                    m.vertex_count()
+                    m.mesh.vertex_count()
                 ),
                 None => "scene JSON".to_string(),
             };
             (compose(file, mesh.as_ref())?, source)
         }
         (None, Some((name, m))) => {
-            let source = format!("mesh {name} ({} vertices), default scene", m.vertex_count());
-            (Scene::from_mesh(m)?, source)
+            let source = format!(
+                "mesh {name} ({} vertices), {}",
+                m.mesh.vertex_count(),
+                if m.lights.is_empty() {
+                    "default scene"
+                } else {
+                    "with its own lamps"
+                }
+            );
+            (Scene::from_asset(m)?, source)
         }
         (None, None) => {
             return Err(ApiError::bad_request(
@@ -98,7 +106,7 @@ pub(crate) fn prepare(up: Upload, lim: &InputLimits) -> ApiResult<Prepared> {
 }
 
 /// Decompresses (`.zst`) and parses an uploaded mesh; returns its file name and the mesh.
-fn load_upload(name: &str, bytes: Vec<u8>, lim: &Limits) -> ApiResult<(String, Mesh)> {
+fn load_upload(name: &str, bytes: Vec<u8>, lim: &Limits) -> ApiResult<(String, Asset)> {
     // Only the last path component of a client-supplied file name means anything.
     let name = name
         .rsplit(['/', '\\'])
@@ -120,8 +128,8 @@ fn load_upload(name: &str, bytes: Vec<u8>, lim: &Limits) -> ApiResult<(String, M
         None => (name.clone(), bytes),
     };
     let format = Format::from_name(&inner)?;
-    let mesh = load_mesh_bytes(&bytes, format, lim)?;
-    Ok((inner, mesh))
+    let asset = load_asset_bytes(&bytes, format, lim)?;
+    Ok((inner, asset))
 }
 
 /// zstd decompression that stops at `max` bytes of output.
@@ -143,7 +151,7 @@ fn decompress(data: &[u8], max: u64) -> ApiResult<Vec<u8>> {
 }
 
 /// [`Scene::from_file`] for an upload: `builtin:` meshes and the uploaded mesh only.
-fn compose(file: SceneFile, upload: Option<&(String, Mesh)>) -> ApiResult<Scene> {
+fn compose(file: SceneFile, upload: Option<&(String, Asset)>) -> ApiResult<Scene> {
     let mut parts = Vec::with_capacity(file.meshes.len());
     for m in &file.meshes {
         if let Some(name) = m.path.strip_prefix("builtin:") {
@@ -156,7 +164,10 @@ fn compose(file: SceneFile, upload: Option<&(String, Mesh)>) -> ApiResult<Scene>
                     ),
                 )
             })?;
-            parts.push(part);
+            parts.push(Asset {
+                mesh: part,
+                ..Asset::default()
+            });
         } else {
             match upload {
                 Some((uploaded, part)) if *uploaded == m.path => parts.push(part.clone()),
@@ -308,7 +319,8 @@ mod tests {
         )
         .unwrap_or_else(|e| panic!("prepare: {e:?}"));
         let mut expect = Scene::from_mesh(
-            load_mesh_bytes(OBJ.as_bytes(), Format::Obj, &Limits::default()).expect("mesh"),
+            bspvt_proto::import::load_mesh_bytes(OBJ.as_bytes(), Format::Obj, &Limits::default())
+                .expect("mesh"),
         )
         .expect("scene");
         expect.bake.face_res = 8;

@@ -98,6 +98,7 @@ pub(crate) fn status_of(st: &Shared, live: &Live) -> SceneStatus {
         },
         mesh_hash: format!("{:016x}", r.mesh_hash),
         source: r.source.clone(),
+        warnings: r.warnings.clone(),
         created_ms: r.created_ms,
         started_ms: s.started_ms,
         finished_ms: s.finished_ms,

@@ -457,6 +457,7 @@ mod tests {
             header: vec![],
             upload_bytes: 0,
             source: String::new(),
+            warnings: Vec::new(),
             chunks_baked: 0,
             chunks_corrupt: 0,
         }

@@ -1,0 +1,249 @@
+#!/usr/bin/env python3
+"""Writes bspvt's own test rooms (run from anywhere; rewrites the files next to this script).
+
+- cornell-box.obj + .mtl: the published Cornell box geometry (Cornell University Program of
+  Computer Graphics, "Cornell Box Data", in metres), written the way exporters write OBJ: CRLF
+  line ends, quads, negative (relative) indices, a 4-vertex floor, materials with Kd and the
+  lamp's Ke. Winding: walls face into the box, the blocks face out, the lamp faces down.
+- room.gltf: a 4 x 2.5 x 4 m room (glTF 2.0, one embedded buffer): coloured walls, an
+  emissive ceiling quad with KHR_materials_emissive_strength, a metal box and a glossy sphere
+  under a node hierarchy, and a perspective camera on a node.
+"""
+import base64, json, math, os, struct
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+MM = 0.001
+
+# ---------------------------------------------------------------------------------------------
+# Cornell box. Each quad as published (mm); wound below so that the normal faces `inward`.
+CENTRE = (278.0, 274.4, 279.6)
+WALLS = {
+    "floor": [(552.8, 0, 0), (0, 0, 0), (0, 0, 559.2), (549.6, 0, 559.2)],
+    "ceiling": [(556, 548.8, 0), (556, 548.8, 559.2), (0, 548.8, 559.2), (0, 548.8, 0)],
+    "back": [(549.6, 0, 559.2), (0, 0, 559.2), (0, 548.8, 559.2), (556, 548.8, 559.2)],
+    "green": [(0, 0, 559.2), (0, 0, 0), (0, 548.8, 0), (0, 548.8, 559.2)],
+    "red": [(552.8, 0, 0), (549.6, 0, 559.2), (556, 548.8, 559.2), (556, 548.8, 0)],
+}
+SHORT = [
+    [(130, 165, 65), (82, 165, 225), (240, 165, 272), (290, 165, 114)],
+    [(290, 0, 114), (290, 165, 114), (240, 165, 272), (240, 0, 272)],
+    [(130, 0, 65), (130, 165, 65), (290, 165, 114), (290, 0, 114)],
+    [(82, 0, 225), (82, 165, 225), (130, 165, 65), (130, 0, 65)],
+    [(240, 0, 272), (240, 165, 272), (82, 165, 225), (82, 0, 225)],
+]
+TALL = [
+    [(423, 330, 247), (265, 330, 296), (314, 330, 456), (472, 330, 406)],
+    [(423, 0, 247), (423, 330, 247), (472, 330, 406), (472, 0, 406)],
+    [(472, 0, 406), (472, 330, 406), (314, 330, 456), (314, 0, 456)],
+    [(314, 0, 456), (314, 330, 456), (265, 330, 296), (265, 0, 296)],
+    [(265, 0, 296), (265, 330, 296), (423, 330, 247), (423, 0, 247)],
+]
+# The lamp, 0.8 mm under the ceiling (the published file puts it in the ceiling's plane).
+LAMP = [(343, 548.0, 227), (343, 548.0, 332), (213, 548.0, 332), (213, 548.0, 227)]
+
+
+def sub(a, b):
+    return tuple(x - y for x, y in zip(a, b))
+
+
+def cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def dot(a, b):
+    return sum(x * y for x, y in zip(a, b))
+
+
+def centroid(q):
+    return tuple(sum(c) / len(q) for c in zip(*q))
+
+
+def facing(quad, toward):
+    """The quad wound so that its normal points toward `toward` (a direction)."""
+    n = cross(sub(quad[1], quad[0]), sub(quad[2], quad[0]))
+    return quad if dot(n, toward) > 0 else list(reversed(quad))
+
+
+def cornell():
+    obj = ["# Cornell box (Cornell University Program of Computer Graphics), metres",
+           "# written by assets/rooms/make_rooms.py", "mtllib cornell-box.mtl"]
+    def quad(name, mat, q):
+        obj.append(f"o {name}")
+        obj.append(f"usemtl {mat}")
+        for p in q:
+            obj.append("v {:.4f} {:.4f} {:.4f}".format(*(c * MM for c in p)))
+        obj.append("f -4 -3 -2 -1")
+    for name, q in WALLS.items():
+        mat = name if name in ("red", "green") else "white"
+        quad(name, mat, facing(q, sub(CENTRE, centroid(q))))
+    for block, faces in (("short", SHORT), ("tall", TALL)):
+        c = centroid([p for f in faces for p in f])
+        c = (c[0], 0.0, c[2])
+        for i, q in enumerate(faces):
+            out = sub(centroid(q), c) if i else (0, 1, 0)
+            quad(f"{block}_{i}", "white", facing(q, out))
+    quad("light", "light", facing(LAMP, (0, -1, 0)))
+    mtl = ["# Cornell box materials (reflectances as in Mitsuba's cornell-box scene)",
+           "newmtl white", "Kd 0.725 0.71 0.68", "Ks 0 0 0", "Ns 0",
+           "newmtl red", "Kd 0.63 0.065 0.05", "Ks 0 0 0", "Ns 0",
+           "newmtl green", "Kd 0.14 0.45 0.091", "Ks 0 0 0", "Ns 0",
+           "newmtl light", "Kd 0.78 0.78 0.78", "Ks 0 0 0", "Ns 0", "Ke 17 12 4"]
+    with open(os.path.join(HERE, "cornell-box.obj"), "w", newline="") as f:
+        f.write("\r\n".join(obj) + "\r\n")
+    with open(os.path.join(HERE, "cornell-box.mtl"), "w", newline="") as f:
+        f.write("\r\n".join(mtl) + "\r\n")
+
+
+# ---------------------------------------------------------------------------------------------
+# glTF room.
+class Gltf:
+    def __init__(self):
+        self.buf = bytearray()
+        self.doc = {"asset": {"version": "2.0", "generator": "bspvt make_rooms.py"},
+                    "extensionsUsed": ["KHR_materials_emissive_strength"],
+                    "buffers": [], "bufferViews": [], "accessors": [], "meshes": [],
+                    "materials": [], "nodes": [], "cameras": [], "scenes": [], "scene": 0}
+
+    def accessor(self, data, fmt, comp, typ, target, minmax=False):
+        while len(self.buf) % 4:
+            self.buf.append(0)
+        off = len(self.buf)
+        for row in data:
+            self.buf += struct.pack(fmt, *row) if isinstance(row, tuple) else struct.pack(fmt, row)
+        self.doc["bufferViews"].append({"buffer": 0, "byteOffset": off,
+                                        "byteLength": len(self.buf) - off, "target": target})
+        acc = {"bufferView": len(self.doc["bufferViews"]) - 1, "componentType": comp,
+               "count": len(data), "type": typ}
+        if minmax:
+            acc["min"] = [min(r[i] for r in data) for i in range(3)]
+            acc["max"] = [max(r[i] for r in data) for i in range(3)]
+        self.doc["accessors"].append(acc)
+        return len(self.doc["accessors"]) - 1
+
+    def primitive(self, positions, normals, tris, material):
+        p = self.accessor(positions, "<3f", 5126, "VEC3", 34962, True)
+        n = self.accessor(normals, "<3f", 5126, "VEC3", 34962)
+        i = self.accessor([t for tri in tris for t in tri], "<H", 5123, "SCALAR", 34963)
+        return {"attributes": {"POSITION": p, "NORMAL": n}, "indices": i, "material": material}
+
+    def material(self, name, base, metallic, roughness, emissive=None, strength=None):
+        m = {"name": name, "pbrMetallicRoughness": {"baseColorFactor": base + [1.0],
+             "metallicFactor": metallic, "roughnessFactor": roughness}}
+        if emissive:
+            m["emissiveFactor"] = emissive
+            m["extensions"] = {"KHR_materials_emissive_strength": {"emissiveStrength": strength}}
+        self.doc["materials"].append(m)
+        return len(self.doc["materials"]) - 1
+
+    def mesh(self, name, prims):
+        self.doc["meshes"].append({"name": name, "primitives": prims})
+        return len(self.doc["meshes"]) - 1
+
+    def node(self, name, **kw):
+        self.doc["nodes"].append({"name": name, **kw})
+        return len(self.doc["nodes"]) - 1
+
+    def write(self, path):
+        self.doc["buffers"] = [{"byteLength": len(self.buf), "uri":
+                                "data:application/octet-stream;base64,"
+                                + base64.b64encode(bytes(self.buf)).decode()}]
+        with open(path, "w") as f:
+            json.dump(self.doc, f, indent=1)
+            f.write("\n")
+
+
+def quad_prim(g, corners, normal, material):
+    return g.primitive(corners, [normal] * 4, [(0, 1, 2), (0, 2, 3)], material)
+
+
+def box(g, half, material):
+    prims_p, prims_n, tris = [], [], []
+    hx, hy, hz = half
+    for axis in range(3):
+        for sign in (-1, 1):
+            n = [0, 0, 0]
+            n[axis] = sign
+            u = [0, 0, 0]
+            v = [0, 0, 0]
+            u[(axis + 1) % 3] = 1
+            v[(axis + 2) % 3] = 1
+            if sign < 0:
+                u, v = v, u
+            base = len(prims_p)
+            for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+                p = [n[i] * half[i] + a * u[i] * half[i] + b * v[i] * half[i] for i in range(3)]
+                prims_p.append(tuple(p))
+                prims_n.append(tuple(n))
+            tris += [(base, base + 1, base + 2), (base, base + 2, base + 3)]
+    return g.primitive(prims_p, prims_n, tris, material)
+
+
+def sphere(g, r, material, rings=12, segments=24):
+    pos, nrm, tris = [], [], []
+    for i in range(rings + 1):
+        th = math.pi * i / rings
+        for j in range(segments + 1):
+            ph = 2 * math.pi * j / segments
+            n = (math.sin(th) * math.cos(ph), math.cos(th), -math.sin(th) * math.sin(ph))
+            pos.append(tuple(r * c for c in n))
+            nrm.append(n)
+    w = segments + 1
+    for i in range(rings):
+        for j in range(segments):
+            a, b, c, d = i * w + j, i * w + j + 1, (i + 1) * w + j + 1, (i + 1) * w + j
+            if i:
+                tris.append((a, d, b))
+            if i < rings - 1:
+                tris.append((b, d, c))
+    return g.primitive(pos, nrm, tris, material)
+
+
+def room():
+    g = Gltf()
+    white = g.material("white wall", [0.75, 0.74, 0.72], 0.0, 0.9)
+    red = g.material("red wall", [0.7, 0.08, 0.06], 0.0, 0.9)
+    blue = g.material("blue wall", [0.1, 0.2, 0.65], 0.0, 0.9)
+    floor = g.material("oak floor", [0.55, 0.4, 0.25], 0.0, 0.55)
+    lamp = g.material("ceiling lamp", [1.0, 1.0, 1.0], 0.0, 1.0, [1.0, 0.9, 0.75], 12.0)
+    gold = g.material("brushed gold", [1.0, 0.78, 0.34], 1.0, 0.35)
+    glossy = g.material("glossy plastic", [0.05, 0.3, 0.1], 0.0, 0.2)
+    X, Y, Z = 2.0, 2.5, 2.0
+    shell = g.mesh("shell", [
+        quad_prim(g, [(-X, 0, -Z), (-X, 0, Z), (X, 0, Z), (X, 0, -Z)], (0, 1, 0), floor),
+        quad_prim(g, [(-X, Y, -Z), (X, Y, -Z), (X, Y, Z), (-X, Y, Z)], (0, -1, 0), white),
+        quad_prim(g, [(-X, 0, -Z), (X, 0, -Z), (X, Y, -Z), (-X, Y, -Z)], (0, 0, 1), white),
+        quad_prim(g, [(-X, 0, Z), (-X, Y, Z), (X, Y, Z), (X, 0, Z)], (0, 0, -1), white),
+        quad_prim(g, [(-X, 0, -Z), (-X, Y, -Z), (-X, Y, Z), (-X, 0, Z)], (1, 0, 0), red),
+        quad_prim(g, [(X, 0, -Z), (X, 0, Z), (X, Y, Z), (X, Y, -Z)], (-1, 0, 0), blue),
+    ])
+    s = 0.4  # the lamp: a 0.8 m square 2 cm under the ceiling, in its node's frame
+    lamp_mesh = g.mesh("lamp", [quad_prim(g, [(-s, 0, -s), (s, 0, -s), (s, 0, s), (-s, 0, s)],
+                                          (0, -1, 0), lamp)])
+    box_mesh = g.mesh("metal box", [box(g, (0.35, 0.35, 0.35), gold)])
+    ball_mesh = g.mesh("glossy sphere", [sphere(g, 0.4, glossy)])
+    g.doc["cameras"].append({"name": "view", "type": "perspective",
+                             "perspective": {"yfov": 0.9, "aspectRatio": 1.5,
+                                             "znear": 0.05, "zfar": 50.0}})
+    # Camera at (0, 1.4, 1.8) looking down its -Z, tilted 12 degrees down.
+    t = math.radians(-12) / 2
+    nodes = [
+        g.node("shell", mesh=shell),
+        g.node("lamp", mesh=lamp_mesh, translation=[0.0, Y - 0.02, 0.0]),
+        g.node("furniture", translation=[0.0, 0.0, -0.3], children=[]),
+        g.node("camera", camera=0, translation=[0.0, 1.4, 1.8],
+               rotation=[math.sin(t), 0.0, 0.0, math.cos(t)]),
+    ]
+    furniture = g.doc["nodes"][nodes[2]]
+    r = math.radians(30) / 2
+    furniture["children"] = [
+        g.node("metal box", mesh=box_mesh, translation=[-0.7, 0.35, 0.0],
+               rotation=[0.0, math.sin(r), 0.0, math.cos(r)]),
+        g.node("glossy sphere", mesh=ball_mesh, translation=[0.8, 0.4, 0.3]),
+    ]
+    g.doc["scenes"].append({"name": "room", "nodes": nodes})
+    g.write(os.path.join(HERE, "room.gltf"))
+
+
+if __name__ == "__main__":
+    cornell()
+    room()

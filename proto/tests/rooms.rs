@@ -1,0 +1,183 @@
+//! The project's own rooms (`assets/rooms/`, written by `make_rooms.py`) given alone, as a
+//! user gives an asset with `--mesh`: the importer's materials, lamps and camera against values
+//! computed by hand from the files, and the warnings for what it leaves out.
+
+use std::path::{Path, PathBuf};
+
+use bspvt_proto::Scene;
+use bspvt_proto::import::{Format, Limits, load_asset, load_asset_bytes};
+use glam::Vec3;
+
+fn rooms() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/rooms")
+}
+
+fn close3(a: [f32; 3], b: [f32; 3], tol: f32) -> bool {
+    a.iter().zip(&b).all(|(x, y)| (x - y).abs() <= tol)
+}
+
+fn area(p: &[Vec3]) -> f32 {
+    let mut n = Vec3::ZERO;
+    for i in 0..p.len() {
+        n += p[i].cross(p[(i + 1) % p.len()]);
+    }
+    0.5 * n.length()
+}
+
+#[test]
+fn cornell_box_obj_mtl_lamp_materials_and_no_added_ground() {
+    let s = Scene::from_mesh_path(&rooms().join("cornell-box.obj")).expect("cornell box");
+    // The lamp: Ke 17 12 4 on a 130 × 105 mm quad 0.8 mm under the ceiling, facing down.
+    assert_eq!(s.lights.len(), 1, "{:?}", s.lights);
+    let l = &s.lights[0];
+    assert_eq!(l.radiance, [17.0, 12.0, 4.0]);
+    assert_eq!(l.vertices.len(), 4);
+    assert!(l.normal().dot(Vec3::NEG_Y) > 0.9999, "{}", l.normal());
+    assert!((area(&l.points()) - 0.130 * 0.105).abs() < 1e-6);
+    assert!(l.vertices.iter().all(|v| (v[1] - 0.548).abs() < 1e-6));
+    assert!(!l.two_sided && l.region.is_none());
+    // Materials by name, Kd as written, Ns 0 → α = 1, Ks 0 → F0 = 0.
+    let find = |n: &str| {
+        s.materials
+            .iter()
+            .position(|m| m.name == n)
+            .unwrap_or_else(|| panic!("no material {n}: {:?}", s.materials))
+    };
+    let red = &s.materials[find("red")];
+    assert_eq!(red.albedo, [0.63, 0.065, 0.05]);
+    assert_eq!(red.roughness, 1.0);
+    assert_eq!(red.specular, [0.0; 3]);
+    assert_eq!(s.materials[find("green")].albedo, [0.14, 0.45, 0.091]);
+    // The lamp's quad is not geometry (not an occluder): 16 quads − 1 = 15, 4 vertices each,
+    // 2 triangles each; the floor keeps its 4 vertices; no ground plane, no default light.
+    assert_eq!(s.mesh.triangles.len(), 30);
+    assert_eq!(s.mesh.vertex_count(), 60);
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let red_tris = s
+        .mesh
+        .material_ids
+        .iter()
+        .filter(|&&m| m as usize == find("red"))
+        .count();
+    assert_eq!(red_tris, 2);
+    // Framed on the model: the camera sees the box's centre.
+    let c = &s.camera;
+    let f = (Vec3::from(c.target) - Vec3::from(c.position)).normalize();
+    let to_centre = (Vec3::new(0.278, 0.274, 0.2796) - Vec3::from(c.position)).normalize();
+    assert!(f.dot(to_centre) > 0.99);
+    // The same file read from memory (an upload) cannot read its MTL: defaults and a warning.
+    let bytes = std::fs::read(rooms().join("cornell-box.obj")).expect("read");
+    let a = load_asset_bytes(&bytes, Format::Obj, &Limits::default()).expect("from memory");
+    assert!(a.lights.is_empty());
+    assert!(
+        a.warnings
+            .iter()
+            .any(|w| w.contains("mtllib") && w.contains("not read")),
+        "{:?}",
+        a.warnings
+    );
+}
+
+#[test]
+fn gltf_room_materials_lamp_camera_and_node_hierarchy() {
+    let a = load_asset(&rooms().join("room.gltf")).expect("room");
+    assert!(a.warnings.is_empty(), "{:?}", a.warnings);
+    // Lamp: emissiveFactor (1, 0.9, 0.75) × emissiveStrength 12, a 0.8 m square at y = 2.48.
+    assert_eq!(a.lights.len(), 1);
+    let l = &a.lights[0];
+    assert!(
+        close3(l.radiance, [12.0, 10.8, 9.0], 1e-5),
+        "{:?}",
+        l.radiance
+    );
+    assert!((area(&l.points()) - 0.64).abs() < 1e-5);
+    assert!(l.vertices.iter().all(|v| (v[1] - 2.48).abs() < 1e-6));
+    assert!(l.normal().dot(Vec3::NEG_Y) > 0.9999);
+    // Metallic-roughness: α = r², albedo = base·(1 − m), F0 = mix(0.04, base, m).
+    let m = |n: &str| {
+        a.materials
+            .iter()
+            .find(|m| m.name == n)
+            .unwrap_or_else(|| panic!("no material {n}"))
+    };
+    let gold = m("brushed gold");
+    assert!((gold.roughness - 0.1225).abs() < 1e-6);
+    assert_eq!(gold.albedo, [0.0; 3]);
+    assert!(close3(gold.specular, [1.0, 0.78, 0.34], 1e-6));
+    let plastic = m("glossy plastic");
+    assert!((plastic.roughness - 0.04).abs() < 1e-6);
+    assert!(close3(plastic.albedo, [0.05, 0.3, 0.1], 1e-6));
+    assert!(close3(plastic.specular, [0.04; 3], 1e-6));
+    // Node hierarchy: the box sits at furniture (0, 0, −0.3) + box (−0.7, 0.35, 0), rotated
+    // 30° about +Y, half-size 0.35: its gold triangles' centre is the composed translation.
+    let gold_id = a
+        .materials
+        .iter()
+        .position(|x| x.name == "brushed gold")
+        .expect("id") as u32;
+    let pts: Vec<Vec3> = a
+        .mesh
+        .triangles
+        .iter()
+        .zip(&a.mesh.material_ids)
+        .filter(|(_, m)| **m == gold_id)
+        .flat_map(|(t, _)| t.map(|i| a.mesh.positions[i as usize]))
+        .collect();
+    assert_eq!(pts.len(), 36);
+    let c = pts.iter().copied().sum::<Vec3>() / pts.len() as f32;
+    assert!((c - Vec3::new(-0.7, 0.35, -0.3)).length() < 1e-5, "{c}");
+    let (lo, hi) = pts.iter().fold((f32::MAX, f32::MIN), |(lo, hi), p| {
+        (lo.min(p.y), hi.max(p.y))
+    });
+    assert!((lo - 0.0).abs() < 1e-5 && (hi - 0.7).abs() < 1e-5);
+    // Camera: node at (0, 1.4, 1.8) rotated −12° about X, looking down its −Z; yfov 0.9 rad.
+    let cam = a.camera.as_ref().expect("camera");
+    assert!(close3(cam.position, [0.0, 1.4, 1.8], 1e-6));
+    let f = (Vec3::from(cam.target) - Vec3::from(cam.position)).normalize();
+    let t = (-12f32).to_radians();
+    assert!(
+        (f - Vec3::new(0.0, t.sin(), -t.cos())).length() < 1e-5,
+        "{f}"
+    );
+    assert!((cam.fov_y_deg - 0.9f32.to_degrees()).abs() < 1e-4);
+    // As a scene: the asset's lamp, materials and camera; nothing added.
+    let s = Scene::from_asset(a.clone()).expect("scene");
+    assert_eq!(s.lights, a.lights);
+    assert_eq!(s.camera, *cam);
+    assert_eq!(s.mesh.vertex_count(), a.mesh.vertex_count());
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+}
+
+/// What the importer leaves out is named: textures, unsupported extensions, punctual lights.
+#[test]
+fn gltf_warnings_name_what_is_ignored() {
+    let text = std::fs::read_to_string(rooms().join("room.gltf")).expect("read");
+    let mut doc: serde_json::Value = serde_json::from_str(&text).expect("json");
+    doc["extensionsUsed"].as_array_mut().expect("list").extend([
+        "KHR_materials_clearcoat".into(),
+        "KHR_lights_punctual".into(),
+    ]);
+    doc["extensions"] = serde_json::json!({"KHR_lights_punctual": {"lights": [
+        {"type": "point", "intensity": 10.0}, {"type": "spot", "spot": {}}]}});
+    doc["images"] = serde_json::json!([{"uri": "data:image/png;base64,AAAA"}]);
+    doc["textures"] = serde_json::json!([{"source": 0}]);
+    doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] =
+        serde_json::json!({"index": 0});
+    doc["materials"][1]["normalTexture"] = serde_json::json!({"index": 0});
+    doc["cameras"][0] = serde_json::json!({"type": "orthographic", "orthographic":
+        {"xmag": 1.0, "ymag": 1.0, "znear": 0.1, "zfar": 10.0}});
+    let bytes = serde_json::to_vec(&doc).expect("json");
+    let a = load_asset_bytes(&bytes, Format::Gltf, &Limits::default()).expect("room");
+    let has = |s: &str| a.warnings.iter().any(|w| w.contains(s));
+    for s in [
+        "KHR_materials_clearcoat",
+        "base-colour textures",
+        "normal maps",
+        "2 KHR_lights_punctual lights",
+        "orthographic",
+    ] {
+        assert!(has(s), "no warning on {s}: {:?}", a.warnings);
+    }
+    assert!(a.camera.is_none());
+    assert_eq!(a.lights.len(), 1);
+}

@@ -97,26 +97,27 @@ pub enum LightStop {
 impl LightStop {
     /// The stops of a scene's lights: its region where it declares one, else its plane.
     pub fn of_scene(scene: &bspvt_proto::Scene) -> Vec<LightStop> {
-        scene
-            .lights
-            .iter()
-            .map(|l| match l.region {
-                Some(r) => LightStop::Region(r.aabb()),
-                None => {
-                    let pts = l.points();
-                    let c = pts.iter().copied().sum::<Vec3>() / pts.len().max(1) as f32;
-                    LightStop::Plane {
-                        point: c,
-                        normal: l.normal(),
-                    }
+        scene.lights.iter().map(LightStop::of_light).collect()
+    }
+
+    /// The stop of one light: its region where it declares one, else its plane.
+    pub fn of_light(light: &bspvt_proto::scene::PolygonLight) -> LightStop {
+        match light.region {
+            Some(r) => LightStop::Region(r.aabb()),
+            None => {
+                let pts = light.points();
+                let c = pts.iter().copied().sum::<Vec3>() / pts.len().max(1) as f32;
+                LightStop::Plane {
+                    point: c,
+                    normal: light.normal(),
                 }
-            })
-            .collect()
+            }
+        }
     }
 
     /// The distance along unit `d` from `origin` at which the ray ends here, if it does.
     #[inline]
-    fn distance(&self, origin: Vec3, d: Vec3) -> Option<f32> {
+    pub(crate) fn distance(&self, origin: Vec3, d: Vec3) -> Option<f32> {
         match *self {
             LightStop::Region(b) => b.ray_entry(origin, d),
             LightStop::Plane { point, normal } => {

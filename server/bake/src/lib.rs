@@ -4,7 +4,8 @@
 //! BSPVT per face, encoded in chunks ([`bspvt_proto::encoding`]). Used by the baking service,
 //! the offline `bspvt-server bake` and the client's own bakes (methods that need trees).
 //!
-//! Owns: [`Baker`], the cube-map casting, the frustum culler, the tree fitter, [`stats`].
+//! Owns: [`Baker`], the cube-map casting, the frustum culler, the tree fitter, [`stats`],
+//! the visibility-driven mesh refinement done before a bake ([`refine`]).
 //! Must not depend on: the HTTP service, a database or a file format beyond `bspvt-proto`.
 //!
 //! [`Baker`] holds what every vertex shares (the BVH, the ray directions, the line codec);
@@ -16,6 +17,7 @@
 pub mod cubemap;
 pub mod fit;
 mod frustum;
+pub mod refine;
 pub mod stats;
 
 use std::ops::Range;

@@ -31,6 +31,7 @@ pub mod method;
 pub mod penumbra;
 pub mod ratio;
 pub mod render;
+pub mod scene;
 pub mod session;
 pub mod sg;
 pub mod shade;

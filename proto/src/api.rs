@@ -187,8 +187,9 @@ pub struct SceneStatus {
 // ---------------------------------------------------------------------------------------------
 // The scene as stored and served (`GET /v1/scenes/{id}/scene`).
 
-/// 2: adds the moving parts ([`bspvt_proto::motion`]); version 1 (static scenes) still reads.
-const STORED_VERSION: u16 = 2;
+/// 2: adds the moving parts ([`bspvt_proto::motion`]); 3: adds `bake.refine`. Versions 1 and 2
+/// still read.
+const STORED_VERSION: u16 = 3;
 
 #[derive(Serialize, Deserialize)]
 struct StoredScene {
@@ -201,7 +202,19 @@ struct StoredScene {
     motion: Vec<MovingPart>,
 }
 
-/// Version 1: [`StoredScene`] without `motion`.
+/// Version 2: [`StoredScene`] with [`BakeSettingsV2`].
+#[derive(Serialize, Deserialize)]
+struct StoredSceneV2 {
+    version: u16,
+    mesh: Mesh,
+    materials: Vec<Material>,
+    lights: Vec<StoredLight>,
+    camera: Camera,
+    bake: BakeSettingsV2,
+    motion: Vec<MovingPart>,
+}
+
+/// Version 1: version 2 without `motion`.
 #[derive(Serialize, Deserialize)]
 struct StoredSceneV1 {
     version: u16,
@@ -209,7 +222,30 @@ struct StoredSceneV1 {
     materials: Vec<Material>,
     lights: Vec<StoredLight>,
     camera: Camera,
-    bake: BakeSettings,
+    bake: BakeSettingsV2,
+}
+
+/// [`BakeSettings`] before `refine` (versions 1 and 2).
+#[derive(Serialize, Deserialize)]
+struct BakeSettingsV2 {
+    face_res: u32,
+    epsilon: f32,
+    supersampling: u32,
+    split: crate::scene::SplitMethod,
+    chunk_vertices: u32,
+}
+
+impl From<BakeSettingsV2> for BakeSettings {
+    fn from(b: BakeSettingsV2) -> BakeSettings {
+        BakeSettings {
+            face_res: b.face_res,
+            epsilon: b.epsilon,
+            supersampling: b.supersampling,
+            split: b.split,
+            chunk_vertices: b.chunk_vertices,
+            refine: None,
+        }
+    }
 }
 
 /// [`PolygonLight`] without serde's skipped fields, which postcard cannot carry.
@@ -261,8 +297,20 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
                 materials: v1.materials,
                 lights: v1.lights,
                 camera: v1.camera,
-                bake: v1.bake,
+                bake: v1.bake.into(),
                 motion: Vec::new(),
+            }
+        }
+        2 => {
+            let v2: StoredSceneV2 = postcard::from_bytes(bytes).map_err(bad)?;
+            StoredScene {
+                version: v2.version,
+                mesh: v2.mesh,
+                materials: v2.materials,
+                lights: v2.lights,
+                camera: v2.camera,
+                bake: v2.bake.into(),
+                motion: v2.motion,
             }
         }
         STORED_VERSION => postcard::from_bytes(bytes).map_err(bad)?,
@@ -307,10 +355,45 @@ mod tests {
             materials: p.materials.clone(),
             lights: p.lights.iter().map(StoredLight::from).collect(),
             camera: p.camera.clone(),
-            bake: p.bake.clone(),
+            bake: v2_settings(&p.bake),
         })
         .expect("encode v1");
         assert_eq!(decode_scene(&v1).as_ref(), Ok(&p));
+        assert_eq!(decode_scene(&encode_scene(&p)).as_ref(), Ok(&p));
+    }
+
+    fn v2_settings(b: &BakeSettings) -> BakeSettingsV2 {
+        BakeSettingsV2 {
+            face_res: b.face_res,
+            epsilon: b.epsilon,
+            supersampling: b.supersampling,
+            split: b.split,
+            chunk_vertices: b.chunk_vertices,
+        }
+    }
+
+    /// A version-2 stored scene (before `bake.refine`) still reads, with no refinement; a
+    /// version-3 scene with refinement round-trips.
+    #[test]
+    fn version_2_reads_and_refinement_round_trips() {
+        let mut p = crate::builtin::scene("dynamic").expect("builtin");
+        let v2 = postcard::to_stdvec(&StoredSceneV2 {
+            version: 2,
+            mesh: p.mesh.clone(),
+            materials: p.materials.clone(),
+            lights: p.lights.iter().map(StoredLight::from).collect(),
+            camera: p.camera.clone(),
+            bake: v2_settings(&p.bake),
+            motion: p.motion.clone(),
+        })
+        .expect("encode v2");
+        p.warnings.clear();
+        assert_eq!(decode_scene(&v2).as_ref(), Ok(&p));
+        p.bake.refine = Some(crate::scene::Refinement {
+            tolerance: 0.25,
+            min_edge: 0.01,
+            max_vertices: 1234,
+        });
         assert_eq!(decode_scene(&encode_scene(&p)).as_ref(), Ok(&p));
     }
 

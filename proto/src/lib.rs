@@ -26,11 +26,14 @@
 
 pub mod api;
 pub mod bspvt;
+pub(crate) mod camera;
 pub mod cubemap;
 pub mod encoding;
 pub mod error;
 pub mod hash;
 pub mod import;
+pub(crate) mod light;
+pub(crate) mod material;
 pub(crate) mod mesh;
 pub mod motion;
 pub mod paths;

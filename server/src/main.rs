@@ -95,6 +95,20 @@ fn bake(a: BakeArgs) -> Result<()> {
         };
     }
     scene.validate()?;
+    if let Some(r) = bspvt_bake::refine::refine_scene(&mut scene)? {
+        eprintln!(
+            "refined {} → {} vertices ({} splits{}) in {:.2} s",
+            r.vertices_before,
+            r.vertices_after,
+            r.splits,
+            if r.budget_reached {
+                ", vertex budget reached"
+            } else {
+                ""
+            },
+            r.seconds
+        );
+    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))
         .build()

@@ -155,6 +155,7 @@ fn run(supersampling: u32, epsilon: f32) -> Errors {
         supersampling,
         split: SplitMethod::Default,
         chunk_vertices: 1024,
+        refine: None,
     };
     let t = std::time::Instant::now();
     let baker = Baker::with_settings(mesh, settings, Some(vec![region]));

@@ -107,6 +107,7 @@ fn random_header(rng: &mut Rng, vertex_count: u32) -> BakeHeader {
             SplitMethod::NelderMead,
         ][rng.below(3) as usize],
         chunk_vertices: 1 + rng.below(8) as u32,
+        refine: None,
     };
     BakeHeader::new(&settings, vertex_count, rng.next_u64())
 }

@@ -6,7 +6,6 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use bspvt_proto::encoding::decode_bake;
-use bspvt_proto::scene::open_scene;
 
 #[derive(clap::Args)]
 pub(crate) struct InspectArgs {
@@ -44,7 +43,7 @@ pub(crate) fn run(a: InspectArgs) -> Result<()> {
     if a.scene.is_none() && a.mesh.is_none() {
         return Ok(());
     }
-    let scene = open_scene(a.scene.as_deref(), a.mesh.as_deref())?;
+    let scene = bspvt_client::scene::open(a.scene.as_deref(), a.mesh.as_deref())?;
     if scene.mesh.content_hash() != h.mesh_hash {
         bail!("the bake was made from a different mesh than this scene's");
     }

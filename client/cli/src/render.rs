@@ -10,7 +10,6 @@ use bspvt_client::method::trees::{cached_bake, load_checked};
 use bspvt_client::method::{EnvOptions, Settings};
 use bspvt_client::render::renderer::{Mode, Trees};
 use bspvt_client::sg::{SgOptions, SsdfMode};
-use bspvt_proto::scene::open_scene;
 
 use crate::frame_args::{method, method_values};
 use crate::progress::progress_bar;
@@ -118,7 +117,7 @@ fn frame_path(out: &std::path::Path, k: usize, frames: usize) -> PathBuf {
 }
 
 pub(crate) fn run(a: RenderArgs) -> Result<()> {
-    let scene = open_scene(a.scene.as_deref(), a.mesh.as_deref())?;
+    let scene = bspvt_client::scene::open(a.scene.as_deref(), a.mesh.as_deref())?;
     let method = method(&a.method)?;
     let bake = match &a.trees {
         Some(p) => Some(load_checked(p, &scene)?),

@@ -119,9 +119,6 @@ pub fn render_sequence(
                 method.name()
             );
         }
-        for w in &scene.warnings {
-            tracing::warn!("{w}");
-        }
         if scene.lights_facing_away().contains(&opts.light) {
             tracing::warn!(
                 "light {} faces away from every vertex of the scene: it lights nothing and the \

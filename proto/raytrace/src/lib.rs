@@ -83,7 +83,21 @@ impl Occluder {
     /// Whether a triangle not touching vertex `skip` blocks the ray from `origin` along `dir`
     /// before distance `t_max` (in units of `dir`).
     pub fn occluded_until(&self, origin: Vec3, dir: Vec3, t_max: f32, skip: u32) -> bool {
-        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
+        self.occluded_between(origin, dir, 0.0, t_max, skip)
+    }
+
+    /// [`Occluder::occluded_until`], counting only hits at distances in \[`t_min`, `t_max`\]:
+    /// a surface point's rays ignore surfaces that pass through their origin (the wall beside a
+    /// floor vertex of a room, whose plane contains the vertex: a hit at t ≈ 0 ± rounding).
+    pub fn occluded_between(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        skip: u32,
+    ) -> bool {
+        let ray = Ray::new(origin.into(), dir.into(), t_min, t_max);
         !self.bvh.ray_traverse_miss(ray, |ray, id| {
             if self.indices[id].contains(&skip) {
                 f32::INFINITY

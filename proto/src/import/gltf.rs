@@ -50,9 +50,10 @@ use glam::{Mat3, Mat4, Vec3};
 
 use super::mtl::MIN_ALPHA;
 use super::{FileMaterial, Limits, Raw, is_degenerate, usable_normals};
+use crate::camera::Camera;
 use crate::error::MeshError;
+use crate::material::Material;
 use crate::mesh::Mesh;
-use crate::scene::{Camera, Material};
 
 fn malformed(message: impl Into<String>) -> MeshError {
     MeshError::Malformed {

@@ -16,7 +16,7 @@ use std::collections::HashMap;
 
 use glam::Vec3;
 
-use crate::scene::PolygonLight;
+use crate::light::PolygonLight;
 
 /// Most lights taken from one asset: shading costs one polygon integral per light and pixel.
 pub(crate) const MAX_LAMPS: usize = 64;
@@ -117,7 +117,7 @@ pub(crate) fn merge(emitters: &[Emitter]) -> Lamps {
         for poly in polygons_of(&group, &tris, normal, &neighbour) {
             let src = tris[start].2;
             let e = &emitters[src];
-            let area = 0.5 * crate::scene::newell_normal(&poly).length();
+            let area = 0.5 * crate::light::newell_normal(&poly).length();
             let power = area * (e.radiance[0] + e.radiance[1] + e.radiance[2]);
             polygons.push((poly, src, power));
         }
@@ -290,7 +290,7 @@ mod tests {
             light.normal()
         );
         assert!(light.validate(0).is_ok());
-        let area = 0.5 * crate::scene::newell_normal(&light.points()).length();
+        let area = 0.5 * crate::light::newell_normal(&light.points()).length();
         assert!((area - 1.0).abs() < 1e-6, "{area}");
     }
 
@@ -315,7 +315,7 @@ mod tests {
             let area: f32 = l
                 .lights
                 .iter()
-                .map(|x| 0.5 * crate::scene::newell_normal(&x.points()).length())
+                .map(|x| 0.5 * crate::light::newell_normal(&x.points()).length())
                 .sum();
             let expect = 0.5 * sides as f32 * (std::f32::consts::TAU / sides as f32).sin();
             assert!((area - expect).abs() < 1e-5, "{sides}: {area} vs {expect}");

@@ -29,9 +29,11 @@ use std::path::Path;
 
 use glam::Vec3;
 
+use crate::camera::Camera;
 use crate::error::MeshError;
+use crate::light::PolygonLight;
+use crate::material::Material;
 use crate::mesh::Mesh;
-use crate::scene::{Camera, Material, PolygonLight};
 
 mod gltf;
 mod lamps;

@@ -14,7 +14,7 @@
 use std::collections::{BTreeSet, HashMap};
 
 use super::FileMaterial;
-use crate::scene::Material;
+use crate::material::Material;
 
 /// Smallest GGX α an imported material gets (a mirror is not representable by the LTC fit).
 pub(crate) const MIN_ALPHA: f32 = 1e-3;

@@ -32,8 +32,8 @@ use std::path::Path;
 use super::mtl::Library;
 use super::{FileMaterial, Limits, Raw, is_degenerate};
 use crate::error::MeshError;
+use crate::material::Material;
 use crate::mesh::Mesh;
-use crate::scene::Material;
 
 fn malformed(line: usize, message: impl std::fmt::Display) -> MeshError {
     MeshError::Malformed {

@@ -15,108 +15,9 @@ use crate::motion::{Motion, MovingPart, Transform};
 
 pub mod builtin;
 
-/// A GGX microfacet material.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Material {
-    /// The material's name (for messages).
-    #[serde(default)]
-    pub name: String,
-    /// GGX roughness α (the squared perceptual roughness \[Karis13\]), in (0, 1].
-    #[serde(default = "default_roughness")]
-    pub roughness: f32,
-    /// Diffuse (Lambertian) albedo, linear RGB in [0, 1].
-    #[serde(default = "default_albedo")]
-    pub albedo: [f32; 3],
-    /// Specular colour F0 (Fresnel at normal incidence), linear RGB in [0, 1].
-    #[serde(default = "default_specular")]
-    pub specular: [f32; 3],
-}
-
-fn default_roughness() -> f32 {
-    0.3
-}
-fn default_albedo() -> [f32; 3] {
-    [0.6, 0.6, 0.6]
-}
-fn default_specular() -> [f32; 3] {
-    [0.04, 0.04, 0.04]
-}
-
-impl Default for Material {
-    fn default() -> Self {
-        Material {
-            name: "default".into(),
-            roughness: default_roughness(),
-            albedo: default_albedo(),
-            specular: default_specular(),
-        }
-    }
-}
-
-/// A planar convex polygonal light of uniform (or textured) radiance.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct PolygonLight {
-    /// 3 to 8 coplanar vertices of a convex polygon, counter-clockwise seen from the emitting
-    /// side (the emitting normal is `(v1 - v0) × (v2 - v0)`).
-    pub vertices: Vec<[f32; 3]>,
-    /// Emitted radiance, linear RGB (W·sr⁻¹·m⁻²).
-    pub radiance: [f32; 3],
-    /// Emits from both sides.
-    #[serde(default)]
-    pub two_sided: bool,
-    /// Optional texture (path relative to the scene file) modulating the radiance.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub texture: Option<String>,
-    /// Optional box the light stays inside while it moves. Directions from a vertex that cannot
-    /// reach this box can never see the light, so the bake treats them as "don't care".
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub region: Option<Region>,
-}
-
-/// An axis-aligned region of space, as written in scene files.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Region {
-    /// Smallest corner.
-    pub min: [f32; 3],
-    /// Largest corner.
-    pub max: [f32; 3],
-}
-
-impl Region {
-    /// The region as a box.
-    pub fn aabb(&self) -> Aabb {
-        Aabb {
-            min: Vec3::from(self.min),
-            max: Vec3::from(self.max),
-        }
-    }
-}
-
-/// A pinhole camera.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Camera {
-    /// Eye position.
-    pub position: [f32; 3],
-    /// The point looked at.
-    pub target: [f32; 3],
-    /// Up direction (default +Y).
-    #[serde(default = "default_up")]
-    pub up: [f32; 3],
-    /// Vertical field of view in degrees.
-    #[serde(default = "default_fov")]
-    pub fov_y_deg: f32,
-}
-
-fn default_up() -> [f32; 3] {
-    [0.0, 1.0, 0.0]
-}
-fn default_fov() -> f32 {
-    40.0
-}
+pub use crate::camera::Camera;
+pub use crate::light::{PolygonLight, Region};
+pub use crate::material::Material;
 
 /// How the BSPVT builder chooses a split line.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -152,6 +53,77 @@ pub struct BakeSettings {
     /// Vertices per stored chunk.
     #[serde(default = "default_chunk_vertices")]
     pub chunk_vertices: u32,
+    /// Adaptive refinement of the mesh before the bake where the lights' visibility varies
+    /// across a triangle (docs/bake.md "Refinement"); `None`: the mesh is baked as given.
+    #[serde(default)]
+    pub refine: Option<Refinement>,
+}
+
+/// How finely the bake refines a mesh where shadows cross its triangles: a triangle is split
+/// (conforming longest-edge bisection) while the visibility of the lights, sampled at its
+/// vertices and edge midpoints, varies by more than `tolerance` across it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Refinement {
+    /// Largest allowed variation of the visibility V ∈ [0, 1] (the fraction of the light's
+    /// samples seen) across a triangle. Finite, ≥ 0 (≥ 1 never splits).
+    #[serde(default = "default_tolerance")]
+    pub tolerance: f32,
+    /// Shortest edge that may still be split, in scene units; 0: the scene's diagonal / 256.
+    #[serde(default)]
+    pub min_edge: f32,
+    /// Vertex budget of the refined mesh (the original vertices included).
+    #[serde(default = "default_max_vertices")]
+    pub max_vertices: u32,
+}
+
+fn default_tolerance() -> f32 {
+    0.1
+}
+fn default_max_vertices() -> u32 {
+    200_000
+}
+
+impl Default for Refinement {
+    /// Tolerance 0.1, shortest edge the diagonal / 256, at most 200,000 vertices.
+    fn default() -> Self {
+        Refinement {
+            tolerance: default_tolerance(),
+            min_edge: 0.0,
+            max_vertices: default_max_vertices(),
+        }
+    }
+}
+
+impl Refinement {
+    /// Largest vertex budget a scene may ask for.
+    pub const MAX_VERTICES: u32 = 20_000_000;
+
+    /// Checks every field; the message names the field and what it may be.
+    pub fn validate(&self) -> Result<(), SceneError> {
+        let bad = |m: String| Err(SceneError::Invalid(format!("bake.refine.{m}")));
+        if !(self.tolerance.is_finite() && self.tolerance >= 0.0) {
+            return bad(format!(
+                "tolerance = {} must be a finite fraction ≥ 0 (e.g. 0.1)",
+                self.tolerance
+            ));
+        }
+        if !(self.min_edge.is_finite() && self.min_edge >= 0.0) {
+            return bad(format!(
+                "min_edge = {} must be a finite length ≥ 0 in scene units (0: the scene's \
+                 diagonal / 256)",
+                self.min_edge
+            ));
+        }
+        if self.max_vertices > Self::MAX_VERTICES {
+            return bad(format!(
+                "max_vertices = {} is above {}",
+                self.max_vertices,
+                Self::MAX_VERTICES
+            ));
+        }
+        Ok(())
+    }
 }
 
 fn default_face_res() -> u32 {
@@ -175,6 +147,7 @@ impl Default for BakeSettings {
             supersampling: default_supersampling(),
             split: SplitMethod::Default,
             chunk_vertices: default_chunk_vertices(),
+            refine: None,
         }
     }
 }
@@ -216,7 +189,10 @@ impl BakeSettings {
                 Self::MAX_CHUNK_VERTICES
             ));
         }
-        Ok(())
+        match &self.refine {
+            Some(r) => r.validate(),
+            None => Ok(()),
+        }
     }
 }
 
@@ -226,9 +202,10 @@ impl BakeSettings {
 pub struct MeshRef {
     /// Path relative to the scene file, or `builtin:NAME` for a procedural scene mesh.
     pub path: String,
-    /// Material index (into the scene file's `materials`) for the whole mesh. Without it, the
-    /// file's own materials are used (glTF, OBJ/MTL; appended after the scene file's), or
-    /// material 0 when the file has none.
+    /// Material index (into the scene file's `materials`) for the whole mesh (for a file
+    /// without materials of its own, such as a built-in mesh of several parts, it shifts the
+    /// mesh's ids). Without it, the file's own materials are used (glTF, OBJ/MTL; appended
+    /// after the scene file's), or material 0 when the file has none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub material: Option<u32>,
     /// Where the mesh sits (default: as in its file).
@@ -295,136 +272,6 @@ pub struct Scene {
     /// What the loader did not use or added on its own (ignored textures, a default light),
     /// one sentence each, for the front ends to show. Not part of the scene's identity.
     pub warnings: Vec<String>,
-}
-
-impl PolygonLight {
-    /// The light's corners as vectors.
-    pub fn points(&self) -> Vec<Vec3> {
-        self.vertices.iter().map(|&v| Vec3::from(v)).collect()
-    }
-
-    /// Unit normal of the emitting side.
-    pub fn normal(&self) -> Vec3 {
-        let p = self.points();
-        newell_normal(&p).normalize_or_zero()
-    }
-
-    pub(crate) fn validate(&self, index: usize) -> Result<(), SceneError> {
-        let bad = |m: String| Err(SceneError::Invalid(format!("lights[{index}]: {m}")));
-        let n = self.vertices.len();
-        if !(3..=8).contains(&n) {
-            return bad(format!("has {n} vertices; a light needs 3 to 8"));
-        }
-        if self.vertices.iter().flatten().any(|x| !x.is_finite()) {
-            return bad("a vertex is NaN or infinite".into());
-        }
-        if self.radiance.iter().any(|x| !x.is_finite() || *x < 0.0) {
-            return bad("radiance must be finite and ≥ 0".into());
-        }
-        let p = self.points();
-        let normal = newell_normal(&p);
-        let size = Aabb::from_points(&p).diagonal();
-        let area2 = normal.length();
-        if area2.is_nan() || area2 <= 1e-12 * size * size {
-            return bad("polygon has zero area".into());
-        }
-        let nrm = normal / area2;
-        // Planarity: every vertex within 1e-3 of the polygon's size from its plane.
-        let d0 = nrm.dot(p[0]);
-        if p.iter().any(|q| (nrm.dot(*q) - d0).abs() > 1e-3 * size) {
-            return bad("vertices are not coplanar".into());
-        }
-        // Convexity: every turn has the same sign as the polygon normal.
-        for i in 0..n {
-            let (a, b, c) = (p[i], p[(i + 1) % n], p[(i + 2) % n]);
-            if (b - a).cross(c - b).dot(nrm) < -1e-6 * size * size {
-                return bad(format!(
-                    "polygon is not convex (or not counter-clockwise) at vertex {}",
-                    (i + 1) % n
-                ));
-            }
-        }
-        if let Some(r) = &self.region {
-            let b = r.aabb();
-            if !b.is_valid() {
-                return bad("region min must be ≤ max and finite".into());
-            }
-            let eps = 1e-4 * size.max(b.diagonal());
-            if p.iter().any(|q| {
-                q.cmplt(b.min - Vec3::splat(eps)).any() || q.cmpgt(b.max + Vec3::splat(eps)).any()
-            }) {
-                return bad("the light starts outside its declared region".into());
-            }
-        }
-        Ok(())
-    }
-}
-
-/// Newell's polygon normal: robust for any planar polygon, length = 2 · area.
-pub(crate) fn newell_normal(p: &[Vec3]) -> Vec3 {
-    let mut n = Vec3::ZERO;
-    for i in 0..p.len() {
-        n += p[i].cross(p[(i + 1) % p.len()]);
-    }
-    n
-}
-
-impl Material {
-    pub(crate) fn validate(&self, index: usize) -> Result<(), SceneError> {
-        let bad = |m: String| Err(SceneError::Invalid(format!("materials[{index}]: {m}")));
-        if !(self.roughness.is_finite() && self.roughness > 0.0 && self.roughness <= 1.0) {
-            return bad(format!("roughness {} must be in (0, 1]", self.roughness));
-        }
-        let unit = |c: &[f32; 3]| c.iter().all(|x| x.is_finite() && (0.0..=1.0).contains(x));
-        if !unit(&self.albedo) {
-            return bad("albedo must be in [0, 1]".into());
-        }
-        if !unit(&self.specular) {
-            return bad("specular must be in [0, 1]".into());
-        }
-        Ok(())
-    }
-}
-
-impl Camera {
-    /// A camera looking at `bounds` from the front-right and above, fitting its bounding sphere.
-    pub(crate) fn framing(bounds: &Aabb) -> Camera {
-        let center = bounds.center();
-        let radius = (0.5 * bounds.diagonal()).max(1e-6);
-        let fov_y_deg = default_fov();
-        let dist = radius / (0.5 * fov_y_deg.to_radians()).sin() * 1.05;
-        let dir = Vec3::new(0.55, 0.45, 1.0).normalize();
-        Camera {
-            position: (center + dir * dist).to_array(),
-            target: center.to_array(),
-            up: default_up(),
-            fov_y_deg,
-        }
-    }
-
-    pub(crate) fn validate(&self) -> Result<(), SceneError> {
-        let p = Vec3::from(self.position);
-        let t = Vec3::from(self.target);
-        let up = Vec3::from(self.up);
-        if !(p.is_finite() && t.is_finite() && up.is_finite()) {
-            return Err(SceneError::Invalid(
-                "camera has a NaN or infinite value".into(),
-            ));
-        }
-        let f = t - p;
-        if f.length_squared() == 0.0 || f.cross(up).length_squared() == 0.0 {
-            return Err(SceneError::Invalid(
-                "camera target equals its position or looks along `up`".into(),
-            ));
-        }
-        if !(self.fov_y_deg > 0.1 && self.fov_y_deg < 179.0) {
-            return Err(SceneError::Invalid(format!(
-                "camera fov_y_deg {} is outside (0.1, 179)",
-                self.fov_y_deg
-            )));
-        }
-        Ok(())
-    }
 }
 
 impl Scene {
@@ -589,6 +436,10 @@ impl Scene {
             }
             // The entry's material for the whole mesh, else the file's own materials.
             let offset = match m.material {
+                // A file without materials (PLY, a built-in part): its ids shifted by the
+                // entry's (all 0 for a plain mesh, so the entry's material throughout).
+                Some(id) if own.is_empty() => id,
+                // A file with its own materials: the entry's replaces them all.
                 Some(id) => {
                     part.material_ids.iter_mut().for_each(|x| *x = id);
                     0
@@ -629,6 +480,11 @@ impl Scene {
             mesh.append(&part, offset);
         }
         let model = mesh.bounds();
+        let model_mesh = if file.camera.is_none() && asset_camera.is_none() {
+            mesh.clone()
+        } else {
+            Mesh::default()
+        };
         if file.ground_plane {
             let ground = builtin::ground_under(&model, file.ground_material);
             mesh.append(&ground, 0);
@@ -636,7 +492,7 @@ impl Scene {
         let camera = file
             .camera
             .or(asset_camera)
-            .unwrap_or_else(|| Camera::framing(&model));
+            .unwrap_or_else(|| Camera::framing_mesh(&model_mesh));
         if materials.is_empty() {
             materials = default_materials();
         }
@@ -708,6 +564,8 @@ impl Scene {
         } = asset;
         mesh.validate()?;
         let bounds = mesh.bounds();
+        // Framed on the model, before a ground is added.
+        let camera = camera.unwrap_or_else(|| Camera::framing_mesh(&mesh));
         let mut materials = if materials.is_empty() {
             mesh.material_ids.iter_mut().for_each(|m| *m = 0);
             vec![Material {
@@ -717,6 +575,7 @@ impl Scene {
         } else {
             materials
         };
+        let mut bake = BakeSettings::default();
         let lights = if lights.is_empty() {
             let ground_id = materials.len() as u32;
             materials.push(Material {
@@ -734,14 +593,17 @@ impl Scene {
             );
             vec![light]
         } else {
+            // The asset's own scene (a room, a lamp over a table): its large flat polygons
+            // need refining where shadows cross them.
+            bake.refine = Some(Refinement::default());
             lights
         };
         let scene = Scene {
-            camera: camera.unwrap_or_else(|| Camera::framing(&bounds)),
+            camera,
             mesh,
             materials,
             lights,
-            bake: BakeSettings::default(),
+            bake,
             motion: Vec::new(),
             warnings,
         };

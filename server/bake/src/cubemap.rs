@@ -136,6 +136,9 @@ pub(crate) struct VertexRays<'a> {
     pub vertex: u32,
     /// Ray origin offset along the normal (scaled to the scene).
     pub offset: f32,
+    /// Hits nearer than this are not counted ([`crate::RAY_T_MIN_SCALE`] of the scene's
+    /// diagonal).
+    pub t_min: f32,
     /// Light regions; `None` when a light may go anywhere.
     pub regions: Option<&'a [Aabb]>,
     /// Where rays end (at the first stop they reach).
@@ -248,7 +251,8 @@ impl VertexRays<'_> {
                     let subs = &table.sub[f][p * s..(p + 1) * s];
                     px.index.push(p as u32);
                     px.visible.push(self.escaping(subs, |d| {
-                        occ.occluded_until(origin, d, self.t_max(origin, d), self.vertex)
+                        let t_max = self.t_max(origin, d);
+                        occ.occluded_between(origin, d, self.t_min, t_max, self.vertex)
                     }));
                 }
             }
@@ -359,14 +363,15 @@ impl BlockWalk<'_> {
             let subs = &self.table.sub[f][p * s..(p + 1) * s];
             self.vis[p] = if kept {
                 self.rays.escaping(subs, |d| {
-                    let t_max = self.rays.t_max(self.origin, d);
-                    self.culler.ray_hits_any(self.origin, d, t_max, &list)
+                    let t = [self.rays.t_min, self.rays.t_max(self.origin, d)];
+                    self.culler.ray_hits_any(self.origin, d, t, &list)
                 })
             } else {
                 self.rays.escaping(subs, |d| {
                     let t_max = self.rays.t_max(self.origin, d);
+                    let t_min = self.rays.t_min;
                     self.occ
-                        .occluded_until(self.origin, d, t_max, self.rays.vertex)
+                        .occluded_between(self.origin, d, t_min, t_max, self.rays.vertex)
                 })
             };
         }

@@ -120,10 +120,16 @@ impl FrustumCuller {
         );
     }
 
-    /// Whether the ray hits any primitive of the list.
+    /// Whether the ray hits any primitive of the list between `t_min` and `t_max`.
     #[inline]
-    pub(crate) fn ray_hits_any(&self, origin: Vec3, dir: Vec3, t_max: f32, list: &[u32]) -> bool {
-        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
+    pub(crate) fn ray_hits_any(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        [t_min, t_max]: [f32; 2],
+        list: &[u32],
+    ) -> bool {
+        let ray = Ray::new(origin.into(), dir.into(), t_min, t_max);
         list.iter()
             .any(|&p| self.rt[p as usize].intersect(&ray) < f32::INFINITY)
     }

@@ -37,6 +37,12 @@ use fit::{FitStats, Fitter};
 /// Ray origins are offset along the normal by this fraction of the scene's diagonal.
 pub(crate) const RAY_OFFSET_SCALE: f32 = 1e-4;
 
+/// Hits nearer than this fraction of the scene's diagonal are not counted: a surface that
+/// passes through a vertex (a wall meeting a floor in a room, as separate parts whose corners
+/// coincide, or whose edge runs through a refined vertex) is hit at t ≈ 0 ± rounding by rays
+/// that leave it, and must not shadow them. 1 % of the normal offset.
+pub(crate) const RAY_T_MIN_SCALE: f32 = 1e-6;
+
 /// Everything a bake shares across vertices.
 pub struct Baker {
     mesh: Mesh,
@@ -49,6 +55,8 @@ pub struct Baker {
     table: RayTable,
     codec: LineCodec,
     offset: f32,
+    /// See [`RAY_T_MIN_SCALE`].
+    t_min: f32,
     header: BakeHeader,
 }
 
@@ -148,6 +156,7 @@ impl Baker {
         let table = RayTable::new(settings.face_res, settings.supersampling);
         let codec = LineCodec::for_resolution(settings.face_res);
         let offset = RAY_OFFSET_SCALE * mesh.bounds().diagonal();
+        let t_min = RAY_T_MIN_SCALE * mesh.bounds().diagonal();
         let header = BakeHeader::new(&settings, mesh.vertex_count() as u32, mesh.content_hash());
         Baker {
             mesh,
@@ -159,6 +168,7 @@ impl Baker {
             table,
             codec,
             offset,
+            t_min,
             header,
         }
     }
@@ -192,6 +202,7 @@ impl Baker {
             normal: self.mesh.normals[v as usize],
             vertex: v,
             offset: self.offset,
+            t_min: self.t_min,
             regions: self.regions.as_deref(),
             stops: &self.stops,
         }

@@ -9,7 +9,7 @@
 //! * The measure ([`Visibility`]): V(p, n) ∈ \[0, 1\], the fraction of a fixed set of sample
 //!   points on the lights that the point sees (see [`Visibility::at`]).
 //! * The error of a triangle: V at its three vertices and its three edge midpoints (see
-//!   [`triangle_error`]).
+//!   [`triangle_error`]), and on a grid of interior probes when the triangle is large.
 //! * The split: conforming longest-edge bisection (Rivara's LEPP, generalised to edges shared
 //!   by more than two triangles): an edge is only ever split in every triangle that shares it,
 //!   with one midpoint vertex, so the refined mesh has no T-junction.
@@ -31,65 +31,43 @@ use rayon::prelude::*;
 use crate::RAY_OFFSET_SCALE;
 use crate::cubemap::LightStop;
 
-/// What [`refine`] may do.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RefineSettings {
-    /// Largest allowed variation of the visibility V across a triangle, in units of "fraction
-    /// of the light visible" (V ∈ \[0, 1\]): a triangle is split while V at its vertices and
-    /// edge midpoints varies by more than this. Must be finite and ≥ 0 (≥ 1 never splits).
-    pub tolerance: f32,
-    /// Shortest edge that may still be split, in scene units: a triangle whose longest edge is
-    /// not longer than this is never split. 0 means "derive from the scene": the diagonal of
-    /// the mesh's bounding box / 256 ([`RefineSettings::resolved_min_edge`]). Finite, ≥ 0.
-    pub min_edge: f32,
-    /// Total vertex budget of the refined mesh (original vertices included): refinement stops
-    /// when the next split would exceed it.
-    pub max_vertices: u32,
-}
-
-impl Default for RefineSettings {
-    /// tolerance 0.1, min_edge 0 (diagonal / 256), max_vertices 200 000.
-    fn default() -> Self {
-        RefineSettings {
-            tolerance: 0.1,
-            min_edge: 0.0,
-            max_vertices: 200_000,
-        }
-    }
-}
+/// What [`refine`] may do: the scene file's `bake.refine` ([`Refinement`], one definition of
+/// the settings shared by the scene files, the service and the bake).
+pub use bspvt_proto::scene::Refinement as RefineSettings;
 
 /// The scene's diagonal is divided by this to give the default shortest splittable edge.
 pub const MIN_EDGE_DIVISOR: f32 = 256.0;
 
-impl RefineSettings {
-    /// Checks that `tolerance` and `min_edge` are finite and ≥ 0.
-    pub fn validate(&self) -> Result<(), RefineError> {
-        let bad = |m: String| Err(RefineError::Settings(m));
-        if !self.tolerance.is_finite() || self.tolerance < 0.0 {
-            return bad(format!(
-                "tolerance is {}; it must be a finite fraction ≥ 0 (e.g. 0.1)",
-                self.tolerance
-            ));
-        }
-        if !self.min_edge.is_finite() || self.min_edge < 0.0 {
-            return bad(format!(
-                "min_edge is {}; it must be a finite length ≥ 0 in scene units \
-                 (0: the scene's diagonal / {MIN_EDGE_DIVISOR})",
-                self.min_edge
-            ));
-        }
-        Ok(())
-    }
+/// Interior probes of a large triangle are spaced this many shortest splittable edges apart
+/// (the default: the scene's diagonal / 64), so that a shadow that misses a triangle's corners
+/// and edge midpoints is still seen.
+const PROBE_SPACING_EDGES: f32 = 4.0;
 
-    /// The shortest splittable edge for `mesh`: `min_edge`, or when it is 0 the diagonal of
-    /// the mesh's bounding box / [`MIN_EDGE_DIVISOR`].
-    pub fn resolved_min_edge(&self, mesh: &Mesh) -> f32 {
-        if self.min_edge > 0.0 {
-            self.min_edge
-        } else {
-            (scene_diagonal(mesh) / MIN_EDGE_DIVISOR as f64) as f32
-        }
+/// At most this many divisions per edge for the interior probes (≤ 253 probes a triangle).
+const MAX_PROBE_DIVISIONS: u32 = 24;
+
+/// The shortest splittable edge for `mesh`: `settings.min_edge`, or when it is 0 the diagonal
+/// of the mesh's bounding box / [`MIN_EDGE_DIVISOR`].
+pub fn resolved_min_edge(settings: &RefineSettings, mesh: &Mesh) -> f32 {
+    if settings.min_edge > 0.0 {
+        settings.min_edge
+    } else {
+        (scene_diagonal(mesh) / MIN_EDGE_DIVISOR as f64) as f32
     }
+}
+
+/// Refines `scene`'s mesh in place when its bake settings ask for it (`bake.refine`) and it
+/// does not move (a moving part's vertex ranges must stay as they are). Returns what was done.
+pub fn refine_scene(scene: &mut bspvt_proto::Scene) -> Result<Option<RefineStats>, RefineError> {
+    let Some(settings) = scene.bake.refine else {
+        return Ok(None);
+    };
+    if scene.is_dynamic() {
+        return Ok(None);
+    }
+    let (mesh, stats) = try_refine(&scene.mesh, &scene.lights, &settings)?;
+    scene.mesh = mesh;
+    Ok(Some(stats))
 }
 
 /// Why [`try_refine`] refused to work.
@@ -282,6 +260,8 @@ pub struct Visibility {
     lights: Vec<LightSamples>,
     stops: Vec<LightStop>,
     offset: f32,
+    /// Hits nearer than this are not counted, as in the bake ([`crate::RAY_T_MIN_SCALE`]).
+    t_min: f32,
     /// Positions are multiplied by this (a power of two, 1 for scenes within 2²⁰ units).
     scale: f32,
 }
@@ -359,12 +339,15 @@ impl Visibility {
             .collect();
         let offset = RAY_OFFSET_SCALE * scene_diagonal(&occ_mesh) as f32;
         let offset = if offset.is_finite() { offset } else { 0.0 };
+        let t_min = crate::RAY_T_MIN_SCALE * scene_diagonal(&occ_mesh) as f32;
+        let t_min = if t_min.is_finite() { t_min } else { 0.0 };
         let (lights, stops) = sampled.into_iter().unzip();
         Visibility {
             occluder,
             lights,
             stops,
             offset,
+            t_min,
             scale,
         }
     }
@@ -411,7 +394,7 @@ impl Visibility {
                     rays += 1;
                     self.occluder
                         .as_ref()
-                        .is_none_or(|occ| !occ.occluded_until(o, d, t_max, skip))
+                        .is_none_or(|occ| !occ.occluded_between(o, d, self.t_min, t_max, skip))
                 } else {
                     true
                 };
@@ -443,11 +426,12 @@ impl Visibility {
 /// midpoint's departure δ. Penumbrae (V varying smoothly) are split until V varies by at most
 /// the tolerance per triangle, which is what linear interpolation needs.
 ///
-/// What it misses: it only looks at six points. A shadow smaller than the triangle that
-/// touches none of the six points (a small occluder's shadow in the middle of a large
-/// triangle, or a thin shadow band crossing it between the sample points) leaves all six
-/// values equal and the triangle is not split; neither is a triangle whose six values vary by
-/// less than the tolerance although V in between varies by more. Note also that both values
+/// What it misses on its own: it only looks at six points. A shadow smaller than the triangle
+/// that touches none of them (a box's shadow in the middle of a two-triangle floor) leaves all
+/// six values equal. The refiner therefore also probes the inside of every triangle longer
+/// than 4 shortest splittable edges on a barycentric grid (spacing the diagonal / 64 by
+/// default, at most 24 divisions an edge) and takes the range over those probes too; what a
+/// grid still misses is a shadow narrower than its spacing. Note also that both values
 /// lie in \[min, max\] of the six, so δ ≤ ρ always: the ρ test alone decides, δ is kept as
 /// the documented non-linearity term.
 pub fn triangle_error(corners: [f32; 3], midpoints: [f32; 3]) -> (f32, f32) {
@@ -505,7 +489,9 @@ pub fn try_refine(
     settings: &RefineSettings,
 ) -> Result<(Mesh, RefineStats), RefineError> {
     let start = Instant::now();
-    settings.validate()?;
+    settings
+        .validate()
+        .map_err(|e| RefineError::Settings(e.to_string()))?;
     mesh.validate()?;
     let vis = Visibility::new(mesh, lights);
     let mut r = Refiner::new(mesh, &vis, settings);
@@ -571,6 +557,8 @@ struct Refiner<'a> {
     n_orig: usize,
     tolerance: f32,
     min_edge: f32,
+    /// Triangles longer than this are probed inside too ([`Refiner::interior_probes`]).
+    probe_spacing: f32,
     max_vertices: u32,
     pos: Vec<Vec3>,
     nrm: Vec<Vec3>,
@@ -605,7 +593,8 @@ impl<'a> Refiner<'a> {
             vis,
             n_orig: mesh.positions.len(),
             tolerance: settings.tolerance,
-            min_edge: settings.resolved_min_edge(mesh),
+            min_edge: resolved_min_edge(settings, mesh),
+            probe_spacing: PROBE_SPACING_EDGES * resolved_min_edge(settings, mesh),
             max_vertices: settings.max_vertices,
             pos: mesh.positions.clone(),
             nrm: mesh.normals.clone(),
@@ -726,12 +715,22 @@ impl<'a> Refiner<'a> {
                 }
             }
         }
-        let geo: Vec<(Vec3, Vec3, u32)> = need.iter().map(|&p| self.geometry(p)).collect();
+        let mut geo: Vec<(Vec3, Vec3, u32)> = need.iter().map(|&p| self.geometry(p)).collect();
+        // Interior probes of the large triangles, after the shared points: (first, count).
+        let probes: Vec<(usize, usize)> = dirty
+            .iter()
+            .map(|&t| {
+                let first = geo.len();
+                geo.extend(self.interior_probes(t).map(|(p, n)| (p, n, u32::MAX)));
+                (first, geo.len() - first)
+            })
+            .collect();
         let vis = self.vis;
         let values: Vec<(f32, u64)> = geo
             .par_iter()
             .map(|&(p, n, skip)| vis.eval(p, n, skip))
             .collect();
+        self.rays += values[need.len()..].iter().map(|v| v.1).sum::<u64>();
         for ((&pt, &(_, n, _)), &(v, rays)) in need.iter().zip(&geo).zip(&values) {
             self.rays += rays;
             match pt {
@@ -741,11 +740,16 @@ impl<'a> Refiner<'a> {
                 }
             }
         }
-        for t in dirty {
+        for (t, (first, count)) in dirty.into_iter().zip(probes) {
             let tri = self.tris[t];
             let corners = tri.map(|i| self.vert_v[i as usize].unwrap_or(0.0));
             let mids = tri_edges(&tri).map(|e| self.mid_v.get(&e).map_or(0.0, |m| m.1));
             let (dev, range) = triangle_error(corners, mids);
+            // A shadow inside a large triangle that misses its six points shows in the probes.
+            let inside = values[first..first + count].iter().map(|v| v.0);
+            let all = corners.into_iter().chain(mids).chain(inside);
+            let lo = all.clone().fold(f32::INFINITY, f32::min);
+            let range = range.max(all.fold(f32::NEG_INFINITY, f32::max) - lo);
             if dev > self.tolerance || range > self.tolerance {
                 self.heap.push(Entry {
                     error: dev.max(range).to_bits(),
@@ -755,6 +759,34 @@ impl<'a> Refiner<'a> {
                 });
             }
         }
+    }
+
+    /// The interior probe points of triangle `t` (position, normal): none for a triangle whose
+    /// longest edge is at most `probe_spacing`; otherwise the interior nodes of the barycentric
+    /// grid (i, j, k) / n, i + j + k = n, all of i, j, k ≥ 1, with n = ⌈longest / spacing⌉
+    /// capped at [`MAX_PROBE_DIVISIONS`]. Normals are the corners' interpolated (else the face
+    /// normal). Corners and edge midpoints are measured once per vertex and edge, these per
+    /// triangle.
+    fn interior_probes(&self, t: usize) -> impl Iterator<Item = (Vec3, Vec3)> + '_ {
+        let tri = self.tris[t];
+        let longest = self.len2(self.longest_edge(t)).sqrt();
+        let n = if longest > self.probe_spacing as f64 && self.probe_spacing > 0.0 {
+            ((longest / self.probe_spacing as f64).ceil() as u32).min(MAX_PROBE_DIVISIONS)
+        } else {
+            0
+        };
+        let p = tri.map(|i| self.pos[i as usize]);
+        let nv = tri.map(|i| self.nrm[i as usize]);
+        let face = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or(Vec3::Y);
+        (1..n.max(1)).flat_map(move |i| {
+            (1..n - i).map(move |j| {
+                let k = n - i - j;
+                let w = [i, j, k].map(|x| x as f32 / n as f32);
+                let at = p[0] * w[0] + p[1] * w[1] + p[2] * w[2];
+                let nrm = (nv[0] * w[0] + nv[1] * w[1] + nv[2] * w[2]).normalize_or(face);
+                (at, nrm)
+            })
+        })
     }
 
     /// Rivara's longest-edge propagation path: bisects triangle `target` by its longest edge,

@@ -318,6 +318,49 @@ fn floor_under_a_box_is_refined_at_the_shadow_edge() {
     assert!(after < before / 5.0, "mean |V error| {before} -> {after}");
 }
 
+/// A box's shadow that falls inside one of a two-triangle floor's triangles, away from every
+/// corner and edge midpoint (the shadow's centre is near (0.94, 0, −0.94); the floor's six
+/// points per triangle are its corners and (±2, 0), (0, ±2), (0, 0)): the interior probes
+/// find it and the floor is refined there, and only there.
+#[test]
+fn a_shadow_inside_a_large_triangle_is_found() {
+    let mut mesh = tile(0.0, 0.0, 0.0, 2.0, 0);
+    mesh.append(&cube(Vec3::new(0.8, 0.3, -0.8), 0.15, 1), 0);
+    let lights = vec![down_light(2.0, 0.25)];
+    let vis = Visibility::new(&mesh, &lights);
+    for p in [
+        [-2.0, -2.0],
+        [-2.0, 0.0],
+        [0.0, 0.0],
+        [2.0, 0.0],
+        [0.0, -2.0],
+        [2.0, -2.0],
+    ] {
+        let v = vis.at(Vec3::new(p[0], 0.0, p[1]), Vec3::Y, None);
+        assert!(v > 0.99, "the six points must all be lit: V{p:?} = {v}");
+    }
+    let (out, st) = refine(&mesh, &lights, &settings());
+    assert_conforming(&mesh, &out);
+    let n = mesh.positions.len();
+    let new_floor: Vec<Vec3> = out.positions[n..]
+        .iter()
+        .copied()
+        .filter(|p| p.y == 0.0)
+        .collect();
+    let near = new_floor
+        .iter()
+        .filter(|p| (p.x - 0.94).abs() < 0.6 && (p.z + 0.94).abs() < 0.6)
+        .count();
+    let far = new_floor.iter().filter(|p| p.x < -0.5 && p.z > 0.5).count();
+    assert!(
+        near > 20 && far * 50 <= near,
+        "{st:?}: near {near}, far {far}"
+    );
+    let before = floor_error(&vis, &mesh, &mesh);
+    let after = floor_error(&vis, &mesh, &out);
+    assert!(after < before / 4.0, "mean |V error| {before} -> {after}");
+}
+
 /// One thread or two: the same bytes.
 #[test]
 fn refinement_is_deterministic_across_thread_counts() {
@@ -396,7 +439,7 @@ fn budget_goes_to_the_largest_errors_first() {
             .count();
         (faint, deep, st)
     };
-    let (faint, deep, st) = split(u32::MAX);
+    let (faint, deep, st) = split(RefineSettings::MAX_VERTICES);
     assert!(!st.budget_reached);
     assert!(
         faint >= 10 && deep >= 10,

@@ -97,6 +97,16 @@ pub(crate) fn prepare(up: Upload, lim: &InputLimits) -> ApiResult<Prepared> {
         source.push_str(", settings overridden");
         scene.validate()?;
     }
+    // Refinement where shadows cross large triangles (bounded by the scene's vertex budget);
+    // the stored scene carries the refined mesh, so every client renders what was baked.
+    if let Some(stats) = bspvt_bake::refine::refine_scene(&mut scene)
+        .map_err(|e| ApiError::unprocessable("invalid_settings", e.to_string()))?
+    {
+        source.push_str(&format!(
+            ", refined from {} to {} vertices",
+            stats.vertices_before, stats.vertices_after
+        ));
+    }
     check_limits(&scene, lim)?;
     Ok(Prepared {
         scene,

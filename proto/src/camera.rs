@@ -1,0 +1,141 @@
+//! The pinhole camera of a scene, and framing a mesh that brings none.
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::error::SceneError;
+use crate::mesh::{Aabb, Mesh};
+
+/// A pinhole camera.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Camera {
+    /// Eye position.
+    pub position: [f32; 3],
+    /// The point looked at.
+    pub target: [f32; 3],
+    /// Up direction (default +Y).
+    #[serde(default = "default_up")]
+    pub up: [f32; 3],
+    /// Vertical field of view in degrees.
+    #[serde(default = "default_fov")]
+    pub fov_y_deg: f32,
+}
+
+fn default_up() -> [f32; 3] {
+    [0.0, 1.0, 0.0]
+}
+fn default_fov() -> f32 {
+    40.0
+}
+
+impl Camera {
+    /// A camera looking at `bounds` from the front-right and above, fitting its bounding sphere.
+    pub(crate) fn framing(bounds: &Aabb) -> Camera {
+        let center = bounds.center();
+        let radius = (0.5 * bounds.diagonal()).max(1e-6);
+        let fov_y_deg = default_fov();
+        let dist = radius / (0.5 * fov_y_deg.to_radians()).sin() * 1.05;
+        let dir = Vec3::new(0.55, 0.45, 1.0).normalize();
+        Camera {
+            position: (center + dir * dist).to_array(),
+            target: center.to_array(),
+            up: default_up(),
+            fov_y_deg,
+        }
+    }
+
+    /// A camera for a mesh that brings none. An object (most of its area faces away from the
+    /// centre of its box) is framed as [`Camera::framing`] does. An enclosure (a room, a
+    /// Cornell box: most area faces inward) is looked into through its most open side (the
+    /// side of ±x or ±z with the least wall area): from outside, framing the box with a 40°
+    /// field of view, when that side is mostly open; from just inside that wall at eye height
+    /// with a 60° field of view when it is closed.
+    pub(crate) fn framing_mesh(mesh: &Mesh) -> Camera {
+        let b = mesh.bounds();
+        let c = b.center();
+        let ext = (b.max - b.min).max(Vec3::splat(1e-6));
+        let faces: Vec<(Vec3, Vec3, f32)> = mesh
+            .triangles
+            .iter()
+            .filter_map(|t| {
+                let p = t.map(|i| mesh.positions[i as usize]);
+                let n = (p[1] - p[0]).cross(p[2] - p[0]);
+                let area = 0.5 * n.length();
+                (area > 0.0 && area.is_finite())
+                    .then(|| (n / (2.0 * area), (p[0] + p[1] + p[2]) / 3.0, area))
+            })
+            .collect();
+        let inward: f32 = faces
+            .iter()
+            .map(|(n, at, a)| if n.dot(c - *at) > 0.0 { *a } else { -*a })
+            .sum();
+        if inward <= 0.0 {
+            return Camera::framing(&b);
+        }
+        // (axis, side sign, coverage of that side's wall as a fraction of its area).
+        let sides = [(2usize, -1.0f32), (2, 1.0), (0, -1.0), (0, 1.0)].map(|(axis, sign)| {
+            let plane = if sign < 0.0 { b.min[axis] } else { b.max[axis] };
+            let tol = 0.02 * ext[axis];
+            let wall: f32 = faces
+                .iter()
+                .filter(|(n, at, _)| (at[axis] - plane).abs() <= tol && n[axis].abs() > 0.9)
+                .map(|(_, _, a)| a)
+                .sum();
+            let other = if axis == 0 { ext.z } else { ext.x };
+            (axis, sign, wall / (other * ext.y))
+        });
+        let (axis, sign, coverage) =
+            sides.into_iter().fold(
+                sides[0],
+                |best, s| if s.2 < best.2 - 1e-3 { s } else { best },
+            );
+        let mut out = Vec3::ZERO;
+        out[axis] = sign;
+        let mut face = c;
+        face[axis] = if sign < 0.0 { b.min[axis] } else { b.max[axis] };
+        let (position, fov_y_deg) = if coverage < 0.5 {
+            let other = if axis == 0 { ext.z } else { ext.x };
+            let half = 0.5 * other.max(ext.y);
+            let fov: f32 = 40.0;
+            (
+                face + out * (half / (0.5 * fov).to_radians().tan() * 1.05),
+                fov,
+            )
+        } else {
+            let mut eye = face - out * (0.02 * ext[axis]);
+            eye.y = b.min.y + 0.55 * ext.y;
+            (eye, 60.0)
+        };
+        Camera {
+            position: position.to_array(),
+            target: c.to_array(),
+            up: default_up(),
+            fov_y_deg,
+        }
+    }
+
+    pub(crate) fn validate(&self) -> Result<(), SceneError> {
+        let p = Vec3::from(self.position);
+        let t = Vec3::from(self.target);
+        let up = Vec3::from(self.up);
+        if !(p.is_finite() && t.is_finite() && up.is_finite()) {
+            return Err(SceneError::Invalid(
+                "camera has a NaN or infinite value".into(),
+            ));
+        }
+        let f = t - p;
+        if f.length_squared() == 0.0 || f.cross(up).length_squared() == 0.0 {
+            return Err(SceneError::Invalid(
+                "camera target equals its position or looks along `up`".into(),
+            ));
+        }
+        if !(self.fov_y_deg > 0.1 && self.fov_y_deg < 179.0) {
+            return Err(SceneError::Invalid(format!(
+                "camera fov_y_deg {} is outside (0.1, 179)",
+                self.fov_y_deg
+            )));
+        }
+        Ok(())
+    }
+}

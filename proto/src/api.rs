@@ -391,6 +391,7 @@ mod tests {
         assert_eq!(decode_scene(&v2).as_ref(), Ok(&p));
         p.bake.refine = Some(crate::scene::Refinement {
             tolerance: 0.25,
+            lighting: 0.0,
             min_edge: 0.01,
             max_vertices: 1234,
         });

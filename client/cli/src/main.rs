@@ -61,6 +61,10 @@ enum Command {
     /// and exact SSDF, unshadowed) against the Monte Carlo environment reference, per image
     /// size and lobe count (results.json/.md and images in --out).
     BenchSg(bspvt_lab::sg_bench::BenchSgArgs),
+    /// What adaptive refinement (`bake.refine`) buys on rooms of large flat polygons: error
+    /// against Monte Carlo, vertices, bake seconds and bytes, against uniform subdivision at
+    /// the same vertex count (results.md/.json in --out).
+    BenchRefine(bspvt_lab::refine_bench::BenchRefineArgs),
     /// Fit the LTC table of GGX (regenerates `assets/ltc/ggx.json`).
     LtcFit(bspvt_lab::ltc_fit::FitArgs),
     /// Write a Mitsuba 3 scene that renders the same image (independent cross-check).
@@ -122,6 +126,13 @@ fn main() -> std::process::ExitCode {
                 "bench-sg: {} configuration(s) written to {}",
                 r.rows.len(),
                 a.out.display()
+            );
+        }),
+        Command::BenchRefine(a) => bspvt_lab::refine_bench::run(&a).map(|r| {
+            eprintln!(
+                "bench-refine: {} scene(s) written to {}",
+                r.len(),
+                a.out.join("results.md").display()
             );
         }),
         Command::LtcFit(a) => bspvt_lab::ltc_fit::run(&a),

@@ -68,6 +68,10 @@ fn errors(scene: &Scene, size: (u32, u32), spp: u32) -> (f64, f64, f64) {
 fn cornell_box_bspvt_per_pixel_matches_monte_carlo() {
     let mut s = Scene::from_mesh_path(&room("cornell-box.obj")).expect("cornell box");
     s.bake.face_res = 32;
+    // A budget keeps the test quick (the default refines to ~16K vertices).
+    if let Some(r) = &mut s.bake.refine {
+        r.max_vertices = 4000;
+    }
     let before = s.mesh.vertex_count();
     bspvt_bake::refine::refine_scene(&mut s).expect("refine");
     let (pixel, vertex, shadows) = errors(&s, (64, 64), 64);
@@ -82,6 +86,10 @@ fn cornell_box_bspvt_per_pixel_matches_monte_carlo() {
 fn gltf_room_bspvt_per_pixel_matches_monte_carlo() {
     let mut s = Scene::from_mesh_path(&room("room.gltf")).expect("room");
     s.bake.face_res = 32;
+    // A budget keeps the test quick (the default refines to ~16K vertices).
+    if let Some(r) = &mut s.bake.refine {
+        r.max_vertices = 4000;
+    }
     let before = s.mesh.vertex_count();
     bspvt_bake::refine::refine_scene(&mut s).expect("refine");
     let (pixel, vertex, shadows) = errors(&s, (72, 48), 64);

@@ -2,7 +2,8 @@
 //!
 //! bspvt's research tooling, built on the client library: the error-against-run-time
 //! [`report`] of every method against converged Monte Carlo, image comparison ([`compare`]),
-//! the shading and method benchmarks ([`bench`], [`penumbra_bench`], [`sg_bench`]), the
+//! the shading and method benchmarks ([`bench`], [`penumbra_bench`], [`sg_bench`],
+//! [`refine_bench`]), the
 //! project's LTC fit of GGX ([`ltc_fit`]) and the Mitsuba 3 export ([`mitsuba`]).
 //!
 //! Depends on `bspvt-client` and the bake engine; nothing but the command line depends on it.
@@ -15,5 +16,6 @@ pub mod compare;
 pub mod ltc_fit;
 pub mod mitsuba;
 pub mod penumbra_bench;
+pub mod refine_bench;
 pub mod report;
 pub mod sg_bench;

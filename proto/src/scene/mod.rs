@@ -69,6 +69,12 @@ pub struct Refinement {
     /// samples seen) across a triangle. Finite, ≥ 0 (≥ 1 never splits).
     #[serde(default = "default_tolerance")]
     pub tolerance: f32,
+    /// Largest allowed variation of the lights' unshadowed irradiance across a triangle, as a
+    /// fraction of its largest value there: what per-vertex shading must interpolate besides
+    /// the shadows. Lights with a region (moving lights) do not count, nor surfaces lit below
+    /// 10⁻³ of the brightest vertex. Finite, ≥ 0; 0: visibility alone decides.
+    #[serde(default = "default_lighting")]
+    pub lighting: f32,
     /// Shortest edge that may still be split, in scene units; 0: the scene's diagonal / 256.
     #[serde(default)]
     pub min_edge: f32,
@@ -80,15 +86,20 @@ pub struct Refinement {
 fn default_tolerance() -> f32 {
     0.1
 }
+fn default_lighting() -> f32 {
+    0.25
+}
 fn default_max_vertices() -> u32 {
     200_000
 }
 
 impl Default for Refinement {
-    /// Tolerance 0.1, shortest edge the diagonal / 256, at most 200,000 vertices.
+    /// Tolerances 0.1 (visibility) and 0.25 (lighting), shortest edge the diagonal / 256, at most
+    /// 200,000 vertices.
     fn default() -> Self {
         Refinement {
             tolerance: default_tolerance(),
+            lighting: default_lighting(),
             min_edge: 0.0,
             max_vertices: default_max_vertices(),
         }
@@ -106,6 +117,12 @@ impl Refinement {
             return bad(format!(
                 "tolerance = {} must be a finite fraction ≥ 0 (e.g. 0.1)",
                 self.tolerance
+            ));
+        }
+        if !(self.lighting.is_finite() && self.lighting >= 0.0) {
+            return bad(format!(
+                "lighting = {} must be a finite fraction ≥ 0 (e.g. 0.1; 0: off)",
+                self.lighting
             ));
         }
         if !(self.min_edge.is_finite() && self.min_edge >= 0.0) {

@@ -10,10 +10,14 @@
 //!   points on the lights that the point sees (see [`Visibility::at`]).
 //! * The error of a triangle: V at its three vertices and its three edge midpoints (see
 //!   [`triangle_error`]), and on a grid of interior probes when the triangle is large.
+//! * The lighting term (`lighting`, on by default): the range of the lights' unshadowed
+//!   irradiance over the same points, relative to its largest value there
+//!   ([`Visibility::irradiance`]), because per-vertex shading interpolates the lighting too:
+//!   a wall of two triangles has no shadow to refine but its light falls off across it.
 //! * The split: conforming longest-edge bisection (Rivara's LEPP, generalised to edges shared
 //!   by more than two triangles): an edge is only ever split in every triangle that shares it,
 //!   with one midpoint vertex, so the refined mesh has no T-junction.
-//! * The order: largest error first, within a vertex budget.
+//! * The order: largest error × size first, within a vertex budget.
 //!
 //! A math kernel: no I/O; deterministic whatever the number of rayon threads (rays are cast in
 //! parallel, every decision is taken sequentially in a fixed order).
@@ -116,6 +120,18 @@ struct LightSamples {
     points: Vec<Vec3>,
     weights: Vec<f64>,
     total: f64,
+    /// A light without a region: what its unshadowed irradiance needs.
+    emitter: Option<Emitter>,
+}
+
+/// A fixed polygon light as [`Visibility::irradiance`] sees it.
+#[derive(Clone, Copy)]
+struct Emitter {
+    /// Unit normal of the emitting side.
+    normal: Vec3,
+    two_sided: bool,
+    /// Area × the radiance's luminance.
+    power: f64,
 }
 
 impl LightSamples {
@@ -136,10 +152,23 @@ impl LightSamples {
         if !(total > 0.0) || !total.is_finite() {
             return Some(Self::equal(points));
         }
+        // Newell's normal: length = 2 × area.
+        let n: Vec3 = (0..pts.len())
+            .map(|i| pts[i].cross(pts[(i + 1) % pts.len()]))
+            .sum();
+        let [r, g, b] = light.radiance.map(f64::from);
+        // Rec. 709 luminance.
+        let power = 0.5 * f64::from(n.length()) * (0.2126 * r + 0.7152 * g + 0.0722 * b);
+        let emitter = (power > 0.0 && power.is_finite()).then(|| Emitter {
+            normal: n.normalize_or_zero(),
+            two_sided: light.two_sided,
+            power,
+        });
         Some(LightSamples {
             points,
             weights,
             total,
+            emitter,
         })
     }
 
@@ -147,6 +176,7 @@ impl LightSamples {
         LightSamples {
             weights: vec![1.0; points.len()],
             total: points.len() as f64,
+            emitter: None,
             points,
         }
     }
@@ -364,6 +394,38 @@ impl Visibility {
             .0
     }
 
+    /// The unshadowed irradiance (luminance) at `position` with `normal` from the lights
+    /// without a region, from the same sample points: E ≈ Σ_lights P Σ_s (wₛ/W) max(0, n·d)
+    /// cos θₗ / r² (P = area × luminance; cos θₗ = −nₗ·d, or |nₗ·d| two-sided). No rays: what
+    /// per-vertex shading must interpolate besides the shadows.
+    fn irradiance(&self, position: Vec3, normal: Vec3) -> f64 {
+        let n = normal.normalize_or_zero().as_dvec3();
+        let o = (position * self.scale).as_dvec3();
+        let mut e = 0.0f64;
+        for l in &self.lights {
+            let Some(em) = l.emitter else { continue };
+            let ln = em.normal.as_dvec3();
+            let mut sum = 0.0f64;
+            for (&s, &w) in l.points.iter().zip(&l.weights) {
+                let v = s.as_dvec3() - o;
+                let r2 = v.length_squared();
+                if !(r2 > 0.0) || !r2.is_finite() {
+                    continue;
+                }
+                let d = v / r2.sqrt();
+                let cos_l = if em.two_sided {
+                    ln.dot(d).abs()
+                } else {
+                    (-ln.dot(d)).max(0.0)
+                };
+                sum += w * n.dot(d).max(0.0) * cos_l / r2;
+            }
+            e += em.power * sum / l.total;
+        }
+        // Area / r² in the same (working) units: E does not depend on the working scale.
+        if e.is_finite() { e } else { 0.0 }
+    }
+
     /// V and the number of rays cast.
     fn eval(&self, position: Vec3, normal: Vec3, skip: u32) -> (f32, u64) {
         if self.lights.is_empty() {
@@ -496,23 +558,27 @@ pub fn try_refine(
     let vis = Visibility::new(mesh, lights);
     let mut r = Refiner::new(mesh, &vis, settings);
     r.run();
-    let stats = RefineStats {
-        vertices_before: mesh.positions.len(),
-        vertices_after: r.pos.len(),
-        triangles_before: mesh.triangles.len(),
-        triangles_after: r.tris.len(),
-        splits: r.splits,
-        samples_cast: r.rays,
-        seconds: start.elapsed().as_secs_f64(),
-        budget_reached: r.budget_reached,
+    Ok(r.finish(mesh, start))
+}
+
+/// The baseline that [`refine`] is measured against: the same crack-free bisection, longest
+/// edges first everywhere (uniform subdivision, whatever the lights), until the mesh has
+/// `max_vertices` vertices (or no edge is longer than the mesh's diagonal / 256). Used by
+/// the refinement benchmark to compare at equal vertex count.
+pub fn refine_uniform(mesh: &Mesh, max_vertices: u32) -> Result<(Mesh, RefineStats), RefineError> {
+    let start = Instant::now();
+    mesh.validate()?;
+    let vis = Visibility::new(&Mesh::default(), &[]);
+    let settings = RefineSettings {
+        tolerance: 0.0,
+        lighting: 0.0,
+        min_edge: 0.0,
+        max_vertices,
     };
-    let out = Mesh {
-        positions: r.pos,
-        normals: r.nrm,
-        triangles: r.tris,
-        material_ids: r.mats,
-    };
-    Ok((out, stats))
+    let mut r = Refiner::new(mesh, &vis, &settings);
+    r.uniform = true;
+    r.run();
+    Ok(r.finish(mesh, start))
 }
 
 /// An edge: its two vertex indices, smaller first.
@@ -529,11 +595,12 @@ enum Point {
     Midpoint(Edge),
 }
 
-/// A triangle waiting to be split; the heap pops the largest error, then the longest edge
-/// (so that equal errors refine evenly), then the lowest triangle index.
+/// A triangle waiting to be split; the heap pops the largest error × longest edge² (uniform
+/// mode: the longest edge), then the longest edge (so that equal errors refine evenly), then
+/// the lowest triangle index.
 #[derive(PartialEq, Eq, PartialOrd, Ord)]
 struct Entry {
-    /// `f32::to_bits` of the error (≥ 0, so the bits order like the values).
+    /// `f32::to_bits` of the priority (≥ 0, so the bits order like the values).
     error: u32,
     /// `f64::to_bits` of the longest edge's squared length.
     longest: u64,
@@ -560,6 +627,13 @@ struct Refiner<'a> {
     /// Triangles longer than this are probed inside too ([`Refiner::interior_probes`]).
     probe_spacing: f32,
     max_vertices: u32,
+    /// Split by edge length alone (the baseline of [`refine_uniform`]).
+    uniform: bool,
+    /// `settings.lighting` (0: the lighting term is off).
+    lighting: f64,
+    /// Triangles whose irradiance stays below this (10⁻³ × the brightest original vertex's)
+    /// are not refined for their lighting: too dark to matter.
+    dark: f64,
     pos: Vec<Vec3>,
     nrm: Vec<Vec3>,
     tris: Vec<[u32; 3]>,
@@ -596,6 +670,9 @@ impl<'a> Refiner<'a> {
             min_edge: resolved_min_edge(settings, mesh),
             probe_spacing: PROBE_SPACING_EDGES * resolved_min_edge(settings, mesh),
             max_vertices: settings.max_vertices,
+            uniform: false,
+            lighting: f64::from(settings.lighting),
+            dark: DARK_FRACTION * brightest_irradiance(mesh, vis),
             pos: mesh.positions.clone(),
             nrm: mesh.normals.clone(),
             tris: mesh.triangles.clone(),
@@ -610,6 +687,27 @@ impl<'a> Refiner<'a> {
             rays: 0,
             budget_reached: false,
         }
+    }
+
+    /// The refined mesh and what it cost (`input`: the mesh it started from).
+    fn finish(self, input: &Mesh, start: Instant) -> (Mesh, RefineStats) {
+        let stats = RefineStats {
+            vertices_before: input.positions.len(),
+            vertices_after: self.pos.len(),
+            triangles_before: input.triangles.len(),
+            triangles_after: self.tris.len(),
+            splits: self.splits,
+            samples_cast: self.rays,
+            seconds: start.elapsed().as_secs_f64(),
+            budget_reached: self.budget_reached,
+        };
+        let out = Mesh {
+            positions: self.pos,
+            normals: self.nrm,
+            triangles: self.tris,
+            material_ids: self.mats,
+        };
+        (out, stats)
     }
 
     fn run(&mut self) {
@@ -700,6 +798,19 @@ impl<'a> Refiner<'a> {
         dirty.sort_unstable();
         dirty.dedup();
         dirty.retain(|&t| self.candidate(t));
+        if self.uniform {
+            // Longest edges first, whatever the light: the error is the edge's length.
+            for t in dirty {
+                let longest = self.len2(self.longest_edge(t));
+                self.heap.push(Entry {
+                    error: (longest.sqrt() as f32).to_bits(),
+                    longest: longest.to_bits(),
+                    tri: Reverse(t),
+                    version: self.version[t],
+                });
+            }
+            return;
+        }
         let mut need = Vec::new();
         let mut seen = HashSet::new();
         for &t in &dirty {
@@ -749,11 +860,32 @@ impl<'a> Refiner<'a> {
             let inside = values[first..first + count].iter().map(|v| v.0);
             let all = corners.into_iter().chain(mids).chain(inside);
             let lo = all.clone().fold(f32::INFINITY, f32::min);
-            let range = range.max(all.fold(f32::NEG_INFINITY, f32::max) - lo);
+            let mut range = range.max(all.fold(f32::NEG_INFINITY, f32::max) - lo);
+            if self.lighting > 0.0 {
+                // The lighting term, in units of the tolerance's: (range of E / largest E) /
+                // lighting × tolerance, so that one threshold and one priority serve both.
+                let corners = tri.map(|i| self.geometry(Point::Vertex(i)));
+                let mids = tri_edges(&tri).map(|e| self.geometry(Point::Midpoint(e)));
+                let inside = geo[first..first + count].iter();
+                let e = corners
+                    .iter()
+                    .chain(&mids)
+                    .chain(inside)
+                    .map(|&(p, n, _)| self.vis.irradiance(p, n));
+                let (lo, hi) = e.fold((f64::INFINITY, 0.0f64), |(l, h), x| (l.min(x), h.max(x)));
+                if hi > self.dark && hi > 0.0 {
+                    let light = ((hi - lo) / hi / self.lighting) as f32 * self.tolerance.max(1e-6);
+                    range = range.max(light);
+                }
+            }
             if dev > self.tolerance || range > self.tolerance {
+                // Largest error × size first: what a split takes off the image's L¹ error
+                // (a triangle's error covers its area; the longest edge² stands for it).
+                let longest = self.len2(self.longest_edge(t));
+                let priority = (f64::from(dev.max(range)) * longest) as f32;
                 self.heap.push(Entry {
-                    error: dev.max(range).to_bits(),
-                    longest: self.len2(self.longest_edge(t)).to_bits(),
+                    error: priority.max(0.0).to_bits(),
+                    longest: longest.to_bits(),
                     tri: Reverse(t),
                     version: self.version[t],
                 });
@@ -880,6 +1012,18 @@ impl<'a> Refiner<'a> {
             }
         }
     }
+}
+
+/// Lighting below this fraction of the brightest vertex's is not refined for.
+const DARK_FRACTION: f64 = 1e-3;
+
+/// The largest unshadowed irradiance at a vertex of `mesh`.
+fn brightest_irradiance(mesh: &Mesh, vis: &Visibility) -> f64 {
+    mesh.positions
+        .par_iter()
+        .zip(&mesh.normals)
+        .map(|(&p, &n)| vis.irradiance(p, n))
+        .reduce(|| 0.0, f64::max)
 }
 
 /// (a + b) / 2, computed so that it cannot overflow.

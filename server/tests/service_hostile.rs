@@ -131,6 +131,20 @@ fn corpus(done_id: &str) -> Vec<Case> {
             }),
         ),
         c(
+            // The scheme is case-insensitive (RFC 9110 §11.1): auth passes, the body is refused.
+            "lower-case bearer scheme",
+            415,
+            Some("not_multipart"),
+            Box::new(|srv, a| {
+                let r = a
+                    .post(srv.url("/v1/scenes"))
+                    .header("Authorization", format!("bearer {API_KEY}"))
+                    .send(&b""[..])
+                    .unwrap();
+                resp(r)
+            }),
+        ),
+        c(
             "delete without key",
             401,
             Some("unauthorized"),

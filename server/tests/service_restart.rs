@@ -114,3 +114,130 @@ fn sigkill_mid_bake_then_restart_resumes_without_recomputing() {
         }
     }
 }
+
+/// Runs `bspvt-server serve` on `data` expecting it to refuse to start: returns its stderr.
+/// Fails if it is still running after 30 s.
+fn refused_start(data: &Path) -> String {
+    let mut child = std::process::Command::new(BIN)
+        .args(["serve", "--data-dir"])
+        .arg(data)
+        .args(["--addr", "127.0.0.1:0"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("spawn bspvt-server");
+    let t = std::time::Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            assert!(!status.success(), "the server exited with success");
+            let mut err = String::new();
+            use std::io::Read as _;
+            child
+                .stderr
+                .take()
+                .expect("stderr")
+                .read_to_string(&mut err)
+                .expect("read stderr");
+            return err;
+        }
+        if t.elapsed() > Duration::from_secs(30) {
+            let _ = child.kill();
+            panic!("the server started on a data folder it should have refused");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Data safety at start: a `done` scene whose chunk rows were lost (a damaged chunk table) is
+/// baked again where rows are missing, never served as `done` with chunks missing; a data
+/// folder whose database is missing, or fails its integrity check, is refused with a clear
+/// error and nothing in it is deleted.
+#[test]
+fn lost_chunk_rows_are_rebaked_and_a_missing_or_corrupt_database_is_refused() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let data = tmp.path().join("data");
+    let json = plate_small_json(24, 100); // 26 chunks
+    let total = 26;
+    let a = agent();
+    let mut srv = start(&data, &["--workers", "1"]);
+    let id = submit_ok(&a, &srv, &[("scene", None, json.as_bytes())], None);
+    wait_done(&a, &srv, &id);
+    srv.kill();
+
+    // Five chunk rows lost while the scene stays `done`.
+    {
+        let db = rusqlite::Connection::open(data.join("bspvt.sqlite")).expect("open db");
+        let n = db
+            .execute(
+                "DELETE FROM chunks WHERE scene_id = ?1 AND idx IN (0, 3, 7, 11, 25)",
+                [&id],
+            )
+            .expect("delete rows");
+        assert_eq!(n, 5);
+    }
+    let offline = offline_bake(tmp.path(), &json, "lost-rows");
+    let mut srv = start(&data, &["--workers", "1"]);
+    let s = wait_done(&a, &srv, &id);
+    assert_eq!(s["chunks_baked_this_process"].as_u64(), Some(5), "{s}");
+    assert_eq!(s["chunks_done"].as_u64(), Some(total), "{s}");
+    let trees = get(&a, &srv.url(&format!("/v1/scenes/{id}/trees")));
+    assert!(
+        trees.body == offline,
+        "the trees differ from the offline bake"
+    );
+    assert!(srv.log_text().contains("chunks missing"));
+    srv.kill();
+
+    // The database moved away: refused, nothing deleted.
+    let scene_dir = data.join("scenes").join(&id);
+    let chunks_before = std::fs::read_dir(scene_dir.join("chunks")).unwrap().count();
+    let moved = tmp.path().join("moved");
+    std::fs::create_dir_all(&moved).unwrap();
+    for f in ["bspvt.sqlite", "bspvt.sqlite-wal", "bspvt.sqlite-shm"] {
+        if data.join(f).exists() {
+            std::fs::rename(data.join(f), moved.join(f)).unwrap();
+        }
+    }
+    let err = refused_start(&data);
+    assert!(
+        err.contains("no database") && err.contains("nothing was deleted"),
+        "{err}"
+    );
+    assert!(
+        !data.join("bspvt.sqlite").exists(),
+        "a new database was created"
+    );
+    assert_eq!(
+        std::fs::read_dir(scene_dir.join("chunks")).unwrap().count(),
+        chunks_before
+    );
+
+    // A damaged database (its second half overwritten): refused, nothing deleted.
+    for f in ["bspvt.sqlite", "bspvt.sqlite-wal", "bspvt.sqlite-shm"] {
+        if moved.join(f).exists() {
+            std::fs::rename(moved.join(f), data.join(f)).unwrap();
+        }
+    }
+    {
+        // Fold the WAL into the main file first, so the damage is not undone by it.
+        let db = rusqlite::Connection::open(data.join("bspvt.sqlite")).expect("open db");
+        db.query_row("PRAGMA wal_checkpoint(TRUNCATE)", [], |_| Ok(()))
+            .unwrap();
+    }
+    let mut bytes = std::fs::read(data.join("bspvt.sqlite")).unwrap();
+    let page = 4096;
+    assert!(bytes.len() >= 4 * page, "{} bytes", bytes.len());
+    for b in &mut bytes[2 * page..] {
+        *b = 0x5a;
+    }
+    std::fs::write(data.join("bspvt.sqlite"), &bytes).unwrap();
+    let err = refused_start(&data);
+    assert!(
+        err.contains("refusing to start") || err.contains("malformed"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_dir(scene_dir.join("chunks")).unwrap().count(),
+        chunks_before
+    );
+}

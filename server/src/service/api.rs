@@ -70,8 +70,11 @@ impl FromRequestParts<Shared> for WriteAccess {
             })?
             .to_str()
             .map_err(|_| unauthorized("the Authorization header is not ASCII"))?;
+        // The scheme is case-insensitive (RFC 9110 §11.1).
         let token = given
-            .strip_prefix("Bearer ")
+            .split_once(' ')
+            .filter(|(scheme, _)| scheme.eq_ignore_ascii_case("bearer"))
+            .map(|(_, token)| token)
             .ok_or_else(|| unauthorized("the Authorization header must be `Bearer KEY`"))?;
         if constant_time_eq(token.trim().as_bytes(), key.as_bytes()) {
             Ok(WriteAccess)

@@ -28,6 +28,10 @@ pub struct ServeArgs {
     /// When set, `Authorization: Bearer KEY` is required for writes (POST, DELETE).
     #[arg(long, env = "BSPVT_API_KEY", hide_env_values = true)]
     pub api_key: Option<String>,
+    /// …or read from this file (its first line, whitespace trimmed), so that the key is not
+    /// on the command line where `ps` shows it.
+    #[arg(long, env = "BSPVT_API_KEY_FILE", conflicts_with = "api_key")]
+    pub api_key_file: Option<PathBuf>,
     /// Bake workers: chunks baked at the same time, taken round-robin across scenes.
     #[arg(long, env = "BSPVT_WORKERS")]
     pub workers: Option<usize>,
@@ -89,6 +93,7 @@ struct FileConfig {
     data_dir: Option<PathBuf>,
     addr: Option<String>,
     api_key: Option<String>,
+    api_key_file: Option<PathBuf>,
     workers: Option<usize>,
     threads: Option<usize>,
     max_body_bytes: Option<u64>,
@@ -205,7 +210,12 @@ impl Config {
                 .parse()
                 .with_context(|| format!("address {a:?} is not HOST:PORT (e.g. 0.0.0.0:8080)"))?;
         }
-        c.api_key = args.api_key.clone().or(file.api_key);
+        let key_file = args.api_key_file.clone().or(file.api_key_file);
+        c.api_key = match (args.api_key.clone().or(file.api_key), key_file) {
+            (Some(_), Some(_)) => bail!("give the API key or a file that holds it, not both"),
+            (key, None) => key,
+            (None, Some(p)) => Some(read_key_file(&p)?),
+        };
         macro_rules! take {
             ($($f:ident),*) => {$(
                 if let Some(v) = args.$f.or(file.$f) {
@@ -297,6 +307,17 @@ impl Config {
     }
 }
 
+/// The API key in `path`: its first line, surrounding whitespace trimmed; never empty.
+fn read_key_file(path: &Path) -> Result<String> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read the API key file {}", path.display()))?;
+    let key = text.lines().next().unwrap_or("").trim();
+    if key.is_empty() {
+        bail!("the API key file {} is empty", path.display());
+    }
+    Ok(key.to_string())
+}
+
 fn read_file(path: &Path) -> Result<FileConfig> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read config file {}", path.display()))?;
@@ -328,6 +349,36 @@ mod tests {
         assert_eq!(c.max_streams, 7);
         assert_eq!(c.max_uploads, 4);
         assert!(c.max_active_scenes >= c.workers);
+    }
+
+    #[test]
+    fn the_api_key_can_come_from_a_file() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let key = dir.path().join("key");
+        std::fs::write(&key, "  s3cret-key \n# a comment\n").expect("write key");
+        let args = ServeArgs {
+            data_dir: Some("/x".into()),
+            api_key_file: Some(key.clone()),
+            ..ServeArgs::default()
+        };
+        let c = Config::resolve(&args).expect("valid config");
+        assert_eq!(c.api_key.as_deref(), Some("s3cret-key"));
+        let both = ServeArgs {
+            api_key: Some("other".into()),
+            ..args
+        };
+        assert!(
+            Config::resolve(&both).is_err(),
+            "a key and a key file accepted"
+        );
+        std::fs::write(&key, "\n").expect("write key");
+        let empty = ServeArgs {
+            data_dir: Some("/x".into()),
+            api_key_file: Some(key),
+            ..ServeArgs::default()
+        };
+        let e = Config::resolve(&empty).expect_err("empty key file accepted");
+        assert!(format!("{e:#}").contains("is empty"), "{e:#}");
     }
 
     #[test]

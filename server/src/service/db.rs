@@ -134,6 +134,22 @@ impl Db {
         conn.pragma_update(None, "journal_mode", "WAL")?;
         conn.pragma_update(None, "synchronous", "FULL")?;
         conn.pragma_update(None, "foreign_keys", true)?;
+        // Corruption found now stops the start, before anything trusts (or deletes by) it.
+        let check: Vec<String> = {
+            let mut st = conn.prepare("PRAGMA quick_check")?;
+            st.query_map([], |r| r.get(0))?
+                .collect::<rusqlite::Result<_>>()
+                .with_context(|| format!("cannot check database {}", path.display()))?
+        };
+        if check.first().map(String::as_str) != Some("ok") {
+            anyhow::bail!(
+                "database {} fails its integrity check (PRAGMA quick_check: {}); refusing to \
+                 start, nothing was changed. Restore it from a backup, or move the data folder \
+                 away to start empty",
+                path.display(),
+                check.iter().take(3).cloned().collect::<Vec<_>>().join("; ")
+            );
+        }
         let version: i64 = conn.pragma_query_value(None, "user_version", |r| r.get(0))?;
         if version > SCHEMA_VERSION {
             anyhow::bail!(
@@ -267,6 +283,20 @@ impl Db {
             .query_map([], Db::row)?
             .collect::<rusqlite::Result<Vec<_>>>()?;
         rows.into_iter().map(Db::finish_row).collect()
+    }
+
+    /// Scenes recorded `done` with fewer chunk rows than they have chunks: (id, recorded,
+    /// total). Never true after a clean run; a damaged chunk table can leave it.
+    pub(crate) fn done_scenes_missing_chunks(&self) -> Result<Vec<(String, u32, u32)>> {
+        let c = self.conn();
+        let mut st = c.prepare(
+            "SELECT s.id, (SELECT COUNT(*) FROM chunks c WHERE c.scene_id = s.id), s.chunk_count
+             FROM scenes s WHERE s.state = 'done'",
+        )?;
+        let rows = st
+            .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))?
+            .collect::<rusqlite::Result<Vec<(String, u32, u32)>>>()?;
+        Ok(rows.into_iter().filter(|(_, n, total)| n < total).collect())
     }
 
     /// Ids of every scene that still owns files (not cancelled).

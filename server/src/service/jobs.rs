@@ -279,6 +279,7 @@ impl Jobs {
             baked_here: Mutex::new(HashMap::new()),
         });
         jobs.collect_garbage()?;
+        jobs.reopen_incomplete()?;
         jobs.resume()?;
         let mut handles = lock(&jobs.handles);
         for w in 0..workers {
@@ -305,6 +306,22 @@ impl Jobs {
                     tracing::warn!(scene = %id, error = %e, "cannot remove scene files");
                 }
             }
+        }
+        Ok(())
+    }
+
+    /// A scene recorded `done` whose chunk rows are not all there (a damaged chunk table) is
+    /// queued again: [`Jobs::resume`] keeps the chunks its files and rows prove and bakes the
+    /// rest, so it is never served as `done` with chunks missing.
+    fn reopen_incomplete(&self) -> Result<()> {
+        for (id, recorded, total) in self.db.done_scenes_missing_chunks()? {
+            tracing::warn!(
+                scene = %id,
+                recorded,
+                total,
+                "scene recorded done with chunks missing; baking the missing ones again"
+            );
+            self.db.set_state(&id, JobState::Queued, None)?;
         }
         Ok(())
     }

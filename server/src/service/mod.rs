@@ -141,7 +141,24 @@ impl Service {
     pub(crate) async fn open(cfg: Config) -> Result<Service> {
         std::fs::create_dir_all(&cfg.data_dir)
             .with_context(|| format!("cannot create data dir {}", cfg.data_dir.display()))?;
-        let db = Arc::new(Db::open(&cfg.db_path())?);
+        // Scene folders without their database: start-up garbage collection would take them
+        // all for leftovers of crashed uploads. Stop before anything is created or deleted.
+        let db_path = cfg.db_path();
+        if !db_path.exists() {
+            let n = Store::scene_folders(&cfg.data_dir)
+                .with_context(|| format!("cannot read data dir {}", cfg.data_dir.display()))?;
+            if n > 0 {
+                anyhow::bail!(
+                    "{} holds {n} scene folder(s) but no database ({} is missing): refusing to \
+                     start, nothing was deleted. Restore the database (with its -wal file), or \
+                     move {} away to start empty",
+                    cfg.data_dir.display(),
+                    db_path.display(),
+                    cfg.data_dir.join("scenes").display()
+                );
+            }
+        }
+        let db = Arc::new(Db::open(&db_path)?);
         let store = Arc::new(
             Store::open(&cfg.data_dir)
                 .with_context(|| format!("cannot open the store in {}", cfg.data_dir.display()))?,

@@ -170,6 +170,26 @@ impl Store {
         Ok(ChunkFiles { chunks, stray })
     }
 
+    /// How many scene folders `root` holds (temporary ones not counted), without opening or
+    /// changing anything: 0 when there is no `scenes` folder.
+    pub(crate) fn scene_folders(root: &Path) -> io::Result<usize> {
+        match fs::read_dir(root.join("scenes")) {
+            Ok(rd) => {
+                let mut n = 0;
+                for e in rd {
+                    let e = e?;
+                    let name = e.file_name();
+                    if e.file_type()?.is_dir() && !name.to_string_lossy().ends_with(".tmp") {
+                        n += 1;
+                    }
+                }
+                Ok(n)
+            }
+            Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(0),
+            Err(e) => Err(e),
+        }
+    }
+
     /// Ids of the scene directories present (temporary ones are removed).
     pub(crate) fn scene_ids(&self) -> io::Result<Vec<String>> {
         let mut ids = Vec::new();

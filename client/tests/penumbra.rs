@@ -182,6 +182,7 @@ fn finite_in_degenerate_configurations() {
         target: [0.0, 0.0, 0.0],
         up: [0.0, 1.0, 0.0],
         fov_y_deg: 50.0,
+        aspect: None,
     };
     // Sphere top at y = 1.4, under the light's centroid moved to y = 1.43.
     let near_light = moved(&l0, DVec3::new(-0.7, -1.57, 0.2));

@@ -187,9 +187,9 @@ pub struct SceneStatus {
 // ---------------------------------------------------------------------------------------------
 // The scene as stored and served (`GET /v1/scenes/{id}/scene`).
 
-/// 2: adds the moving parts ([`bspvt_proto::motion`]); 3: adds `bake.refine`. Versions 1 and 2
-/// still read.
-const STORED_VERSION: u16 = 3;
+/// 2: adds the moving parts ([`bspvt_proto::motion`]); 3: adds `bake.refine`; 4: adds the
+/// camera's `aspect`. Versions 1 to 3 still read.
+const STORED_VERSION: u16 = 4;
 
 #[derive(Serialize, Deserialize)]
 struct StoredScene {
@@ -197,19 +197,31 @@ struct StoredScene {
     mesh: Mesh,
     materials: Vec<Material>,
     lights: Vec<StoredLight>,
-    camera: Camera,
+    camera: StoredCamera,
     bake: BakeSettings,
     motion: Vec<MovingPart>,
 }
 
-/// Version 2: [`StoredScene`] with [`BakeSettingsV2`].
+/// Version 3: [`StoredScene`] with [`CameraV3`].
+#[derive(Serialize, Deserialize)]
+struct StoredSceneV3 {
+    version: u16,
+    mesh: Mesh,
+    materials: Vec<Material>,
+    lights: Vec<StoredLight>,
+    camera: CameraV3,
+    bake: BakeSettings,
+    motion: Vec<MovingPart>,
+}
+
+/// Version 2: version 3 with [`BakeSettingsV2`].
 #[derive(Serialize, Deserialize)]
 struct StoredSceneV2 {
     version: u16,
     mesh: Mesh,
     materials: Vec<Material>,
     lights: Vec<StoredLight>,
-    camera: Camera,
+    camera: CameraV3,
     bake: BakeSettingsV2,
     motion: Vec<MovingPart>,
 }
@@ -221,8 +233,63 @@ struct StoredSceneV1 {
     mesh: Mesh,
     materials: Vec<Material>,
     lights: Vec<StoredLight>,
-    camera: Camera,
+    camera: CameraV3,
     bake: BakeSettingsV2,
+}
+
+/// [`Camera`] without serde's skipped fields, which postcard cannot carry.
+#[derive(Serialize, Deserialize)]
+struct StoredCamera {
+    position: [f32; 3],
+    target: [f32; 3],
+    up: [f32; 3],
+    fov_y_deg: f32,
+    aspect: Option<f32>,
+}
+
+impl From<&Camera> for StoredCamera {
+    fn from(c: &Camera) -> StoredCamera {
+        StoredCamera {
+            position: c.position,
+            target: c.target,
+            up: c.up,
+            fov_y_deg: c.fov_y_deg,
+            aspect: c.aspect,
+        }
+    }
+}
+
+impl From<StoredCamera> for Camera {
+    fn from(c: StoredCamera) -> Camera {
+        Camera {
+            position: c.position,
+            target: c.target,
+            up: c.up,
+            fov_y_deg: c.fov_y_deg,
+            aspect: c.aspect,
+        }
+    }
+}
+
+/// [`Camera`] before `aspect` (versions 1 to 3).
+#[derive(Serialize, Deserialize)]
+struct CameraV3 {
+    position: [f32; 3],
+    target: [f32; 3],
+    up: [f32; 3],
+    fov_y_deg: f32,
+}
+
+impl From<CameraV3> for StoredCamera {
+    fn from(c: CameraV3) -> StoredCamera {
+        StoredCamera {
+            position: c.position,
+            target: c.target,
+            up: c.up,
+            fov_y_deg: c.fov_y_deg,
+            aspect: None,
+        }
+    }
 }
 
 /// [`BakeSettings`] before `refine` (versions 1 and 2).
@@ -277,7 +344,7 @@ pub fn encode_scene(s: &Scene) -> Vec<u8> {
         mesh: s.mesh.clone(),
         materials: s.materials.clone(),
         lights: s.lights.iter().map(StoredLight::from).collect(),
-        camera: s.camera.clone(),
+        camera: StoredCamera::from(&s.camera),
         bake: s.bake.clone(),
         motion: s.motion.clone(),
     };
@@ -296,7 +363,7 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
                 mesh: v1.mesh,
                 materials: v1.materials,
                 lights: v1.lights,
-                camera: v1.camera,
+                camera: v1.camera.into(),
                 bake: v1.bake.into(),
                 motion: Vec::new(),
             }
@@ -308,9 +375,21 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
                 mesh: v2.mesh,
                 materials: v2.materials,
                 lights: v2.lights,
-                camera: v2.camera,
+                camera: v2.camera.into(),
                 bake: v2.bake.into(),
                 motion: v2.motion,
+            }
+        }
+        3 => {
+            let v3: StoredSceneV3 = postcard::from_bytes(bytes).map_err(bad)?;
+            StoredScene {
+                version: v3.version,
+                mesh: v3.mesh,
+                materials: v3.materials,
+                lights: v3.lights,
+                camera: v3.camera.into(),
+                bake: v3.bake,
+                motion: v3.motion,
             }
         }
         STORED_VERSION => postcard::from_bytes(bytes).map_err(bad)?,
@@ -330,7 +409,7 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
                 region: l.region,
             })
             .collect(),
-        camera: s.camera,
+        camera: s.camera.into(),
         bake: s.bake,
         motion: s.motion,
         warnings: Vec::new(),
@@ -354,12 +433,43 @@ mod tests {
             mesh: p.mesh.clone(),
             materials: p.materials.clone(),
             lights: p.lights.iter().map(StoredLight::from).collect(),
-            camera: p.camera.clone(),
+            camera: v3_camera(&p.camera),
             bake: v2_settings(&p.bake),
         })
         .expect("encode v1");
         assert_eq!(decode_scene(&v1).as_ref(), Ok(&p));
         assert_eq!(decode_scene(&encode_scene(&p)).as_ref(), Ok(&p));
+    }
+
+    fn v3_camera(c: &Camera) -> CameraV3 {
+        CameraV3 {
+            position: c.position,
+            target: c.target,
+            up: c.up,
+            fov_y_deg: c.fov_y_deg,
+        }
+    }
+
+    /// A version-3 stored scene (before the camera's `aspect`) still reads, with none; a
+    /// version-4 scene with an aspect round-trips.
+    #[test]
+    fn version_3_reads_and_the_camera_aspect_round_trips() {
+        let mut p = crate::builtin::scene("room").expect("builtin");
+        p.warnings.clear();
+        assert_eq!(p.camera.aspect, Some(1.5), "the glTF room's camera");
+        assert_eq!(decode_scene(&encode_scene(&p)).as_ref(), Ok(&p));
+        let v3 = postcard::to_stdvec(&StoredSceneV3 {
+            version: 3,
+            mesh: p.mesh.clone(),
+            materials: p.materials.clone(),
+            lights: p.lights.iter().map(StoredLight::from).collect(),
+            camera: v3_camera(&p.camera),
+            bake: p.bake.clone(),
+            motion: p.motion.clone(),
+        })
+        .expect("encode v3");
+        p.camera.aspect = None;
+        assert_eq!(decode_scene(&v3).as_ref(), Ok(&p));
     }
 
     fn v2_settings(b: &BakeSettings) -> BakeSettingsV2 {
@@ -382,7 +492,7 @@ mod tests {
             mesh: p.mesh.clone(),
             materials: p.materials.clone(),
             lights: p.lights.iter().map(StoredLight::from).collect(),
-            camera: p.camera.clone(),
+            camera: v3_camera(&p.camera),
             bake: v2_settings(&p.bake),
             motion: p.motion.clone(),
         })

@@ -20,6 +20,12 @@ pub struct Camera {
     /// Vertical field of view in degrees.
     #[serde(default = "default_fov")]
     pub fov_y_deg: f32,
+    /// Width / height of the image the camera was made for (a glTF camera's `aspectRatio`).
+    /// Commands given no image height take it from this; the field of view stays vertical
+    /// whatever the image's shape (glTF 2.0 §3.10.2: `yfov` is kept, the viewport's aspect
+    /// is used).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub aspect: Option<f32>,
 }
 
 fn default_up() -> [f32; 3] {
@@ -42,6 +48,7 @@ impl Camera {
             target: center.to_array(),
             up: default_up(),
             fov_y_deg,
+            aspect: None,
         }
     }
 
@@ -112,6 +119,7 @@ impl Camera {
             target: c.to_array(),
             up: default_up(),
             fov_y_deg,
+            aspect: None,
         }
     }
 
@@ -136,6 +144,50 @@ impl Camera {
                 self.fov_y_deg
             )));
         }
+        if let Some(a) = self.aspect
+            && !(a >= Camera::ASPECT_RANGE.0 && a <= Camera::ASPECT_RANGE.1)
+        {
+            return Err(SceneError::Invalid(format!(
+                "camera aspect {a} is outside [{}, {}]",
+                Camera::ASPECT_RANGE.0,
+                Camera::ASPECT_RANGE.1
+            )));
+        }
         Ok(())
+    }
+
+    /// The aspect ratios (width / height) a camera may declare.
+    pub const ASPECT_RANGE: (f32, f32) = (0.01, 100.0);
+
+    /// The image height for `width` pixels: `height` when given, else `width / aspect` when
+    /// the camera declares an aspect, else `width` (square).
+    pub fn image_height(&self, width: u32, height: Option<u32>) -> u32 {
+        match (height, self.aspect) {
+            (Some(h), _) => h,
+            (None, Some(a)) => ((f64::from(width) / f64::from(a)).round() as u32).max(1),
+            (None, None) => width,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn image_height_follows_the_declared_aspect() {
+        let mut c = Camera::framing(&Aabb {
+            min: Vec3::ZERO,
+            max: Vec3::ONE,
+        });
+        assert_eq!(c.image_height(600, None), 600);
+        c.aspect = Some(1.5);
+        assert_eq!(c.image_height(600, None), 400);
+        assert_eq!(c.image_height(600, Some(123)), 123);
+        assert!(c.validate().is_ok());
+        c.aspect = Some(0.0);
+        assert!(c.validate().is_err());
+        c.aspect = Some(f32::NAN);
+        assert!(c.validate().is_err());
     }
 }

@@ -11,6 +11,12 @@
 //! (the concatenated vertex records), u32 LE CRC-32 of the body. Frames are self-delimiting, so
 //! a file or an HTTP stream is a [`BakeHeader`] frame followed by chunk frames.
 //!
+//! **Mesh frame** (bake files of refined scenes only): `"BVMS"`, u32 LE body length, body =
+//! u32 LE raw length + zstd of the postcard [`Mesh`], CRC-32. It ends the file of a scene whose
+//! mesh was refined at bake time (`bake.refine`), so the file carries the very mesh its trees
+//! belong to (vertex order = tree order; its content hash is the header's `mesh_hash`). Files of
+//! unrefined scenes have none and are byte for byte what they were.
+//!
 //! **Encoding choice**: headers use postcard (serde, maintained, compact varints, a stable
 //! documented wire format); bincode is not used (unmaintained, RUSTSEC-2025-0141). Trees use
 //! the hand-written bit stream above because they are the product's core and dominate size.
@@ -24,12 +30,14 @@ use serde::{Deserialize, Serialize};
 use crate::bspvt::{FaceTree, LineCodec, MAX_DEPTH, Node, QLine, VertexTrees};
 use crate::cubemap::FACES;
 use crate::error::DecodeError;
+use crate::mesh::Mesh;
 use crate::scene::{BakeSettings, SplitMethod};
 
 /// Format version written by this build.
 pub const FORMAT_VERSION: u16 = 1;
 const FILE_MAGIC: &[u8; 6] = b"BSPVT\0";
 const CHUNK_MAGIC: &[u8; 4] = b"BVCK";
+const MESH_MAGIC: &[u8; 4] = b"BVMS";
 /// zstd level for chunks: trees are compressed once at bake time and served many times.
 pub(crate) const ZSTD_LEVEL: i32 = 19;
 
@@ -39,6 +47,10 @@ pub const MAX_HEADER_BYTES: u32 = 4096;
 pub const MAX_CHUNK_BODY_BYTES: u32 = 64 << 20;
 /// Largest uncompressed chunk body the decoder accepts.
 pub const MAX_CHUNK_RAW_BYTES: u32 = 256 << 20;
+/// Largest compressed mesh frame body the decoder accepts.
+pub const MAX_MESH_BODY_BYTES: u32 = 1 << 30;
+/// Largest uncompressed mesh the decoder accepts.
+pub const MAX_MESH_RAW_BYTES: u32 = 2 << 30;
 
 /// What a reader needs to decode a bake's chunks, and what produced them.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -542,15 +554,64 @@ pub struct Bake {
     pub header: BakeHeader,
     /// One entry per vertex, in vertex order.
     pub trees: Vec<VertexTrees>,
+    /// The mesh the trees belong to, when the file carries it (a refined scene's bake).
+    pub mesh: Option<Mesh>,
 }
 
-/// Decodes a bake file: a header frame followed by chunk frames covering every vertex once.
+/// The mesh frame that ends the bake file of a refined scene (see the module docs).
+pub fn encode_mesh(mesh: &Mesh) -> Vec<u8> {
+    let raw = postcard::to_stdvec(mesh).unwrap_or_default();
+    let mut body = (raw.len() as u32).to_le_bytes().to_vec();
+    body.extend(zstd::bulk::compress(&raw, 3).unwrap_or_default());
+    frame(MESH_MAGIC, &body)
+}
+
+/// Decodes a mesh frame at the start of `data`; returns it and the bytes consumed.
+pub fn decode_mesh(data: &[u8]) -> Result<(Mesh, usize), DecodeError> {
+    let (body, used) = read_frame(data, MESH_MAGIC, MAX_MESH_BODY_BYTES)?;
+    if body.len() < 4 {
+        return Err(DecodeError::Truncated("mesh raw length"));
+    }
+    let raw_len = u32::from_le_bytes([body[0], body[1], body[2], body[3]]);
+    if raw_len > MAX_MESH_RAW_BYTES {
+        return Err(DecodeError::Limit {
+            what: "mesh raw bytes",
+            value: raw_len as u64,
+            limit: MAX_MESH_RAW_BYTES as u64,
+        });
+    }
+    // zstd refuses to write more than `raw_len` bytes: a decompression bomb fails here.
+    let raw = zstd::bulk::decompress(&body[4..], raw_len as usize)
+        .map_err(|e| DecodeError::Corrupt(format!("mesh payload: {e}")))?;
+    let mesh: Mesh =
+        postcard::from_bytes(&raw).map_err(|e| DecodeError::Corrupt(format!("mesh: {e}")))?;
+    mesh.validate()
+        .map_err(|e| DecodeError::Corrupt(format!("mesh: {e}")))?;
+    Ok((mesh, used))
+}
+
+/// Decodes a bake file: a header frame followed by chunk frames covering every vertex once,
+/// and for a refined scene a mesh frame last.
 pub fn decode_bake(data: &[u8]) -> Result<Bake, DecodeError> {
     let (header, mut pos) = decode_header(data)?;
     let n = header.vertex_count as usize;
     let mut slots: Vec<Option<VertexTrees>> = Vec::new();
+    let mut mesh = None;
     // Grow with the data instead of trusting vertex_count for the allocation.
     while pos < data.len() {
+        if data[pos..].starts_with(MESH_MAGIC) {
+            let (m, used) = decode_mesh(&data[pos..])?;
+            if pos + used != data.len() {
+                return Err(DecodeError::Corrupt("data after the mesh frame".into()));
+            }
+            if m.content_hash() != header.mesh_hash || m.vertex_count() != n {
+                return Err(DecodeError::Corrupt(
+                    "the mesh frame is not the mesh the header names".into(),
+                ));
+            }
+            mesh = Some(m);
+            break;
+        }
         let (chunk, used) = decode_chunk(&data[pos..], &header)?;
         pos += used;
         let first = chunk.first_vertex as usize;
@@ -575,5 +636,9 @@ pub fn decode_bake(data: &[u8]) -> Result<Bake, DecodeError> {
         .enumerate()
         .map(|(i, t)| t.ok_or_else(|| DecodeError::Corrupt(format!("vertex {i} is missing"))))
         .collect::<Result<_, _>>()?;
-    Ok(Bake { header, trees })
+    Ok(Bake {
+        header,
+        trees,
+        mesh,
+    })
 }

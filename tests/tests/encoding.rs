@@ -15,7 +15,7 @@ use bspvt_proto::cubemap::FACES;
 use bspvt_proto::encoding::{
     Bake, BakeHeader, ChunkHeader, FORMAT_VERSION, MAX_CHUNK_BODY_BYTES, MAX_CHUNK_RAW_BYTES,
     MAX_HEADER_BYTES, decode_bake, decode_chunk, decode_header, decode_vertex, encode_chunk,
-    encode_header, encode_vertex, peek_chunk,
+    encode_header, encode_mesh, encode_vertex, peek_chunk,
 };
 use bspvt_proto::{BakeSettings, DecodeError, SplitMethod};
 use bspvt_tests::{Rng, random_value};
@@ -263,7 +263,7 @@ proptest! {
         // The whole file.
         let file = encode_file(&header, &trees);
         let bake = decode_bake(&file).map_err(|e| TestCaseError::fail(e.to_string()))?;
-        prop_assert_eq!(bake, Bake { header: header.clone(), trees });
+        prop_assert_eq!(bake, Bake { header: header.clone(), trees, mesh: None });
         let (h, used) = decode_header(&file).map_err(|e| TestCaseError::fail(e.to_string()))?;
         prop_assert_eq!(h, header.clone());
         prop_assert_eq!(used, encode_header(&header).len());
@@ -285,6 +285,48 @@ fn file_with_chunks_out_of_order_decodes() {
         file.extend(encode_chunk(c * 3, &trees[s..(s + 3).min(10)], &codec));
     }
     assert_eq!(decode_bake(&file).expect("decodes").trees, trees);
+}
+
+/// A refined scene's bake file ends with its mesh: it decodes back; a mesh that is not the one
+/// the header names, anything after it, a hostile raw length and every truncation are errors.
+#[test]
+fn mesh_frame_round_trips_and_is_checked() {
+    let mesh = bspvt_proto::builtin::mesh("cube").expect("built-in cube");
+    let n = mesh.vertex_count() as u32;
+    let settings = BakeSettings {
+        face_res: 16,
+        chunk_vertices: 256,
+        ..BakeSettings::default()
+    };
+    let header = BakeHeader::new(&settings, n, mesh.content_hash());
+    let mut rng = Rng(11);
+    let codec = header.codec();
+    let trees: Vec<VertexTrees> = (0..n)
+        .map(|_| random_vertex(&mut rng, &header, &codec))
+        .collect();
+    let mut file = encode_file(&header, &trees);
+    let plain = decode_bake(&file).expect("decodes");
+    assert_eq!(plain.mesh, None);
+    let body_end = file.len();
+    file.extend(encode_mesh(&mesh));
+    let bake = decode_bake(&file).expect("decodes with its mesh");
+    assert_eq!(bake.trees, trees);
+    assert_eq!(bake.mesh.as_ref(), Some(&mesh));
+
+    let mut after = file.clone();
+    after.extend(encode_chunk(0, &trees[..1], &codec));
+    assert!(matches!(decode_bake(&after), Err(DecodeError::Corrupt(_))));
+    let mut other = mesh.clone();
+    other.positions[0].x += 1.0;
+    let mut wrong = file[..body_end].to_vec();
+    wrong.extend(encode_mesh(&other));
+    assert!(matches!(decode_bake(&wrong), Err(DecodeError::Corrupt(_))));
+    let mut bomb = file[..body_end].to_vec();
+    bomb.extend(frame(b"BVMS", &u32::MAX.to_le_bytes()));
+    assert!(matches!(decode_bake(&bomb), Err(DecodeError::Limit { .. })));
+    for cut in body_end + 1..file.len() {
+        assert!(decode_bake(&file[..cut]).is_err(), "cut at {cut}");
+    }
 }
 
 /// A vertex that sees everything is one byte, whichever faces are present; so is one that

@@ -26,7 +26,7 @@ pub(crate) struct DemoArgs {
     /// Frames of the light's path (headless).
     #[arg(long, default_value_t = 48)]
     pub(crate) frames: usize,
-    /// Frame size in pixels (square).
+    /// Frame width in pixels (the height from the scene camera's aspect ratio, else square).
     #[arg(long, default_value_t = 512)]
     pub(crate) size: u32,
     /// Never open a window, even when a display is available.
@@ -67,7 +67,8 @@ pub(crate) fn run(a: &DemoArgs) -> Result<()> {
             ", baked before: reusing it"
         }
     );
-    let mut session = connected.session(&opts, a.size, a.size)?;
+    let height = connected.scene.camera.image_height(a.size, None);
+    let mut session = connected.session(&opts, a.size, height)?;
     let mut report = AnimateReport::new(&connected, &session, a.frames);
     // The first frame right away, with whatever trees are here (unshadowed where none are).
     report.first_frame(&mut session, started, &a.out.join("first.png"), 1.0)?;

@@ -28,8 +28,10 @@ pub(crate) fn method(name: &str) -> Result<&'static dyn FrameMethod> {
 pub(crate) struct FrameArgs {
     #[arg(long, default_value_t = 512)]
     pub(crate) width: u32,
-    #[arg(long, default_value_t = 512)]
-    pub(crate) height: u32,
+    /// Image height [default: the width over the scene camera's aspect ratio (a glTF camera's
+    /// `aspectRatio`), else the width].
+    #[arg(long)]
+    pub(crate) height: Option<u32>,
     /// Rendering method (`bspvt methods` lists them with what they need).
     #[arg(long, default_value = "bspvt", value_parser = method_values())]
     pub(crate) method: String,

@@ -46,8 +46,10 @@ pub(crate) struct RenderArgs {
     spp: u32,
     #[arg(long, default_value_t = 512)]
     width: u32,
-    #[arg(long, default_value_t = 512)]
-    height: u32,
+    /// Image height [default: the width over the scene camera's aspect ratio (a glTF camera's
+    /// `aspectRatio`), else the width].
+    #[arg(long)]
+    height: Option<u32>,
     /// Frames along the light path; more than one writes OUT-000.png, OUT-001.png, …
     #[arg(long, default_value_t = 1)]
     frames: usize,
@@ -155,7 +157,7 @@ pub(crate) fn run(a: RenderArgs) -> Result<()> {
         let opts = Options {
             method,
             width: a.width,
-            height: a.height,
+            height: scene.camera.image_height(a.width, a.height),
             frames: a.frames,
             light: 0,
             settings: Settings {

@@ -27,7 +27,8 @@ pub(crate) fn run(a: &ViewArgs) -> Result<()> {
     let opts = a.connect.options();
     let connected = connect(&opts)?;
     let f = &a.frame;
-    let mut session = connected.session(&opts, f.width, f.height)?;
+    let height = connected.scene.camera.image_height(f.width, f.height);
+    let mut session = connected.session(&opts, f.width, height)?;
     session.method = method(&f.method)?;
     session.mode = f.mode.into();
     if a.moving {

@@ -39,6 +39,12 @@ fn errors(scene: &Scene, size: (u32, u32), spp: u32) -> (f64, f64, f64) {
         .expect("bake")
         .bytes;
     let b = decode_bake(&bytes).expect("decode");
+    // A refined scene's bake carries the refined mesh, whose hash the header names.
+    assert_eq!(
+        b.mesh.as_ref(),
+        Some(&scene.mesh),
+        "the bake carries its mesh"
+    );
     let trees = Trees::full(&b.trees, b.header.codec());
     let r = Renderer::new(scene, size.0, size.1);
     let light = Light::from_scene(&scene.lights[0]);

@@ -211,22 +211,25 @@ pub(crate) fn named_scene_path(name: &str, meshes_dir: &Path) -> PathBuf {
 /// [`named_scene_path`]) as its default `--mesh` scene, or a scene JSON file. `None` when the
 /// file does not exist (the caller says so and skips it).
 pub(crate) fn load_named_scene(name: &str, meshes_dir: &Path) -> Result<Option<Scene>> {
-    if let Some(s) = bspvt_proto::builtin::scene(name) {
-        return Ok(Some(s));
-    }
-    let file = named_scene_path(name, meshes_dir);
-    if !file.exists() {
-        return Ok(None);
-    }
-    let is_json = file.extension().is_some_and(|e| e == "json");
-    let scene = if is_json {
-        bspvt_proto::scene::open_scene(Some(&file.to_string_lossy()), None)
+    let mut scene = if let Some(s) = bspvt_proto::builtin::scene(name) {
+        s
     } else {
-        Scene::from_mesh_path(&file)
+        let file = named_scene_path(name, meshes_dir);
+        if !file.exists() {
+            return Ok(None);
+        }
+        let is_json = file.extension().is_some_and(|e| e == "json");
+        let scene = if is_json {
+            bspvt_proto::scene::open_scene(Some(&file.to_string_lossy()), None)
+        } else {
+            Scene::from_mesh_path(&file)
+        };
+        scene.with_context(|| format!("cannot load scene {name} ({})", file.display()))?
     };
-    scene
-        .map(Some)
-        .with_context(|| format!("cannot load scene {name} ({})", file.display()))
+    // The mesh every path bakes and shades: refined where the scene asks (rooms, assets with
+    // their own lamps).
+    bspvt_client::scene::refine(&mut scene)?;
+    Ok(Some(scene))
 }
 
 /// Median wall time (ms) of `frames` calls of `f`, and the last result.

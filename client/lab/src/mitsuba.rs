@@ -9,11 +9,14 @@
 //!   size), `independent` sampler, `hdrfilm` (rgb) with a `box` reconstruction filter;
 //! - `mesh_<k>.ply`: the triangles of material k (binary PLY with the vertex normals, which
 //!   Mitsuba interpolates as shading normals — as our G-buffer does);
-//! - `light.ply`: the light polygon (fan triangles, no normals: face normals
+//! - `light<k>.ply`: light k's polygon (fan triangles, no normals: face normals
 //!   `(v1 − v0) × (v2 − v0)`, which is both Mitsuba's and our emitting side), with an `area`
-//!   emitter and a black `diffuse` BSDF. A two-sided light adds `light_back.ply`: the same
+//!   emitter and a black `diffuse` BSDF. A two-sided light adds `light<k>_back.ply`: the same
 //!   polygon with reversed winding, 1e-4 × its diagonal behind (Mitsuba's area emitters are
-//!   one-sided; two coplanar copies would hide each other at random).
+//!   one-sided; two coplanar copies would hide each other at random). Every light of the scene
+//!   is written (the asset's lamps too), or the one `--light` names. bspvt's renderers shade
+//!   one light at a time (`bspvt render --light k`); direct light is linear in the lights, so
+//!   Mitsuba's image of all of them is the sum of those.
 //!
 //! **Materials.** Our BRDF is a sum, albedo/π + F·D·G₁G₁/(4 cos θo cos θi) with Schlick's F;
 //! Mitsuba has no additive BSDF, but every term has an exact counterpart:
@@ -63,28 +66,29 @@ pub struct ExportArgs {
     /// Samples per pixel (the sampler's `sample_count`).
     #[arg(long, default_value_t = 256)]
     pub(crate) spp: u32,
-    /// Which of the scene's lights (Mitsuba renders one polygon light, like our renderers).
-    #[arg(long, default_value_t = 0)]
-    pub(crate) light: usize,
+    /// Write only this light (its index in the scene) [default: every light].
+    #[arg(long)]
+    pub(crate) light: Option<usize>,
 }
 
 /// Runs `bspvt export-mitsuba`.
 pub fn run(args: &ExportArgs) -> Result<()> {
     let scene = open_scene(args.scene.as_deref(), args.mesh.as_deref())?;
-    let Some(l) = scene.lights.get(args.light) else {
-        bail!(
-            "--light {}: the scene has {} light(s)",
-            args.light,
-            scene.lights.len()
-        );
+    let lights: Vec<Light> = match args.light {
+        Some(k) => {
+            let Some(l) = scene.lights.get(k) else {
+                bail!("--light {k}: the scene has {} light(s)", scene.lights.len());
+            };
+            vec![Light::from_scene(l)]
+        }
+        None => scene.lights.iter().map(Light::from_scene).collect(),
     };
-    let light = Light::from_scene(l);
     let opts = ExportOptions {
         width: args.width,
         height: args.height,
         spp: args.spp,
     };
-    let summary = export(&scene, &light, &opts, &args.out)?;
+    let summary = export(&scene, &lights, &opts, &args.out)?;
     for w in &summary.warnings {
         eprintln!("warning: {w}");
     }
@@ -123,16 +127,21 @@ pub struct ExportSummary {
 /// Smallest α Mitsuba's `principled` BSDF represents (it clamps roughness² to this).
 pub(crate) const PRINCIPLED_MIN_ALPHA: f64 = 1e-3;
 
-/// Writes `scene` lit by `light` (world space; e.g. one frame of a moving light) as a Mitsuba 3
-/// scene in `dir`.
+/// Writes `scene` lit by `lights` (world space; e.g. one frame of a moving light) as a
+/// Mitsuba 3 scene in `dir`.
 pub fn export(
     scene: &Scene,
-    light: &Light,
+    lights: &[Light],
     opts: &ExportOptions,
     dir: &Path,
 ) -> Result<ExportSummary> {
-    if light.vertices.len() < 3 || !light.vertices.iter().all(|v| v.is_finite()) {
-        bail!("the light needs at least 3 finite vertices");
+    if lights.is_empty() {
+        bail!("no light to export");
+    }
+    for (k, light) in lights.iter().enumerate() {
+        if light.vertices.len() < 3 || !light.vertices.iter().all(|v| v.is_finite()) {
+            bail!("light {k} needs at least 3 finite vertices");
+        }
     }
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let mut files = Vec::new();
@@ -150,7 +159,7 @@ pub fn export(
     let _ = writeln!(xml, r#"<?xml version="1.0" encoding="utf-8"?>"#);
     let _ = writeln!(
         xml,
-        "<!-- Written by `bspvt export-mitsuba`: direct light from one polygonal light, the \
+        "<!-- Written by `bspvt export-mitsuba`: direct light from polygonal lights, the \
          same image as bspvt's Monte Carlo ground truth with box-filtered pixels.\n     \
          Materials: twosided(blendbsdf(0.5, diffuse(albedo), GGX-Schlick specular)) with the \
          emitter's radiance doubled, which is exactly albedo/pi + F D G / (4 cos cos); see \
@@ -266,49 +275,50 @@ pub fn export(
         );
     }
 
-    // The light: emitting side = (v1 − v0) × (v2 − v0) in Mitsuba and here.
-    let mut verts = light.vertices.clone();
-    if newell(&verts).dot(light.normal) < 0.0 {
-        verts.reverse();
-    }
-    if light.texture.is_some() {
-        warnings.push(
-            "the light's texture is not exported: Mitsuba renders its radiance at the centroid, \
-             uniform"
-                .to_string(),
-        );
-    }
-    let radiance = light.radiance_at(light.centroid()) * 2.0;
-    let mut sides = vec![("light.ply".to_string(), verts.clone())];
-    if light.two_sided {
-        let size = polygon_diagonal(&verts);
-        let back: Vec<DVec3> = verts
-            .iter()
-            .rev()
-            .map(|&v| v - light.normal * (1e-4 * size))
-            .collect();
-        sides.push(("light_back.ply".to_string(), back));
-    }
-    for (file, poly) in &sides {
-        let path = dir.join(file);
-        write_ply(&path, &polygon_mesh(poly), false)?;
-        files.push(path);
-        let _ = writeln!(
-            xml,
-            r#"    <shape type="ply">
+    // The lights: emitting side = (v1 − v0) × (v2 − v0) in Mitsuba and here.
+    for (k, light) in lights.iter().enumerate() {
+        let mut verts = light.vertices.clone();
+        if newell(&verts).dot(light.normal) < 0.0 {
+            verts.reverse();
+        }
+        if light.texture.is_some() {
+            warnings.push(format!(
+                "light {k}'s texture is not exported: Mitsuba renders its radiance at the \
+                 centroid, uniform"
+            ));
+        }
+        let radiance = light.radiance_at(light.centroid()) * 2.0;
+        let mut sides = vec![(format!("light{k}.ply"), verts.clone())];
+        if light.two_sided {
+            let size = polygon_diagonal(&verts);
+            let back: Vec<DVec3> = verts
+                .iter()
+                .rev()
+                .map(|&v| v - light.normal * (1e-4 * size))
+                .collect();
+            sides.push((format!("light{k}_back.ply"), back));
+        }
+        for (file, poly) in &sides {
+            let path = dir.join(file);
+            write_ply(&path, &polygon_mesh(poly), false)?;
+            files.push(path);
+            let _ = writeln!(
+                xml,
+                r#"    <shape type="ply">
         <string name="filename" value="{file}"/>
         <boolean name="face_normals" value="true"/>
         <bsdf type="diffuse">
             <rgb name="reflectance" value="0, 0, 0"/>
         </bsdf>
         <emitter type="area">
-            <!-- 2 x the light's radiance {l}: see the blendbsdf weights above -->
+            <!-- 2 x light {k}'s radiance {l}: see the blendbsdf weights above -->
             <rgb name="radiance" value="{r}"/>
         </emitter>
     </shape>"#,
-            l = triple((radiance / 2.0).to_array()),
-            r = triple(radiance.to_array()),
-        );
+                l = triple((radiance / 2.0).to_array()),
+                r = triple(radiance.to_array()),
+            );
+        }
     }
     let _ = writeln!(xml, "</scene>");
     let scene_xml = dir.join("scene.xml");
@@ -452,7 +462,7 @@ mod tests {
             height: 24,
             spp: 4,
         };
-        let s = export(&scene, &light, &opts, &dir).expect("export");
+        let s = export(&scene, &[light], &opts, &dir).expect("export");
         let xml = std::fs::read_to_string(&s.scene_xml).expect("read scene.xml");
         assert!(xml.contains(r#"<scene version="3.0.0">"#));
         assert!(xml.contains(r#"<integer name="max_depth" value="2"/>"#));
@@ -469,11 +479,63 @@ mod tests {
                 .find_map(|l| l.strip_prefix("element face "))
                 .and_then(|n| n.trim().parse().ok())
                 .expect("face count");
-            if !f.ends_with("light.ply") {
+            if !f.ends_with("light0.ply") {
                 tris += faces;
             }
         }
         assert_eq!(tris, scene.mesh.triangles.len());
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    /// The asset's own materials and lamp (the built-in glTF room): the lamp's radiance is
+    /// emissiveFactor × emissiveStrength = (1, 0.9, 0.75) × 12, written doubled; the gold box
+    /// (metallic 1, baseColor (1, 0.78, 0.34), roughness 0.35) has albedo 0 and F0 = baseColor,
+    /// the green plastic (metallic 0) albedo = baseColor and F0 = 0.04.
+    #[test]
+    fn exports_the_rooms_own_lamp_and_materials() {
+        let scene = bspvt_proto::builtin::scene("room").expect("built-in room");
+        let lights: Vec<Light> = scene.lights.iter().map(Light::from_scene).collect();
+        assert_eq!(lights.len(), 1);
+        let dir = std::env::temp_dir().join(format!("bspvt-mitsuba-room-{}", std::process::id()));
+        let opts = ExportOptions {
+            width: 32,
+            height: 24,
+            spp: 4,
+        };
+        let s = export(&scene, &lights, &opts, &dir).expect("export");
+        let xml = std::fs::read_to_string(&s.scene_xml).expect("read scene.xml");
+        // The numbers after `key` in the file, in order (each value="a, b, c" or "a").
+        let values = |key: &str| -> Vec<Vec<f64>> {
+            xml.split(key)
+                .skip(1)
+                .filter_map(|rest| rest.split('"').nth(1))
+                .map(|v| v.split(',').filter_map(|x| x.trim().parse().ok()).collect())
+                .collect()
+        };
+        let close = |a: &[f64], b: &[f64]| {
+            a.len() == b.len()
+                && a.iter()
+                    .zip(b)
+                    .all(|(x, y)| (x - y).abs() <= 1e-6 * y.abs())
+        };
+        let radiance = values(r#"<rgb name="radiance" value="#);
+        assert_eq!(radiance.len(), 1, "{xml}");
+        assert!(close(&radiance[0], &[24.0, 21.6, 18.0]), "{radiance:?}");
+        // The gold's specular: principled, base colour = F0 = baseColor, roughness = √α = 0.35.
+        let base = values(r#"<rgb name="base_color" value="#);
+        assert!(
+            base.iter().any(|b| close(b, &[1.0, 0.78, 0.34])),
+            "{base:?}"
+        );
+        let roughness = values(r#"<float name="roughness" value="#);
+        assert!(roughness.iter().any(|r| close(r, &[0.35])), "{roughness:?}");
+        assert!(xml.contains("brushed gold: albedo 0, 0, 0, F0 1, 0.78, 0.34"));
+        assert!(xml.contains("glossy plastic: albedo 0.05, 0.3, 0.1, F0 0.04, 0.04, 0.04"));
+        // One PLY per material in use, one for the lamp; the lamp is not in the meshes.
+        let materials: std::collections::BTreeSet<u32> =
+            scene.mesh.material_ids.iter().copied().collect();
+        assert_eq!(s.files.len(), 1 + materials.len() + 1);
+        assert!(dir.join("light0.ply").is_file());
         let _ = std::fs::remove_dir_all(dir);
     }
 }

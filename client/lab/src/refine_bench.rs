@@ -46,7 +46,7 @@ pub struct BenchRefineArgs {
     /// Vertex budgets of the adaptive refinement (0: the default budget).
     #[arg(long, value_delimiter = ',', default_value = "1000,2000,4000,0")]
     pub budgets: Vec<u32>,
-    /// Image width (the height follows the scene camera's 3:2 or 1:1 frame: width × 2/3).
+    /// Image width (the height follows the scene camera's aspect ratio, else square).
     #[arg(long, default_value_t = 192)]
     pub width: u32,
     /// Monte Carlo samples per pixel of each of the two reference renders.
@@ -105,7 +105,9 @@ pub struct SceneResult {
 fn default_scenes() -> Result<Vec<PathBuf>> {
     let rooms = Path::new("assets/rooms");
     if !rooms.is_dir() {
-        bail!("assets/rooms was not found (run from the project's root) — name the scenes with --scenes");
+        bail!(
+            "assets/rooms was not found (run from the project's root) — name the scenes with --scenes"
+        );
     }
     Ok(vec![rooms.join("room.gltf"), rooms.join("cornell-box.obj")])
 }
@@ -164,13 +166,17 @@ fn bench_scene(path: &Path, a: &BenchRefineArgs) -> Result<SceneResult> {
         bail!("the scene has no polygon light");
     };
     if given.lights.len() > 1 {
-        eprintln!("{}: only light 0 of {} is measured", path.display(), given.lights.len());
+        eprintln!(
+            "{}: only light 0 of {} is measured",
+            path.display(),
+            given.lights.len()
+        );
     }
     let light = Light::from_scene(light);
     let name = path
         .file_name()
         .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-    let (w, h) = (a.width, (a.width * 2 / 3).max(8));
+    let (w, h) = (a.width, given.camera.image_height(a.width, None));
 
     let r = Renderer::new(&given, w, h);
     let cov = covered(&r.gbuffer);
@@ -183,14 +189,15 @@ fn bench_scene(path: &Path, a: &BenchRefineArgs) -> Result<SceneResult> {
         *p = std::array::from_fn(|k| 0.5 * (p[k] + q[k]));
     }
     let mean = {
-        let (s, n) = reference
-            .pixels
-            .iter()
-            .zip(&cov)
-            .filter(|(_, c)| **c)
-            .fold((0.0f64, 0usize), |(s, n), (p, _)| {
-                (s + p.iter().map(|&x| f64::from(x)).sum::<f64>() / 3.0, n + 1)
-            });
+        let (s, n) = reference.pixels.iter().zip(&cov).filter(|(_, c)| **c).fold(
+            (0.0f64, 0usize),
+            |(s, n), (p, _)| {
+                (
+                    s + p.iter().map(|&x| f64::from(x)).sum::<f64>() / 3.0,
+                    n + 1,
+                )
+            },
+        );
         s / n.max(1) as f64
     };
     if !(mean > 0.0) {
@@ -252,7 +259,12 @@ fn bench_scene(path: &Path, a: &BenchRefineArgs) -> Result<SceneResult> {
         };
         let (adaptive, st) = try_refine(&given.mesh, &given.lights, &settings)?;
         let n = adaptive.vertex_count() as u32;
-        rows.push(measure(&with_mesh(adaptive), "adaptive", budget, st.seconds)?);
+        rows.push(measure(
+            &with_mesh(adaptive),
+            "adaptive",
+            budget,
+            st.seconds,
+        )?);
         let t = Instant::now();
         let (uniform, _) = refine_uniform(&given.mesh, n)?;
         let s = t.elapsed().as_secs_f64();

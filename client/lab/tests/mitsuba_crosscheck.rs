@@ -1,5 +1,7 @@
 //! The independent cross-check: bspvt's Monte Carlo ground truth against Mitsuba 3 on the same
-//! scenes (written by `bspvt_lab::mitsuba::export`), within Monte Carlo noise.
+//! scenes (written by `bspvt_lab::mitsuba::export`), within Monte Carlo noise: the built-in
+//! plate, mirror-like and two-sided-light variants, and the project's two rooms given alone
+//! (`assets/rooms`: the glTF room, the Cornell box OBJ/MTL) with their own lamps and materials.
 //!
 //! Skipped (with a message) where `python3 -c "import mitsuba"` fails: `pip install mitsuba`.
 //! Both renderers integrate each pixel with a box filter (ours: `render_mc_box`, jittered
@@ -213,13 +215,19 @@ fn run_case(name: &str, scene: &Scene, dir: &Path) -> Stats {
     let pass_spp = env_u32("BSPVT_XCHECK_PASS_SPP", 128);
     let seed = env_u32("BSPVT_XCHECK_SEED", 1);
     let case_dir = dir.join(name);
+    assert_eq!(
+        scene.lights.len(),
+        1,
+        "{name}: one light, as render_mc_box draws"
+    );
     let light = Light::from_scene(&scene.lights[0]);
     let opts = ExportOptions {
         width: W,
         height: H,
         spp: pass_spp,
     };
-    let summary = export(scene, &light, &opts, &case_dir).expect("export the Mitsuba scene");
+    let summary = export(scene, std::slice::from_ref(&light), &opts, &case_dir)
+        .expect("export the Mitsuba scene");
     assert!(summary.warnings.is_empty(), "{:?}", summary.warnings);
 
     let t = std::time::Instant::now();
@@ -319,11 +327,19 @@ fn ground_truth_agrees_with_mitsuba() {
         std::env::temp_dir().join(format!("bspvt-xcheck-{}", std::process::id()))
     });
     let plate = bspvt_proto::builtin::scene("plate-small").expect("built-in scene");
+    let room = bspvt_proto::builtin::scene("room").expect("built-in room");
+    let cornell = Scene::from_mesh_path(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/cornell-box.obj"),
+    )
+    .expect("the project's Cornell box");
     let cases = [
         ("plate-small", plate),
         ("specular-a0.3", specular_scene(0.3)),
         ("specular-a0.05", specular_scene(0.05)),
         ("two-sided-light", two_sided_scene()),
+        // Enclosed rooms given alone: the asset's own lamp, materials and camera.
+        ("room", room),
+        ("cornell-box", cornell),
     ];
     let mut failures = Vec::new();
     for (name, scene) in &cases {

@@ -81,6 +81,7 @@ mod tests {
             target: [0.0, 0.5, 0.0],
             up: [0.0, 1.0, 0.0],
             fov_y_deg: 40.0,
+            aspect: None,
         };
         let v = View::new(&cam, 320, 200);
         for (x, y) in [(0.5, 0.5), (160.0, 100.0), (319.5, 3.25)] {

@@ -58,6 +58,7 @@ impl Orbit {
             target: self.target.as_vec3().to_array(),
             up: [0.0, 1.0, 0.0],
             fov_y_deg: self.fov_y_deg,
+            aspect: None,
         }
     }
 }

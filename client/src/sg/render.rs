@@ -478,6 +478,7 @@ mod tests {
             target: [0.0, 0.0, 0.0],
             up: [0.0, 0.0, -1.0],
             fov_y_deg: 50.0,
+            aspect: None,
         };
         let env = one_lobe([0.6, 1.0, 0.0], 30.0);
         let opts = SgOptions {

@@ -229,6 +229,7 @@ fn node_camera(world: &Mat4, cam: &::gltf::Camera) -> Result<Camera, String> {
         target: (eye + forward.normalize_or_zero()).to_array(),
         up: up.normalize_or_zero().to_array(),
         fov_y_deg,
+        aspect: p.aspect_ratio(),
     };
     camera
         .validate()

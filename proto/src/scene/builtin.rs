@@ -2,18 +2,23 @@
 //!
 //! `dynamic`: the run-time methods' moving scene (`assets/scenes/dynamic.json`).
 //!
+//! `room`: the project's own enclosed room (`assets/rooms/room.gltf`, written by
+//! `assets/rooms/make_rooms.py`): coloured walls, an emissive ceiling quad, a metal box and a
+//! glossy sphere, read by the glTF importer as any asset given alone ([`Scene::from_asset`]).
+//!
 //! `plate`: a 160×160 receiver grid (25,600 vertices) under a sphere and a tilted slab, lit by a
 //! quad light that may move in a declared box above them (28,258 vertices in all).
 
 use glam::{Quat, Vec3};
 
+use crate::import::Format;
 use crate::mesh::{Aabb, Mesh};
 use crate::scene::{
     BakeSettings, Camera, Material, MeshRef, PolygonLight, Region, Scene, SceneFile,
 };
 
 /// Names accepted by [`scene`] and [`mesh`] (and by `builtin:NAME` in scene files).
-pub const NAMES: &[&str] = &["plate", "plate-small", "dynamic"];
+pub const NAMES: &[&str] = &["plate", "plate-small", "dynamic", "room"];
 
 /// Single-object meshes for scene files to place (`builtin:NAME`, with a `transform`):
 /// `sphere` (unit radius, 2,562 vertices) and `cube` (unit side, 12 × 12 vertices a face).
@@ -22,6 +27,9 @@ pub(crate) const PART_NAMES: &[&str] = &["sphere", "cube"];
 /// `dynamic`: a sphere orbiting and bobbing over a floor beside a twisting bar (the
 /// run-time methods' moving scene), written as a scene file.
 pub const DYNAMIC_JSON: &str = include_str!("../../../assets/scenes/dynamic.json");
+
+/// `room`: the project's glTF room (self-contained: its buffer is a `data:` URI).
+const ROOM_GLTF: &[u8] = include_bytes!("../../../assets/rooms/room.gltf");
 
 /// Every name [`mesh`] accepts.
 pub fn mesh_names() -> Vec<&'static str> {
@@ -44,6 +52,11 @@ pub fn scene(name: &str) -> Option<Scene> {
         // The same layout, coarse enough for fast tests (1,849 + 642 + 96 vertices).
         "plate-small" => Some(plate(43, 3)),
         "dynamic" => Scene::from_json(DYNAMIC_JSON, std::path::Path::new("")).ok(),
+        "room" => {
+            let limits = crate::import::Limits::default();
+            let asset = crate::import::load_asset_bytes(ROOM_GLTF, Format::Gltf, &limits);
+            asset.ok().and_then(|a| Scene::from_asset(a).ok())
+        }
         _ => None,
     }
 }
@@ -131,6 +144,7 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
             target: [0.0, 0.5, 0.0],
             up: [0.0, 1.0, 0.0],
             fov_y_deg: 40.0,
+            aspect: None,
         },
         bake: BakeSettings::default(),
         motion: Vec::new(),

@@ -315,6 +315,12 @@ impl Baker {
             totals += t;
             progress(totals.vertices, total);
         }
+        // A refined scene's file carries its mesh (the scene file alone names the coarse one).
+        if self.settings.refine.is_some() {
+            let frame = bspvt_proto::encoding::encode_mesh(&self.mesh);
+            totals.bytes += frame.len() as u64;
+            bytes.extend_from_slice(&frame);
+        }
         Ok(BakeOutput {
             header: self.header.clone(),
             bytes,

@@ -389,7 +389,10 @@ fn uniform_subdivision_is_crack_free_and_meets_its_budget() {
         })
         .collect();
     let longest = floor_edges.iter().copied().fold(0.0f32, f32::max);
-    assert!(longest <= 4.0 * 2f32.sqrt() / 8.0 + 1e-4, "longest floor edge {longest}");
+    assert!(
+        longest <= 4.0 * 2f32.sqrt() / 8.0 + 1e-4,
+        "longest floor edge {longest}"
+    );
     let again = refine_uniform(&mesh, budget).expect("uniform").0;
     assert_eq!(mesh_bits(&out), mesh_bits(&again));
 }

@@ -28,9 +28,10 @@ use crate::bench::{file_stem, load_named_scene, named_scene_path};
 /// `bspvt report`: error against run time of every method on real scenes.
 #[derive(clap::Args, Clone, Debug)]
 pub struct ReportArgs {
-    /// Scenes: built-in names (plate, plate-small), shared meshes (teapot, bunny, dragon, or a
-    /// file name in the meshes folder such as bunny_res3.ply), or paths to a mesh or scene JSON
-    /// [default: plate,teapot,bunny; with --quick: plate-small,teapot,bunny_res3.ply]
+    /// Scenes: built-in names (plate, plate-small, room), shared meshes (teapot, bunny, dragon,
+    /// or a file name in the meshes folder such as bunny_res3.ply), or paths to a mesh or scene
+    /// JSON [default: plate,teapot,bunny,room; with --quick:
+    /// plate-small,teapot,bunny_res3.ply,room]
     #[arg(long, value_delimiter = ',')]
     pub scenes: Vec<String>,
     /// The smoke-test report: smaller images, scenes and sample counts (minutes, for CI).
@@ -190,9 +191,15 @@ pub fn run(a: &ReportArgs) -> Result<Report> {
             "plate-small".into(),
             "teapot".into(),
             "bunny_res3.ply".into(),
+            "room".into(),
         ]
     } else {
-        vec!["plate".into(), "teapot".into(), "bunny".into()]
+        vec![
+            "plate".into(),
+            "teapot".into(),
+            "bunny".into(),
+            "room".into(),
+        ]
     };
     let mut report = Report {
         settings: settings.clone(),

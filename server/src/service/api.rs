@@ -189,7 +189,13 @@ fn accept(st: &Shared, up: Upload) -> ApiResult<Arc<Live>> {
     let header = BakeHeader::new(&scene.bake, vertex_count, scene.mesh.content_hash());
     st.store
         .create_scene(&id, &input::encode_scene(scene))
-        .map_err(|e| ApiError::internal(format!("cannot store the scene: {e}")))?;
+        .map_err(|e| {
+            if super::store::is_storage_full(&e) {
+                insufficient_storage()
+            } else {
+                ApiError::internal(format!("cannot store the scene: {}", e.kind()))
+            }
+        })?;
     let row = SceneRow {
         id: id.clone(),
         seq: 0,
@@ -226,9 +232,23 @@ fn accept(st: &Shared, up: Upload) -> ApiResult<Arc<Live>> {
             let _ = st.store.remove_scene(&id);
             Err(match e {
                 SubmitError::QueueFull(n) => queue_full(n),
+                SubmitError::Db(e) if super::db::is_disk_full(&e) => insufficient_storage(),
                 SubmitError::Db(e) => ApiError::internal(format!("cannot record the scene: {e}")),
             })
         }
+    }
+}
+
+/// 507 with `Retry-After`: the data disk is full (RFC 4918 §11.5).
+fn insufficient_storage() -> ApiError {
+    tracing::warn!("an upload was refused: the data disk is full");
+    ApiError {
+        retry_after: Some(30),
+        ..ApiError::new(
+            StatusCode::INSUFFICIENT_STORAGE,
+            "insufficient_storage",
+            "the server's data disk is full; retry later",
+        )
     }
 }
 
@@ -273,6 +293,7 @@ pub(crate) struct SubmitForm {
         (status = 415, description = "Not a multipart form, or unsupported mesh format", body = ErrorBody),
         (status = 422, description = "Invalid mesh, scene or settings", body = ErrorBody),
         (status = 429, description = "Queue full or too many uploads at once", body = ErrorBody),
+        (status = 507, description = "The server's data disk is full (with Retry-After)", body = ErrorBody),
     ),
     security(("api_key" = []))
 )]

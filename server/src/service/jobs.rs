@@ -57,7 +57,17 @@ pub(crate) struct Jobs {
     /// Chunks baked by this process, per scene (the proof that a restart recomputes nothing
     /// that was durable; kept for the process's lifetime, a few bytes per scene).
     baked_here: Mutex<HashMap<String, u32>>,
+    /// Set while the data disk is full: how long a worker waits before it tries again.
+    space_wait: Mutex<Option<Duration>>,
 }
+
+/// The first wait after the disk filled up; it doubles up to [`SPACE_WAIT_MAX`].
+const SPACE_WAIT_MIN: Duration = Duration::from_millis(500);
+const SPACE_WAIT_MAX: Duration = Duration::from_secs(15);
+
+/// The reason a scene shows while its bake waits for disk space.
+const PAUSED_FOR_SPACE: &str = "paused: the data disk is full; the bake resumes by itself when \
+                                space is freed (free space or delete scenes)";
 
 #[derive(Default)]
 struct Sched {
@@ -277,6 +287,7 @@ impl Jobs {
             max_queued,
             handles: Mutex::new(Vec::new()),
             baked_here: Mutex::new(HashMap::new()),
+            space_wait: Mutex::new(None),
         });
         jobs.collect_garbage()?;
         jobs.reopen_incomplete()?;
@@ -445,7 +456,20 @@ impl Jobs {
         let live = s.live.remove(id);
         s.queue.retain(|l| l.id() != id);
         s.active.retain(|l| l.id() != id);
-        let before = self.db.cancel(id)?;
+        let before = match self.db.cancel(id) {
+            Ok(b) => b,
+            Err(e) if super::db::is_disk_full(&e) => {
+                // The disk is full to the last byte: free the scene's own space, then record
+                // the deletion. (A crash in between leaves its row without files: it fails
+                // with "files are missing" at the next start instead of reading "cancelled".)
+                tracing::warn!(scene = %id, "the data disk is full: removing the scene's files before recording its deletion");
+                if let Err(e) = self.store.remove_scene(id) {
+                    tracing::warn!(scene = %id, error = %e, "cannot remove the files of a deleted scene");
+                }
+                self.db.cancel(id)?
+            }
+            Err(e) => return Err(e),
+        };
         drop(s);
         if let Some(l) = &live {
             l.cancel.store(true, Ordering::Release);
@@ -456,7 +480,11 @@ impl Jobs {
                 p.pending.clear();
                 p.finished_ms = Some(now_ms());
             }
-            *lock(&l.baker) = None;
+            // A worker building the scene's BVH holds this lock: never wait for it (the
+            // worker sees the cancellation and the baker goes with the scene).
+            if let Ok(mut b) = l.baker.try_lock() {
+                *b = None;
+            }
             l.bump();
         }
         if matches!(before, Some(b) if b != JobState::Cancelled) {
@@ -563,9 +591,79 @@ impl Jobs {
 
     fn worker(self: Arc<Self>) {
         while let Some((live, c)) = self.next_work() {
-            let span = tracing::info_span!("chunk", scene = %live.row.id, chunk = c);
-            let _enter = span.enter();
-            self.bake_one(&live, c);
+            {
+                let span = tracing::info_span!("chunk", scene = %live.row.id, chunk = c);
+                let _enter = span.enter();
+                self.bake_one(&live, c);
+            }
+            self.wait_for_space();
+        }
+    }
+
+    /// While the disk is full, waits (backing off) before the next chunk; returns at once
+    /// when stopping.
+    fn wait_for_space(&self) {
+        let Some(delay) = *lock(&self.space_wait) else {
+            return;
+        };
+        let s = lock(&self.sched);
+        if !s.stop {
+            drop(self.work.wait_timeout(s, delay));
+        }
+    }
+
+    /// Chunk `c` could not be stored because the disk is full: it goes back to the scene's
+    /// pending chunks, the scene shows why, the ballast is released (so that states and
+    /// deletions can still be recorded), and workers back off.
+    fn pause_for_space(&self, live: &Arc<Live>, c: u32, what: &str) {
+        let delay = {
+            let mut w = lock(&self.space_wait);
+            let d = w.map_or(SPACE_WAIT_MIN, |d| (d * 2).min(SPACE_WAIT_MAX));
+            *w = Some(d);
+            d
+        };
+        {
+            let mut p = lock(&live.progress);
+            p.in_flight.remove(&c);
+            if !p.state.is_terminal() {
+                p.pending.insert(c);
+                p.reason = Some(PAUSED_FOR_SPACE.to_string());
+            }
+        }
+        let released = self.store.release_ballast();
+        if released {
+            self.metrics.bake_errors.fetch_add(1, Ordering::Relaxed);
+        }
+        tracing::warn!(
+            scene = %live.id(),
+            chunk = c,
+            retry_ms = delay.as_millis() as u64,
+            ballast_released = released,
+            "{what}: the data disk is full, waiting for space"
+        );
+        live.bump();
+    }
+
+    /// While paused for space: true once the ballast could be written back (the disk has
+    /// room for it and more), which ends the pause.
+    fn room_again(&self) -> bool {
+        let mut w = lock(&self.space_wait);
+        if w.is_none() {
+            return true;
+        }
+        if self.store.room_again() {
+            *w = None;
+            tracing::info!("the data disk has room again; baking resumes");
+            return true;
+        }
+        false
+    }
+
+    /// A chunk was stored: the scene no longer shows the pause.
+    fn space_is_back(&self, live: &Live) {
+        let mut p = lock(&live.progress);
+        if p.reason.as_deref() == Some(PAUSED_FOR_SPACE) {
+            p.reason = None;
         }
     }
 
@@ -637,6 +735,9 @@ impl Jobs {
         if live.cancelled() {
             return;
         }
+        if !self.room_again() {
+            return self.pause_for_space(live, c, "still no room for a chunk");
+        }
         let baker = match self.baker(live) {
             Ok(b) => b,
             Err(reason) => return self.fail(live, reason),
@@ -668,18 +769,35 @@ impl Jobs {
             crc32: crc32fast::hash(&frame),
         };
         if let Err(e) = self.store.write_chunk(live.id(), c, &frame) {
-            if !live.cancelled() {
-                self.fail(live, format!("storage error writing chunk {c}: {e}"));
+            if live.cancelled() {
+                return;
             }
-            return;
+            if super::store::is_storage_full(&e) {
+                return self.pause_for_space(live, c, "cannot write a chunk");
+            }
+            // The scene's reason is public: the error's kind, not the server's paths.
+            tracing::error!(scene = %live.id(), chunk = c, error = %e, "cannot write a chunk");
+            return self.fail(
+                live,
+                format!(
+                    "storage error writing chunk {c}: {} (see the server's log)",
+                    e.kind()
+                ),
+            );
         }
         match self.db.insert_chunk(live.id(), c, meta) {
             Ok(true) => {}
             Ok(false) => return, // deleted meanwhile
+            Err(e) if super::db::is_disk_full(&e) => {
+                // Not recorded, so never reported: the file goes, the chunk is baked again.
+                self.store.remove_chunk(live.id(), c);
+                return self.pause_for_space(live, c, "cannot record a chunk");
+            }
             Err(e) => {
                 return self.fail(live, format!("database error recording chunk {c}: {e}"));
             }
         }
+        self.space_is_back(live);
         let took = t0.elapsed();
         tracing::debug!(
             vertices = totals.vertices,

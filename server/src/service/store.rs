@@ -5,6 +5,7 @@
 //! DIR/scenes/<id>/scene.bin        the scene as baked (mesh, lights, settings), framed + CRC-32
 //! DIR/scenes/<id>/chunks/<n>.bvck  chunk n's frame, exactly as in a bake file
 //! DIR/trash/                       scene directories being deleted
+//! DIR/reserve                      ballast: 4 MiB given back when the disk fills up
 //! ```
 //!
 //! Guarantees:
@@ -14,7 +15,11 @@
 //!   database and its frame parses (magic, frame CRC, the expected first vertex);
 //!   anything else is [`ChunkRead::Corrupt`] and is never served;
 //! - deleting a scene renames its directory into `trash/` first, so a half-deleted scene never
-//!   looks like a live one.
+//!   looks like a live one;
+//! - **a full disk is a state, not a crash**: a write that fails leaves no temporary file, and
+//!   the ballast file (`reserve`, as CockroachDB's ballast) is removed when the disk fills so
+//!   that the database can still record states and deletions; it is put back once writes
+//!   succeed again.
 
 use std::fs::{self, File};
 use std::io::{self, Write};
@@ -27,6 +32,17 @@ use super::db::ChunkMeta;
 /// The store rooted at the data directory.
 pub(crate) struct Store {
     root: PathBuf,
+}
+
+/// Size of the ballast file kept in the data directory.
+const BALLAST_BYTES: usize = 4 << 20;
+
+/// True for the errors of a full disk or an exhausted quota (transient: the bake waits).
+pub(crate) fn is_storage_full(e: &io::Error) -> bool {
+    matches!(
+        e.kind(),
+        io::ErrorKind::StorageFull | io::ErrorKind::QuotaExceeded
+    )
 }
 
 /// The result of reading a stored chunk.
@@ -56,7 +72,61 @@ impl Store {
             root: root.to_path_buf(),
         };
         s.empty_trash();
+        s.restore_ballast();
         Ok(s)
+    }
+
+    fn ballast(&self) -> PathBuf {
+        self.root.join("reserve")
+    }
+
+    /// Bytes available to this process on the data disk (`None` where it cannot be read).
+    pub(crate) fn free_bytes(&self) -> Option<u64> {
+        #[cfg(unix)]
+        {
+            let s = rustix::fs::statvfs(&self.root).ok()?;
+            Some(s.f_bavail.saturating_mul(s.f_frsize))
+        }
+        #[cfg(not(unix))]
+        {
+            None
+        }
+    }
+
+    /// After the disk filled up: whether it has room again — for the ballast and as much again
+    /// (so that the bake does not stop and start on the edge) — with the ballast put back.
+    pub(crate) fn room_again(&self) -> bool {
+        let margin = 2 * BALLAST_BYTES as u64;
+        let extra = if self.ballast().exists() {
+            0
+        } else {
+            BALLAST_BYTES as u64
+        };
+        if self.free_bytes().is_some_and(|f| f < margin + extra) {
+            return false;
+        }
+        self.restore_ballast()
+    }
+
+    /// Gives the ballast's space back (the disk is full). True if there was one.
+    pub(crate) fn release_ballast(&self) -> bool {
+        fs::remove_file(self.ballast()).is_ok()
+    }
+
+    /// Writes the ballast if it is missing. False when the disk has no room for it (it is
+    /// then left out): the bake waits rather than eat the database's reserve.
+    pub(crate) fn restore_ballast(&self) -> bool {
+        let path = self.ballast();
+        if path.exists() {
+            return true;
+        }
+        let tmp = self.root.join("reserve.tmp");
+        let ok =
+            write_synced(&tmp, &vec![0u8; BALLAST_BYTES]).and_then(|()| fs::rename(&tmp, &path));
+        if ok.is_err() {
+            let _ = fs::remove_file(&tmp);
+        }
+        ok.is_ok()
     }
 
     pub(crate) fn scene_dir(&self, id: &str) -> PathBuf {
@@ -77,6 +147,16 @@ impl Store {
         if tmp.exists() {
             fs::remove_dir_all(&tmp)?;
         }
+        let written = self.write_scene_dir(&tmp, scene_bin);
+        if written.is_err() {
+            let _ = fs::remove_dir_all(&tmp);
+        }
+        written?;
+        fs::rename(&tmp, scenes.join(id))?;
+        sync_dir(&scenes)
+    }
+
+    fn write_scene_dir(&self, tmp: &Path, scene_bin: &[u8]) -> io::Result<()> {
         fs::create_dir_all(tmp.join("chunks"))?;
         let mut body = Vec::with_capacity(scene_bin.len() + 12);
         body.extend_from_slice(SCENE_MAGIC);
@@ -85,9 +165,7 @@ impl Store {
         body.extend_from_slice(&crc32fast::hash(scene_bin).to_le_bytes());
         write_synced(&tmp.join("scene.bin"), &body)?;
         sync_dir(&tmp.join("chunks"))?;
-        sync_dir(&tmp)?;
-        fs::rename(&tmp, scenes.join(id))?;
-        sync_dir(&scenes)
+        sync_dir(tmp)
     }
 
     /// Reads a scene's `scene.bin` payload, checking its frame and CRC.
@@ -121,8 +199,11 @@ impl Store {
             .parent()
             .ok_or_else(|| io::Error::other("chunk path has no directory"))?;
         let tmp = dir.join(format!("{chunk}.bvck.tmp"));
-        write_synced(&tmp, frame)?;
-        fs::rename(&tmp, &path)?;
+        let written = write_synced(&tmp, frame).and_then(|()| fs::rename(&tmp, &path));
+        if written.is_err() {
+            let _ = fs::remove_file(&tmp);
+        }
+        written?;
         sync_dir(dir)
     }
 

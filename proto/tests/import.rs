@@ -209,6 +209,25 @@ fn obj_drops_degenerate_and_unused() {
     assert_eq!(m.triangles, vec![[0, 1, 2]]);
 }
 
+/// Copies of a triangle (the same vertices, either winding) are kept in the mesh and named in
+/// a warning; `Mesh::unique_triangles` lists the first of each, which the ray casters build
+/// their BVHs from.
+#[test]
+fn repeated_triangles_are_named_and_listed_once() {
+    use bspvt_proto::import::load_asset_bytes;
+    let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\nf 3 1 2\nf 3 2 1\nf 1 2 3\n";
+    let a = load_asset_bytes(text.as_bytes(), Format::Obj, &Limits::default()).expect("obj");
+    assert_eq!(a.mesh.triangles.len(), 5);
+    assert_eq!(a.mesh.unique_triangles(), vec![0, 1]);
+    assert!(
+        a.warnings
+            .iter()
+            .any(|w| w.starts_with("3 triangles repeat")),
+        "{:?}",
+        a.warnings
+    );
+}
+
 // ---------------------------------------------------------------------------------------------
 // PLY
 // ---------------------------------------------------------------------------------------------

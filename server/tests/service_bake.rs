@@ -257,6 +257,27 @@ fn corrupt_or_missing_chunks_are_rebaked_never_served() {
     let text = get(&a, &srv.url("/metrics")).text();
     assert_eq!(metric(&text, "bspvt_chunks_corrupt_total"), 2.0);
     assert!(srv.log_text().contains("stored chunk is corrupt"));
+
+    // A corrupt stored scene: the re-bake a missing chunk needs fails the scene, the stream
+    // ends, and the public reason names no server path (the log has it).
+    let scene_bin = data.join(format!("scenes/{id}/scene.bin"));
+    let mut sb = std::fs::read(&scene_bin).unwrap();
+    let k = sb.len() / 2;
+    sb[k] ^= 0x01;
+    std::fs::write(&scene_bin, &sb).unwrap();
+    std::fs::remove_file(chunk(1)).unwrap();
+    let _ = try_get(&a, &url, &[]);
+    let s = wait_status(&a, &srv, &id, std::time::Duration::from_secs(60), |s| {
+        s["state"] == "failed"
+    });
+    let reason = s["reason"].as_str().unwrap_or_default();
+    assert!(reason.contains("the stored scene is corrupt"), "{s}");
+    let root = tmp.path().to_string_lossy().to_string();
+    assert!(
+        !reason.contains(&root) && !reason.contains("scene.bin"),
+        "{reason}"
+    );
+    assert!(srv.log_text().contains(&root), "the log names the path");
 }
 
 #[test]
@@ -369,4 +390,33 @@ fn delete_cancels_a_bake_and_aborts_its_streams() {
     assert_eq!(d2.status, 200);
     let text = get(&a, &srv.url("/metrics")).text();
     assert_eq!(metric(&text, "bspvt_queue_depth_chunks"), 0.0);
+}
+
+/// A 6.7 KB-style attack: a million copies of one triangle, zstd-compressed. Accepted with a
+/// warning that names the copies, and baked in seconds (the copies are left out of the BVHs;
+/// before, the BVH build of this upload ran for hours).
+#[test]
+fn a_million_coincident_triangles_bake_in_seconds() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let srv = start(&tmp.path().join("data"), &["--workers", "1"]);
+    let a = agent();
+    let obj = String::from("v 0 0 0\nv 1 0 0\nv 0 0 1\n") + &"f 1 3 2\n".repeat(1_000_000);
+    let z = zstd::bulk::compress(obj.as_bytes(), 19).unwrap();
+    eprintln!("{} bytes compressed to {}", obj.len(), z.len());
+    let t = std::time::Instant::now();
+    let id = submit_ok(
+        &a,
+        &srv,
+        &[
+            ("mesh", Some("coincident.obj.zst"), &z),
+            ("settings", None, br#"{"face_res": 8}"#),
+        ],
+        None,
+    );
+    let s = wait_status(&a, &srv, &id, std::time::Duration::from_secs(60), |s| {
+        s["state"] == "done"
+    });
+    eprintln!("accepted and baked in {:.1} s", t.elapsed().as_secs_f64());
+    let warnings = s["warnings"].to_string();
+    assert!(warnings.contains("999999 triangles repeat"), "{s}");
 }

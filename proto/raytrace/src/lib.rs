@@ -58,14 +58,18 @@ impl Occluder {
     }
 
     fn with_params(mesh: &Mesh, tris: &[Triangle], params: BvhBuildParams) -> Occluder {
+        // Copies of a triangle (the same vertices) answer every ray as the first one does.
+        let unique = mesh.unique_triangles();
+        let built: Vec<Triangle> = unique.iter().map(|&i| tris[i as usize]).collect();
         let bvh =
-            obvhs::cwbvh::builder::build_cwbvh_from_tris(tris, params, &mut Duration::default());
-        let order = &bvh.primitive_indices;
-        let rt = order
+            obvhs::cwbvh::builder::build_cwbvh_from_tris(&built, params, &mut Duration::default());
+        let order: Vec<usize> = bvh
+            .primitive_indices
             .iter()
-            .map(|&i| RtTriangle::from(&tris[i as usize]))
+            .map(|&i| unique[i as usize] as usize)
             .collect();
-        let indices = order.iter().map(|&i| mesh.triangles[i as usize]).collect();
+        let rt = order.iter().map(|&i| RtTriangle::from(&tris[i])).collect();
+        let indices = order.iter().map(|&i| mesh.triangles[i]).collect();
         Occluder {
             bvh,
             tris: rt,

@@ -248,14 +248,22 @@ fn load(
             message: "the file is empty".into(),
         });
     }
-    match format {
-        Format::Gltf | Format::Glb => finish_asset(gltf::parse(bytes, base_dir, limits)?),
-        Format::Obj => finish_asset(obj::parse(bytes, base_dir, limits)?),
-        Format::Ply => Ok(Asset {
+    let mut asset = match format {
+        Format::Gltf | Format::Glb => finish_asset(gltf::parse(bytes, base_dir, limits)?)?,
+        Format::Obj => finish_asset(obj::parse(bytes, base_dir, limits)?)?,
+        Format::Ply => Asset {
             mesh: ply::parse(bytes, limits)?,
             ..Asset::default()
-        }),
+        },
+    };
+    let copies = asset.mesh.triangles.len() - asset.mesh.unique_triangles().len();
+    if copies > 0 {
+        asset.warnings.push(format!(
+            "{copies} triangles repeat another triangle's vertices: kept for shading, left out \
+             of the rays' BVH (they change no ray's answer)"
+        ));
     }
+    Ok(asset)
 }
 
 /// The last step of the glTF and OBJ readers: checks indices and coordinates, takes the

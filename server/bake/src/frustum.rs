@@ -53,20 +53,24 @@ impl FrustumCuller {
     pub(crate) fn new(mesh: &Mesh, tris: &[Triangle]) -> FrustumCuller {
         let mut params = BvhBuildParams::medium_build();
         params.pre_split = false;
-        let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(tris, params, &mut Default::default());
-        let prims = bvh
+        // Copies of a triangle (the same vertices) cull nothing the first one does not.
+        let unique = mesh.unique_triangles();
+        let built: Vec<Triangle> = unique.iter().map(|&i| tris[i as usize]).collect();
+        let bvh =
+            obvhs::bvh2::builder::build_bvh2_from_tris(&built, params, &mut Default::default());
+        let order: Vec<usize> = bvh
             .primitive_indices
             .iter()
+            .map(|&i| unique[i as usize] as usize)
+            .collect();
+        let prims = order
+            .iter()
             .map(|&i| {
-                let t = mesh.triangles[i as usize];
+                let t = mesh.triangles[i];
                 (t.map(|v| mesh.positions[v as usize]), t)
             })
             .collect();
-        let rt = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| RtTriangle::from(&tris[i as usize]))
-            .collect();
+        let rt = order.iter().map(|&i| RtTriangle::from(&tris[i])).collect();
         FrustumCuller { bvh, prims, rt }
     }
 

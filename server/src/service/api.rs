@@ -190,7 +190,7 @@ fn accept(st: &Shared, up: Upload) -> ApiResult<Arc<Live>> {
     st.store
         .create_scene(&id, &input::encode_scene(scene))
         .map_err(|e| {
-            if super::store::is_storage_full(&e) {
+            if super::error::is_storage_full(&e) {
                 insufficient_storage()
             } else {
                 ApiError::internal(format!("cannot store the scene: {}", e.kind()))
@@ -232,7 +232,7 @@ fn accept(st: &Shared, up: Upload) -> ApiResult<Arc<Live>> {
             let _ = st.store.remove_scene(&id);
             Err(match e {
                 SubmitError::QueueFull(n) => queue_full(n),
-                SubmitError::Db(e) if super::db::is_disk_full(&e) => insufficient_storage(),
+                SubmitError::Db(e) if super::error::is_disk_full(&e) => insufficient_storage(),
                 SubmitError::Db(e) => ApiError::internal(format!("cannot record the scene: {e}")),
             })
         }

@@ -122,18 +122,6 @@ pub(crate) fn now_ms() -> i64 {
         .unwrap_or(0)
 }
 
-/// True when `e` is SQLite's "database or disk is full" (transient: the bake waits for space).
-pub(crate) fn is_disk_full(e: &anyhow::Error) -> bool {
-    e.chain().any(|c| {
-        matches!(
-            c.downcast_ref::<rusqlite::Error>(),
-            Some(rusqlite::Error::SqliteFailure(f, _)) if f.code == rusqlite::ErrorCode::DiskFull
-        ) || c
-            .downcast_ref::<std::io::Error>()
-            .is_some_and(super::store::is_storage_full)
-    })
-}
-
 impl Db {
     /// Opens (creating if needed) the database and starts a new generation.
     pub(crate) fn open(path: &Path) -> Result<Db> {

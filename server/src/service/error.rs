@@ -13,6 +13,27 @@ use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use bspvt_proto::error::{MeshError, SceneError, chain_message};
 
+/// True for the errors of a full disk or an exhausted quota (transient: the bake waits).
+pub(crate) fn is_storage_full(e: &std::io::Error) -> bool {
+    matches!(
+        e.kind(),
+        std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded
+    )
+}
+
+/// True when `e` (a database or storage error) says the disk is full: SQLite's "database or
+/// disk is full", or [`is_storage_full`] anywhere in its chain.
+pub(crate) fn is_disk_full(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        matches!(
+            c.downcast_ref::<rusqlite::Error>(),
+            Some(rusqlite::Error::SqliteFailure(f, _)) if f.code == rusqlite::ErrorCode::DiskFull
+        ) || c
+            .downcast_ref::<std::io::Error>()
+            .is_some_and(is_storage_full)
+    })
+}
+
 pub(crate) use bspvt_proto::api::ErrorBody;
 
 /// An error answered to a client.

@@ -458,7 +458,7 @@ impl Jobs {
         s.active.retain(|l| l.id() != id);
         let before = match self.db.cancel(id) {
             Ok(b) => b,
-            Err(e) if super::db::is_disk_full(&e) => {
+            Err(e) if super::error::is_disk_full(&e) => {
                 // The disk is full to the last byte: free the scene's own space, then record
                 // the deletion. (A crash in between leaves its row without files: it fails
                 // with "files are missing" at the next start instead of reading "cancelled".)
@@ -772,7 +772,7 @@ impl Jobs {
             if live.cancelled() {
                 return;
             }
-            if super::store::is_storage_full(&e) {
+            if super::error::is_storage_full(&e) {
                 return self.pause_for_space(live, c, "cannot write a chunk");
             }
             // The scene's reason is public: the error's kind, not the server's paths.
@@ -788,7 +788,7 @@ impl Jobs {
         match self.db.insert_chunk(live.id(), c, meta) {
             Ok(true) => {}
             Ok(false) => return, // deleted meanwhile
-            Err(e) if super::db::is_disk_full(&e) => {
+            Err(e) if super::error::is_disk_full(&e) => {
                 // Not recorded, so never reported: the file goes, the chunk is baked again.
                 self.store.remove_chunk(live.id(), c);
                 return self.pause_for_space(live, c, "cannot record a chunk");

@@ -37,14 +37,6 @@ pub(crate) struct Store {
 /// Size of the ballast file kept in the data directory.
 const BALLAST_BYTES: usize = 4 << 20;
 
-/// True for the errors of a full disk or an exhausted quota (transient: the bake waits).
-pub(crate) fn is_storage_full(e: &io::Error) -> bool {
-    matches!(
-        e.kind(),
-        io::ErrorKind::StorageFull | io::ErrorKind::QuotaExceeded
-    )
-}
-
 /// The result of reading a stored chunk.
 pub(crate) enum ChunkRead {
     Ok(Vec<u8>),
@@ -168,11 +160,18 @@ impl Store {
         sync_dir(tmp)
     }
 
-    /// Reads a scene's `scene.bin` payload, checking its frame and CRC.
+    /// Reads a scene's `scene.bin` payload, checking its frame and CRC. The error is public
+    /// (a scene's `reason`): it names no server path; the log has the path.
     pub(crate) fn read_scene(&self, id: &str) -> Result<Vec<u8>, String> {
         let path = self.scene_dir(id).join("scene.bin");
-        let data = fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        let bad = |what: &str| format!("{} is corrupt: {what}", path.display());
+        let data = fs::read(&path).map_err(|e| {
+            tracing::error!(scene = %id, path = %path.display(), error = %e, "cannot read the stored scene");
+            format!("cannot read the stored scene: {}", e.kind())
+        })?;
+        let bad = |what: &str| {
+            tracing::error!(scene = %id, path = %path.display(), what, "the stored scene is corrupt");
+            format!("the stored scene is corrupt: {what}")
+        };
         if data.len() < 16 || &data[..4] != SCENE_MAGIC {
             return Err(bad("bad header"));
         }

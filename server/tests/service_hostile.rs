@@ -748,3 +748,119 @@ fn slow_and_excess_connections_are_cut_off() {
     std::thread::sleep(Duration::from_millis(100));
     assert_eq!(get(&agent(), &srv.url("/healthz")).status, 200);
 }
+
+/// Per-client limits: 8 trickling uploads and 600 idle event streams from one address hold at
+/// most `max_uploads_per_client` (2) and `max_streams_per_client` (64) slots, the rest get 429
+/// at once; another address (127.0.0.2) still uploads and streams.
+#[test]
+fn one_address_cannot_hold_every_slot() {
+    use std::io::{Read, Write};
+    use std::net::{SocketAddr, TcpStream};
+
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let srv = start(&tmp.path().join("data"), &["--workers", "1"]);
+    let a = agent();
+    let json = plate_small_json(8, 4096);
+    let id = submit_ok(&a, &srv, &[("scene", None, json.as_bytes())], None);
+    wait_done(&a, &srv, &id);
+    let slow = plate_small_json(64, 16);
+    let baking = submit_ok(&a, &srv, &[("scene", None, slow.as_bytes())], None);
+    let server: SocketAddr = srv.addr.parse().unwrap();
+
+    // A connection from `from` (127.0.0.1: the test's default).
+    let connect = |from: [u8; 4]| -> TcpStream {
+        let sock = socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::STREAM, None)
+            .expect("socket");
+        sock.bind(&SocketAddr::from((from, 0)).into())
+            .expect("bind");
+        sock.connect(&server.into()).expect("connect");
+        let s: TcpStream = sock.into();
+        s.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+        s
+    };
+    // The status code of the response on `s` (reads the status line only).
+    let status = |s: &mut TcpStream| -> u16 {
+        let mut line = Vec::new();
+        let mut b = [0u8; 1];
+        while !line.ends_with(b"\r\n") {
+            match s.read(&mut b) {
+                Ok(1) => line.push(b[0]),
+                _ => panic!("no status line: {:?}", String::from_utf8_lossy(&line)),
+            }
+        }
+        let text = String::from_utf8_lossy(&line);
+        text.split(' ')
+            .nth(1)
+            .and_then(|c| c.parse().ok())
+            .unwrap_or(0)
+    };
+    // Headers and the first bytes of a 100 kB body, then nothing. One write: a refused
+    // upload is answered (and closed) as soon as its headers are read.
+    let trickle = |from: [u8; 4]| {
+        let mut s = connect(from);
+        let head = format!(
+            "POST /v1/scenes HTTP/1.1\r\nHost: x\r\nContent-Type: multipart/form-data; \
+             boundary={BOUNDARY}\r\nContent-Length: 100000\r\n\r\n--{BOUNDARY}\r\n"
+        );
+        let _ = s.write_all(head.as_bytes());
+        s
+    };
+
+    // Eight trickling uploads from 127.0.0.1: two hold their slots, six are refused at once.
+    let mut uploads: Vec<TcpStream> = Vec::new();
+    for _ in 0..2 {
+        uploads.push(trickle([127, 0, 0, 1]));
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    for _ in 0..6 {
+        let mut s = trickle([127, 0, 0, 1]);
+        assert_eq!(status(&mut s), 429, "a third upload from one address");
+    }
+    // 600 idle event streams from 127.0.0.1 on a scene still baking (a finished scene's
+    // event stream ends at once): 64 open, the rest refused.
+    let mut events: Vec<TcpStream> = Vec::new();
+    let (mut open, mut refused) = (0, 0);
+    for _ in 0..600 {
+        let mut s = connect([127, 0, 0, 1]);
+        write!(
+            s,
+            "GET /v1/scenes/{baking}/events HTTP/1.1\r\nHost: x\r\n\r\n"
+        )
+        .unwrap();
+        match status(&mut s) {
+            200 => {
+                open += 1;
+                events.push(s);
+            }
+            429 => refused += 1,
+            other => panic!("events: status {other}"),
+        }
+    }
+    assert_eq!((open, refused), (64, 536));
+    let st = get(&a, &srv.url(&format!("/v1/scenes/{baking}"))).json();
+    assert_ne!(
+        st["state"], "done",
+        "the scene finished during the test: {st}"
+    );
+
+    // Another address uploads and streams as if nothing were going on.
+    let body = multipart(&[("scene", None, plate_small_json(8, 4096).as_bytes())]);
+    let mut up = connect([127, 0, 0, 2]);
+    write!(
+        up,
+        "POST /v1/scenes HTTP/1.1\r\nHost: x\r\nContent-Type: multipart/form-data; \
+         boundary={BOUNDARY}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+        body.len()
+    )
+    .unwrap();
+    up.write_all(&body).unwrap();
+    assert_eq!(status(&mut up), 202, "an upload from 127.0.0.2");
+    let mut tr = connect([127, 0, 0, 2]);
+    write!(
+        tr,
+        "GET /v1/scenes/{id}/trees HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    assert_eq!(status(&mut tr), 200, "a tree stream from 127.0.0.2");
+    drop((uploads, events));
+}

@@ -10,18 +10,19 @@
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
-use axum::Json;
 use axum::extract::multipart::{Field, MultipartError, MultipartRejection};
 use axum::extract::{FromRequestParts, Multipart, Path, RawQuery, State};
 use axum::http::request::Parts;
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
+use axum::{Extension, Json};
 use bspvt_proto::encoding::{BakeHeader, encode_header};
 use serde::Serialize;
 use utoipa::ToSchema;
 
 use bspvt_proto::api::{JobState, Links, SceneStatus};
 
+use super::clients::{Client, Kind};
 use super::db::{SceneRow, now_ms};
 use super::error::{ApiError, ApiResult, ErrorBody, gone};
 use super::http::{not_modified, not_modified_response, query_pairs};
@@ -301,6 +302,7 @@ pub(crate) async fn submit(
     State(st): State<Shared>,
     _auth: WriteAccess,
     headers: HeaderMap,
+    client: Option<Extension<Client>>,
     mp: Result<Multipart, MultipartRejection>,
 ) -> ApiResult<Response> {
     let declared = headers
@@ -321,6 +323,21 @@ pub(crate) async fn submit(
     if !st.jobs.has_room() {
         return Err(queue_full(st.cfg.max_queued_scenes));
     }
+    // The client's slot first: one address cannot hold every upload slot.
+    let _slot = match client {
+        Some(Extension(Client(ip))) => Some(
+            st.clients
+                .try_acquire(ip, Kind::Upload, st.cfg.max_uploads_per_client)
+                .ok_or_else(|| {
+                    ApiError::too_many(format!(
+                        "{} uploads are in progress from your address, the most this server \
+                         allows one client; retry when one has finished",
+                        st.cfg.max_uploads_per_client
+                    ))
+                })?,
+        ),
+        None => None,
+    };
     let _permit = st
         .uploads
         .clone()

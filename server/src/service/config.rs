@@ -72,6 +72,12 @@ pub struct ServeArgs {
     /// Most uploads being read and parsed at once.
     #[arg(long, env = "BSPVT_MAX_UPLOADS")]
     pub max_uploads: Option<usize>,
+    /// Uploads being read from one remote address at once.
+    #[arg(long, env = "BSPVT_MAX_UPLOADS_PER_CLIENT")]
+    pub max_uploads_per_client: Option<u32>,
+    /// Open tree and event streams from one remote address at once.
+    #[arg(long, env = "BSPVT_MAX_STREAMS_PER_CLIENT")]
+    pub max_streams_per_client: Option<u32>,
     /// Seconds a non-streaming request (including an upload) may take.
     #[arg(long, env = "BSPVT_REQUEST_TIMEOUT_S")]
     pub request_timeout_s: Option<u64>,
@@ -107,6 +113,8 @@ struct FileConfig {
     max_concurrent_requests: Option<usize>,
     max_streams: Option<usize>,
     max_uploads: Option<usize>,
+    max_uploads_per_client: Option<u32>,
+    max_streams_per_client: Option<u32>,
     request_timeout_s: Option<u64>,
     max_connections: Option<usize>,
     header_read_timeout_s: Option<u64>,
@@ -157,6 +165,10 @@ pub struct Config {
     pub max_streams: usize,
     /// Most uploads being read and parsed at once.
     pub max_uploads: usize,
+    /// Uploads being read from one remote address at once.
+    pub max_uploads_per_client: u32,
+    /// Open streams from one remote address at once.
+    pub max_streams_per_client: u32,
     /// Seconds a non-streaming request may take.
     pub request_timeout_s: u64,
     /// Most open client connections.
@@ -187,6 +199,8 @@ impl Config {
             max_concurrent_requests: 1024,
             max_streams: 512,
             max_uploads: 4,
+            max_uploads_per_client: 2,
+            max_streams_per_client: 64,
             request_timeout_s: 300,
             max_connections: 4096,
             header_read_timeout_s: 30,
@@ -237,6 +251,8 @@ impl Config {
             max_concurrent_requests,
             max_streams,
             max_uploads,
+            max_uploads_per_client,
+            max_streams_per_client,
             request_timeout_s,
             max_connections,
             header_read_timeout_s
@@ -270,6 +286,14 @@ impl Config {
             ),
             ("max_streams", self.max_streams as u64),
             ("max_uploads", self.max_uploads as u64),
+            (
+                "max_uploads_per_client",
+                u64::from(self.max_uploads_per_client),
+            ),
+            (
+                "max_streams_per_client",
+                u64::from(self.max_streams_per_client),
+            ),
             ("request_timeout_s", self.request_timeout_s),
             ("max_connections", self.max_connections as u64),
             ("header_read_timeout_s", self.header_read_timeout_s),

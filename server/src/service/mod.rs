@@ -19,6 +19,7 @@
 //! nothing durable: see `jobs`).
 
 mod api;
+mod clients;
 pub mod config;
 mod db;
 mod error;
@@ -187,6 +188,7 @@ impl Service {
         let state = Arc::new(AppState {
             uploads: Arc::new(Semaphore::new(cfg.max_uploads)),
             streams: Arc::new(Semaphore::new(cfg.max_streams)),
+            clients: Arc::new(clients::ClientSlots::default()),
             requests: Arc::new(Semaphore::new(cfg.max_concurrent_requests)),
             reencode: Semaphore::new(std::thread::available_parallelism().map_or(2, |n| n.get())),
             cfg,
@@ -271,7 +273,10 @@ async fn accept_loop(
             continue;
         };
         let _ = socket.set_nodelay(true);
-        let service = hyper_util::service::TowerToHyperService::new(app.clone());
+        let app = app
+            .clone()
+            .layer(axum::Extension(clients::Client(peer.ip())));
+        let service = hyper_util::service::TowerToHyperService::new(app);
         let conn = hyper::server::conn::http1::Builder::new()
             .timer(TokioTimer::new())
             .header_read_timeout(limits.header_timeout)

@@ -9,12 +9,14 @@ use std::convert::Infallible;
 use std::sync::Arc;
 use std::time::Duration;
 
+use axum::Extension;
 use axum::extract::{Path, State};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use futures_util::Stream;
 use tokio::sync::watch;
 
-use super::error::{ApiError, ApiResult, ErrorBody};
+use super::clients::Client;
+use super::error::{ApiResult, ErrorBody};
 use super::jobs::Live;
 use super::state::{Shared, StreamGuard, lookup, status_of};
 
@@ -44,17 +46,14 @@ struct Events {
 pub(crate) async fn get_events(
     State(st): State<Shared>,
     Path(id): Path<String>,
+    client: Option<Extension<Client>>,
 ) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {
     let live = lookup(&st, &id).await?;
-    let permit = st
-        .streams
-        .clone()
-        .try_acquire_owned()
-        .map_err(|_| ApiError::too_many("too many open streams; retry shortly"))?;
+    let guard = StreamGuard::open(&st, client.map(|Extension(c)| c))?;
     let events = Events {
         rx: live.subscribe(),
         shutdown: st.shutdown.clone(),
-        _guard: StreamGuard::new(&st, permit),
+        _guard: guard,
         st,
         live,
         first: true,

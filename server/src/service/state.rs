@@ -11,6 +11,7 @@ use bspvt_proto::api::{JobState, Links, SceneStatus, Sizes};
 use bspvt_proto::import::Limits;
 use tokio::sync::{OwnedSemaphorePermit, Semaphore, watch};
 
+use super::clients::{Client, ClientSlot, Kind};
 use super::config::Config;
 use super::db::Db;
 use super::error::{ApiError, ApiResult};
@@ -30,6 +31,8 @@ pub(crate) struct AppState {
     pub uploads: Arc<Semaphore>,
     /// Open tree and event streams.
     pub streams: Arc<Semaphore>,
+    /// Uploads and streams held per remote address.
+    pub clients: Arc<super::clients::ClientSlots>,
     /// Requests being handled (streams count until their headers are sent).
     pub requests: Arc<Semaphore>,
     /// Face-filter re-encodes running at once.
@@ -132,19 +135,43 @@ pub(crate) async fn lookup(st: &Shared, id: &str) -> ApiResult<Arc<Live>> {
         .ok_or_else(|| ApiError::not_found(id))
 }
 
-/// Counts an open stream and holds its permit while it lives.
+/// Counts an open stream and holds its permits (the client's and the server's) while it
+/// lives.
 pub(crate) struct StreamGuard {
     st: Shared,
     _permit: OwnedSemaphorePermit,
+    _client: Option<ClientSlot>,
 }
 
 impl StreamGuard {
-    pub(crate) fn new(st: &Shared, permit: OwnedSemaphorePermit) -> StreamGuard {
+    /// A stream slot for `client` (at most `max_streams_per_client` per address) and one of
+    /// the server's `max_streams`; 429 when either is taken.
+    pub(crate) fn open(st: &Shared, client: Option<Client>) -> ApiResult<StreamGuard> {
+        let slot = match client {
+            Some(Client(ip)) => Some(
+                st.clients
+                    .try_acquire(ip, Kind::Stream, st.cfg.max_streams_per_client)
+                    .ok_or_else(|| {
+                        ApiError::too_many(format!(
+                            "{} streams are open from your address, the most this server \
+                             allows one client; close one or retry later",
+                            st.cfg.max_streams_per_client
+                        ))
+                    })?,
+            ),
+            None => None,
+        };
+        let permit = st
+            .streams
+            .clone()
+            .try_acquire_owned()
+            .map_err(|_| ApiError::too_many("too many open streams; retry shortly"))?;
         st.metrics.streams_open.fetch_add(1, Ordering::Relaxed);
-        StreamGuard {
+        Ok(StreamGuard {
             st: st.clone(),
             _permit: permit,
-        }
+            _client: slot,
+        })
     }
 }
 

@@ -23,6 +23,7 @@
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
+use axum::Extension;
 use axum::body::{Body, Bytes};
 use axum::extract::{Path, RawQuery, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
@@ -31,6 +32,7 @@ use bspvt_proto::cubemap::FACES;
 use bspvt_proto::encoding::{BakeHeader, decode_chunk, decode_header, encode_chunk};
 use tokio::sync::watch;
 
+use super::clients::Client;
 use super::db::{ChunkMeta, JobState, SceneRow};
 use super::error::{ApiError, ApiResult, ErrorBody, gone};
 use super::http::{not_modified, not_modified_response, query_pairs};
@@ -196,6 +198,7 @@ pub(crate) async fn get_trees(
     Path(id): Path<String>,
     RawQuery(q): RawQuery,
     headers: HeaderMap,
+    client: Option<Extension<Client>>,
 ) -> ApiResult<Response> {
     let live = lookup(&st, &id).await?;
     let snap = live.snapshot();
@@ -224,11 +227,7 @@ pub(crate) async fn get_trees(
     {
         return Ok(not_modified_response(e));
     }
-    let permit = st
-        .streams
-        .clone()
-        .try_acquire_owned()
-        .map_err(|_| ApiError::too_many("too many open streams; retry shortly"))?;
+    let guard = StreamGuard::open(&st, client.map(|Extension(c)| c))?;
     let cv = live.row.chunk_vertices;
     let covered = format!(
         "{}..{}",
@@ -252,7 +251,7 @@ pub(crate) async fn get_trees(
         faces: sel.faces,
         shutdown: st.shutdown.clone(),
         done: false,
-        _guard: StreamGuard::new(&st, permit),
+        _guard: guard,
     };
     let body = Body::from_stream(futures_util::stream::unfold(stream, TreeStream::step));
     let mut r = body.into_response();

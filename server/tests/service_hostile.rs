@@ -864,3 +864,50 @@ fn one_address_cannot_hold_every_slot() {
     assert_eq!(status(&mut tr), 200, "a tree stream from 127.0.0.2");
     drop((uploads, events));
 }
+
+/// An upload that stops sending is cut off after `--body-read-timeout-s` of silence (408), and
+/// its slot is free again at once.
+#[test]
+fn a_stalled_upload_times_out_and_frees_its_slot() {
+    use std::io::{Read, Write};
+    use std::net::TcpStream;
+    use std::time::Instant;
+
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let srv = start(
+        &tmp.path().join("data"),
+        &[
+            "--body-read-timeout-s",
+            "1",
+            "--max-uploads-per-client",
+            "1",
+        ],
+    );
+    let mut s = TcpStream::connect(&srv.addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+    let head = format!(
+        "POST /v1/scenes HTTP/1.1\r\nHost: x\r\nContent-Type: multipart/form-data; \
+         boundary={BOUNDARY}\r\nContent-Length: 100000\r\n\r\n--{BOUNDARY}\r\n"
+    );
+    s.write_all(head.as_bytes()).unwrap();
+    let t0 = Instant::now();
+    let mut reply = Vec::new();
+    let mut buf = [0u8; 4096];
+    while !String::from_utf8_lossy(&reply).contains("body_timeout") {
+        match s.read(&mut buf) {
+            Ok(0) | Err(_) => break,
+            Ok(n) => reply.extend_from_slice(&buf[..n]),
+        }
+    }
+    let text = String::from_utf8_lossy(&reply);
+    assert!(text.starts_with("HTTP/1.1 408"), "{text}");
+    assert!(text.contains("body_timeout"), "{text}");
+    let waited = t0.elapsed();
+    assert!(
+        waited >= Duration::from_millis(900) && waited < Duration::from_secs(10),
+        "{waited:?}"
+    );
+    // The one upload slot of this address is free again.
+    let json = plate_small_json(8, 4096);
+    submit_ok(&agent(), &srv, &[("scene", None, json.as_bytes())], None);
+}

@@ -9,6 +9,7 @@
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
+use std::time::Duration;
 
 use axum::extract::multipart::{Field, MultipartError, MultipartRejection};
 use axum::extract::{FromRequestParts, Multipart, Path, RawQuery, State};
@@ -99,10 +100,30 @@ fn multipart_error(e: MultipartError) -> ApiError {
     ApiError::new(status, code, e.body_text())
 }
 
+/// Awaits the next piece of an upload's body, or 408 when the client sends nothing for `idle`
+/// (nginx's `client_body_timeout`: the time between two reads, not for the whole body).
+async fn within<T>(idle: Duration, next: impl std::future::Future<Output = T>) -> ApiResult<T> {
+    tokio::time::timeout(idle, next).await.map_err(|_| {
+        ApiError::new(
+            StatusCode::REQUEST_TIMEOUT,
+            "body_timeout",
+            format!("the upload sent nothing for {} s", idle.as_secs()),
+        )
+    })
+}
+
 /// Reads one form field, refusing it past `max` bytes.
-async fn read_field(mut field: Field<'_>, max: u64, what: &str) -> ApiResult<Vec<u8>> {
+async fn read_field(
+    mut field: Field<'_>,
+    max: u64,
+    what: &str,
+    idle: Duration,
+) -> ApiResult<Vec<u8>> {
     let mut buf = Vec::new();
-    while let Some(chunk) = field.chunk().await.map_err(multipart_error)? {
+    while let Some(chunk) = within(idle, field.chunk())
+        .await?
+        .map_err(multipart_error)?
+    {
         if (buf.len() + chunk.len()) as u64 > max {
             return Err(ApiError::too_large(
                 "field_too_large",
@@ -114,7 +135,7 @@ async fn read_field(mut field: Field<'_>, max: u64, what: &str) -> ApiResult<Vec
     Ok(buf)
 }
 
-async fn read_upload(mut mp: Multipart, max_mesh: u64) -> ApiResult<Upload> {
+async fn read_upload(mut mp: Multipart, max_mesh: u64, idle: Duration) -> ApiResult<Upload> {
     let mut up = Upload {
         mesh: None,
         scene: None,
@@ -131,7 +152,10 @@ async fn read_upload(mut mp: Multipart, max_mesh: u64) -> ApiResult<Upload> {
             format!("the form has more than one `{what}` field"),
         )
     };
-    while let Some(field) = mp.next_field().await.map_err(multipart_error)? {
+    while let Some(field) = within(idle, mp.next_field())
+        .await?
+        .map_err(multipart_error)?
+    {
         let name = field.name().unwrap_or_default().to_string();
         match name.as_str() {
             "mesh" => {
@@ -146,7 +170,7 @@ async fn read_upload(mut mp: Multipart, max_mesh: u64) -> ApiResult<Upload> {
                     ));
                 }
                 // The compressed size is bounded too: no upload is larger than the mesh limit.
-                let bytes = read_field(field, max_mesh, "mesh").await?;
+                let bytes = read_field(field, max_mesh, "mesh", idle).await?;
                 up.mesh = Some((file_name, bytes));
             }
             "scene" => {
@@ -154,7 +178,7 @@ async fn read_upload(mut mp: Multipart, max_mesh: u64) -> ApiResult<Upload> {
                     return Err(duplicate("scene"));
                 }
                 up.scene = Some(text(
-                    read_field(field, MAX_SCENE_JSON_BYTES, "scene").await?,
+                    read_field(field, MAX_SCENE_JSON_BYTES, "scene", idle).await?,
                     "scene",
                 )?);
             }
@@ -163,7 +187,7 @@ async fn read_upload(mut mp: Multipart, max_mesh: u64) -> ApiResult<Upload> {
                     return Err(duplicate("settings"));
                 }
                 up.settings = Some(text(
-                    read_field(field, MAX_SETTINGS_JSON_BYTES, "settings").await?,
+                    read_field(field, MAX_SETTINGS_JSON_BYTES, "settings", idle).await?,
                     "settings",
                 )?);
             }
@@ -358,7 +382,8 @@ pub(crate) async fn submit(
             ),
         )
     })?;
-    let up = read_upload(mp, st.cfg.max_mesh_bytes).await?;
+    let idle = Duration::from_secs(st.cfg.body_read_timeout_s);
+    let up = read_upload(mp, st.cfg.max_mesh_bytes, idle).await?;
     let st2 = st.clone();
     let live = blocking(move || Ok::<_, anyhow::Error>(accept(&st2, up))).await??;
     let id = live.row.id.clone();

@@ -78,6 +78,9 @@ pub struct ServeArgs {
     /// Open tree and event streams from one remote address at once.
     #[arg(long, env = "BSPVT_MAX_STREAMS_PER_CLIENT")]
     pub max_streams_per_client: Option<u32>,
+    /// Seconds an upload may send nothing before it is cut off (408), between two reads.
+    #[arg(long, env = "BSPVT_BODY_READ_TIMEOUT_S")]
+    pub body_read_timeout_s: Option<u64>,
     /// Seconds a non-streaming request (including an upload) may take.
     #[arg(long, env = "BSPVT_REQUEST_TIMEOUT_S")]
     pub request_timeout_s: Option<u64>,
@@ -115,6 +118,7 @@ struct FileConfig {
     max_uploads: Option<usize>,
     max_uploads_per_client: Option<u32>,
     max_streams_per_client: Option<u32>,
+    body_read_timeout_s: Option<u64>,
     request_timeout_s: Option<u64>,
     max_connections: Option<usize>,
     header_read_timeout_s: Option<u64>,
@@ -169,6 +173,8 @@ pub struct Config {
     pub max_uploads_per_client: u32,
     /// Open streams from one remote address at once.
     pub max_streams_per_client: u32,
+    /// Seconds an upload may send nothing (between two reads) before 408.
+    pub body_read_timeout_s: u64,
     /// Seconds a non-streaming request may take.
     pub request_timeout_s: u64,
     /// Most open client connections.
@@ -201,6 +207,7 @@ impl Config {
             max_uploads: 4,
             max_uploads_per_client: 2,
             max_streams_per_client: 64,
+            body_read_timeout_s: 60,
             request_timeout_s: 300,
             max_connections: 4096,
             header_read_timeout_s: 30,
@@ -253,6 +260,7 @@ impl Config {
             max_uploads,
             max_uploads_per_client,
             max_streams_per_client,
+            body_read_timeout_s,
             request_timeout_s,
             max_connections,
             header_read_timeout_s
@@ -294,6 +302,7 @@ impl Config {
                 "max_streams_per_client",
                 u64::from(self.max_streams_per_client),
             ),
+            ("body_read_timeout_s", self.body_read_timeout_s),
             ("request_timeout_s", self.request_timeout_s),
             ("max_connections", self.max_connections as u64),
             ("header_read_timeout_s", self.header_read_timeout_s),

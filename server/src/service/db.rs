@@ -277,7 +277,9 @@ impl Db {
         let c = self.conn();
         let mut st = c.prepare(&format!(
             "SELECT {SCENE_COLUMNS} FROM scenes WHERE state IN ('queued', 'baking')
-             ORDER BY state = 'queued', seq"
+             ORDER BY state = 'queued',
+                 (SELECT MAX(c.baked_ms) FROM chunks c WHERE c.scene_id = scenes.id),
+                 seq"
         ))?;
         let rows = st
             .query_map([], Db::row)?
@@ -438,6 +440,33 @@ mod tests {
             chunks_baked: 0,
             chunks_corrupt: 0,
         }
+    }
+
+    /// Scenes resume least recently advanced first (one with no chunk yet before all), so that
+    /// repeated restarts do not always favour the same scenes.
+    #[test]
+    fn unfinished_scenes_resume_least_recently_advanced_first() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let db = Db::open(&dir.path().join("db.sqlite")).expect("open");
+        let m = ChunkMeta { bytes: 1, crc32: 0 };
+        for id in ["a", "b", "c", "q"] {
+            db.insert_scene(&row(id)).expect("insert");
+        }
+        for id in ["a", "b", "c"] {
+            db.set_state(id, JobState::Baking, None).expect("baking");
+        }
+        assert!(db.insert_chunk("a", 0, m).expect("chunk"));
+        std::thread::sleep(std::time::Duration::from_millis(5));
+        assert!(db.insert_chunk("c", 0, m).expect("chunk"));
+        std::thread::sleep(std::time::Duration::from_millis(5));
+        assert!(db.insert_chunk("a", 1, m).expect("chunk"));
+        let order: Vec<String> = db
+            .unfinished_scenes()
+            .expect("query")
+            .into_iter()
+            .map(|r| r.id)
+            .collect();
+        assert_eq!(order, ["b", "c", "a", "q"]);
     }
 
     #[test]

@@ -337,7 +337,8 @@ impl Jobs {
         Ok(())
     }
 
-    /// Re-queues the scenes a previous run left queued or baking.
+    /// Re-queues the scenes a previous run left queued or baking: baking ones first, the least
+    /// recently advanced of them first (so that repeated restarts rotate, not starve).
     fn resume(&self) -> Result<()> {
         let rows = self.db.unfinished_scenes()?;
         let mut s = lock(&self.sched);

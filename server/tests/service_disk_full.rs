@@ -2,7 +2,8 @@
 //! `size=`), a bake that runs out of space pauses with a reason and leaves no temporary
 //! file; an upload gets 507 with `Retry-After`; `DELETE` of another scene works on the full
 //! disk; once space is freed the bake resumes by itself and its trees are the offline bake's,
-//! byte for byte.
+//! byte for byte. The server's log is on the same full disk (the test harness writes it
+//! beside the data folder): a log line that cannot be written is dropped, not a crash.
 //!
 //! Mounting needs root (or passwordless sudo); where neither works the test says so and
 //! skips.

@@ -87,6 +87,7 @@ fn main() -> std::process::ExitCode {
                     .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
             )
             .with_writer(std::io::stderr)
+            .log_internal_errors(false)
             .without_time()
             .with_target(false)
             .try_init();

@@ -44,6 +44,15 @@ pub fn mesh_triangles(mesh: &Mesh) -> Vec<Triangle> {
         .collect()
 }
 
+/// What a BVH over `mesh` is built from: the first of each set of copies of a triangle
+/// ([`Mesh::unique_triangles`]: copies answer every ray as the first one does), as their mesh
+/// indices and their primitives. `tris`: [`mesh_triangles`] of `mesh`.
+pub fn distinct_triangles(mesh: &Mesh, tris: &[Triangle]) -> (Vec<u32>, Vec<Triangle>) {
+    let unique = mesh.unique_triangles();
+    let built = unique.iter().map(|&i| tris[i as usize]).collect();
+    (unique, built)
+}
+
 impl Occluder {
     /// `tris`: [`mesh_triangles`] of `mesh`. The highest-quality BVH (for bakes and
     /// references, where rays outnumber builds by far).
@@ -58,9 +67,7 @@ impl Occluder {
     }
 
     fn with_params(mesh: &Mesh, tris: &[Triangle], params: BvhBuildParams) -> Occluder {
-        // Copies of a triangle (the same vertices) answer every ray as the first one does.
-        let unique = mesh.unique_triangles();
-        let built: Vec<Triangle> = unique.iter().map(|&i| tris[i as usize]).collect();
+        let (unique, built) = distinct_triangles(mesh, tris);
         let bvh =
             obvhs::cwbvh::builder::build_cwbvh_from_tris(&built, params, &mut Duration::default());
         let order: Vec<usize> = bvh

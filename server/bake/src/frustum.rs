@@ -53,9 +53,8 @@ impl FrustumCuller {
     pub(crate) fn new(mesh: &Mesh, tris: &[Triangle]) -> FrustumCuller {
         let mut params = BvhBuildParams::medium_build();
         params.pre_split = false;
-        // Copies of a triangle (the same vertices) cull nothing the first one does not.
-        let unique = mesh.unique_triangles();
-        let built: Vec<Triangle> = unique.iter().map(|&i| tris[i as usize]).collect();
+        // Copies of a triangle cull nothing the first one does not.
+        let (unique, built) = bspvt_raytrace::distinct_triangles(mesh, tris);
         let bvh =
             obvhs::bvh2::builder::build_bvh2_from_tris(&built, params, &mut Default::default());
         let order: Vec<usize> = bvh

@@ -348,20 +348,11 @@ pub(crate) async fn submit(
         return Err(queue_full(st.cfg.max_queued_scenes));
     }
     // The client's slot first: one address cannot hold every upload slot.
-    let _slot = match client {
-        Some(Extension(Client(ip))) => Some(
-            st.clients
-                .try_acquire(ip, Kind::Upload, st.cfg.max_uploads_per_client)
-                .ok_or_else(|| {
-                    ApiError::too_many(format!(
-                        "{} uploads are in progress from your address, the most this server \
-                         allows one client; retry when one has finished",
-                        st.cfg.max_uploads_per_client
-                    ))
-                })?,
-        ),
-        None => None,
-    };
+    let _slot = st.clients.acquire(
+        client.map(|Extension(c)| c),
+        Kind::Upload,
+        st.cfg.max_uploads_per_client,
+    )?;
     let _permit = st
         .uploads
         .clone()

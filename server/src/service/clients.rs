@@ -7,6 +7,8 @@ use std::collections::HashMap;
 use std::net::IpAddr;
 use std::sync::{Arc, Mutex};
 
+use super::error::{ApiError, ApiResult};
+
 /// The remote address of a request's connection (added by the accept loop).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Client(pub IpAddr);
@@ -31,6 +33,31 @@ pub(crate) struct ClientSlot {
 }
 
 impl ClientSlots {
+    /// A slot of `kind` for the request's client (none to hold for a request without an
+    /// address), or 429 when the client already holds `max`.
+    pub(crate) fn acquire(
+        self: &Arc<Self>,
+        client: Option<Client>,
+        kind: Kind,
+        max: u32,
+    ) -> ApiResult<Option<ClientSlot>> {
+        let Some(Client(ip)) = client else {
+            return Ok(None);
+        };
+        self.try_acquire(ip, kind, max).map(Some).ok_or_else(|| {
+            ApiError::too_many(match kind {
+                Kind::Upload => format!(
+                    "{max} uploads are in progress from your address, the most this server \
+                     allows one client; retry when one has finished"
+                ),
+                Kind::Stream => format!(
+                    "{max} streams are open from your address, the most this server allows \
+                     one client; close one or retry later"
+                ),
+            })
+        })
+    }
+
     /// A slot of `kind` for `ip`, unless it already holds `max`.
     pub(crate) fn try_acquire(
         self: &Arc<Self>,

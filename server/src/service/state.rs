@@ -147,20 +147,9 @@ impl StreamGuard {
     /// A stream slot for `client` (at most `max_streams_per_client` per address) and one of
     /// the server's `max_streams`; 429 when either is taken.
     pub(crate) fn open(st: &Shared, client: Option<Client>) -> ApiResult<StreamGuard> {
-        let slot = match client {
-            Some(Client(ip)) => Some(
-                st.clients
-                    .try_acquire(ip, Kind::Stream, st.cfg.max_streams_per_client)
-                    .ok_or_else(|| {
-                        ApiError::too_many(format!(
-                            "{} streams are open from your address, the most this server \
-                             allows one client; close one or retry later",
-                            st.cfg.max_streams_per_client
-                        ))
-                    })?,
-            ),
-            None => None,
-        };
+        let slot = st
+            .clients
+            .acquire(client, Kind::Stream, st.cfg.max_streams_per_client)?;
         let permit = st
             .streams
             .clone()

@@ -18,8 +18,8 @@
 //!   looks like a live one;
 //! - **a full disk is a state, not a crash**: a write that fails leaves no temporary file, and
 //!   the ballast file (`reserve`, as CockroachDB's ballast) is removed when the disk fills so
-//!   that the database can still record states and deletions; it is put back once writes
-//!   succeed again.
+//!   that the database can still record states and deletions; it is put back once the disk
+//!   has room for it and as much again (`statvfs`), which ends the pause.
 
 use std::fs::{self, File};
 use std::io::{self, Write};

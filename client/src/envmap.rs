@@ -156,6 +156,49 @@ impl EnvLight {
         }
     }
 
+    /// The map turned by `deg` about +y: the direction d of this map appears at R_y(deg) · d.
+    /// A turn about the up axis shifts the map's columns; a shift by a fraction of a column
+    /// interpolates linearly between the two nearest (exact for whole columns).
+    pub fn rotated_y(&self, deg: f64) -> EnvLight {
+        if deg.rem_euclid(360.0) == 0.0 || !deg.is_finite() {
+            return self.clone();
+        }
+        let w = self.width as usize;
+        // Column c of the result shows the source at R⁻¹ d: the same shift for every row.
+        let inv = glam::DMat3::from_rotation_y(-deg.to_radians());
+        let d = inv * EnvLight::direction(0.5 / w as f64, 0.5);
+        let u = d.z.atan2(d.x) / (2.0 * PI) + 0.5;
+        let shift = (u * w as f64 - 0.5).rem_euclid(w as f64);
+        let (whole, frac) = (shift.floor() as usize, shift.fract());
+        let mut pixels = Vec::with_capacity(self.pixels.len());
+        for row in self.pixels.chunks_exact(w) {
+            for x in 0..w {
+                let a = row[(x + whole) % w];
+                let b = row[(x + whole + 1) % w];
+                pixels.push(std::array::from_fn(|c| {
+                    ((1.0 - frac) * f64::from(a[c]) + frac * f64::from(b[c])) as f32
+                }));
+            }
+        }
+        EnvLight {
+            width: self.width,
+            height: self.height,
+            pixels,
+        }
+    }
+
+    /// The map with its radiance multiplied by `k` (finite, ≥ 0; anything else leaves it).
+    pub fn scaled(mut self, k: f64) -> EnvLight {
+        if k != 1.0 && k.is_finite() && k >= 0.0 {
+            for p in &mut self.pixels {
+                for c in p.iter_mut() {
+                    *c = (f64::from(*c) * k) as f32;
+                }
+            }
+        }
+        self
+    }
+
     #[cfg(test)]
     /// ∫ L(ω) dω over the sphere, per channel.
     pub(crate) fn power(&self) -> DVec3 {
@@ -194,6 +237,45 @@ pub fn write_test_map(dir: &Path) -> PathBuf {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// R_y(θ) · d of the turned map reads what d read in the original, for whole and
+    /// fractional column shifts; a full turn is the identity.
+    #[test]
+    fn a_turned_map_reads_the_original_at_the_turned_direction() {
+        let (w, h) = (64u32, 32u32);
+        let px: Vec<[f32; 3]> = (0..w * h)
+            .map(|i| [(i % w) as f32, (i / w) as f32, ((i * 7) % 13) as f32])
+            .collect();
+        let env = EnvLight::from_pixels(w, h, px).expect("map");
+        let q = 360.0 / f64::from(w);
+        for deg in [90.0, -45.0, 3.0 * q, 36.0 * q] {
+            let turned = env.rotated_y(deg);
+            let r = glam::DMat3::from_rotation_y(deg.to_radians());
+            for y in [3usize, 16, 28] {
+                for x in (0..w as usize).step_by(5) {
+                    let d = EnvLight::direction(
+                        (x as f64 + 0.5) / f64::from(w),
+                        (y as f64 + 0.5) / f64::from(h),
+                    );
+                    assert_eq!(env.eval(d), turned.eval(r * d), "{deg}° at ({x}, {y})");
+                }
+            }
+        }
+        // Half a column: the mean of two neighbours.
+        let half = env.rotated_y(q / 2.0);
+        let (a, b) = (env.pixels[5 * 64 + 10][0], env.pixels[5 * 64 + 11][0]);
+        let got = half.pixels[5 * 64 + 10][0];
+        let c = env.pixels[5 * 64 + 9][0];
+        assert!(
+            (got - 0.5 * (a + b)).abs() < 1e-4 || (got - 0.5 * (a + c)).abs() < 1e-4,
+            "{got}"
+        );
+        assert_eq!(env.rotated_y(360.0).pixels, env.pixels);
+        assert_eq!(
+            env.clone().scaled(2.0).pixels[70][1],
+            2.0 * env.pixels[70][1]
+        );
+    }
 
     #[test]
     fn mapping_round_trips_and_solid_angles_sum_to_4pi() {

@@ -9,7 +9,7 @@
 //!
 //! 1. kernels, free of I/O: [`ggx`], [`ltc`], [`shade`], [`sg`]'s lobes, [`texture`], [`light`];
 //! 2. [`frame`]: the image, camera, G-buffer, BRDF and shadow-ray types every method shares;
-//!    [`envmap`]: the environment map;
+//!    [`envmap`]: the environment map; [`sky`]: the map as textured quad lights at infinity;
 //! 3. [`render`] (per-vertex / per-pixel frames), [`groundtruth`], [`penumbra`], [`sg`],
 //!    [`ratio`];
 //! 4. [`method`]: the [`method::FrameMethod`] interface and its registry, one file per method;
@@ -35,6 +35,7 @@ pub mod scene;
 pub mod session;
 pub mod sg;
 pub mod shade;
+pub mod sky;
 pub mod stream;
 pub mod texture;
 pub mod viewer;

@@ -346,6 +346,7 @@ fn frames_along_the_light_path() {
             height: 48,
             frames: 3,
             light: 0,
+            env_spin_deg: 0.0,
             settings: Settings {
                 mode: Mode::Pixel,
                 spp: 1,
@@ -353,7 +354,7 @@ fn frames_along_the_light_path() {
             },
         };
         let mut n = 0;
-        let stats = render_sequence(&s, None, &opts, |_, img| {
+        let stats = render_sequence(&s, None, None, &opts, |_, img| {
             n += 1;
             assert!(img.pixels.iter().flatten().all(|c| c.is_finite()));
             Ok(())

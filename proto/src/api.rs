@@ -409,6 +409,7 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
                 region: l.region,
             })
             .collect(),
+        environment: None,
         camera: s.camera.into(),
         bake: s.bake,
         motion: s.motion,

@@ -29,6 +29,7 @@ pub mod bspvt;
 pub(crate) mod camera;
 pub mod cubemap;
 pub mod encoding;
+pub(crate) mod environment;
 pub mod error;
 pub mod hash;
 pub mod import;

@@ -374,11 +374,15 @@ fn corpus(done_id: &str) -> Vec<Case> {
             Some("invalid_scene"),
             scene(r#"{"meshes": [{"path": "builtin:plate-small"}], "lights": [], "colour": 1}"#),
         ),
+        // (A scene without lights is valid: its bake is the sky's.)
         c(
-            "scene without lights",
+            "scene with a light of zero area",
             422,
             Some("invalid_scene"),
-            scene(builtin_scene_with("{}", "[]")),
+            scene(builtin_scene_with(
+                "{}",
+                r#"[{"vertices": [[0, 1, 0], [1, 1, 0], [2, 1, 0]], "radiance": [1, 1, 1]}]"#,
+            )),
         ),
         c(
             "scene naming a server path",

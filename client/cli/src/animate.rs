@@ -195,6 +195,7 @@ pub(crate) fn run(a: &AnimateArgs) -> Result<()> {
     let mut session = connected.session(&opts, f.width, height)?;
     session.method = method(&f.method)?;
     session.mode = f.mode.into();
+    session.set_env(f.env.options(&connected.scene)?);
     session.set_roughness(a.roughness);
     let mut report = AnimateReport::new(&connected, &session, a.frames);
     report.first_frame(&mut session, started, &a.out.join("first.png"), a.exposure)?;
@@ -210,7 +211,14 @@ pub(crate) fn run(a: &AnimateArgs) -> Result<()> {
     };
     full_at(&session, &mut report);
     // Only BSPVT frames need the trees; the other methods do not wait for them.
-    if !a.progressive && session.method.needs().trees {
+    let needs = session.method.needs();
+    if !a.progressive && needs.sky_trees {
+        session.wait_sky();
+        if !session.sky_ready() {
+            bail!("the sky's trees could not be baked (see the warning above)");
+        }
+    }
+    if !a.progressive && needs.lamp_trees(&connected.scene) {
         session.wait_complete();
         full_at(&session, &mut report);
         if !session.streamed.complete() {

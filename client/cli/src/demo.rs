@@ -10,7 +10,7 @@ use anyhow::{Context, Result};
 use bspvt_proto::api::JobState;
 
 use crate::animate::{self, AnimateReport, PathOptions, render_path};
-use crate::frame_args::ConnectArgs;
+use crate::frame_args::{ConnectArgs, EnvArgs, method, method_values};
 use crate::gif::Preview;
 use bspvt_client::session::connect::connect;
 use bspvt_client::viewer::{self, ViewerOptions};
@@ -32,6 +32,11 @@ pub(crate) struct DemoArgs {
     /// Never open a window, even when a display is available.
     #[arg(long)]
     pub(crate) headless: bool,
+    /// Rendering method (`bspvt methods`): e.g. `bspvt-env` for the scene's sky and lamps.
+    #[arg(long, default_value = "bspvt", value_parser = method_values())]
+    pub(crate) method: String,
+    #[command(flatten)]
+    pub(crate) env: EnvArgs,
 }
 
 /// Whether a window can be opened (an X display; the viewer is X11).
@@ -69,6 +74,8 @@ pub(crate) fn run(a: &DemoArgs) -> Result<()> {
     );
     let height = connected.scene.camera.image_height(a.size, None);
     let mut session = connected.session(&opts, a.size, height)?;
+    session.method = method(&a.method)?;
+    session.set_env(a.env.options(&connected.scene)?);
     let mut report = AnimateReport::new(&connected, &session, a.frames);
     // The first frame right away, with whatever trees are here (unshadowed where none are).
     report.first_frame(&mut session, started, &a.out.join("first.png"), 1.0)?;
@@ -134,6 +141,15 @@ pub(crate) fn run(a: &DemoArgs) -> Result<()> {
                 .as_deref()
                 .unwrap_or("the stream ended early")
         );
+    }
+    if session.method.needs().sky_trees {
+        println!("baking the sky's trees (every direction above each vertex, once, cached)…");
+        let t = Instant::now();
+        session.wait_sky();
+        if !session.sky_ready() {
+            anyhow::bail!("the sky's trees could not be baked (see the warning above)");
+        }
+        println!("sky trees ready after {:.1} s", t.elapsed().as_secs_f64());
     }
     report.full_trees_ms = Some(started.elapsed().as_secs_f64() * 1e3);
     animate::fill_stream_counters(&mut report, &session);

@@ -4,9 +4,11 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use bspvt_client::method::{FrameMethod, METHODS, registry};
+use bspvt_client::method::{EnvOptions, FrameMethod, METHODS, registry};
 use bspvt_client::render::renderer::Mode;
 use bspvt_client::session::connect::ConnectOptions;
+use bspvt_client::sg::{SgOptions, SsdfMode};
+use bspvt_proto::Scene;
 use clap::builder::{PossibleValue, PossibleValuesParser};
 
 /// `--method`'s accepted values, each with its description: read from the registry.
@@ -37,6 +39,97 @@ pub(crate) struct FrameArgs {
     pub(crate) method: String,
     #[arg(long, value_enum, default_value = "vertex")]
     pub(crate) mode: ModeArg,
+    #[command(flatten)]
+    pub(crate) env: EnvArgs,
+}
+
+/// The environment light of the environment methods (`sg`, `mc-env`, `bspvt-env`).
+#[derive(clap::Args, Clone, Debug)]
+pub(crate) struct EnvArgs {
+    /// Environment map (equirectangular Radiance .hdr or .exr) [default: the scene's
+    /// `environment`, else env/royal_esplanade_1k.hdr under BSPVT_ASSETS or ../shared/assets].
+    #[arg(long)]
+    pub(crate) env: Option<PathBuf>,
+    /// Rotation of the map about +y, degrees [default: the scene's, else 0].
+    #[arg(long, allow_hyphen_values = true)]
+    pub(crate) env_rotation: Option<f64>,
+    /// Multiplies the map's radiance [default: the scene's, else 1].
+    #[arg(long)]
+    pub(crate) env_strength: Option<f64>,
+    /// `--method bspvt-env`: pieces per cube-face side (6·k² textured quad lights).
+    #[arg(long, default_value_t = bspvt_client::sky::DEFAULT_K,
+          value_parser = clap::value_parser!(u32).range(1..=i64::from(bspvt_client::sky::MAX_K)))]
+    pub(crate) sky_pieces: u32,
+    /// Spherical Gaussians fitted to the map (`--method sg`).
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=256))]
+    pub(crate) lobes: u32,
+    /// How `--method sg` finds the spherical signed distance (visibility).
+    #[arg(long, value_enum, default_value = "screen")]
+    pub(crate) ssdf: SsdfArg,
+    /// Side of the screen-space SSDF depth maps (`--ssdf screen`).
+    #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u32).range(8..=4096))]
+    pub(crate) depth_res: u32,
+    /// SSDF sharing: search at one pixel per STRIDE×STRIDE block, reused by the block's pixels
+    /// on the same surface (1: every pixel, the paper's).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub(crate) ssdf_stride: u32,
+    /// Screen SSDF: neighbourhood searched at each finer pyramid level (the paper's 6×6).
+    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(2..=16))]
+    pub(crate) ssdf_window: u32,
+}
+
+impl EnvArgs {
+    /// The options for `scene`: flags over the scene's `environment` over the defaults.
+    pub(crate) fn options(&self, scene: &Scene) -> Result<EnvOptions> {
+        let mut o = EnvOptions {
+            lobes: self.lobes as usize,
+            pieces: self.sky_pieces,
+            sg: SgOptions {
+                ssdf: self.ssdf.into(),
+                depth_res: self.depth_res,
+                stride: self.ssdf_stride,
+                window: self.ssdf_window,
+            },
+            ..EnvOptions::default()
+        }
+        .for_scene(scene);
+        if let Some(p) = &self.env {
+            o.path = p.clone();
+        }
+        if let Some(r) = self.env_rotation {
+            anyhow::ensure!(r.is_finite(), "--env-rotation must be finite");
+            o.rotation_deg = r;
+        }
+        if let Some(k) = self.env_strength {
+            anyhow::ensure!(
+                k.is_finite() && k >= 0.0,
+                "--env-strength must be finite and ≥ 0"
+            );
+            o.strength = k;
+        }
+        Ok(o)
+    }
+}
+
+/// `--ssdf`: how `--method sg` finds its visibility.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum SsdfArg {
+    /// The paper's: a depth map per lighting lobe with a MIN/MAX pyramid, coarse-to-fine.
+    Screen,
+    /// Ray-cast search around each lobe axis with the BVH (reference; slow).
+    Exact,
+    /// No occluders (horizon only): unshadowed SG shading.
+    None,
+}
+
+impl From<SsdfArg> for SsdfMode {
+    fn from(s: SsdfArg) -> SsdfMode {
+        match s {
+            SsdfArg::Screen => SsdfMode::Screen,
+            SsdfArg::Exact => SsdfMode::Exact,
+            SsdfArg::None => SsdfMode::None,
+        }
+    }
 }
 
 /// `--mode` of the streaming commands.

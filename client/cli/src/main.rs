@@ -61,6 +61,10 @@ enum Command {
     /// and exact SSDF, unshadowed) against the Monte Carlo environment reference, per image
     /// size and lobe count (results.json/.md and images in --out).
     BenchSg(bspvt_lab::sg_bench::BenchSgArgs),
+    /// Speed and error of the environment through the baked trees (`bspvt-env`) for k pieces
+    /// per cube face, against SG with the screen-space SSDF and the unshadowed sky, all
+    /// against the Monte Carlo environment reference (results.json/.md and images in --out).
+    BenchSky(bspvt_lab::sky_bench::BenchSkyArgs),
     /// What adaptive refinement (`bake.refine`) buys on rooms of large flat polygons: error
     /// against Monte Carlo, vertices, bake seconds and bytes, against uniform subdivision at
     /// the same vertex count (results.md/.json in --out).
@@ -125,6 +129,13 @@ fn main() -> std::process::ExitCode {
         Command::BenchSg(a) => bspvt_lab::sg_bench::run(&a).map(|r| {
             eprintln!(
                 "bench-sg: {} configuration(s) written to {}",
+                r.rows.len(),
+                a.out.display()
+            );
+        }),
+        Command::BenchSky(a) => bspvt_lab::sky_bench::run(&a).map(|r| {
+            eprintln!(
+                "bench-sky: {} configuration(s) written to {}",
                 r.rows.len(),
                 a.out.display()
             );

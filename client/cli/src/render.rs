@@ -5,13 +5,12 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use bspvt_client::frame::image::Image;
+use bspvt_client::method::Settings;
 use bspvt_client::method::sequence::{Options, render_sequence};
-use bspvt_client::method::trees::{cached_bake, load_checked};
-use bspvt_client::method::{EnvOptions, Settings};
+use bspvt_client::method::trees::bakes_for;
 use bspvt_client::render::renderer::{Mode, Trees};
-use bspvt_client::sg::{SgOptions, SsdfMode};
 
-use crate::frame_args::{method, method_values};
+use crate::frame_args::{EnvArgs, method, method_values};
 use crate::progress::progress_bar;
 
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -65,47 +64,12 @@ pub(crate) struct RenderArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
-    /// Environment map (equirectangular Radiance .hdr) for `--method sg` and `mc-env`
-    /// [default: env/royal_esplanade_1k.hdr under BSPVT_ASSETS or ../shared/assets].
-    #[arg(long)]
-    env: Option<PathBuf>,
-    /// Spherical Gaussians fitted to the map (`--method sg`).
-    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=256))]
-    lobes: u32,
-    /// How `--method sg` finds the spherical signed distance (visibility).
-    #[arg(long, value_enum, default_value = "screen")]
-    ssdf: SsdfArg,
-    /// Side of the screen-space SSDF depth maps (`--ssdf screen`).
-    #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u32).range(8..=4096))]
-    depth_res: u32,
-    /// SSDF sharing: search at one pixel per STRIDE×STRIDE block, reused by the block's pixels
-    /// on the same surface (1: every pixel, the paper's).
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=16))]
-    ssdf_stride: u32,
-    /// Screen SSDF: neighbourhood searched at each finer pyramid level (the paper's 6×6).
-    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(2..=16))]
-    ssdf_window: u32,
-}
-
-/// `--ssdf`: how `--method sg` finds its visibility.
-#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub(crate) enum SsdfArg {
-    /// The paper's: a depth map per lighting lobe with a MIN/MAX pyramid, coarse-to-fine.
-    Screen,
-    /// Ray-cast search around each lobe axis with the BVH (reference; slow).
-    Exact,
-    /// No occluders (horizon only): unshadowed SG shading.
-    None,
-}
-
-impl From<SsdfArg> for SsdfMode {
-    fn from(s: SsdfArg) -> SsdfMode {
-        match s {
-            SsdfArg::Screen => SsdfMode::Screen,
-            SsdfArg::Exact => SsdfMode::Exact,
-            SsdfArg::None => SsdfMode::None,
-        }
-    }
+    #[command(flatten)]
+    env: EnvArgs,
+    /// Turns the environment by this many degrees per frame (`--method bspvt-env`, with
+    /// --frames): the sky rotating while the light moves.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    env_spin: f64,
 }
 
 /// `OUT` for one frame, `OUT-NNN.ext` for a sequence.
@@ -121,25 +85,28 @@ fn frame_path(out: &std::path::Path, k: usize, frames: usize) -> PathBuf {
 pub(crate) fn run(a: RenderArgs) -> Result<()> {
     let scene = bspvt_client::scene::open(a.scene.as_deref(), a.mesh.as_deref())?;
     let method = method(&a.method)?;
-    let bake = match &a.trees {
-        Some(p) => Some(load_checked(p, &scene)?),
-        None if method.needs().trees => {
-            let label = a
-                .scene
-                .as_deref()
-                .or(a.mesh.as_deref().and_then(|m| m.to_str()))
-                .unwrap_or("scene");
-            let bar = progress_bar();
-            let cached = cached_bake(label, &scene, &a.cache, &|done, total| {
-                bar.set_length(total);
-                bar.set_position(done);
-            })?;
-            bar.finish_and_clear();
-            Some(load_checked(&cached.path, &scene)?)
-        }
-        None => None,
-    };
+    let label = a
+        .scene
+        .as_deref()
+        .or(a.mesh.as_deref().and_then(|m| m.to_str()))
+        .unwrap_or("scene");
+    let bar = progress_bar();
+    let (bake, sky_bake) = bakes_for(
+        method,
+        label,
+        &scene,
+        a.trees.as_deref(),
+        &a.cache,
+        &|done, total| {
+            bar.set_length(total);
+            bar.set_position(done);
+        },
+    )?;
+    bar.finish_and_clear();
     let trees = bake
+        .as_ref()
+        .map(|b| Trees::full(&b.trees, b.header.codec()));
+    let sky_trees = sky_bake
         .as_ref()
         .map(|b| Trees::full(&b.trees, b.header.codec()));
     let pool = rayon::ThreadPoolBuilder::new()
@@ -160,35 +127,30 @@ pub(crate) fn run(a: RenderArgs) -> Result<()> {
             height: scene.camera.image_height(a.width, a.height),
             frames: a.frames,
             light: 0,
+            env_spin_deg: a.env_spin,
             settings: Settings {
                 mode,
                 spp: a.spp,
-                env: EnvOptions {
-                    path: a
-                        .env
-                        .clone()
-                        .unwrap_or_else(bspvt_client::envmap::default_env_path),
-                    lobes: a.lobes as usize,
-                    sg: SgOptions {
-                        ssdf: a.ssdf.into(),
-                        depth_res: a.depth_res,
-                        stride: a.ssdf_stride,
-                        window: a.ssdf_window,
-                    },
-                },
+                env: a.env.options(&scene)?,
                 ..Settings::default()
             },
         };
         let mut frames = Vec::new();
         let stats = pool.install(|| {
-            render_sequence(&scene, trees.as_ref(), &opts, |k, img| {
-                if modes.len() == 1 {
-                    img.save(&frame_path(&a.out, k, a.frames), a.exposure)
-                } else {
-                    frames.push(img.clone());
-                    Ok(())
-                }
-            })
+            render_sequence(
+                &scene,
+                trees.as_ref(),
+                sky_trees.as_ref(),
+                &opts,
+                |k, img| {
+                    if modes.len() == 1 {
+                        img.save(&frame_path(&a.out, k, a.frames), a.exposure)
+                    } else {
+                        frames.push(img.clone());
+                        Ok(())
+                    }
+                },
+            )
         })?;
         println!(
             "{} {:?}: {} frame(s) at {}×{}, {:.2} ms/frame ({:.1} fps), {:.3} µs/vertex ({:.3} per core, {} threads), {} vertices shaded",

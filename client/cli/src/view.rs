@@ -31,6 +31,7 @@ pub(crate) fn run(a: &ViewArgs) -> Result<()> {
     let mut session = connected.session(&opts, f.width, height)?;
     session.method = method(&f.method)?;
     session.mode = f.mode.into();
+    session.set_env(f.env.options(&connected.scene)?);
     if a.moving {
         session.path_t = Some(0.0);
     }

@@ -47,7 +47,14 @@ fn streamed_frames_equal_offline_frames_and_a_second_start_fetches_nothing() {
         s1.path_t = t;
         s1.mode = mode;
         let streamed = s1.frame();
-        let offline = offline_frame(&scene, &bake, &scene.camera, &s1.light(), mode, SIZE);
+        let offline = offline_frame(
+            &scene,
+            &bake,
+            &scene.camera,
+            &s1.light().unwrap(),
+            mode,
+            SIZE,
+        );
         assert!(all_finite(&streamed));
         assert!(
             streamed == offline,
@@ -175,7 +182,14 @@ fn a_partial_stream_renders_survives_a_server_crash_and_converges() {
     let scene = open_scene(Some(&scene_path.to_string_lossy()), None).expect("scene");
     s.path_t = Some(0.6);
     let img = s.frame();
-    let offline = offline_frame(&scene, &bake, &scene.camera, &s.light(), Mode::Vertex, SIZE);
+    let offline = offline_frame(
+        &scene,
+        &bake,
+        &scene.camera,
+        &s.light().unwrap(),
+        Mode::Vertex,
+        SIZE,
+    );
     assert!(
         img == offline,
         "the converged frame differs from the offline bake's"

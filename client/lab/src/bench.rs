@@ -153,13 +153,14 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                     height: a.size,
                     frames: a.frames,
                     light: 0,
+                    env_spin_deg: 0.0,
                     settings: Settings {
                         mode,
                         spp: 1,
                         ..Settings::default()
                     },
                 };
-                let s = render_sequence(scene, Some(&trees), &opts, |_, _| Ok(()))?;
+                let s = render_sequence(scene, Some(&trees), None, &opts, |_, _| Ok(()))?;
                 println!(
                     "{name}: {} {mode:?} {:.2} ms/frame ({:.1} fps), {:.3} µs/vertex/core, {} vertices",
                     method.name(),

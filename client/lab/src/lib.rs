@@ -2,7 +2,7 @@
 //!
 //! bspvt's research tooling, built on the client library: the error-against-run-time
 //! [`report`] of every method against converged Monte Carlo, image comparison ([`compare`]),
-//! the shading and method benchmarks ([`bench`], [`penumbra_bench`], [`sg_bench`],
+//! the shading and method benchmarks ([`bench`], [`penumbra_bench`], [`sg_bench`], [`sky_bench`],
 //! [`refine_bench`]), the
 //! project's LTC fit of GGX ([`ltc_fit`]) and the Mitsuba 3 export ([`mitsuba`]).
 //!
@@ -19,3 +19,4 @@ pub mod penumbra_bench;
 pub mod refine_bench;
 pub mod report;
 pub mod sg_bench;
+pub mod sky_bench;

@@ -112,9 +112,16 @@ fn quick_report_measures_every_method_and_reuses_its_cache() {
             let methods: BTreeSet<&str> = env.entries.iter().map(|e| e.method.as_str()).collect();
             assert_eq!(
                 methods,
-                ["mc-env", "sg-exact", "sg-screen", "sg-unshadowed"]
-                    .into_iter()
-                    .collect()
+                [
+                    "bspvt-env",
+                    "bspvt-env-pixel",
+                    "mc-env",
+                    "sg-exact",
+                    "sg-screen",
+                    "sg-unshadowed"
+                ]
+                .into_iter()
+                .collect()
             );
             for e in &env.entries {
                 let m = &e.metrics;
@@ -129,8 +136,16 @@ fn quick_report_measures_every_method_and_reuses_its_cache() {
                     .metrics
                     .rmse
             };
-            // The SSDF's visibility brings SG shading closer to the truth than none.
+            // The SSDF's visibility brings SG shading closer to the truth than none, and the
+            // sky through its trees closer than either (k = 1, 2, 4 in the quick report).
             assert!(env_rmse("sg-screen") < env_rmse("sg-unshadowed"));
+            let sky: Vec<_> = env
+                .entries
+                .iter()
+                .filter(|e| e.method == "bspvt-env")
+                .collect();
+            assert_eq!(sky.len(), 3);
+            assert!(sky.iter().all(|e| e.metrics.rmse < env_rmse("sg-screen")));
             assert!(env.fits.iter().all(|f| f.1.is_finite() && f.1 < 1.0));
         }
         None => {

@@ -25,6 +25,17 @@ impl Image {
         }
     }
 
+    /// Adds `other` pixel by pixel (same size; a different size adds nothing and is a bug of
+    /// the caller, caught in debug builds).
+    pub fn add(&mut self, other: &Image) {
+        debug_assert_eq!((self.width, self.height), (other.width, other.height));
+        for (a, b) in self.pixels.iter_mut().zip(&other.pixels) {
+            for c in 0..3 {
+                a[c] += b[c];
+            }
+        }
+    }
+
     /// Writes `.exr` (linear, 32-bit float) or `.png` (tone-mapped with `exposure`, 8-bit sRGB),
     /// by the file's extension. Creates the parent folder.
     pub fn save(&self, path: &Path, exposure: f32) -> Result<()> {

@@ -33,7 +33,7 @@ impl FrameMethod for McEnv {
         Some(Mode::Pixel)
     }
     fn prepare(&self, scene: &SceneData, settings: &Settings) -> Result<Box<dyn MethodState>> {
-        let env = EnvLight::load(&settings.env.path)?;
+        let env = settings.env.load_map()?;
         if !scene.scene.is_dynamic() {
             scene.occluder();
         }

@@ -11,6 +11,7 @@ pub mod sequence;
 pub mod trees;
 
 mod bspvt;
+mod bspvt_env;
 mod env_scene;
 mod ltc;
 mod ltc_exact;
@@ -44,6 +45,10 @@ pub use registry::{METHODS, find, names};
 pub struct Needs {
     /// The scene's baked BSPVT trees (baked and cached when not given).
     pub trees: bool,
+    /// The trees of the sky: the bake of [`bspvt_proto::Scene::sky`] (every direction above
+    /// the horizon, rays to infinity); the scene's own trees also, for its lamps, when it has
+    /// any.
+    pub sky_trees: bool,
     /// A BVH of the scene for rays (built in setup).
     pub rays: bool,
     /// An environment map (`--env`).
@@ -53,11 +58,20 @@ pub struct Needs {
 }
 
 impl Needs {
+    /// Whether the scene's own (lamp) trees are needed: for the method itself, or for the
+    /// lamps a sky method draws beside the sky.
+    pub fn lamp_trees(&self, scene: &Scene) -> bool {
+        self.trees || (self.sky_trees && !scene.lights.is_empty())
+    }
+
     /// The needs in words, e.g. `trees, polygon light`.
     pub fn describe(&self) -> String {
         let mut v = Vec::new();
         if self.trees {
             v.push("trees");
+        }
+        if self.sky_trees {
+            v.push("sky trees (+ trees for the lamps)");
         }
         if self.rays {
             v.push("rays (BVH)");
@@ -85,6 +99,33 @@ pub struct EnvOptions {
     pub lobes: usize,
     /// How the SG method finds its visibility.
     pub sg: crate::sg::SgOptions,
+    /// Rotation of the map about +y, degrees ([`bspvt_proto::scene::Environment`]).
+    pub rotation_deg: f64,
+    /// Multiplies the map's radiance.
+    pub strength: f64,
+    /// `bspvt-env`: pieces per cube-face side (6·k² pieces).
+    pub pieces: u32,
+    /// `bspvt-env`: pieces carrying less than this fraction of the map's power are left out.
+    pub threshold: f64,
+}
+
+impl EnvOptions {
+    /// The scene's environment where it has one (path, rotation, strength), else these.
+    pub fn for_scene(mut self, scene: &Scene) -> EnvOptions {
+        if let Some(e) = &scene.environment {
+            self.path = PathBuf::from(&e.path);
+            self.rotation_deg = f64::from(e.rotation_deg);
+            self.strength = f64::from(e.strength);
+        }
+        self
+    }
+
+    /// The map as loaded for the methods: turned by `rotation_deg` and scaled by `strength`
+    /// (the run-time methods that cannot turn it per frame: SG and its references).
+    pub fn load_map(&self) -> Result<crate::envmap::EnvLight> {
+        let env = crate::envmap::EnvLight::load(&self.path)?;
+        Ok(env.rotated_y(self.rotation_deg).scaled(self.strength))
+    }
 }
 
 impl Default for EnvOptions {
@@ -93,6 +134,10 @@ impl Default for EnvOptions {
             path: crate::envmap::default_env_path(),
             lobes: 16,
             sg: crate::sg::SgOptions::default(),
+            rotation_deg: 0.0,
+            strength: 1.0,
+            pieces: crate::sky::DEFAULT_K,
+            threshold: crate::sky::DEFAULT_THRESHOLD,
         }
     }
 }
@@ -162,6 +207,10 @@ pub struct FrameInput<'a> {
     pub light: Option<&'a Light>,
     /// Baked trees (all or those streamed so far); `None`: none yet.
     pub trees: Option<&'a Trees<'a>>,
+    /// Baked sky trees ([`Needs::sky_trees`]); `None`: none yet.
+    pub sky_trees: Option<&'a Trees<'a>>,
+    /// Run-time rotation of the environment about +y, degrees, on top of the map's own.
+    pub env_rotation_deg: f64,
     /// The frame's number (seeds the stochastic methods).
     pub index: u64,
     /// Cycle time of a moving scene in [0, 1) (the run-time methods pose the meshes at it).

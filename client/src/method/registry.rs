@@ -14,6 +14,7 @@ pub static METHODS: &[&dyn FrameMethod] = &[
     &super::vsm::VSM,
     &super::sg::SgEnvironment,
     &super::mc_env::McEnv,
+    &super::bspvt_env::BspvtEnv,
     &super::ltc_exact::LtcExact,
     &super::rt_hard::RT_HARD,
     &super::ratio::RATIO,

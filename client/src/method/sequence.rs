@@ -30,6 +30,9 @@ pub struct Options {
     pub frames: usize,
     /// The scene light that moves.
     pub light: usize,
+    /// Turns the environment by this many degrees about +y per frame (the sky methods that
+    /// turn it at run time: `bspvt-env`).
+    pub env_spin_deg: f64,
     /// What the method reads (mode, samples, environment).
     #[serde(skip)]
     pub settings: Settings,
@@ -98,18 +101,24 @@ pub struct Stats {
 pub fn render_sequence(
     scene: &Scene,
     trees: Option<&Trees>,
+    sky_trees: Option<&Trees>,
     opts: &Options,
     mut sink: impl FnMut(usize, &Image) -> Result<()>,
 ) -> Result<Stats> {
     let method = opts.method;
     let needs = method.needs();
-    // Polygon-light methods follow the light's path; the environment methods play the
-    // scene's motion (frame k at cycle time k / frames).
-    let light = if needs.polygon_light {
+    if needs.sky_trees && sky_trees.is_none() {
+        bail!("--method {} needs the sky's baked trees", method.name());
+    }
+    // Polygon-light methods follow the light's path, and so do the lamps a sky method draws
+    // beside the sky; the environment methods play the scene's motion (frame k at cycle time
+    // k / frames).
+    let lamp = needs.polygon_light || (needs.sky_trees && !scene.lights.is_empty());
+    let light = if lamp {
         let Some(light) = scene.lights.get(opts.light) else {
             bail!("the scene has no light {}", opts.light);
         };
-        if needs.trees && trees.is_none() {
+        if needs.lamp_trees(scene) && trees.is_none() {
             bail!("--method {} needs baked trees", method.name());
         }
         if scene.is_dynamic() {
@@ -155,6 +164,8 @@ pub fn render_sequence(
             renderer: &r,
             light: l.as_ref(),
             trees,
+            sky_trees,
+            env_rotation_deg: opts.env_spin_deg * k as f64,
             index: k as u64,
             time: k as f32 / frames as f32,
             mode: opts.settings.mode,
@@ -228,19 +239,20 @@ mod tests {
             height: 40,
             frames: 2,
             light: 0,
+            env_spin_deg: 0.0,
             settings: Settings {
                 mode: Mode::Pixel,
                 spp: 4,
                 env: EnvOptions {
                     path: crate::envmap::write_test_map(dir.path()),
                     lobes: 4,
-                    sg: crate::sg::SgOptions::default(),
+                    ..EnvOptions::default()
                 },
                 ..Settings::default()
             },
         };
         let mut frames: Vec<Image> = Vec::new();
-        let stats = render_sequence(&base, None, &opts, |_, img| {
+        let stats = render_sequence(&base, None, None, &opts, |_, img| {
             frames.push(img.clone());
             Ok(())
         })
@@ -250,7 +262,7 @@ mod tests {
         assert!(frames[0].pixels != frames[1].pixels, "the scene moved");
         let mut still: Vec<Image> = Vec::new();
         opts.frames = 1;
-        render_sequence(&base.at(0.5), None, &opts, |_, img| {
+        render_sequence(&base.at(0.5), None, None, &opts, |_, img| {
             still.push(img.clone());
             Ok(())
         })
@@ -262,7 +274,7 @@ mod tests {
         opts.method = crate::method::registry::lookup("mc-env").expect("mc-env");
         opts.frames = 2;
         let mut mc: Vec<Image> = Vec::new();
-        let stats = render_sequence(&base, None, &opts, |_, img| {
+        let stats = render_sequence(&base, None, None, &opts, |_, img| {
             mc.push(img.clone());
             Ok(())
         })

@@ -32,7 +32,7 @@ impl FrameMethod for SgEnvironment {
     }
     fn prepare(&self, scene: &SceneData, settings: &Settings) -> Result<Box<dyn MethodState>> {
         let e = &settings.env;
-        let env = crate::envmap::EnvLight::load(&e.path)?;
+        let env = e.load_map()?;
         // Cached in the temp folder: a second start skips the fit's seconds.
         let sg = crate::sg::fit_cached(&env, e.lobes, &std::env::temp_dir().join("bspvt-sg-fit"));
         crate::sg::halfspace::warm_up();

@@ -63,8 +63,9 @@ pub fn file_stem(name: &str) -> String {
         .collect()
 }
 
-/// The bake of `scene` in `cache` (`NAME-HASH.bspvt`, HASH over the mesh's content hash and
-/// the bake settings), baking it first when absent. `progress(done, total)` follows the
+/// The bake of `scene` in `cache` (`NAME-HASH.bspvt`, HASH over the mesh's content hash, the
+/// bake settings and the lights — their regions and planes decide which directions matter
+/// and where rays end; none: the sky's), baking it first when absent. `progress(done, total)` follows the
 /// vertices while it bakes.
 pub fn cached_bake(
     name: &str,
@@ -73,7 +74,15 @@ pub fn cached_bake(
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<CachedBake> {
     let mut h = bspvt_proto::hash::Fnv1a::default();
-    h.write(format!("{:x}{:?}", scene.mesh.content_hash(), scene.bake).as_bytes());
+    h.write(
+        format!(
+            "{:x}{:?}{:?}",
+            scene.mesh.content_hash(),
+            scene.bake,
+            scene.lights
+        )
+        .as_bytes(),
+    );
     let key = h.finish();
     let path = cache.join(format!("{}-{key:016x}.bspvt", file_stem(name)));
     let meta = path.with_extension("bspvt.json");
@@ -113,4 +122,34 @@ pub fn cached_bake(
     std::fs::write(&meta, serde_json::to_string_pretty(&b)?)
         .with_context(|| format!("cannot write {}", meta.display()))?;
     Ok(b)
+}
+
+/// The bakes `method` needs for `scene`: the scene's own (its lamps'), read from `given` when
+/// a bake file is given, else baked once into `cache`; and the sky's
+/// ([`bspvt_proto::Scene::sky`], always from `cache`). `None` where the method needs none.
+pub fn bakes_for(
+    method: &dyn super::FrameMethod,
+    name: &str,
+    scene: &Scene,
+    given: Option<&Path>,
+    cache: &Path,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<(Option<Bake>, Option<Bake>)> {
+    let needs = method.needs();
+    let lamps = match given {
+        Some(p) => Some(load_checked(p, scene)?),
+        None if needs.lamp_trees(scene) => {
+            let c = cached_bake(name, scene, cache, progress)?;
+            Some(load_checked(&c.path, scene)?)
+        }
+        None => None,
+    };
+    let sky = if needs.sky_trees {
+        let sky = scene.sky();
+        let c = cached_bake(&format!("{}-sky", file_stem(name)), &sky, cache, progress)?;
+        Some(load_checked(&c.path, &sky)?)
+    } else {
+        None
+    };
+    Ok((lamps, sky))
 }

@@ -20,6 +20,7 @@ use crate::frame::image::Image;
 use crate::light::Light;
 use crate::ltc::table::LtcTable;
 use crate::shade::bspvt::shade_vertex;
+use crate::shade::sky::{shade_vertex_sky, unshadowed_sky};
 use crate::shade::{Lobes, unshadowed};
 
 /// Where shading is evaluated.
@@ -51,6 +52,14 @@ impl<'a> Trees<'a> {
             codec,
             present: None,
         }
+    }
+
+    /// A key of which trees these are: the same slice with the same vertices present.
+    pub(crate) fn key(&self) -> (usize, usize, usize) {
+        let present = self
+            .present
+            .map_or(self.trees.len(), |p| p.iter().filter(|&&b| b).count());
+        (self.trees.as_ptr() as usize, self.trees.len(), present)
     }
 
     fn has(&self, v: u32) -> bool {
@@ -149,6 +158,27 @@ impl<'a> Renderer<'a> {
         }
     }
 
+    /// A key of everything a frame's shading depends on besides the lights and the trees:
+    /// the camera and the materials (with the roughness override). Equal keys, equal shading.
+    pub(crate) fn shading_key(&self) -> u64 {
+        let v = &self.view;
+        let mut h = bspvt_proto::hash::Fnv1a::default();
+        for x in [v.eye, v.forward, v.right, v.up] {
+            h.write(&x.x.to_le_bytes());
+            h.write(&x.y.to_le_bytes());
+            h.write(&x.z.to_le_bytes());
+        }
+        h.write(&v.tan_half_fov.to_le_bytes());
+        h.write(&v.width.to_le_bytes());
+        h.write(&v.height.to_le_bytes());
+        for m in &self.materials {
+            h.write_f32s(&[m.roughness]);
+            h.write_f32s(&m.albedo);
+            h.write_f32s(&m.specular);
+        }
+        h.finish()
+    }
+
     fn material(&self, id: u32) -> &Material {
         let m = &self.materials;
         &m[(id as usize).min(m.len().saturating_sub(1))]
@@ -164,12 +194,11 @@ impl<'a> Renderer<'a> {
         (Lobes::new(self.table, m, n, wo), p, n)
     }
 
-    /// BSPVT per vertex: for every visible vertex, (shadowed radiance, shadow ratios).
-    /// Vertices the camera does not see are left at zero.
-    pub(crate) fn shade_vertices(
+    /// Shades every visible vertex with `shade(v, lobes, p, n)` → (radiance, shadow ratios,
+    /// pieces, dropped); vertices the camera does not see are left at zero (ratio 1).
+    fn per_vertex(
         &self,
-        light: &Light,
-        trees: &Trees,
+        shade: impl Fn(u32, &Lobes, DVec3, DVec3) -> ([f32; 3], [f32; 2], u32, u32) + Sync,
     ) -> (Vec<[f32; 3]>, Vec<[f32; 2]>, FrameCounts) {
         let n = self.scene.mesh.vertex_count();
         // (vertex, radiance, shadow ratios, pieces, dropped)
@@ -179,27 +208,8 @@ impl<'a> Renderer<'a> {
             .par_iter()
             .map(|&v| {
                 let (lobes, p, nrm) = self.vertex_lobes(v);
-                if !trees.has(v) {
-                    let i = unshadowed(&lobes, light, p, nrm);
-                    let c = lobes.radiance(light.radiance, &i);
-                    return (v, c.as_vec3().to_array(), [1.0, 1.0], 0, 0);
-                }
-                let r = shade_vertex(
-                    &lobes,
-                    light,
-                    p,
-                    nrm,
-                    &trees.trees[v as usize],
-                    &trees.codec,
-                );
-                let c = lobes.radiance(light.radiance, &r.shadowed);
-                (
-                    v,
-                    c.as_vec3().to_array(),
-                    r.shadowed.integrals.ratio(&r.unshadowed.integrals),
-                    r.pieces,
-                    r.dropped,
-                )
+                let (c, r, pieces, dropped) = shade(v, &lobes, p, nrm);
+                (v, c, r, pieces, dropped)
             })
             .collect();
         let mut colour = vec![[0.0; 3]; n];
@@ -215,6 +225,58 @@ impl<'a> Renderer<'a> {
             counts.pieces_dropped += u64::from(dropped);
         }
         (colour, ratio, counts)
+    }
+
+    /// BSPVT per vertex: for every visible vertex, (shadowed radiance, shadow ratios).
+    /// Vertices the camera does not see are left at zero.
+    pub(crate) fn shade_vertices(
+        &self,
+        light: &Light,
+        trees: &Trees,
+    ) -> (Vec<[f32; 3]>, Vec<[f32; 2]>, FrameCounts) {
+        self.per_vertex(|v, lobes, p, nrm| {
+            if !trees.has(v) {
+                let i = unshadowed(lobes, light, p, nrm);
+                let c = lobes.radiance(light.radiance, &i);
+                return (c.as_vec3().to_array(), [1.0, 1.0], 0, 0);
+            }
+            let r = shade_vertex(lobes, light, p, nrm, &trees.trees[v as usize], &trees.codec);
+            let c = lobes.radiance(light.radiance, &r.shadowed);
+            (
+                c.as_vec3().to_array(),
+                r.shadowed.integrals.ratio(&r.unshadowed.integrals),
+                r.pieces,
+                r.dropped,
+            )
+        })
+    }
+
+    /// The sky through the baked sky trees per vertex ([`crate::shade::sky`]); vertices
+    /// without trees yet are shaded unshadowed.
+    pub(crate) fn shade_vertices_sky(
+        &self,
+        pieces: &[Light],
+        trees: &Trees,
+        ratios: bool,
+    ) -> (Vec<[f32; 3]>, Vec<[f32; 2]>, FrameCounts) {
+        self.per_vertex(|v, lobes, _, nrm| {
+            if !trees.has(v) {
+                let s = unshadowed_sky(lobes, pieces, nrm);
+                let c = lobes.radiance(DVec3::ONE, &s);
+                return (c.as_vec3().to_array(), [1.0, 1.0], 0, 0);
+            }
+            let r = shade_vertex_sky(
+                lobes,
+                pieces,
+                nrm,
+                &trees.trees[v as usize],
+                &trees.codec,
+                ratios,
+            );
+            let c = lobes.radiance(DVec3::ONE, &r.shadowed);
+            let ratio = if ratios { r.ratio() } else { [1.0, 1.0] };
+            (c.as_vec3().to_array(), ratio, r.pieces, r.dropped)
+        })
     }
 
     /// Unshadowed LTC per vertex (the "ltc" method in vertex mode).
@@ -255,8 +317,13 @@ impl<'a> Renderer<'a> {
         img
     }
 
-    /// Per-pixel LTC times interpolated shadow ratios (`None`: unshadowed).
-    pub fn shade_pixels(&self, light: &Light, ratio: Option<&[[f32; 2]]>) -> Image {
+    /// Shades every covered pixel with `shade(lobes, p, n, ratio)`, `ratio` the per-vertex
+    /// shadow ratios interpolated at the pixel ([1, 1] without).
+    fn per_pixel(
+        &self,
+        ratio: Option<&[[f32; 2]]>,
+        shade: impl Fn(&Lobes, DVec3, DVec3, [f32; 2]) -> DVec3 + Sync,
+    ) -> Image {
         let mesh = &self.scene.mesh;
         let g = &self.gbuffer;
         let mut img = Image::new(g.width, g.height);
@@ -270,7 +337,6 @@ impl<'a> Renderer<'a> {
             }
             let m = self.material(mesh.material_ids.get(s.tri as usize).copied().unwrap_or(0));
             let lobes = Lobes::new(self.table, m, s.normal, wo);
-            let integrals = unshadowed(&lobes, light, s.position, s.normal);
             let r = match ratio {
                 Some(r) => {
                     let idx = mesh.triangles[s.tri as usize];
@@ -285,12 +351,44 @@ impl<'a> Renderer<'a> {
                 }
                 None => [1.0, 1.0],
             };
-            *px = lobes
-                .radiance_scaled(light.radiance, &integrals, r)
-                .as_vec3()
-                .to_array();
+            *px = shade(&lobes, s.position, s.normal, r).as_vec3().to_array();
         });
         img
+    }
+
+    /// Per-pixel LTC times interpolated shadow ratios (`None`: unshadowed).
+    pub fn shade_pixels(&self, light: &Light, ratio: Option<&[[f32; 2]]>) -> Image {
+        self.per_pixel(ratio, |lobes, p, n, r| {
+            let integrals = unshadowed(lobes, light, p, n);
+            lobes.radiance_scaled(light.radiance, &integrals, r)
+        })
+    }
+
+    /// The unshadowed sky per pixel times interpolated sky shadow ratios.
+    pub(crate) fn shade_pixels_sky(&self, pieces: &[Light], ratio: Option<&[[f32; 2]]>) -> Image {
+        self.per_pixel(ratio, |lobes, _, n, r| {
+            let s = unshadowed_sky(lobes, pieces, n);
+            lobes.radiance_scaled(DVec3::ONE, &s, r)
+        })
+    }
+
+    /// One frame of the sky through the baked sky trees in `mode` (`trees`: `None` while none
+    /// have arrived: unshadowed).
+    pub fn sky(&self, pieces: &[Light], trees: Option<&Trees>, mode: Mode) -> (Image, FrameCounts) {
+        let none = Trees {
+            trees: &[],
+            codec: LineCodec::for_resolution(4),
+            present: None,
+        };
+        let (colour, ratio, mut counts) =
+            self.shade_vertices_sky(pieces, trees.unwrap_or(&none), mode == Mode::Pixel);
+        match mode {
+            Mode::Vertex => (self.interpolate(&colour), counts),
+            Mode::Pixel => {
+                counts.pixels_shaded = self.gbuffer.covered();
+                (self.shade_pixels_sky(pieces, Some(&ratio)), counts)
+            }
+        }
     }
 
     /// One BSPVT frame in `mode`.

@@ -66,12 +66,37 @@ pub fn connect(a: &ConnectOptions) -> Result<Connected> {
         .as_ref()
         .map(|d| Cache::new(d, &served.id))
         .transpose()?;
-    let (scene, scene_bytes_fetched) = served.remote.scene(&served.id, cache.as_ref())?;
+    let (mut scene, scene_bytes_fetched) = served.remote.scene(&served.id, cache.as_ref())?;
+    // The service keeps what the bake needs; the sky of a local scene file is the client's.
+    if scene.environment.is_none() {
+        scene.environment = local_environment(&src);
+    }
     Ok(Connected {
         served,
         scene,
         scene_bytes_fetched,
     })
+}
+
+/// The `environment` of a local scene file, its path resolved against the file's folder.
+fn local_environment(src: &Source) -> Option<bspvt_proto::scene::Environment> {
+    let Source::Local {
+        scene: Some(path), ..
+    } = src
+    else {
+        return None;
+    };
+    let path = std::path::Path::new(path);
+    let text = std::fs::read_to_string(path).ok()?;
+    let file: bspvt_proto::scene::SceneFile = serde_json::from_str(&text).ok()?;
+    let mut env = file.environment?;
+    env.path = path
+        .parent()
+        .unwrap_or(std::path::Path::new("."))
+        .join(&env.path)
+        .to_string_lossy()
+        .into_owned();
+    Some(env)
 }
 
 impl Connected {
@@ -100,6 +125,9 @@ impl Connected {
             },
         );
         session.attach(rx, counters);
+        if let Some(c) = &a.cache_dir {
+            session.sky_cache = c.join("bakes");
+        }
         Ok(session)
     }
 }

@@ -17,9 +17,17 @@ use crate::frame::image::Image;
 use crate::light::Light;
 use crate::method::{FrameInput, FrameMethod, MethodState, SceneData, Settings, registry};
 use crate::render::path::LightPath;
-use crate::render::renderer::{Mode, Renderer};
+use crate::render::renderer::{Mode, Renderer, Trees};
 use crate::stream::fetch::{Counters, Update};
 use crate::stream::trees::StreamedTrees;
+
+/// Where the sky's trees are.
+enum SkyBake {
+    NotStarted,
+    Baking(Receiver<Result<bspvt_proto::encoding::Bake, String>>),
+    Ready(Box<bspvt_proto::encoding::Bake>),
+    Failed,
+}
 
 /// An orbit camera around a target.
 #[derive(Clone, Copy, Debug)]
@@ -101,8 +109,9 @@ pub struct Session<'a> {
     pub mode: Mode,
     /// The camera.
     pub(crate) orbit: Orbit,
-    rest: Light,
-    path: LightPath,
+    /// The first light at rest and its default path (`None`: a scene lit by its environment
+    /// alone).
+    rest: Option<(Light, LightPath)>,
     /// The user's pose of the light.
     pub(crate) pose: LightPose,
     /// Position on the light's default path in [0, 1) (`None`: the user's pose alone); also
@@ -111,8 +120,16 @@ pub struct Session<'a> {
     /// The roughness override (`None`: the materials').
     pub(crate) roughness: Option<f32>,
     data: SceneData<'a>,
-    /// What the methods read; the environment map defaults to the shared test map.
+    /// What the methods read; the environment map defaults to the scene's, else the shared
+    /// test map.
     settings: Settings,
+    /// Run-time rotation of the environment about +y, degrees (the sky methods that turn it
+    /// per frame: `bspvt-env`).
+    pub env_rotation_deg: f64,
+    /// The sky's trees (`bspvt-env`), baked in the background on first use.
+    sky: SkyBake,
+    /// Where sky bakes are kept (by the sky scene's hash), shared with `bspvt render --cache`.
+    pub sky_cache: std::path::PathBuf,
     /// Each method's state, prepared on first use (`Err`: preparing failed; its frames fall
     /// back to unshadowed LTC with a warning).
     states: HashMap<&'static str, Result<Box<dyn MethodState>, String>>,
@@ -128,10 +145,6 @@ impl<'a> Session<'a> {
         updates: Option<Receiver<Update>>,
         counters: Option<Arc<Counters>>,
     ) -> anyhow::Result<Session<'a>> {
-        let light = scene
-            .lights
-            .first()
-            .ok_or_else(|| anyhow::anyhow!("the scene has no light"))?;
         for w in &scene.warnings {
             tracing::warn!("{w}");
         }
@@ -141,19 +154,25 @@ impl<'a> Session<'a> {
                  vertices the other way round, or make it two_sided)"
             );
         }
-        let rest = Light::load(light)?;
-        let path = LightPath::new(light, rest.clone());
+        let rest = match scene.lights.first() {
+            Some(light) => {
+                let rest = Light::load(light)?;
+                Some((rest.clone(), LightPath::new(light, rest)))
+            }
+            None => None,
+        };
+        // A scene lit by its environment alone opens on the sky through the trees.
+        let method = if rest.is_some() { "bspvt" } else { "bspvt-env" };
         Ok(Session {
             scene,
             renderer: Renderer::new(scene, width, height),
             streamed,
             updates,
             counters,
-            method: registry::lookup("bspvt")?,
+            method: registry::lookup(method)?,
             mode: Mode::Vertex,
             orbit: Orbit::from_camera(&scene.camera),
             rest,
-            path,
             pose: LightPose::default(),
             path_t: None,
             roughness: None,
@@ -162,9 +181,13 @@ impl<'a> Session<'a> {
             settings: Settings {
                 progressive: true,
                 spp: 1,
+                env: crate::method::EnvOptions::default().for_scene(scene),
                 ..Settings::default()
             },
             states: HashMap::new(),
+            env_rotation_deg: 0.0,
+            sky: SkyBake::NotStarted,
+            sky_cache: std::path::PathBuf::from("out/cache/bakes"),
         })
     }
 
@@ -224,11 +247,20 @@ impl<'a> Session<'a> {
         self.invalidate();
     }
 
-    /// The light for the current frame.
-    pub fn light(&self) -> Light {
+    /// The environment light the methods use (before the first frame of a method that reads
+    /// it; a method already prepared keeps the map it loaded).
+    pub fn set_env(&mut self, env: crate::method::EnvOptions) {
+        self.settings.env = env;
+        self.states
+            .retain(|name, _| !registry::find(name).is_some_and(|m| m.needs().env_map));
+    }
+
+    /// The light for the current frame (`None`: the scene has none).
+    pub fn light(&self) -> Option<Light> {
+        let (rest, path) = self.rest.as_ref()?;
         let base = match self.path_t {
-            Some(t) => self.path.at(t),
-            None => self.rest.clone(),
+            Some(t) => path.at(t),
+            None => rest.clone(),
         };
         let c = base.centroid();
         let m = DAffine3::from_translation(c + self.pose.offset)
@@ -238,7 +270,69 @@ impl<'a> Session<'a> {
             * DAffine3::from_translation(-c);
         let mut l = base.transformed(&m);
         l.radiance *= self.pose.radiance_scale;
-        l
+        Some(l)
+    }
+
+    /// The sky's trees so far: starts their bake on first call (in the background, cached in
+    /// [`Self::sky_cache`]), then picks the result up when it is ready.
+    fn sky_trees(&mut self) -> Option<&bspvt_proto::encoding::Bake> {
+        if matches!(self.sky, SkyBake::NotStarted) {
+            let (tx, rx) = std::sync::mpsc::channel();
+            let sky = self.scene.sky();
+            let cache = self.sky_cache.clone();
+            std::thread::spawn(move || {
+                let r = crate::method::trees::cached_bake("session-sky", &sky, &cache, &|_, _| {})
+                    .and_then(|c| crate::method::trees::load_checked(&c.path, &sky))
+                    .map_err(|e| format!("{e:#}"));
+                let _ = tx.send(r);
+            });
+            self.sky = SkyBake::Baking(rx);
+        }
+        if let SkyBake::Baking(rx) = &self.sky {
+            match rx.try_recv() {
+                Ok(Ok(b)) => {
+                    self.sky = SkyBake::Ready(Box::new(b));
+                    self.invalidate();
+                }
+                Ok(Err(e)) => {
+                    tracing::warn!("the sky's bake failed: {e}; the sky stays unshadowed");
+                    self.sky = SkyBake::Failed;
+                }
+                Err(TryRecvError::Empty) => {}
+                Err(TryRecvError::Disconnected) => self.sky = SkyBake::Failed,
+            }
+        }
+        match &self.sky {
+            SkyBake::Ready(b) => Some(b),
+            _ => None,
+        }
+    }
+
+    /// Blocks until the sky's trees are baked (or their bake failed); starts it if needed.
+    pub fn wait_sky(&mut self) {
+        self.sky_trees();
+        while let SkyBake::Baking(rx) = &self.sky {
+            let next = match rx.recv() {
+                Ok(Ok(b)) => SkyBake::Ready(Box::new(b)),
+                Ok(Err(e)) => {
+                    tracing::warn!("the sky's bake failed: {e}; the sky stays unshadowed");
+                    SkyBake::Failed
+                }
+                Err(_) => SkyBake::Failed,
+            };
+            self.sky = next;
+            self.invalidate();
+        }
+    }
+
+    /// True once the sky's trees are here.
+    pub fn sky_ready(&self) -> bool {
+        matches!(self.sky, SkyBake::Ready(_))
+    }
+
+    /// True while the sky's trees are being baked.
+    pub fn sky_baking(&self) -> bool {
+        matches!(self.sky, SkyBake::Baking(_))
     }
 
     /// Vertices the camera sees (what the fetcher should bring first).
@@ -251,18 +345,27 @@ impl<'a> Session<'a> {
     pub fn frame(&mut self) -> Image {
         let light = self.light();
         let m = self.method;
+        if m.needs().sky_trees {
+            self.sky_trees();
+        }
         let state = self.states.entry(m.name()).or_insert_with(|| {
             m.prepare(&self.data, &self.settings)
                 .map_err(|e| format!("{e:#}"))
         });
         let trees = self.streamed.view();
+        let sky = match &self.sky {
+            SkyBake::Ready(b) => Some(Trees::full(&b.trees, b.header.codec())),
+            _ => None,
+        };
         let result = match state {
             Ok(s) => s
                 .frame(&FrameInput {
                     scene: &self.data,
                     renderer: &self.renderer,
-                    light: Some(&light),
+                    light: light.as_ref(),
                     trees: trees.as_ref(),
+                    sky_trees: sky.as_ref(),
+                    env_rotation_deg: self.env_rotation_deg,
                     index: 0,
                     time: self.path_t.unwrap_or(0.0) as f32,
                     mode: self.mode,
@@ -272,10 +375,16 @@ impl<'a> Session<'a> {
         };
         match result {
             Ok(f) => f.image,
-            Err(e) => {
-                tracing::warn!("{}: {e}; drawing unshadowed LTC", m.name());
-                self.renderer.ltc(&light, Mode::Pixel).0
-            }
+            Err(e) => match &light {
+                Some(light) => {
+                    tracing::warn!("{}: {e}; drawing unshadowed LTC", m.name());
+                    self.renderer.ltc(light, Mode::Pixel).0
+                }
+                None => {
+                    tracing::warn!("{}: {e}", m.name());
+                    Image::new(self.renderer.gbuffer.width, self.renderer.gbuffer.height)
+                }
+            },
         }
     }
 

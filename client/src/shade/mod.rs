@@ -11,6 +11,7 @@
 //! the baked shadows ([`bspvt`]).
 
 pub mod bspvt;
+pub mod sky;
 
 use bspvt_proto::scene::Material;
 use bspvt_proto::sphere::{self, SphPoly};

@@ -111,6 +111,13 @@ pub fn run(session: &mut Session, opts: &ViewerOptions, started: Instant) -> Res
             pose.radiance_scale = (pose.radiance_scale * (1.0 + dt)).min(1e3);
             moved_light = true;
         }
+        // The environment turns about +y (bspvt-env: the trees stay, the sky's pieces move).
+        for (k, s) in [(Key::Y, -1.0), (Key::U, 1.0)] {
+            if window.is_key_down(k) {
+                session.env_rotation_deg = (session.env_rotation_deg + s * 45.0 * dt) % 360.0;
+                moved_light = true;
+            }
+        }
         if let Some(t) = &mut session.path_t {
             *t = (*t + dt * path_speed).fract();
             moved_light = true;
@@ -126,8 +133,13 @@ pub fn run(session: &mut Session, opts: &ViewerOptions, started: Instant) -> Res
                 | Key::Key6
                 | Key::Key7
                 | Key::Key8
-                | Key::Key9 => {
-                    let i = key as usize - Key::Key1 as usize;
+                | Key::Key9
+                | Key::Key0 => {
+                    // 1–9 pick the first nine methods, 0 the tenth.
+                    let i = match key {
+                        Key::Key0 => 9,
+                        _ => key as usize - Key::Key1 as usize,
+                    };
                     if let Some(m) = METHODS.get(i) {
                         session.method = *m;
                     }
@@ -290,6 +302,19 @@ fn overlay_lines(s: &Session, fps: f64, opts: &ViewerOptions) -> Vec<String> {
     if let Some(n) = &opts.note {
         lines.push(n.clone());
     }
-    lines.push("1-9 method  M mode  WASDQE RF TG light  P path  H hide".into());
+    if s.method.needs().sky_trees {
+        lines.push(format!(
+            "sky: {} ({:.0} deg, Y/U turn)",
+            if s.sky_ready() {
+                "through its trees"
+            } else if s.sky_baking() {
+                "baking its trees, unshadowed"
+            } else {
+                "unshadowed"
+            },
+            s.env_rotation_deg
+        ));
+    }
+    lines.push("1-9,0 method  M mode  WASDQE RF TG light  Y/U sky  P path  H hide".into());
     lines
 }

@@ -82,6 +82,7 @@ pub fn scene_file(name: &str) -> Option<SceneFile> {
         asset_lights: true,
         camera: Some(s.camera),
         bake: s.bake,
+        environment: s.environment,
     })
 }
 
@@ -139,6 +140,7 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
             },
         ],
         lights: vec![light],
+        environment: None,
         camera: Camera {
             position: [3.2, 3.0, 4.2],
             target: [0.0, 0.5, 0.0],

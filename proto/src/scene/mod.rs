@@ -16,6 +16,7 @@ use crate::motion::{Motion, MovingPart, Transform};
 pub mod builtin;
 
 pub use crate::camera::Camera;
+pub use crate::environment::Environment;
 pub use crate::light::{PolygonLight, Region};
 pub use crate::material::Material;
 
@@ -261,6 +262,10 @@ pub struct SceneFile {
     /// Settings of the visibility bake.
     #[serde(default)]
     pub bake: BakeSettings,
+    /// Light from an environment map at infinity (the sky), besides or instead of the
+    /// polygonal lights.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub environment: Option<Environment>,
 }
 
 fn default_true() -> bool {
@@ -278,8 +283,11 @@ pub struct Scene {
     pub mesh: Mesh,
     /// The materials, indexed by the mesh's material ids.
     pub materials: Vec<Material>,
-    /// The polygonal lights.
+    /// The polygonal lights (none: a scene lit by its environment alone).
     pub lights: Vec<PolygonLight>,
+    /// The environment light, its path resolved (not part of the bake's identity: the
+    /// service does not store it).
+    pub environment: Option<Environment>,
     /// The camera (given or framed).
     pub camera: Camera,
     /// Settings of the visibility bake.
@@ -312,11 +320,11 @@ impl Scene {
                 self.materials.len()
             )));
         }
-        if self.lights.is_empty() {
-            return Err(SceneError::Invalid("scene has no lights".into()));
-        }
         for (i, l) in self.lights.iter().enumerate() {
             l.validate(i)?;
+        }
+        if let Some(e) = &self.environment {
+            e.validate()?;
         }
         self.camera.validate()?;
         for (i, part) in self.motion.iter().enumerate() {
@@ -344,8 +352,12 @@ impl Scene {
             .collect()
     }
 
-    /// The union of the declared light regions, or `None` when any light may go anywhere.
+    /// The union of the declared light regions, or `None` when any light may go anywhere —
+    /// and for a scene without lights, whose bake is the sky's: every direction matters.
     pub fn light_region(&self) -> Option<Vec<Aabb>> {
+        if self.lights.is_empty() {
+            return None;
+        }
         self.lights
             .iter()
             .map(|l| l.region.map(|r| r.aabb()))
@@ -388,6 +400,10 @@ impl Scene {
                 None => Ok(crate::import::load_asset(&base_dir.join(&m.path))?),
             })
             .collect::<Result<Vec<Asset>, SceneError>>()?;
+        let mut file = file;
+        if let Some(e) = &mut file.environment {
+            e.path = base_dir.join(&e.path).to_string_lossy().into_owned();
+        }
         Scene::assemble(file, parts)
     }
 
@@ -517,6 +533,7 @@ impl Scene {
             mesh,
             materials,
             lights,
+            environment: file.environment,
             camera,
             bake: file.bake,
             motion,
@@ -527,6 +544,18 @@ impl Scene {
         scene.mesh = at0;
         scene.validate()?;
         Ok(scene)
+    }
+
+    /// The scene whose bake is the visibility of the sky: the same mesh (as given: no further
+    /// refinement) without its polygonal lights, so every direction above a vertex's horizon
+    /// matters and every ray runs to infinity. Environment lighting through the trees
+    /// (`bspvt-env`) shades with this bake; the lamps keep theirs, whose rays end at the lamp.
+    pub fn sky(&self) -> Scene {
+        let mut s = self.clone();
+        s.lights.clear();
+        s.bake.refine = None;
+        s.warnings.clear();
+        s
     }
 
     /// True when some mesh moves.
@@ -548,6 +577,7 @@ impl Scene {
             mesh: self.mesh.clone(),
             materials: self.materials.clone(),
             lights: self.lights.clone(),
+            environment: self.environment.clone(),
             camera: self.camera.clone(),
             bake: self.bake.clone(),
             motion: Vec::new(),
@@ -620,6 +650,7 @@ impl Scene {
             mesh,
             materials,
             lights,
+            environment: None,
             bake,
             motion: Vec::new(),
             warnings,

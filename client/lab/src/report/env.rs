@@ -1,6 +1,7 @@
 //! Environment lighting in the report (paper 001): spherical-Gaussian shading with the
 //! screen-space SSDF, the exact (ray-cast) SSDF and no visibility, and Monte Carlo environment
-//! lighting at a few samples per pixel, all against their own ground truth — Monte Carlo with
+//! lighting at a few samples per pixel, and the map as quad lights shadowed by the baked sky
+//! trees (`bspvt-env`, for k pieces per cube-face side), all against their own ground truth — Monte Carlo with
 //! the exact GGX BRDF under the same map, shadow rays, the map importance-sampled (cached).
 
 use std::path::Path;
@@ -19,8 +20,11 @@ use crate::compare::metrics::Metrics;
 use bspvt_client::envmap::EnvLight;
 use bspvt_client::frame::image::Image;
 use bspvt_client::groundtruth::render_mc_env;
+use bspvt_client::method::trees::{cached_bake, load_checked};
 use bspvt_client::render::renderer::Renderer;
+use bspvt_client::render::renderer::{Mode, Trees};
 use bspvt_client::sg::{self, SgOptions, SsdfMode};
+use bspvt_client::sky::{DEFAULT_THRESHOLD, SkyPieces};
 
 const SEED_GT: u64 = 0x5e6e_0001;
 const SEED_MC: u64 = 0x5e6e_1000;
@@ -119,7 +123,12 @@ pub(crate) fn measure_env(
 
     let folder = format!("{stem}/env");
     let mut entries: Vec<Entry> = Vec::new();
-    let mut record = |method: &str, lobes: Option<u32>, spp: Option<u32>, ms: f64, img: &Image| {
+    let mut record = |method: &str,
+                      lobes: Option<u32>,
+                      pieces: Option<u32>,
+                      spp: Option<u32>,
+                      ms: f64,
+                      img: &Image| {
         let e = Entry {
             scene: name.to_string(),
             method: method.to_string(),
@@ -127,6 +136,7 @@ pub(crate) fn measure_env(
             face_res: None,
             epsilon: None,
             lobes,
+            pieces,
             spp,
             ms_per_frame: ms,
             metrics: Metrics::default(),
@@ -164,7 +174,7 @@ pub(crate) fn measure_env(
             let (ms, (img, _)) = median_ms(frames, || {
                 sg::render(scene, &r.view, &r.gbuffer, &lobes, Some(occ), &opts)
             })?;
-            record(method, kk, None, ms, &img)?;
+            record(method, kk, None, None, ms, &img)?;
         }
     }
     for (i, &spp) in st.env_spp.iter().enumerate() {
@@ -172,7 +182,27 @@ pub(crate) fn measure_env(
         let (ms, img) = median_ms(if spp > 4 { 1 } else { st.frames }, || {
             Ok(render_mc_env(scene, &r.view, &r.gbuffer, &env, occ, spp, seed).0)
         })?;
-        record("mc-env", None, Some(spp), ms, &img)?;
+        record("mc-env", None, None, Some(spp), ms, &img)?;
+    }
+    // The sky through the baked sky trees, per vertex, for each k (pieces per face side).
+    let sky = cached_bake(
+        &format!("{stem}-sky"),
+        &scene.sky(),
+        &cache.join("bakes"),
+        &|_, _| {},
+    )?;
+    let sky_bake = load_checked(&sky.path, &scene.sky())?;
+    let sky_trees = Trees::full(&sky_bake.trees, sky_bake.header.codec());
+    for &k in &st.env_sky_pieces {
+        let pieces = SkyPieces::new(&env, k, DEFAULT_THRESHOLD, 1.0)?.posed(0.0);
+        for mode in [Mode::Vertex, Mode::Pixel] {
+            let (ms, img) = median_ms(st.frames, || Ok(r.sky(&pieces, Some(&sky_trees), mode).0))?;
+            let method = match mode {
+                Mode::Vertex => "bspvt-env",
+                Mode::Pixel => "bspvt-env-pixel",
+            };
+            record(method, None, Some(k), None, ms, &img)?;
+        }
     }
     Ok(EnvReport {
         map: map.display().to_string(),

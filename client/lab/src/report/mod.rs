@@ -83,6 +83,8 @@ pub struct Settings {
     /// the Monte Carlo sample counts.
     pub(crate) env_map: Option<PathBuf>,
     pub(crate) env_lobes: Vec<usize>,
+    /// `bspvt-env`: pieces per cube-face side, one entry each.
+    pub(crate) env_sky_pieces: Vec<u32>,
     pub(crate) env_gt_spp: u32,
     pub(crate) env_spp: Vec<u32>,
 }
@@ -119,6 +121,7 @@ impl Settings {
             denoise_radius: 4.0,
             env_map: None,
             env_lobes: if q { vec![16] } else { vec![16, 32] },
+            env_sky_pieces: if q { vec![1, 2, 4] } else { vec![1, 2, 4, 8] },
             env_gt_spp: if q { 256 } else { 2048 },
             env_spp: if q {
                 vec![1, 4, 16]

@@ -172,7 +172,13 @@ pub(crate) fn plot(s: &SceneReport, metric: Metric, dir: &Path) -> Result<PathBu
 pub(crate) fn env_plot(s: &SceneReport, env: &EnvReport, dir: &Path) -> Result<PathBuf> {
     let of = |m: &str| -> Vec<&Entry> {
         let mut v: Vec<&Entry> = env.entries.iter().filter(|e| e.method == m).collect();
-        v.sort_by_key(|e| (e.lobes.unwrap_or(0), e.spp.unwrap_or(0)));
+        v.sort_by_key(|e| {
+            (
+                e.lobes.unwrap_or(0),
+                e.pieces.unwrap_or(0),
+                e.spp.unwrap_or(0),
+            )
+        });
         v
     };
     let series = vec![
@@ -199,6 +205,18 @@ pub(crate) fn env_plot(s: &SceneReport, env: &EnvReport, dir: &Path) -> Result<P
             colour: RGBColor(40, 80, 200),
             line: true,
             points: of("mc-env"),
+        },
+        Series {
+            name: "BSPVT sky, per vertex (k = 1, 2, 4, …)".into(),
+            colour: RGBColor(20, 150, 60),
+            line: true,
+            points: of("bspvt-env"),
+        },
+        Series {
+            name: "BSPVT sky, per pixel (k = 1, 2, 4, …)".into(),
+            colour: RGBColor(120, 40, 160),
+            line: true,
+            points: of("bspvt-env-pixel"),
         },
     ];
     let title = format!(

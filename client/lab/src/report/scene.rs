@@ -47,6 +47,9 @@ pub struct Entry {
     pub(crate) epsilon: Option<f32>,
     /// Spherical Gaussians of the environment fit (the `sg-*` methods).
     pub(crate) lobes: Option<u32>,
+    /// Pieces per cube-face side of the environment (`bspvt-env`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub(crate) pieces: Option<u32>,
     /// Samples (or shadow rays) per pixel.
     pub(crate) spp: Option<u32>,
     /// Median wall time of one frame on all threads (the G-buffer, made once per camera, and
@@ -76,6 +79,9 @@ impl Entry {
         }
         if let Some(k) = self.lobes {
             s += &format!(" K={k}");
+        }
+        if let Some(k) = self.pieces {
+            s += &format!(" k={k}");
         }
         if let Some(n) = self.spp {
             s += &format!(" {n} spp");
@@ -206,6 +212,7 @@ pub(crate) fn measure(
         face_res: None,
         epsilon: None,
         lobes: None,
+        pieces: None,
         spp: None,
         ms_per_frame: ms,
         metrics: Metrics::default(),
@@ -548,6 +555,8 @@ impl Draw<'_> {
             renderer: self.r,
             light: Some(self.light),
             trees,
+            sky_trees: None,
+            env_rotation_deg: 0.0,
             index,
             time: 0.0,
             mode,

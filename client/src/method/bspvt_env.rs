@@ -1,0 +1,96 @@
+//! The environment through the baked trees: the map cut into textured quad lights at infinity
+//! ([`crate::sky`]), each cut by the vertex's sky trees and integrated with LTC GGX
+//! [paper000 §3.1 eq. 2]; the scene's lamps, where it has any, with their own trees in the
+//! same frame. The map turns at run time: only the pieces move ([`FrameInput::env_rotation_deg`]).
+
+use anyhow::Result;
+
+use super::{Frame, FrameInput, FrameMethod, MethodState, Needs, SceneData, Settings};
+use crate::frame::image::Image;
+use crate::render::renderer::{FrameCounts, Mode, Trees};
+use crate::sky::SkyPieces;
+
+/// See the module doc.
+pub(crate) struct BspvtEnv;
+
+impl FrameMethod for BspvtEnv {
+    fn name(&self) -> &'static str {
+        "bspvt-env"
+    }
+    fn label(&self) -> &'static str {
+        "BSPVT environment"
+    }
+    fn description(&self) -> &'static str {
+        "environment map as k×k quad lights per cube face, shadowed by baked sky trees × LTC GGX, plus the scene's lamps (--env, --env-rotation, --sky-pieces)"
+    }
+    fn needs(&self) -> Needs {
+        Needs {
+            sky_trees: true,
+            env_map: true,
+            ..Needs::default()
+        }
+    }
+    fn prepare(&self, _: &SceneData, settings: &Settings) -> Result<Box<dyn MethodState>> {
+        let e = &settings.env;
+        let env = crate::envmap::EnvLight::load(&e.path)?;
+        let sky = SkyPieces::new(&env, e.pieces, e.threshold, e.strength)?;
+        Ok(Box::new(State {
+            sky,
+            rotation_deg: e.rotation_deg,
+            cached: None,
+        }))
+    }
+}
+
+struct State {
+    sky: SkyPieces,
+    rotation_deg: f64,
+    /// The last sky frame and what it was drawn for: while the map's rotation, the camera,
+    /// the materials and the sky trees stay, the sky is reused and only the lamps are
+    /// shaded (moving a lamp costs what it costs in `bspvt`).
+    cached: Option<(SkyKey, Image, FrameCounts)>,
+}
+
+#[derive(Clone, Copy, PartialEq)]
+struct SkyKey {
+    rotation: u64,
+    mode: Mode,
+    shading: u64,
+    trees: Option<(usize, usize, usize)>,
+}
+
+impl MethodState for State {
+    fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
+        let rotation = self.rotation_deg + f.env_rotation_deg;
+        let key = SkyKey {
+            rotation: rotation.to_bits(),
+            mode: f.mode,
+            shading: f.renderer.shading_key(),
+            trees: f.sky_trees.map(Trees::key),
+        };
+        let (mut image, mut counts) = match &self.cached {
+            Some((k, image, counts)) if *k == key => (image.clone(), *counts),
+            _ => {
+                let pieces = self.sky.posed(rotation);
+                let (image, counts) = f.renderer.sky(&pieces, f.sky_trees, f.mode);
+                self.cached = Some((key, image.clone(), counts));
+                (image, counts)
+            }
+        };
+        // The lamps, shadowed by their own trees (unshadowed until those arrive).
+        if let Some(light) = f.light {
+            let (lamps, c) = match f.trees {
+                Some(trees) => f.renderer.bspvt(light, trees, f.mode),
+                None => f.renderer.ltc(light, f.mode),
+            };
+            image.add(&lamps);
+            counts = FrameCounts {
+                vertices_shaded: counts.vertices_shaded.max(c.vertices_shaded),
+                pixels_shaded: counts.pixels_shaded.max(c.pixels_shaded),
+                pieces: counts.pieces + c.pieces,
+                pieces_dropped: counts.pieces_dropped + c.pieces_dropped,
+            };
+        }
+        Ok(Frame::new(image, counts))
+    }
+}

@@ -169,6 +169,12 @@ impl EnvLight {
         let d = inv * EnvLight::direction(0.5 / w as f64, 0.5);
         let u = d.z.atan2(d.x) / (2.0 * PI) + 0.5;
         let shift = (u * w as f64 - 0.5).rem_euclid(w as f64);
+        // A whole number of columns up to the rounding of atan2: exact.
+        let shift = if (shift - shift.round()).abs() < 1e-9 {
+            shift.round().rem_euclid(w as f64)
+        } else {
+            shift
+        };
         let (whole, frac) = (shift.floor() as usize, shift.fract());
         let mut pixels = Vec::with_capacity(self.pixels.len());
         for row in self.pixels.chunks_exact(w) {

@@ -18,7 +18,7 @@ use bspvt_client::envmap::EnvLight;
 use bspvt_client::frame::gbuffer::NONE;
 use bspvt_client::frame::image::Image;
 use bspvt_client::groundtruth::render_mc_env;
-use bspvt_client::method::trees::{cached_bake, load_checked};
+use bspvt_client::method::trees::cached_sky_bake;
 use bspvt_client::render::renderer::{Mode, Renderer, Trees};
 use bspvt_client::sg::{self, SgOptions, SsdfMode};
 use bspvt_client::sky::{DEFAULT_THRESHOLD, SkyPieces};
@@ -162,9 +162,8 @@ pub fn run(a: &BenchSkyArgs) -> Result<Report> {
         .with_context(|| format!("cannot create {}", a.out.display()))?;
     let frames = a.frames.max(1);
 
-    let stem = bspvt_client::method::trees::file_stem(&label);
-    let baked = cached_bake(&format!("{stem}-sky"), &scene, &a.cache, &|_, _| {})?;
-    let bake = load_checked(&baked.path, &scene)?;
+    // `scene` is already the sky's: its sky is itself.
+    let (baked, bake) = cached_sky_bake(&scene, &a.cache, &|_, _| {})?;
     let trees = Trees::full(&bake.trees, bake.header.codec());
     println!(
         "{label}: {} vertices; sky bake {} bytes{}",

@@ -145,11 +145,23 @@ pub fn bakes_for(
         None => None,
     };
     let sky = if needs.sky_trees {
-        let sky = scene.sky();
-        let c = cached_bake(&format!("{}-sky", file_stem(name)), &sky, cache, progress)?;
-        Some(load_checked(&c.path, &sky)?)
+        Some(cached_sky_bake(scene, cache, progress)?.1)
     } else {
         None
     };
     Ok((lamps, sky))
+}
+
+/// The bake of the sky of `scene` ([`bspvt_proto::Scene::sky`]) in `cache` as `sky-HASH.bspvt`
+/// (one name whoever asks: `render`, the viewer, the report and the benchmarks share it), baked
+/// first when absent; with the bake read back.
+pub fn cached_sky_bake(
+    scene: &Scene,
+    cache: &Path,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<(CachedBake, Bake)> {
+    let sky = scene.sky();
+    let c = cached_bake("sky", &sky, cache, progress)?;
+    let bake = load_checked(&c.path, &sky)?;
+    Ok((c, bake))
 }

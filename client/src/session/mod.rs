@@ -278,11 +278,11 @@ impl<'a> Session<'a> {
     fn sky_trees(&mut self) -> Option<&bspvt_proto::encoding::Bake> {
         if matches!(self.sky, SkyBake::NotStarted) {
             let (tx, rx) = std::sync::mpsc::channel();
-            let sky = self.scene.sky();
+            let scene = self.scene.clone();
             let cache = self.sky_cache.clone();
             std::thread::spawn(move || {
-                let r = crate::method::trees::cached_bake("session-sky", &sky, &cache, &|_, _| {})
-                    .and_then(|c| crate::method::trees::load_checked(&c.path, &sky))
+                let r = crate::method::trees::cached_sky_bake(&scene, &cache, &|_, _| {})
+                    .map(|(_, bake)| bake)
                     .map_err(|e| format!("{e:#}"));
                 let _ = tx.send(r);
             });

@@ -20,7 +20,7 @@ use crate::compare::metrics::Metrics;
 use bspvt_client::envmap::EnvLight;
 use bspvt_client::frame::image::Image;
 use bspvt_client::groundtruth::render_mc_env;
-use bspvt_client::method::trees::{cached_bake, load_checked};
+use bspvt_client::method::trees::cached_sky_bake;
 use bspvt_client::render::renderer::Renderer;
 use bspvt_client::render::renderer::{Mode, Trees};
 use bspvt_client::sg::{self, SgOptions, SsdfMode};
@@ -185,13 +185,7 @@ pub(crate) fn measure_env(
         record("mc-env", None, None, Some(spp), ms, &img)?;
     }
     // The sky through the baked sky trees, per vertex, for each k (pieces per face side).
-    let sky = cached_bake(
-        &format!("{stem}-sky"),
-        &scene.sky(),
-        &cache.join("bakes"),
-        &|_, _| {},
-    )?;
-    let sky_bake = load_checked(&sky.path, &scene.sky())?;
+    let (_, sky_bake) = cached_sky_bake(scene, &cache.join("bakes"), &|_, _| {})?;
     let sky_trees = Trees::full(&sky_bake.trees, sky_bake.header.codec());
     for &k in &st.env_sky_pieces {
         let pieces = SkyPieces::new(&env, k, DEFAULT_THRESHOLD, 1.0)?.posed(0.0);

@@ -167,3 +167,52 @@ fn a_full_disk_pauses_the_bake_and_freed_space_resumes_it_byte_identical() {
     assert!(srv.log_text().contains("waiting for space"));
     drop(srv);
 }
+
+/// A data folder on a read-only filesystem is refused at start with a message that says so
+/// (SQLite alone reports "disk I/O error"), and nothing in it changes.
+#[test]
+fn a_read_only_data_folder_is_refused_with_a_clear_error() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let Some(fs) = Tmpfs::mount(&tmp.path().join("disk"), "8m") else {
+        eprintln!("skipped: cannot mount a tmpfs here (needs root or passwordless sudo)");
+        return;
+    };
+    let data = fs.0.join("data");
+    drop(start(&data, &[]));
+    let before: Vec<_> = std::fs::read_dir(&data)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    let remount = |opts: &str| {
+        let ok = Command::new("mount")
+            .args(["-o", opts])
+            .arg(&fs.0)
+            .output()
+            .is_ok_and(|o| o.status.success())
+            || Command::new("sudo")
+                .args(["-n", "mount", "-o", opts])
+                .arg(&fs.0)
+                .output()
+                .is_ok_and(|o| o.status.success());
+        assert!(ok, "cannot remount {opts}");
+    };
+    remount("remount,ro");
+    let out = Command::new(BIN)
+        .args(["serve", "--addr", "127.0.0.1:0", "--data-dir"])
+        .arg(&data)
+        .output()
+        .unwrap();
+    remount("remount,rw");
+    let err = String::from_utf8_lossy(&out.stderr);
+    eprintln!("{err}");
+    assert!(!out.status.success());
+    assert!(
+        err.contains("is not writable") && err.contains(&data.display().to_string()),
+        "{err}"
+    );
+    let after: Vec<_> = std::fs::read_dir(&data)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(before, after);
+}

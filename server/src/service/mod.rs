@@ -128,6 +128,33 @@ async fn observe(State(st): State<Shared>, req: Request, next: Next) -> Response
     .await
 }
 
+/// Refuses a data folder the service cannot write (a read-only mount, no permission) with a
+/// message that says so, before SQLite reports it as a "disk I/O error". Other failures of the
+/// probe (a full disk) are left to the start-up that handles them.
+fn check_writable(dir: &std::path::Path) -> Result<()> {
+    let probe = dir.join(".write-probe");
+    match std::fs::write(&probe, b"") {
+        Ok(()) => {
+            let _ = std::fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e)
+            if matches!(
+                e.kind(),
+                std::io::ErrorKind::ReadOnlyFilesystem | std::io::ErrorKind::PermissionDenied
+            ) =>
+        {
+            anyhow::bail!(
+                "the data folder {} is not writable ({e}): the service keeps its database and \
+                 the baked chunks there. Make it writable (remount it read-write, fix its \
+                 permissions) or give another --data-dir; nothing was changed",
+                dir.display()
+            )
+        }
+        Err(_) => Ok(()),
+    }
+}
+
 /// A service that is running.
 pub(crate) struct Service {
     pub state: Shared,
@@ -142,6 +169,7 @@ impl Service {
     pub(crate) async fn open(cfg: Config) -> Result<Service> {
         std::fs::create_dir_all(&cfg.data_dir)
             .with_context(|| format!("cannot create data dir {}", cfg.data_dir.display()))?;
+        check_writable(&cfg.data_dir)?;
         // Scene folders without their database: start-up garbage collection would take them
         // all for leftovers of crashed uploads. Stop before anything is created or deleted.
         let db_path = cfg.db_path();

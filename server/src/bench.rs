@@ -16,8 +16,8 @@ use bspvt_proto::{BakeSettings, Scene, SplitMethod};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use bspvt_bake::stats::BakeStats;
 use bspvt_bake::cubemap::FacePixels;
+use bspvt_bake::stats::BakeStats;
 use bspvt_bake::{Baker, CastMode, Totals};
 
 /// `bspvt-server bench` flags.
@@ -282,7 +282,9 @@ fn print_table(rows: &[BenchRow], a: &BenchArgs, threads: usize) {
     println!(
         "| scene | vertices | cast | split | rays/vtx | BVH traversals/vtx | Mrays/s/thread | rays ms/vtx/thread | rays vs first cast | fit ms/vtx/thread | total ms/vtx/thread | fit vs NM | leaves/vtx | bytes/vtx | cast ΔV pixels | cast mean abs ΔV | mean abs ΔV (fit) | misclassified |"
     );
-    println!("|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!(
+        "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+    );
     let name = |v: serde_json::Result<serde_json::Value>| {
         v.ok()
             .and_then(|v| v.as_str().map(String::from))

@@ -168,6 +168,13 @@ impl Occluder {
             .find(|&p| self.tris[p as usize].intersect(&ray) < ray.tmax)
     }
 
+    /// Whether primitive `prim` blocks `ray` by the test the traversal applies to it (see
+    /// [`Occluder::first_blocking`]).
+    #[inline]
+    pub fn primitive_blocks(&self, prim: u32, ray: &Ray) -> bool {
+        self.tris[prim as usize].intersect(ray) < ray.tmax
+    }
+
     /// The mesh triangle index of each primitive, in this occluder's order.
     pub fn primitive_triangles(&self) -> &[u32] {
         &self.order

@@ -6,7 +6,9 @@ use glam::{Vec2, Vec3};
 use serde::Serialize;
 
 use super::frustum::{FrustumCuller, Pyramid};
+use super::walk::SurfaceWalk;
 use bspvt_raytrace::Occluder;
+use obvhs::ray::Ray;
 
 /// Ray directions shared by every vertex (the cube map is world-aligned).
 pub(crate) struct RayTable {
@@ -83,10 +85,12 @@ pub enum CastMode {
     /// The culled quadtree walk: every ray of a block that may hold geometry is answered by
     /// its candidate list or a BVH traversal.
     Full,
-    /// As `Full`, but a ray first tries the triangles that blocked its pixel's earlier
-    /// sub-rays, its left and upper neighbours and the face's last blocked ray: most occluded
-    /// rays (the costliest: an any-hit traversal through a self-occluding mesh) end at one
-    /// triangle test instead of a traversal.
+    /// As `Full`, but a ray first tries the triangles that blocked nearby rays (its pixel's
+    /// earlier sub-rays, the pixels left of and above it, the face's last blocked ray), then,
+    /// before a BVH traversal, walks the mesh from the first of them to the triangle it passes
+    /// through ([`crate::walk`]): most occluded rays (the costliest: an any-hit traversal
+    /// through a self-occluding mesh) end after a few triangle tests. A ray no such triangle
+    /// blocks is cast as in `Full`.
     #[default]
     Adaptive,
 }
@@ -228,6 +232,7 @@ impl VertexRays<'_> {
         &self,
         occ: &Occluder,
         culler: &FrustumCuller,
+        walk: &SurfaceWalk,
         table: &RayTable,
         mode: CastMode,
     ) -> ([Option<FacePixels>; FACES], CastCounts) {
@@ -255,6 +260,7 @@ impl VertexRays<'_> {
                 rays: self,
                 occ,
                 culler,
+                walk,
                 table,
                 face: f,
                 origin,
@@ -316,6 +322,7 @@ struct BlockWalk<'a> {
     rays: &'a VertexRays<'a>,
     occ: &'a Occluder,
     culler: &'a FrustumCuller,
+    walk: &'a SurfaceWalk,
     table: &'a RayTable,
     face: usize,
     origin: Vec3,
@@ -421,7 +428,9 @@ impl BlockWalk<'_> {
                     self.culler.ray_hits_any(self.origin, d, t, &list)
                 })
             } else {
-                let above = subs.iter().filter(|&&d| !self.rays.escapes_below_horizon(d));
+                let above = subs
+                    .iter()
+                    .filter(|&&d| !self.rays.escapes_below_horizon(d));
                 self.counts.traversals += above.count() as u64;
                 self.rays.escaping(subs, |d| {
                     let t_max = self.rays.t_max(self.origin, d);
@@ -444,12 +453,17 @@ impl BlockWalk<'_> {
     /// tested exactly as in the full cast.
     fn adaptive_pixel(&mut self, p: usize, subs: &[Vec3], list: Option<&[u32]>) -> u16 {
         let res = self.table.res as usize;
-        let mut hints = [NO_BLOCKER; 4];
+        let mut hints = [NO_BLOCKER; 8];
         let mut n = 0;
+        let (i, j) = (p % res, p / res);
+        // This pixel, then its left, upper, upper-left and upper-right neighbours (done before
+        // it in the walk's Z order, or not at all: then NO_BLOCKER).
         let near = [
             p,
-            if p % res > 0 { p - 1 } else { p },
-            if p >= res { p - res } else { p },
+            if i > 0 { p - 1 } else { p },
+            if j > 0 { p - res } else { p },
+            if i > 0 && j > 0 { p - res - 1 } else { p },
+            if i + 1 < res && j > 0 { p - res + 1 } else { p },
         ];
         for b in near
             .map(|q| self.blocker[q])
@@ -469,9 +483,14 @@ impl BlockWalk<'_> {
                 continue;
             }
             let t_max = self.rays.t_max(origin, d);
-            let mut hit = self
-                .occ
-                .first_blocking(&hints[..n], origin, d, t_min, t_max);
+            let ray = Ray::new(origin.into(), d.into(), t_min, t_max);
+            let mut hit = hints[..n]
+                .iter()
+                .copied()
+                .find(|&h| self.occ.primitive_blocks(h, &ray));
+            if hit.is_none() && n > 0 && list.is_none() {
+                hit = self.walk.find(self.occ, hints[0], &ray, self.rays.vertex);
+            }
             if hit.is_none() {
                 hit = match list {
                     Some(l) => self.culler.ray_first_hit(origin, d, [t_min, t_max], l),
@@ -481,13 +500,13 @@ impl BlockWalk<'_> {
                             .blocker_between(origin, d, t_min, t_max, self.rays.vertex)
                     }
                 };
-                if let Some(b) = hit
-                    && n < hints.len()
-                    && !hints[..n].contains(&b)
-                {
-                    hints[n] = b;
-                    n += 1;
-                }
+            }
+            if let Some(b) = hit
+                && n < hints.len()
+                && !hints[..n].contains(&b)
+            {
+                hints[n] = b;
+                n += 1;
             }
             match hit {
                 Some(b) => {

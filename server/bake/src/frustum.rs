@@ -10,8 +10,8 @@
 //! strictly inside the pyramid.
 
 use bspvt_proto::Mesh;
-use glam::Vec3;
 use bspvt_raytrace::Occluder;
+use glam::Vec3;
 use obvhs::{BvhBuildParams, bvh2::Bvh2, ray::Ray, rt_triangle::RtTriangle, triangle::Triangle};
 
 /// A BVH2 (obvhs) over the triangles, for pyramid queries.

@@ -19,6 +19,7 @@ pub mod fit;
 mod frustum;
 pub mod refine;
 pub mod stats;
+mod walk;
 
 use std::ops::Range;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -52,6 +53,8 @@ pub struct Baker {
     stops: Vec<LightStop>,
     occluder: Occluder,
     culler: frustum::FrustumCuller,
+    /// Mesh adjacency for the adaptive cast's walks.
+    walk: walk::SurfaceWalk,
     table: RayTable,
     /// How rays are cast (the same cube maps either way).
     cast: CastMode,
@@ -162,6 +165,7 @@ impl Baker {
         let tris = bspvt_raytrace::mesh_triangles(&mesh);
         let occluder = Occluder::new(&mesh, &tris);
         let culler = frustum::FrustumCuller::new(&mesh, &tris, &occluder);
+        let walk = walk::SurfaceWalk::new(&mesh, &occluder);
         let table = RayTable::new(settings.face_res, settings.supersampling);
         let codec = LineCodec::for_resolution(settings.face_res);
         let offset = RAY_OFFSET_SCALE * mesh.bounds().diagonal();
@@ -174,6 +178,7 @@ impl Baker {
             stops,
             occluder,
             culler,
+            walk,
             table,
             cast: CastMode::default(),
             codec,
@@ -241,7 +246,7 @@ impl Baker {
         mode: CastMode,
     ) -> ([Option<cubemap::FacePixels>; 6], CastCounts) {
         self.vertex_rays(v)
-            .cast(&self.occluder, &self.culler, &self.table, mode)
+            .cast(&self.occluder, &self.culler, &self.walk, &self.table, mode)
     }
 
     /// The cube map of vertex `v` by casting every ray of every pixel that matters against the
@@ -388,7 +393,10 @@ mod tests {
             for v in (0..n).step_by(37) {
                 let rays_brute = b.brute_force_cube_map(v);
                 let (adaptive, _) = b.cube_map_with(v, CastMode::Adaptive);
-                assert_eq!(adaptive, rays_brute, "adaptive, vertex {v} at {res}² × {ss}²");
+                assert_eq!(
+                    adaptive, rays_brute,
+                    "adaptive, vertex {v} at {res}² × {ss}²"
+                );
                 let (walk, counts) = b.cube_map_with(v, CastMode::Full);
                 let rays = counts.rays;
                 assert_eq!(walk, rays_brute, "vertex {v} at {res}² × {ss}²");

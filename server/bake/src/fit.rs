@@ -82,6 +82,8 @@ struct Cell {
     k: u16,
     /// The face point the search scores the cell at ([`Fitter::centre`]), computed once.
     at: Vec2,
+    /// Its moments: pixels w = size², w·k, w·k² (at most 256 · 64² < 2³²).
+    m: [u32; 3],
 }
 
 /// Sums over a pixel set: count, Σk, Σk².
@@ -93,13 +95,14 @@ struct Moments {
 }
 
 impl Moments {
+    /// Adds a cell's moments.
     #[inline]
-    fn add(&mut self, k: u32, w: u64) {
-        let k = k as u64;
-        self.n += w;
-        self.s1 += w * k;
-        self.s2 += w * k * k;
+    fn add_cell(&mut self, c: &Cell) {
+        self.n += c.m[0] as u64;
+        self.s1 += c.m[1] as u64;
+        self.s2 += c.m[2] as u64;
     }
+
     fn plus(self, o: Moments) -> Moments {
         Moments {
             n: self.n + o.n,
@@ -191,6 +194,23 @@ impl Fitter<'_> {
             }
             return k;
         }
+        // Most blocks of a face are uniform: one scan, stopping at the first pixel that
+        // differs, emits them without the recursion, which would find the same cell (only
+        // for power-of-two sizes: the recursion never merges a block it halves to an odd
+        // size above one).
+        let first = grid[j as usize * res + i as usize];
+        if first >= 0
+            && size.is_power_of_two()
+            && (j..j + size).all(|jj| {
+                let row = jj as usize * res;
+                grid[row + i as usize..row + (i + size) as usize]
+                    .iter()
+                    .all(|&v| v == first)
+            })
+        {
+            out.push(self.cell(i, j, size, first as u16));
+            return first;
+        }
         let mark = out.len();
         let h = size / 2;
         let mut vals = [0i32; 4];
@@ -220,12 +240,14 @@ impl Fitter<'_> {
     /// The cell `[i, i+size) × [j, j+size)` of escape count `k`.
     #[inline]
     fn cell(&self, i: u16, j: u16, size: u16, k: u16) -> Cell {
+        let w = size as u32 * size as u32;
         Cell {
             i,
             j,
             size,
             k,
             at: self.centre(i, j, size),
+            m: [w, w * k as u32, w * k as u32 * k as u32],
         }
     }
 
@@ -245,7 +267,7 @@ impl Fitter<'_> {
     fn moments(cells: &[Cell]) -> Moments {
         let mut m = Moments::default();
         for c in cells {
-            m.add(c.k as u32, (c.size as u64).pow(2));
+            m.add_cell(c);
         }
         m
     }
@@ -445,20 +467,18 @@ impl Fitter<'_> {
         }
         let n = self.codec.normal(a);
         let Scratch { hist, filled, bins } = scratch;
-        let (mut lo, mut hi) = (usize::MAX, 0);
+        let binner = self.codec.offset_bins();
         for c in cells {
             let p = c.at;
-            let bin = self.codec.offsets_below(n.x * p.x + n.y * p.y) as usize;
-            hist[bin].add(c.k as u32, (c.size as u64).pow(2));
+            let bin = binner.bin(n.x * p.x + n.y * p.y) as usize;
+            hist[bin].add_cell(c);
             filled[bin / 64] |= 1 << (bin % 64);
-            lo = lo.min(bin / 64);
-            hi = hi.max(bin / 64);
         }
         stats.cell_visits += cells.len() as u64;
         // The non-empty bins, in order, from the bitmap (cleared as it is read).
         bins.clear();
-        for w in lo..=hi {
-            let mut bits = std::mem::take(&mut filled[w]);
+        for (w, word) in filled.iter_mut().enumerate() {
+            let mut bits = std::mem::take(word);
             while bits != 0 {
                 bins.push((w * 64 + bits.trailing_zeros() as usize) as u32);
                 bits &= bits - 1;

@@ -286,7 +286,6 @@ impl VertexRays<'_> {
     }
 
     /// Every ray of every pixel that matters, against the BVH: the reference for [`Self::cast`].
-    #[cfg(test)]
     pub(crate) fn cast_brute_force(
         &self,
         occ: &Occluder,

@@ -250,9 +250,8 @@ impl Baker {
     }
 
     /// The cube map of vertex `v` by casting every ray of every pixel that matters against the
-    /// BVH, with no culling: the reference the culled walk must equal.
-    #[cfg(test)]
-    pub(crate) fn brute_force_cube_map(&self, v: u32) -> [Option<cubemap::FacePixels>; 6] {
+    /// BVH, with no culling: the reference both casts must equal (slow; for tests).
+    pub fn reference_cube_map(&self, v: u32) -> [Option<cubemap::FacePixels>; 6] {
         self.vertex_rays(v)
             .cast_brute_force(&self.occluder, &self.table)
     }
@@ -391,7 +390,7 @@ mod tests {
             let mut checked = 0;
             let mut occluded_pixels = 0;
             for v in (0..n).step_by(37) {
-                let rays_brute = b.brute_force_cube_map(v);
+                let rays_brute = b.reference_cube_map(v);
                 let (adaptive, _) = b.cube_map_with(v, CastMode::Adaptive);
                 assert_eq!(
                     adaptive, rays_brute,

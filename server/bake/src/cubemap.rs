@@ -486,7 +486,7 @@ impl BlockWalk<'_> {
             let mut hit = hints[..n]
                 .iter()
                 .copied()
-                .find(|&h| self.occ.primitive_blocks(h, &ray));
+                .find(|&h| self.occ.primitive_blocks(h, &ray) && self.walk.interior(h, origin, d));
             if hit.is_none() && n > 0 && list.is_none() {
                 hit = self.walk.find(self.occ, hints[0], &ray, self.rays.vertex);
             }

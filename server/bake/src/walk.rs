@@ -22,6 +22,14 @@ const NONE: u32 = u32::MAX;
 /// Steps a walk may take before giving up.
 const MAX_STEPS: usize = 8;
 
+/// A shortcut hit must cross the triangle at least this far inside (smallest barycentric
+/// coordinate, as seen from the ray's origin). At a hit on or near an edge the traversal can
+/// disagree with the triangle test: in the project's room (floor and walls on a dyadic grid) a
+/// pixel's ray crosses the floor exactly on a triangle's edge, which is also its leaf box's
+/// face; the triangle test counts the hit, the box test rejects the box, and the full cast
+/// sees the ray escape. Such a ray is left to the traversal, so both casts agree.
+const INTERIOR: f64 = 1e-3;
+
 /// Edge adjacency of the occluder's primitives (in its order).
 pub(crate) struct SurfaceWalk {
     /// Per primitive: its vertices and vertex indices.
@@ -63,8 +71,20 @@ impl SurfaceWalk {
         SurfaceWalk { tris, across }
     }
 
+    /// Whether the line from `o` along `d` crosses primitive `prim` at least [`INTERIOR`]
+    /// inside each of its edges (in f64 from the f32 vertices: rounding far below the margin).
+    pub(crate) fn interior(&self, prim: u32, o: Vec3, d: Vec3) -> bool {
+        let (v, _) = &self.tris[prim as usize];
+        let [a, b, c] = v.map(|p| (p - o).as_dvec3());
+        let d = d.as_dvec3();
+        let l = [d.dot(b.cross(c)), d.dot(c.cross(a)), d.dot(a.cross(b))];
+        let sum = l[0] + l[1] + l[2];
+        sum != 0.0 && l.iter().all(|&x| x / sum >= INTERIOR)
+    }
+
     /// Walks from primitive `start` toward the triangle that `ray` passes through; returns it
-    /// when it blocks the ray (the occluder's test) and does not use vertex `skip`.
+    /// when it blocks the ray (the occluder's test), [`Self::interior`]ly, and does not use
+    /// vertex `skip`.
     pub(crate) fn find(&self, occ: &Occluder, start: u32, ray: &Ray, skip: u32) -> Option<u32> {
         let o = Vec3::from(ray.origin);
         let d = Vec3::from(ray.direction);
@@ -93,7 +113,10 @@ impl SurfaceWalk {
                 .min_by(|x, y| x.1.total_cmp(y.1))
                 .unwrap_or((0, &0.0));
             if m >= 0.0 {
-                return (!idx.contains(&skip) && occ.primitive_blocks(cur, ray)).then_some(cur);
+                let blocks = !idx.contains(&skip)
+                    && occ.primitive_blocks(cur, ray)
+                    && self.interior(cur, o, d);
+                return blocks.then_some(cur);
             }
             cur = self.across[cur as usize][k];
             if cur == NONE {

@@ -89,6 +89,29 @@ fn adaptive_equals_full_and_every_ray_on_shared_meshes() {
 }
 
 #[test]
+fn adaptive_equals_full_at_every_resolution_to_128() {
+    // Every face resolution from the smallest the bake accepts to 128² (the quadtree walk's
+    // block sizes turn odd at different depths), two vertices each: one of the teapot, one of
+    // its ground.
+    let Some(first) = mesh_baker("teapot.obj", 4, 1) else {
+        return;
+    };
+    let n = first.mesh().vertex_count() as u32;
+    for res in 4..=128 {
+        let Some(b) = mesh_baker("teapot.obj", res, 1) else {
+            return;
+        };
+        for v in [n / 7, n - 5] {
+            assert_eq!(
+                b.cube_map_with(v, CastMode::Adaptive).0,
+                b.cube_map_with(v, CastMode::Full).0,
+                "teapot.obj at {res}²: vertex {v}"
+            );
+        }
+    }
+}
+
+#[test]
 fn adaptive_equals_full_with_supersampling() {
     for (res, ss) in [(8, 2), (16, 3), (24, 2)] {
         for file in MESHES {

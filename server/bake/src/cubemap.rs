@@ -464,15 +464,18 @@ impl BlockWalk<'_> {
             if i > 0 && j > 0 { p - res - 1 } else { p },
             if i + 1 < res && j > 0 { p - res + 1 } else { p },
         ];
-        for b in near
-            .map(|q| self.blocker[q])
-            .into_iter()
-            .chain([self.last_blocker])
-        {
+        for b in near.map(|q| self.blocker[q]) {
             if b != NO_BLOCKER && !hints[..n].contains(&b) {
                 hints[n] = b;
                 n += 1;
             }
+        }
+        // Walk only from a neighbour's blocker: a ray none of whose neighbours was blocked
+        // mostly escapes, and a walk from far away rarely arrives.
+        let near_hints = n;
+        if self.last_blocker != NO_BLOCKER && !hints[..n].contains(&self.last_blocker) {
+            hints[n] = self.last_blocker;
+            n += 1;
         }
         let (origin, t_min) = (self.origin, self.rays.t_min);
         let mut escaping = 0u16;
@@ -487,7 +490,7 @@ impl BlockWalk<'_> {
                 .iter()
                 .copied()
                 .find(|&h| self.occ.primitive_blocks(h, &ray) && self.walk.interior(h, origin, d));
-            if hit.is_none() && n > 0 && list.is_none() {
+            if hit.is_none() && near_hints > 0 && list.is_none() {
                 hit = self.walk.find(self.occ, hints[0], &ray, self.rays.vertex);
             }
             if hit.is_none() {

@@ -148,28 +148,11 @@ impl Occluder {
         found
     }
 
-    /// The first primitive of `prims` (as named by [`Occluder::blocker_between`]) that blocks
-    /// the ray by the test the traversal applies to it (a hit at a distance in
-    /// \[`t_min`, `t_max`)). Such a ray is occluded for [`Occluder::occluded_between`] too (the
-    /// traversal reaches every leaf whose box holds a hit), so a caller may skip the traversal.
-    #[inline]
-    pub fn first_blocking(
-        &self,
-        prims: &[u32],
-        origin: Vec3,
-        dir: Vec3,
-        t_min: f32,
-        t_max: f32,
-    ) -> Option<u32> {
-        let ray = Ray::new(origin.into(), dir.into(), t_min, t_max);
-        prims
-            .iter()
-            .copied()
-            .find(|&p| self.tris[p as usize].intersect(&ray) < ray.tmax)
-    }
-
-    /// Whether primitive `prim` blocks `ray` by the test the traversal applies to it (see
-    /// [`Occluder::first_blocking`]).
+    /// Whether primitive `prim` (as named by [`Occluder::blocker_between`]) blocks `ray` by the
+    /// test the traversal applies to it: a hit at a distance in \[`ray.tmin`, `ray.tmax`).
+    /// A ray it blocks is occluded for [`Occluder::occluded_between`] too wherever the
+    /// traversal reaches the primitive's leaf — not always at a hit exactly on an edge that is
+    /// also a leaf-box face (see docs/bake.md, "The adaptive cast").
     #[inline]
     pub fn primitive_blocks(&self, prim: u32, ray: &Ray) -> bool {
         self.tris[prim as usize].intersect(ray) < ray.tmax

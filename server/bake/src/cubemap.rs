@@ -87,10 +87,10 @@ pub enum CastMode {
     Full,
     /// As `Full`, but a ray first tries the triangles that blocked nearby rays (its pixel's
     /// earlier sub-rays, the pixels left of and above it, the face's last blocked ray), then,
-    /// before a BVH traversal, walks the mesh from the first of them to the triangle it passes
-    /// through ([`crate::walk`]): most occluded rays (the costliest: an any-hit traversal
-    /// through a self-occluding mesh) end after a few triangle tests. A ray no such triangle
-    /// blocks is cast as in `Full`.
+    /// before a BVH traversal, walks the mesh from a neighbouring pixel's blocker to the
+    /// triangle it passes through (`walk.rs`): most occluded rays (the costliest: an any-hit
+    /// traversal through a self-occluding mesh) end after a few triangle tests. Only hits well
+    /// inside a triangle's edges count; a ray no such triangle blocks is cast as in `Full`.
     #[default]
     Adaptive,
 }
@@ -443,13 +443,15 @@ impl BlockWalk<'_> {
 
     /// Escaping sub-rays of pixel `p` in the adaptive cast: each above-horizon sub-ray first
     /// tries the blockers already known near it (this pixel's, its left and upper neighbours',
-    /// the face's last), then `list` (the block's candidates, when kept) or the BVH.
+    /// the face's last), then, without a list, a walk from a neighbour's blocker, then `list`
+    /// (the block's candidates, when kept) or the BVH.
     ///
-    /// Same answer as the full cast: a blocker that hits the ray in \[t_min, t_max) is a
-    /// triangle not using the vertex (the traversal skips those) inside the block's pyramid,
-    /// so the conservative candidate list holds it and the full cast's list test finds a hit
-    /// too; without a list, the full cast's traversal reaches it. A ray no blocker stops is
-    /// tested exactly as in the full cast.
+    /// Same answer as the full cast: a blocker that hits the ray in \[t_min, t_max), well
+    /// inside its edges ([`SurfaceWalk::interior`]), is a triangle not using the vertex (the
+    /// traversal skips those) inside the block's pyramid, so the conservative candidate list
+    /// holds it and the full cast's list test finds a hit too; without a list, the full cast's
+    /// traversal reaches its leaf (the hit is inside the leaf's box, not on its face). A ray no
+    /// blocker stops is tested exactly as in the full cast.
     fn adaptive_pixel(&mut self, p: usize, subs: &[Vec3], list: Option<&[u32]>) -> u16 {
         let res = self.table.res as usize;
         let mut hints = [NO_BLOCKER; 8];

@@ -131,7 +131,11 @@ impl Occluder {
         t_max: f32,
         skip: u32,
     ) -> Option<u32> {
-        let ray = Ray::new(origin.into(), dir.into(), t_min, t_max);
+        self.blocker(Ray::new(origin.into(), dir.into(), t_min, t_max), skip)
+    }
+
+    /// [`Occluder::blocker_between`] for a ray already made (`Ray::new` divides thrice).
+    pub fn blocker(&self, ray: Ray, skip: u32) -> Option<u32> {
         let mut found = None;
         self.bvh.ray_traverse_miss(ray, |ray, id| {
             if self.indices[id].contains(&skip) {

@@ -497,11 +497,10 @@ impl BlockWalk<'_> {
             }
             if hit.is_none() {
                 hit = match list {
-                    Some(l) => self.culler.ray_first_hit(origin, d, [t_min, t_max], l),
+                    Some(l) => self.culler.ray_first_hit(&ray, l),
                     None => {
                         self.counts.traversals += 1;
-                        self.occ
-                            .blocker_between(origin, d, t_min, t_max, self.rays.vertex)
+                        self.occ.blocker(ray, self.rays.vertex)
                     }
                 };
             }

@@ -152,19 +152,12 @@ impl FrustumCuller {
             .any(|&p| self.rt[p as usize].intersect(&ray) < f32::INFINITY)
     }
 
-    /// The first primitive of the list that the ray hits between `t_min` and `t_max` (the
+    /// The first primitive of the list that `ray` hits between its `tmin` and `tmax` (the
     /// test of [`Self::ray_hits_any`]), as its primitive in the [`Occluder`].
     #[inline]
-    pub(crate) fn ray_first_hit(
-        &self,
-        origin: Vec3,
-        dir: Vec3,
-        [t_min, t_max]: [f32; 2],
-        list: &[u32],
-    ) -> Option<u32> {
-        let ray = Ray::new(origin.into(), dir.into(), t_min, t_max);
+    pub(crate) fn ray_first_hit(&self, ray: &Ray, list: &[u32]) -> Option<u32> {
         list.iter()
-            .find(|&&p| self.rt[p as usize].intersect(&ray) < f32::INFINITY)
+            .find(|&&p| self.rt[p as usize].intersect(ray) < f32::INFINITY)
             .map(|&p| self.occ_prim[p as usize])
     }
 }

@@ -1,9 +1,11 @@
 //! `bspvt-server bench`: the bake measured on real meshes.
 //!
 //! For each mesh (its default `--mesh` scene: the mesh, a ground plane, a quad light), an
-//! evenly spaced sample of vertices is ray-cast once; the same cube maps are then fitted with
-//! every split method, so the methods are compared in the same run on the same data. Rays and
-//! fit are timed separately per vertex on the worker threads.
+//! evenly spaced sample of vertices is ray-cast once per cast mode (`--casts`); each cast's
+//! cube maps are compared with the first cast's (the visibility error: pixels that differ,
+//! mean |ΔV|) and fitted with every split method, so casts and methods are compared in the
+//! same run on the same data. Rays and fit are timed separately per vertex on the worker
+//! threads.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -14,8 +16,9 @@ use bspvt_proto::{BakeSettings, Scene, SplitMethod};
 use rayon::prelude::*;
 use serde::Serialize;
 
+use bspvt_bake::cubemap::FacePixels;
 use bspvt_bake::stats::BakeStats;
-use bspvt_bake::{Baker, Totals};
+use bspvt_bake::{Baker, CastCounts, CastMode, Totals};
 
 /// `bspvt-server bench` flags.
 #[derive(clap::Args, Clone, Debug)]
@@ -50,6 +53,12 @@ pub struct BenchArgs {
         reason = "a doc comment here would become new `--help` text"
     )]
     pub epsilon: Option<f32>,
+    /// Cast modes to compare (the first is the reference of the visibility error).
+    #[arg(long, value_delimiter = ',', default_value = "full,adaptive")]
+    pub casts: Vec<String>,
+    /// Passes of each cast, interleaved; the fastest is reported (for a shared machine).
+    #[arg(long, default_value_t = 1)]
+    pub repeat: usize,
     /// Split methods to compare.
     #[arg(
         long,
@@ -75,9 +84,54 @@ pub(crate) struct BenchRow {
     pub scene_vertices: usize,
     pub sampled: usize,
     pub method: SplitMethod,
+    pub cast: CastMode,
     pub stats: BakeStats,
+    /// This cast's cube maps against the first cast's: pixels that differ, as a share of the
+    /// pixels that matter, and mean |ΔV| over them.
+    pub cast_pixels_differing: f64,
+    pub cast_mean_abs_dv: f64,
+    /// This cast's ray time over the first cast's, same run.
+    pub ray_time_vs_first_cast: f64,
     /// This method's fit time over the Nelder–Mead baseline's, same run.
     pub fit_time_vs_nelder_mead: Option<f64>,
+}
+
+fn parse_cast(s: &str) -> Result<CastMode> {
+    match s {
+        "full" => Ok(CastMode::Full),
+        "adaptive" => Ok(CastMode::Adaptive),
+        _ => anyhow::bail!("unknown cast mode {s:?} (full, adaptive)"),
+    }
+}
+
+type CubeMap = [Option<FacePixels>; 6];
+
+/// Pixels that differ between two casts of the same vertices, the pixels compared, and
+/// Σ |ΔV| over them.
+fn cast_difference(a: &[CubeMap], b: &[CubeMap], samples: u32) -> (u64, u64, f64) {
+    let (mut differ, mut pixels, mut dv) = (0u64, 0u64, 0.0f64);
+    for (fa, fb) in a.iter().flatten().zip(b.iter().flatten()) {
+        match (fa, fb) {
+            (Some(pa), Some(pb)) if pa.index == pb.index => {
+                pixels += pa.index.len() as u64;
+                for (&ka, &kb) in pa.visible.iter().zip(&pb.visible) {
+                    if ka != kb {
+                        differ += 1;
+                        dv += (ka as f64 - kb as f64).abs() / samples as f64;
+                    }
+                }
+            }
+            (None, None) => {}
+            // The pixels that matter do not depend on the cast; count a mismatch as all wrong.
+            (x, y) => {
+                let n = x.as_ref().or(y.as_ref()).map_or(0, |p| p.index.len()) as u64;
+                pixels += n;
+                differ += n;
+                dv += n as f64;
+            }
+        }
+    }
+    (differ, pixels, dv)
 }
 
 fn parse_method(s: &str) -> Result<SplitMethod> {
@@ -93,6 +147,12 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         .iter()
         .map(|m| parse_method(m))
         .collect::<Result<_>>()?;
+    let casts: Vec<CastMode> = a
+        .casts
+        .iter()
+        .map(|c| parse_cast(c))
+        .collect::<Result<_>>()?;
+    anyhow::ensure!(!casts.is_empty(), "--casts names no cast mode");
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))
         .build()?;
@@ -134,60 +194,98 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         let k = a.vertices.min(n).max(1);
         let sample: Vec<u32> = (0..k).map(|i| (i * n / k) as u32).collect();
         eprintln!("{name}: {n} vertices, BVH {bvh_s:.2} s, casting {k} vertices …");
-        let maps: Vec<_> = pool.install(|| {
-            sample
-                .par_iter()
-                .map(|&v| {
-                    let t = Instant::now();
-                    let (faces, rays) = baker.cube_map(v);
-                    (faces, rays, t.elapsed().as_secs_f64())
-                })
-                .collect()
-        });
-        let mut nm_fit = None;
-        for &method in &methods {
-            let fits: Vec<_> = pool.install(|| {
-                maps.par_iter()
-                    .map(|(faces, _, _)| {
+        // Each cast `--repeat` times, the casts interleaved; the fastest pass of each is kept
+        // (the cube maps are the same every pass), so load from other processes on a shared
+        // machine weighs on both casts alike.
+        let cast_pass = |cast: CastMode| -> Vec<(CubeMap, CastCounts, f64)> {
+            pool.install(|| {
+                sample
+                    .par_iter()
+                    .map(|&v| {
                         let t = Instant::now();
-                        let (trees, st) = baker.fit_faces(faces, method);
-                        (trees, st, t.elapsed().as_secs_f64())
+                        let (faces, counts) = baker.cube_map_with(v, cast);
+                        (faces, counts, t.elapsed().as_secs_f64())
                     })
                     .collect()
-            });
-            let mut totals = Totals::default();
-            let mut trees = Vec::with_capacity(fits.len());
-            for ((_, rays, rs), (tr, st, fs)) in maps.iter().zip(fits) {
-                totals += Totals {
-                    vertices: 1,
-                    rays: *rays,
-                    ray_seconds: *rs,
-                    fit_seconds: fs,
-                    fit: st,
-                    bytes: 0,
-                };
-                trees.push(tr);
+            })
+        };
+        let pass_seconds = |m: &[(CubeMap, CastCounts, f64)]| m.iter().map(|x| x.2).sum::<f64>();
+        let mut passes: Vec<Option<Vec<(CubeMap, CastCounts, f64)>>> = vec![None; casts.len()];
+        for _ in 0..a.repeat.max(1) {
+            for (slot, &cast) in passes.iter_mut().zip(&casts) {
+                let m = cast_pass(cast);
+                if slot
+                    .as_ref()
+                    .is_none_or(|best| pass_seconds(&m) < pass_seconds(best))
+                {
+                    *slot = Some(m);
+                }
             }
-            let bytes: u64 = trees
-                .chunks(scene.bake.chunk_vertices as usize)
-                .map(|c| encode_chunk(0, c, baker.codec()).len() as u64)
-                .sum();
-            let mut stats = BakeStats::from_totals(&totals, bytes, threads);
-            stats.face_res = scene.bake.face_res;
-            stats.epsilon = scene.bake.epsilon;
-            stats.supersampling = scene.bake.supersampling;
-            stats.split = method;
-            if method == SplitMethod::NelderMead {
-                nm_fit = Some(stats.fit_thread_seconds_per_vertex);
+        }
+        let mut first: Option<(Vec<CubeMap>, f64)> = None;
+        for (maps, &cast) in passes.into_iter().flatten().zip(&casts) {
+            let faces: Vec<CubeMap> = maps.iter().map(|m| m.0.clone()).collect();
+            let ray_s: f64 = maps.iter().map(|m| m.2).sum();
+            let (differ, pixels, dv) = match &first {
+                Some((f, _)) => cast_difference(f, &faces, scene.bake.supersampling.pow(2)),
+                None => (0, 1, 0.0),
+            };
+            let ray_vs_first = first.as_ref().map_or(1.0, |f| ray_s / f.1);
+            let mut nm_fit = None;
+            for &method in &methods {
+                let fits: Vec<_> = pool.install(|| {
+                    maps.par_iter()
+                        .map(|(faces, _, _)| {
+                            let t = Instant::now();
+                            let (trees, st) = baker.fit_faces(faces, method);
+                            (trees, st, t.elapsed().as_secs_f64())
+                        })
+                        .collect()
+                });
+                let mut totals = Totals::default();
+                let mut trees = Vec::with_capacity(fits.len());
+                for ((_, counts, rs), (tr, st, fs)) in maps.iter().zip(fits) {
+                    totals += Totals {
+                        vertices: 1,
+                        rays: counts.rays,
+                        traversals: counts.traversals,
+                        ray_seconds: *rs,
+                        fit_seconds: fs,
+                        fit: st,
+                        bytes: 0,
+                    };
+                    trees.push(tr);
+                }
+                let bytes: u64 = trees
+                    .chunks(scene.bake.chunk_vertices as usize)
+                    .map(|c| encode_chunk(0, c, baker.codec()).len() as u64)
+                    .sum();
+                let mut stats = BakeStats::from_totals(&totals, bytes, threads);
+                stats.face_res = scene.bake.face_res;
+                stats.epsilon = scene.bake.epsilon;
+                stats.supersampling = scene.bake.supersampling;
+                stats.split = method;
+                stats.cast = cast;
+                if method == SplitMethod::NelderMead {
+                    nm_fit = Some(stats.fit_thread_seconds_per_vertex);
+                }
+                rows.push(BenchRow {
+                    scene: name.clone(),
+                    scene_vertices: n,
+                    sampled: k,
+                    method,
+                    cast,
+                    fit_time_vs_nelder_mead: nm_fit
+                        .map(|b| stats.fit_thread_seconds_per_vertex / b),
+                    stats,
+                    cast_pixels_differing: differ as f64 / pixels.max(1) as f64,
+                    cast_mean_abs_dv: dv / pixels.max(1) as f64,
+                    ray_time_vs_first_cast: ray_vs_first,
+                });
             }
-            rows.push(BenchRow {
-                scene: name.clone(),
-                scene_vertices: n,
-                sampled: k,
-                method,
-                fit_time_vs_nelder_mead: nm_fit.map(|b| stats.fit_thread_seconds_per_vertex / b),
-                stats,
-            });
+            if first.is_none() {
+                first = Some((faces, ray_s));
+            }
         }
     }
     print_table(&rows, a, threads);
@@ -203,20 +301,29 @@ fn print_table(rows: &[BenchRow], a: &BenchArgs, threads: usize) {
         a.face_res, threads, a.vertices
     );
     println!(
-        "| scene | vertices | split | rays ms/vtx/thread | fit ms/vtx/thread | total ms/vtx/thread | fit vs NM | leaves/vtx | bytes/vtx | mean abs ΔV | misclassified |"
+        "| scene | vertices | cast | split | rays/vtx | BVH traversals/vtx | Mrays/s/thread | rays ms/vtx/thread | rays vs first cast | fit ms/vtx/thread | total ms/vtx/thread | fit vs NM | leaves/vtx | bytes/vtx | cast ΔV pixels | cast mean abs ΔV | mean abs ΔV (fit) | misclassified |"
     );
-    println!("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!(
+        "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+    );
+    let name = |v: serde_json::Result<serde_json::Value>| {
+        v.ok()
+            .and_then(|v| v.as_str().map(String::from))
+            .unwrap_or_default()
+    };
     for r in rows {
         let s = &r.stats;
         println!(
-            "| {} | {} | {} | {:.3} | {:.3} | {:.3} | {} | {:.1} | {:.1} | {:.5} | {:.5} |",
+            "| {} | {} | {} | {} | {:.0} | {:.0} | {:.2} | {:.3} | {:.3}× | {:.3} | {:.3} | {} | {:.1} | {:.1} | {:.2e} | {:.2e} | {:.5} | {:.5} |",
             r.scene,
             r.scene_vertices,
-            serde_json::to_value(r.method)
-                .ok()
-                .and_then(|v| v.as_str().map(String::from))
-                .unwrap_or_default(),
+            name(serde_json::to_value(r.cast)),
+            name(serde_json::to_value(r.method)),
+            s.rays_per_vertex,
+            s.traversals_per_vertex,
+            s.rays_per_thread_second * 1e-6,
             s.ray_thread_seconds_per_vertex * 1e3,
+            r.ray_time_vs_first_cast,
             s.fit_thread_seconds_per_vertex * 1e3,
             s.thread_seconds_per_vertex * 1e3,
             r.fit_time_vs_nelder_mead
@@ -224,6 +331,8 @@ fn print_table(rows: &[BenchRow], a: &BenchArgs, threads: usize) {
                 .unwrap_or_else(|| "–".into()),
             s.leaves_per_vertex,
             s.bytes_per_vertex,
+            r.cast_pixels_differing,
+            r.cast_mean_abs_dv,
             s.mean_abs_visibility_error,
             s.misclassified_pixel_fraction,
         );

@@ -4,8 +4,8 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
 use anyhow::{Context, Result};
-use bspvt_bake::Baker;
 use bspvt_bake::stats::BakeStats;
+use bspvt_bake::{Baker, CastMode};
 use bspvt_proto::SplitMethod;
 use bspvt_proto::scene::open_scene;
 use bspvt_server::bench::{self, BenchArgs};
@@ -27,6 +27,14 @@ enum Command {
     Bench(BenchArgs),
     /// Run the HTTP baking service (docs/service.md).
     Serve(Box<bspvt_server::service::ServeArgs>),
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum CastArg {
+    /// Nearby rays' blockers and a walk over the mesh answer most occluded rays.
+    Adaptive,
+    /// Every ray the culling leaves is answered by its candidate list or a BVH traversal.
+    Full,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -54,6 +62,9 @@ struct BakeArgs {
     supersampling: Option<u32>,
     #[arg(long, value_enum)]
     split: Option<SplitArg>,
+    /// How rays are cast (the same cube maps and bytes either way; docs/bake.md).
+    #[arg(long, value_enum, default_value = "adaptive")]
+    cast: CastArg,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -114,7 +125,11 @@ fn bake(a: BakeArgs) -> Result<()> {
         .build()
         .context("cannot start the worker threads")?;
     let threads = pool.current_num_threads();
-    let baker = Baker::new(&scene);
+    let mut baker = Baker::new(&scene);
+    baker.set_cast(match a.cast {
+        CastArg::Adaptive => CastMode::Adaptive,
+        CastArg::Full => CastMode::Full,
+    });
     let n = baker.header().vertex_count as u64;
     eprintln!(
         "baking {n} vertices, {} triangles, {}² faces, ε = {}, {} thread(s)",

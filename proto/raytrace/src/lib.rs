@@ -27,6 +27,8 @@ pub struct Occluder {
     tris: Vec<RtTriangle>,
     /// Vertex indices of each triangle, in BVH primitive order.
     indices: Vec<[u32; 3]>,
+    /// Mesh triangle index of each triangle, in BVH primitive order.
+    order: Vec<u32>,
 }
 
 /// The mesh's triangles as obvhs primitives, in mesh order.
@@ -81,6 +83,7 @@ impl Occluder {
             bvh,
             tris: rt,
             indices,
+            order: order.iter().map(|&i| i as u32).collect(),
         }
     }
 
@@ -116,6 +119,52 @@ impl Occluder {
                 self.tris[id].intersect(ray)
             }
         })
+    }
+
+    /// [`Occluder::occluded_between`], naming the primitive (in this occluder's order) whose
+    /// hit ended the any-hit traversal, or `None` when nothing blocks the ray.
+    pub fn blocker_between(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        skip: u32,
+    ) -> Option<u32> {
+        self.blocker(Ray::new(origin.into(), dir.into(), t_min, t_max), skip)
+    }
+
+    /// [`Occluder::blocker_between`] for a ray already made (`Ray::new` divides thrice).
+    pub fn blocker(&self, ray: Ray, skip: u32) -> Option<u32> {
+        let mut found = None;
+        self.bvh.ray_traverse_miss(ray, |ray, id| {
+            if self.indices[id].contains(&skip) {
+                return f32::INFINITY;
+            }
+            let t = self.tris[id].intersect(ray);
+            // The traversal's own acceptance test (`t < ray.tmax`), so the primitive named
+            // is the one that ended it.
+            if t < ray.tmax {
+                found = Some(id as u32);
+            }
+            t
+        });
+        found
+    }
+
+    /// Whether primitive `prim` (as named by [`Occluder::blocker_between`]) blocks `ray` by the
+    /// test the traversal applies to it: a hit at a distance in \[`ray.tmin`, `ray.tmax`).
+    /// A ray it blocks is occluded for [`Occluder::occluded_between`] too wherever the
+    /// traversal reaches the primitive's leaf — not always at a hit exactly on an edge that is
+    /// also a leaf-box face (see docs/bake.md, "The adaptive cast").
+    #[inline]
+    pub fn primitive_blocks(&self, prim: u32, ray: &Ray) -> bool {
+        self.tris[prim as usize].intersect(ray) < ray.tmax
+    }
+
+    /// The mesh triangle index of each primitive, in this occluder's order.
+    pub fn primitive_triangles(&self) -> &[u32] {
+        &self.order
     }
 
     /// True when the segment from `origin` along unit `dir` up to distance `t_max` hits any

@@ -11,6 +11,24 @@ use glam::{DVec3, Vec2};
 
 use crate::cubemap::FaceFrame;
 
+/// [`LineCodec::offsets_below`], its constants taken once.
+#[derive(Clone, Copy, Debug)]
+pub struct OffsetBins {
+    scale: f32,
+    offsets: f32,
+    max: u32,
+}
+
+impl OffsetBins {
+    /// Number of offsets `o` with `c(o) ≤ t`, clamped to [0, O] ([`LineCodec::offsets_below`]).
+    #[inline]
+    pub fn bin(&self, t: f32) -> u32 {
+        let k = (t * self.scale + self.offsets - 1.0) * 0.5 + 1.0;
+        // Truncation is floor for k > 0; k ≤ 0 (and NaN) gives 0.
+        if k > 0.0 { (k as u32).min(self.max) } else { 0 }
+    }
+}
+
 /// A quantised line: indices into the codec's angle and offset tables.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct QLine {
@@ -92,12 +110,16 @@ impl LineCodec {
     /// is always recomputed with [`Self::side`].
     #[inline]
     pub fn offsets_below(&self, t: f32) -> u32 {
-        let k = (t * self.inv_half_step + self.offsets() as f32 - 1.0) * 0.5 + 1.0;
-        // Truncation is floor for k > 0; k ≤ 0 (and NaN) gives 0.
-        if k > 0.0 {
-            (k as u32).min(self.offsets())
-        } else {
-            0
+        self.offset_bins().bin(t)
+    }
+
+    /// [`Self::offsets_below`] with its constants read once, for loops over many points.
+    #[inline]
+    pub fn offset_bins(&self) -> OffsetBins {
+        OffsetBins {
+            scale: self.inv_half_step,
+            offsets: self.offsets() as f32,
+            max: self.offsets(),
         }
     }
 

@@ -3,9 +3,12 @@
 use bspvt_proto::Aabb;
 use bspvt_proto::cubemap::{FACES, FaceFrame, pixel_centres};
 use glam::{Vec2, Vec3};
+use serde::Serialize;
 
 use super::frustum::{FrustumCuller, Pyramid};
+use super::walk::SurfaceWalk;
 use bspvt_raytrace::Occluder;
+use obvhs::ray::Ray;
 
 /// Ray directions shared by every vertex (the cube map is world-aligned).
 pub(crate) struct RayTable {
@@ -72,6 +75,41 @@ pub struct FacePixels {
     pub index: Vec<u32>,
     /// Escaping rays of each pixel: V(p) = visible / samples [paper000 §3.1].
     pub visible: Vec<u16>,
+}
+
+/// How a vertex's rays are cast. Both give the same cube map, bit for bit (tested against
+/// casting every ray on the shared meshes); `Adaptive` is cheaper.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CastMode {
+    /// The culled quadtree walk: every ray of a block that may hold geometry is answered by
+    /// its candidate list or a BVH traversal.
+    Full,
+    /// As `Full`, but a ray first tries the triangles that blocked nearby rays (its pixel's
+    /// earlier sub-rays, the pixels left of and above it, the face's last blocked ray), then,
+    /// before a BVH traversal, walks the mesh from a neighbouring pixel's blocker to the
+    /// triangle it passes through (`walk.rs`): most occluded rays (the costliest: an any-hit
+    /// traversal through a self-occluding mesh) end after a few triangle tests. Only hits well
+    /// inside a triangle's edges count; a ray no such triangle blocks is cast as in `Full`.
+    #[default]
+    Adaptive,
+}
+
+/// What casting one vertex's cube map cost.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CastCounts {
+    /// Rays tested against geometry (a BVH traversal, a candidate list or a neighbour's
+    /// blocker); rays answered by culling alone are not counted.
+    pub rays: u64,
+    /// Rays that traversed the BVH.
+    pub traversals: u64,
+}
+
+impl std::ops::AddAssign for CastCounts {
+    fn add_assign(&mut self, o: CastCounts) {
+        self.rays += o.rays;
+        self.traversals += o.traversals;
+    }
 }
 
 /// Where a visibility ray ends: at the light it looks for. V(p, ω) = 1 when the ray from p
@@ -181,23 +219,31 @@ impl VertexRays<'_> {
     }
 
     /// Casts the rays of every pixel that matters; returns per-face pixel sets (`None` for
-    /// faces with none) and the number of rays cast against the BVH or a candidate list.
+    /// faces with none) and what it cost.
     ///
     /// Each face is walked as a quadtree of pixel blocks carrying a list of the triangles that
     /// may lie in the block's pyramid ([`FrustumCuller`]): a block with an empty list is
     /// visible without casting; a small block with a short list tests its rays against that
     /// list; otherwise rays traverse the BVH. Every path gives what casting every ray against
-    /// the whole mesh gives (the lists are conservative).
+    /// the whole mesh gives (the lists are conservative); [`CastMode::Adaptive`] only answers
+    /// some occluded rays by a triangle known to block them, which the full cast would find
+    /// blocking too.
     pub(crate) fn cast(
         &self,
         occ: &Occluder,
         culler: &FrustumCuller,
+        walk: &SurfaceWalk,
         table: &RayTable,
-    ) -> ([Option<FacePixels>; FACES], u64) {
+        mode: CastMode,
+    ) -> ([Option<FacePixels>; FACES], CastCounts) {
         let origin = self.position + self.normal * self.offset;
         let res = table.res as usize;
-        let mut rays = 0u64;
+        let mut counts = CastCounts::default();
         let mut matters = vec![false; res * res];
+        let mut blocker = match mode {
+            CastMode::Full => Vec::new(),
+            CastMode::Adaptive => vec![NO_BLOCKER; res * res],
+        };
         let mut stack = Vec::new();
         let faces = std::array::from_fn(|f| {
             let mut any = false;
@@ -208,21 +254,25 @@ impl VertexRays<'_> {
             if !any {
                 return None;
             }
+            blocker.fill(NO_BLOCKER);
             let mut vis = vec![0u16; res * res];
             let mut walk = BlockWalk {
                 rays: self,
                 occ,
                 culler,
+                walk,
                 table,
                 face: f,
                 origin,
                 matters: &matters,
                 vis: &mut vis,
                 stack: &mut stack,
-                rays_cast: 0,
+                blocker: &mut blocker,
+                last_blocker: NO_BLOCKER,
+                counts: CastCounts::default(),
             };
             walk.block(0, 0, res as u32, None);
-            rays += walk.rays_cast;
+            counts += walk.counts;
             let mut px = FacePixels::default();
             for (p, &m) in matters.iter().enumerate() {
                 if m {
@@ -232,11 +282,10 @@ impl VertexRays<'_> {
             }
             Some(px)
         });
-        (faces, rays)
+        (faces, counts)
     }
 
     /// Every ray of every pixel that matters, against the BVH: the reference for [`Self::cast`].
-    #[cfg(test)]
     pub(crate) fn cast_brute_force(
         &self,
         occ: &Occluder,
@@ -272,14 +321,23 @@ struct BlockWalk<'a> {
     rays: &'a VertexRays<'a>,
     occ: &'a Occluder,
     culler: &'a FrustumCuller,
+    walk: &'a SurfaceWalk,
     table: &'a RayTable,
     face: usize,
     origin: Vec3,
     matters: &'a [bool],
     vis: &'a mut [u16],
     stack: &'a mut Vec<u32>,
-    rays_cast: u64,
+    /// Adaptive cast: per pixel of the face, the occluder primitive that blocked one of its
+    /// rays ([`NO_BLOCKER`]: none yet); empty for the full cast.
+    blocker: &'a mut [u32],
+    /// Adaptive cast: the primitive that blocked the face's last blocked ray.
+    last_blocker: u32,
+    counts: CastCounts,
 }
+
+/// No blocker recorded.
+const NO_BLOCKER: u32 = u32::MAX;
 
 impl BlockWalk<'_> {
     fn pixels(&self, i0: u32, j0: u32, size: u32) -> impl Iterator<Item = usize> + use<> {
@@ -359,14 +417,20 @@ impl BlockWalk<'_> {
             if !self.matters[p] {
                 continue;
             }
-            self.rays_cast += s as u64;
+            self.counts.rays += s as u64;
             let subs = &self.table.sub[f][p * s..(p + 1) * s];
-            self.vis[p] = if kept {
+            self.vis[p] = if !self.blocker.is_empty() {
+                self.adaptive_pixel(p, subs, kept.then_some(list.as_slice()))
+            } else if kept {
                 self.rays.escaping(subs, |d| {
                     let t = [self.rays.t_min, self.rays.t_max(self.origin, d)];
                     self.culler.ray_hits_any(self.origin, d, t, &list)
                 })
             } else {
+                let above = subs
+                    .iter()
+                    .filter(|&&d| !self.rays.escapes_below_horizon(d));
+                self.counts.traversals += above.count() as u64;
                 self.rays.escaping(subs, |d| {
                     let t_max = self.rays.t_max(self.origin, d);
                     let t_min = self.rays.t_min;
@@ -375,6 +439,87 @@ impl BlockWalk<'_> {
                 })
             };
         }
+    }
+
+    /// Escaping sub-rays of pixel `p` in the adaptive cast: each above-horizon sub-ray first
+    /// tries the blockers already known near it (this pixel's, its left and upper neighbours',
+    /// the face's last), then, without a list, a walk from a neighbour's blocker, then `list`
+    /// (the block's candidates, when kept) or the BVH.
+    ///
+    /// Same answer as the full cast: a blocker that hits the ray in \[t_min, t_max), well
+    /// inside its edges ([`SurfaceWalk::interior`]), is a triangle not using the vertex (the
+    /// traversal skips those) inside the block's pyramid, so the conservative candidate list
+    /// holds it and the full cast's list test finds a hit too; without a list, the full cast's
+    /// traversal reaches its leaf (the hit is inside the leaf's box, not on its face). A ray no
+    /// blocker stops is tested exactly as in the full cast.
+    fn adaptive_pixel(&mut self, p: usize, subs: &[Vec3], list: Option<&[u32]>) -> u16 {
+        let res = self.table.res as usize;
+        let mut hints = [NO_BLOCKER; 8];
+        let mut n = 0;
+        let (i, j) = (p % res, p / res);
+        // This pixel, then its left, upper, upper-left and upper-right neighbours (done before
+        // it in the walk's Z order, or not at all: then NO_BLOCKER).
+        let near = [
+            p,
+            if i > 0 { p - 1 } else { p },
+            if j > 0 { p - res } else { p },
+            if i > 0 && j > 0 { p - res - 1 } else { p },
+            if i + 1 < res && j > 0 { p - res + 1 } else { p },
+        ];
+        for b in near.map(|q| self.blocker[q]) {
+            if b != NO_BLOCKER && !hints[..n].contains(&b) {
+                hints[n] = b;
+                n += 1;
+            }
+        }
+        // Walk only from a neighbour's blocker: a ray none of whose neighbours was blocked
+        // mostly escapes, and a walk from far away rarely arrives.
+        let near_hints = n;
+        if self.last_blocker != NO_BLOCKER && !hints[..n].contains(&self.last_blocker) {
+            hints[n] = self.last_blocker;
+            n += 1;
+        }
+        let (origin, t_min) = (self.origin, self.rays.t_min);
+        let mut escaping = 0u16;
+        for &d in subs {
+            if self.rays.escapes_below_horizon(d) {
+                escaping += 1;
+                continue;
+            }
+            let t_max = self.rays.t_max(origin, d);
+            let ray = Ray::new(origin.into(), d.into(), t_min, t_max);
+            let mut hit = hints[..n]
+                .iter()
+                .copied()
+                .find(|&h| self.occ.primitive_blocks(h, &ray) && self.walk.interior(h, origin, d));
+            if hit.is_none() && near_hints > 0 && list.is_none() {
+                hit = self.walk.find(self.occ, hints[0], &ray, self.rays.vertex);
+            }
+            if hit.is_none() {
+                hit = match list {
+                    Some(l) => self.culler.ray_first_hit(&ray, l),
+                    None => {
+                        self.counts.traversals += 1;
+                        self.occ.blocker(ray, self.rays.vertex)
+                    }
+                };
+            }
+            if let Some(b) = hit
+                && n < hints.len()
+                && !hints[..n].contains(&b)
+            {
+                hints[n] = b;
+                n += 1;
+            }
+            match hit {
+                Some(b) => {
+                    self.blocker[p] = b;
+                    self.last_blocker = b;
+                }
+                None => escaping += 1,
+            }
+        }
+        escaping
     }
 }
 

@@ -80,6 +80,10 @@ struct Cell {
     j: u16,
     size: u16,
     k: u16,
+    /// The face point the search scores the cell at ([`Fitter::centre`]), computed once.
+    at: Vec2,
+    /// Its moments: pixels w = size², w·k, w·k² (at most 256 · 64² < 2³²).
+    m: [u32; 3],
 }
 
 /// Sums over a pixel set: count, Σk, Σk².
@@ -91,13 +95,14 @@ struct Moments {
 }
 
 impl Moments {
+    /// Adds a cell's moments.
     #[inline]
-    fn add(&mut self, k: u32, w: u64) {
-        let k = k as u64;
-        self.n += w;
-        self.s1 += w * k;
-        self.s2 += w * k * k;
+    fn add_cell(&mut self, c: &Cell) {
+        self.n += c.m[0] as u64;
+        self.s1 += c.m[1] as u64;
+        self.s2 += c.m[2] as u64;
     }
+
     fn plus(self, o: Moments) -> Moments {
         Moments {
             n: self.n + o.n,
@@ -136,8 +141,8 @@ impl Fitter<'_> {
         let cells = self.cells(index, visible);
         let mut nodes = Vec::new();
         let mut stats = FitStats::default();
-        let mut hist = vec![Moments::default(); self.codec.offsets() as usize + 1];
-        self.build(cells, 0, &mut nodes, &mut stats, &mut hist);
+        let mut scratch = Scratch::new(self.codec);
+        self.build(cells, 0, &mut nodes, &mut stats, &mut scratch);
         (FaceTree { nodes }, stats)
     }
 
@@ -149,11 +154,8 @@ impl Fitter<'_> {
             return index
                 .iter()
                 .zip(visible)
-                .map(|(&p, &k)| Cell {
-                    i: (p as usize % res) as u16,
-                    j: (p as usize / res) as u16,
-                    size: 1,
-                    k,
+                .map(|(&p, &k)| {
+                    self.cell((p as usize % res) as u16, (p as usize / res) as u16, 1, k)
                 })
                 .collect();
         }
@@ -188,14 +190,26 @@ impl Fitter<'_> {
         if size == 1 {
             let k = grid[j as usize * res + i as usize];
             if k >= 0 {
-                out.push(Cell {
-                    i,
-                    j,
-                    size,
-                    k: k as u16,
-                });
+                out.push(self.cell(i, j, size, k as u16));
             }
             return k;
+        }
+        // Most blocks of a face are uniform: one scan, stopping at the first pixel that
+        // differs, emits them without the recursion, which would find the same cell (only
+        // for power-of-two sizes: the recursion never merges a block it halves to an odd
+        // size above one).
+        let first = grid[j as usize * res + i as usize];
+        if first >= 0
+            && size.is_power_of_two()
+            && (j..j + size).all(|jj| {
+                let row = jj as usize * res;
+                grid[row + i as usize..row + (i + size) as usize]
+                    .iter()
+                    .all(|&v| v == first)
+            })
+        {
+            out.push(self.cell(i, j, size, first as u16));
+            return first;
         }
         let mark = out.len();
         let h = size / 2;
@@ -216,34 +230,44 @@ impl Fitter<'_> {
         let uniform = vals[0] >= 0 && vals.iter().all(|&v| v == vals[0]);
         if uniform {
             out.truncate(mark);
-            out.push(Cell {
-                i,
-                j,
-                size,
-                k: vals[0] as u16,
-            });
+            out.push(self.cell(i, j, size, vals[0] as u16));
             vals[0]
         } else {
             -1
         }
     }
 
+    /// The cell `[i, i+size) × [j, j+size)` of escape count `k`.
     #[inline]
-    fn centre(&self, c: &Cell) -> Vec2 {
-        if c.size == 1 {
-            return self.uv[c.j as usize * self.res as usize + c.i as usize];
+    fn cell(&self, i: u16, j: u16, size: u16, k: u16) -> Cell {
+        let w = size as u32 * size as u32;
+        Cell {
+            i,
+            j,
+            size,
+            k,
+            at: self.centre(i, j, size),
+            m: [w, w * k as u32, w * k as u32 * k as u32],
+        }
+    }
+
+    /// Where a cell is scored: its pixel's centre, or the block's centre.
+    #[inline]
+    fn centre(&self, i: u16, j: u16, size: u16) -> Vec2 {
+        if size == 1 {
+            return self.uv[j as usize * self.res as usize + i as usize];
         }
         let r = self.res as f32;
         Vec2::new(
-            (2 * c.i + c.size) as f32 / r - 1.0,
-            (2 * c.j + c.size) as f32 / r - 1.0,
+            (2 * i + size) as f32 / r - 1.0,
+            (2 * j + size) as f32 / r - 1.0,
         )
     }
 
     fn moments(cells: &[Cell]) -> Moments {
         let mut m = Moments::default();
         for c in cells {
-            m.add(c.k as u32, (c.size as u64).pow(2));
+            m.add_cell(c);
         }
         m
     }
@@ -254,7 +278,7 @@ impl Fitter<'_> {
         depth: usize,
         nodes: &mut Vec<Node>,
         stats: &mut FitStats,
-        hist: &mut [Moments],
+        scratch: &mut Scratch,
     ) {
         let m = Self::moments(&cells);
         let s = self.samples as f64;
@@ -262,7 +286,7 @@ impl Fitter<'_> {
         let split = if is_leaf {
             None
         } else {
-            self.best_line(&cells, m, stats, hist)
+            self.best_line(&cells, m, stats, scratch)
         };
         let Some(line) = split else {
             self.leaf(&cells, m, nodes, stats);
@@ -275,10 +299,10 @@ impl Fitter<'_> {
         }
         let at = nodes.len();
         nodes.push(Node::Split { line, right: 0 });
-        self.build(left, depth + 1, nodes, stats, hist);
+        self.build(left, depth + 1, nodes, stats, scratch);
         let r = nodes.len() as u32;
         nodes[at] = Node::Split { line, right: r };
-        self.build(right, depth + 1, nodes, stats, hist);
+        self.build(right, depth + 1, nodes, stats, scratch);
     }
 
     /// Splits cells by the shared side test, exactly per pixel: a cell whose corner pixel
@@ -317,12 +341,7 @@ impl Fitter<'_> {
                         (c.i, c.j + h),
                         (c.i + h, c.j + h),
                     ] {
-                        stack.push(Cell {
-                            i: qi,
-                            j: qj,
-                            size: h,
-                            k: c.k,
-                        });
+                        stack.push(self.cell(qi, qj, h, c.k));
                     }
                 }
             }
@@ -357,18 +376,18 @@ impl Fitter<'_> {
         cells: &[Cell],
         total: Moments,
         stats: &mut FitStats,
-        hist: &mut [Moments],
+        scratch: &mut Scratch,
     ) -> Option<QLine> {
         match self.method {
             SplitMethod::Exhaustive => {
                 let half = self.codec.angles() / 2;
                 let mut best = Best::default();
                 for a in 0..half {
-                    self.sweep(cells, total, a as u16, &mut best, stats, hist);
+                    self.sweep(cells, total, a as u16, &mut best, stats, scratch);
                 }
                 best.choose(total, self.samples as u64)
             }
-            SplitMethod::Default => self.coarse_to_fine(cells, total, stats, hist),
+            SplitMethod::Default => self.coarse_to_fine(cells, total, stats, scratch),
             SplitMethod::NelderMead => self.nelder_mead(cells, stats),
         }
     }
@@ -378,7 +397,7 @@ impl Fitter<'_> {
         cells: &[Cell],
         total: Moments,
         stats: &mut FitStats,
-        hist: &mut [Moments],
+        scratch: &mut Scratch,
     ) -> Option<QLine> {
         const STEP: u32 = 8;
         let half = self.codec.angles() / 2;
@@ -396,20 +415,30 @@ impl Fitter<'_> {
         let mut coarse: Vec<((u64, u64), u32)> = Vec::with_capacity((half / STEP) as usize);
         for a in (0..half).step_by(STEP as usize) {
             let mut b = Best::default();
-            self.sweep(cells, total, a as u16, &mut b, stats, hist);
+            self.sweep(cells, total, a as u16, &mut b, stats, scratch);
             coarse.push((score(&b), a));
             best.take(b);
         }
         coarse.sort_unstable();
         // Refine the two best angles by bisection: ±4, ±2, ±1 around the current best.
+        // The two refinements can meet (coarse angles 8 apart): an angle already swept gives
+        // the same `Best` again, so it is looked up rather than swept twice.
+        let mut swept: Vec<(u32, Best)> = Vec::with_capacity(12);
         for &(sc, a0) in coarse.iter().take(2) {
             let (mut centre, mut centre_score) = (a0, sc);
             let mut step = STEP / 2;
             while step > 0 {
                 for a in [centre + step, centre + half - step] {
                     let a = a % half;
-                    let mut b = Best::default();
-                    self.sweep(cells, total, a as u16, &mut b, stats, hist);
+                    let b = match swept.iter().find(|(x, _)| *x == a) {
+                        Some(&(_, b)) => b,
+                        None => {
+                            let mut b = Best::default();
+                            self.sweep(cells, total, a as u16, &mut b, stats, scratch);
+                            swept.push((a, b));
+                            b
+                        }
+                    };
                     let sc = score(&b);
                     if sc < centre_score {
                         (centre, centre_score) = (a, sc);
@@ -431,45 +460,66 @@ impl Fitter<'_> {
         a: u16,
         best: &mut Best,
         stats: &mut FitStats,
-        hist: &mut [Moments],
+        scratch: &mut Scratch,
     ) {
+        if cells.is_empty() {
+            return;
+        }
         let n = self.codec.normal(a);
-        let (mut lo, mut hi) = (u32::MAX, 0);
+        let Scratch { hist, filled, bins } = scratch;
+        let binner = self.codec.offset_bins();
         for c in cells {
-            let p = self.centre(c);
-            let bin = self.codec.offsets_below(n.x * p.x + n.y * p.y);
-            hist[bin as usize].add(c.k as u32, (c.size as u64).pow(2));
-            lo = lo.min(bin);
-            hi = hi.max(bin);
+            let p = c.at;
+            let bin = binner.bin(n.x * p.x + n.y * p.y) as usize;
+            hist[bin].add_cell(c);
+            filled[bin / 64] |= 1 << (bin % 64);
         }
         stats.cell_visits += cells.len() as u64;
+        // The non-empty bins, in order, from the bitmap (cleared as it is read).
+        bins.clear();
+        for (w, word) in filled.iter_mut().enumerate() {
+            let mut bits = std::mem::take(word);
+            while bits != 0 {
+                bins.push((w * 64 + bits.trailing_zeros() as usize) as u32);
+                bits &= bits - 1;
+            }
+        }
         let s = self.samples as u64;
         // Line o: left = bins ≤ o, right = bins > o. The partition changes only at non-empty
         // bins: "left = bins ≤ b" holds for every o in [b, b′ − 1], b′ the next non-empty bin,
         // and the line is placed mid-gap, so an edge between two pixel rows is not pulled
         // toward one of them (mirror-image inputs get mirror-image lines).
+        let line = |b: u32, next: u32| QLine {
+            angle: a,
+            offset: ((b + next - 1) / 2) as u16,
+        };
         let mut left = Moments::default();
-        let mut b = lo;
-        while b < hi {
+        for pair in bins.windows(2) {
+            let (b, next) = (pair[0], pair[1]);
             left = left.plus(hist[b as usize]);
-            let mut next = b + 1;
-            while hist[next as usize].n == 0 {
-                next += 1;
-            }
             let right = total.minus(left);
             let e1 = left.err_as_zero() + right.err_as_one(s);
             let e2 = left.err_as_one(s) + right.err_as_zero();
-            let line = QLine {
-                angle: a,
-                offset: ((b + next - 1) / 2) as u16,
-            };
-            best.offer(e1, line);
-            best.offer(e2, self.codec.mirror(line));
-            best.offer_ssd(left.ssd_scaled() + right.ssd_scaled(), line);
-            b = next;
+            best.offer(e1, line(b, next));
+            if e2 < best.err {
+                best.offer(e2, self.codec.mirror(line(b, next)));
+            }
         }
-        for h in &mut hist[lo as usize..=hi as usize] {
-            *h = Moments::default();
+        // The children's squared deviation decides only where no line's E beats the best
+        // constant (`Best::choose`, and the angle ranking of `coarse_to_fine`); E only falls
+        // as lines are offered, so once it beats the constant the deviations are not needed.
+        // Offered in the same order as E, so the result is as if both were offered together.
+        if best.err >= total.err_as_zero().min(total.err_as_one(s)) {
+            let mut left = Moments::default();
+            for pair in bins.windows(2) {
+                let (b, next) = (pair[0], pair[1]);
+                left = left.plus(hist[b as usize]);
+                let right = total.minus(left);
+                best.offer_ssd(left.ssd_scaled() + right.ssd_scaled(), line(b, next));
+            }
+        }
+        for &b in bins.iter() {
+            hist[b as usize] = Moments::default();
         }
     }
 
@@ -481,7 +531,7 @@ impl Fitter<'_> {
         for c in cells {
             let k = c.k as u64;
             let w = (c.size as u64).pow(2);
-            if self.codec.side(line, self.centre(c)) {
+            if self.codec.side(line, c.at) {
                 right += 1;
                 e += w * (s - k) * (s - k);
             } else {
@@ -565,8 +615,30 @@ impl Fitter<'_> {
     }
 }
 
+/// Buffers the split search reuses across the nodes of a face.
+struct Scratch {
+    /// Moments per offset bin (zero between sweeps).
+    hist: Vec<Moments>,
+    /// Bitmap of the non-empty bins (zero between sweeps).
+    filled: Vec<u64>,
+    /// The non-empty bins of the current sweep, in order.
+    bins: Vec<u32>,
+}
+
+impl Scratch {
+    fn new(codec: &LineCodec) -> Scratch {
+        let bins = codec.offsets() as usize + 1;
+        Scratch {
+            hist: vec![Moments::default(); bins],
+            filled: vec![0; bins.div_ceil(64)],
+            bins: Vec::with_capacity(bins),
+        }
+    }
+}
+
 /// The best lines seen so far by E and by the children's squared deviation (ties keep the
 /// first, so the search order fixes the result).
+#[derive(Clone, Copy)]
 struct Best {
     err: u64,
     line: Option<QLine>,

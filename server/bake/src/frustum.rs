@@ -10,6 +10,7 @@
 //! strictly inside the pyramid.
 
 use bspvt_proto::Mesh;
+use bspvt_raytrace::Occluder;
 use glam::Vec3;
 use obvhs::{BvhBuildParams, bvh2::Bvh2, ray::Ray, rt_triangle::RtTriangle, triangle::Triangle};
 
@@ -20,6 +21,8 @@ pub(crate) struct FrustumCuller {
     prims: Vec<([Vec3; 3], [u32; 3])>,
     /// Per primitive (BVH order), for direct ray tests against a candidate list.
     rt: Vec<RtTriangle>,
+    /// Per primitive (BVH order), the same triangle's primitive in the [`Occluder`].
+    occ_prim: Vec<u32>,
 }
 
 /// A pyramid of directions from an apex: four inward plane normals through the apex.
@@ -49,8 +52,9 @@ impl Pyramid {
 }
 
 impl FrustumCuller {
-    /// `tris`: [`bspvt_raytrace::mesh_triangles`] of `mesh`.
-    pub(crate) fn new(mesh: &Mesh, tris: &[Triangle]) -> FrustumCuller {
+    /// `tris`: [`bspvt_raytrace::mesh_triangles`] of `mesh`; `occ`: the occluder built from
+    /// them.
+    pub(crate) fn new(mesh: &Mesh, tris: &[Triangle], occ: &Occluder) -> FrustumCuller {
         let mut params = BvhBuildParams::medium_build();
         params.pre_split = false;
         // Copies of a triangle cull nothing the first one does not.
@@ -70,7 +74,18 @@ impl FrustumCuller {
             })
             .collect();
         let rt = order.iter().map(|&i| RtTriangle::from(&tris[i])).collect();
-        FrustumCuller { bvh, prims, rt }
+        // Both BVHs hold the same distinct triangles (`distinct_triangles`).
+        let mut of_triangle = vec![u32::MAX; mesh.triangles.len()];
+        for (p, &t) in occ.primitive_triangles().iter().enumerate() {
+            of_triangle[t as usize] = p as u32;
+        }
+        let occ_prim = order.iter().map(|&i| of_triangle[i]).collect();
+        FrustumCuller {
+            bvh,
+            prims,
+            rt,
+            occ_prim,
+        }
     }
 
     /// Collects the primitives (not using vertex `skip`) that may lie inside the pyramid into
@@ -135,5 +150,14 @@ impl FrustumCuller {
         let ray = Ray::new(origin.into(), dir.into(), t_min, t_max);
         list.iter()
             .any(|&p| self.rt[p as usize].intersect(&ray) < f32::INFINITY)
+    }
+
+    /// The first primitive of the list that `ray` hits between its `tmin` and `tmax` (the
+    /// test of [`Self::ray_hits_any`]), as its primitive in the [`Occluder`].
+    #[inline]
+    pub(crate) fn ray_first_hit(&self, ray: &Ray, list: &[u32]) -> Option<u32> {
+        list.iter()
+            .find(|&&p| self.rt[p as usize].intersect(ray) < f32::INFINITY)
+            .map(|&p| self.occ_prim[p as usize])
     }
 }

@@ -19,6 +19,7 @@ pub mod fit;
 mod frustum;
 pub mod refine;
 pub mod stats;
+mod walk;
 
 use std::ops::Range;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -30,7 +31,7 @@ use bspvt_proto::{Aabb, BakeSettings, Mesh, Scene, SplitMethod};
 use rayon::prelude::*;
 
 use bspvt_raytrace::Occluder;
-pub use cubemap::LightStop;
+pub use cubemap::{CastCounts, CastMode, LightStop};
 use cubemap::{RayTable, VertexRays};
 use fit::{FitStats, Fitter};
 
@@ -52,7 +53,11 @@ pub struct Baker {
     stops: Vec<LightStop>,
     occluder: Occluder,
     culler: frustum::FrustumCuller,
+    /// Mesh adjacency for the adaptive cast's walks.
+    walk: walk::SurfaceWalk,
     table: RayTable,
+    /// How rays are cast (the same cube maps either way).
+    cast: CastMode,
     codec: LineCodec,
     offset: f32,
     /// See [`RAY_T_MIN_SCALE`].
@@ -68,6 +73,8 @@ pub struct VertexResult {
     pub fit: FitStats,
     /// Rays cast.
     pub rays: u64,
+    /// Rays that traversed the BVH.
+    pub traversals: u64,
     /// Seconds spent casting rays.
     pub ray_seconds: f64,
     /// Seconds spent fitting trees.
@@ -81,6 +88,8 @@ pub struct Totals {
     pub vertices: u64,
     /// Rays cast.
     pub rays: u64,
+    /// Rays that traversed the BVH.
+    pub traversals: u64,
     /// Thread-seconds spent casting rays.
     pub ray_seconds: f64,
     /// Thread-seconds spent fitting trees.
@@ -95,6 +104,7 @@ impl std::ops::AddAssign for Totals {
     fn add_assign(&mut self, o: Totals) {
         self.vertices += o.vertices;
         self.rays += o.rays;
+        self.traversals += o.traversals;
         self.ray_seconds += o.ray_seconds;
         self.fit_seconds += o.fit_seconds;
         self.fit += o.fit;
@@ -120,6 +130,8 @@ pub struct BakeOutput {
     pub totals: Totals,
     /// Wall-clock seconds of the bake.
     pub seconds: f64,
+    /// How rays were cast.
+    pub cast: CastMode,
 }
 
 impl Baker {
@@ -152,7 +164,8 @@ impl Baker {
     ) -> Baker {
         let tris = bspvt_raytrace::mesh_triangles(&mesh);
         let occluder = Occluder::new(&mesh, &tris);
-        let culler = frustum::FrustumCuller::new(&mesh, &tris);
+        let culler = frustum::FrustumCuller::new(&mesh, &tris, &occluder);
+        let walk = walk::SurfaceWalk::new(&mesh, &occluder);
         let table = RayTable::new(settings.face_res, settings.supersampling);
         let codec = LineCodec::for_resolution(settings.face_res);
         let offset = RAY_OFFSET_SCALE * mesh.bounds().diagonal();
@@ -165,12 +178,24 @@ impl Baker {
             stops,
             occluder,
             culler,
+            walk,
             table,
+            cast: CastMode::default(),
             codec,
             offset,
             t_min,
             header,
         }
+    }
+
+    /// Casts rays the given way from now on (the cube maps, and so the bytes, do not change).
+    pub fn set_cast(&mut self, mode: CastMode) {
+        self.cast = mode;
+    }
+
+    /// How rays are cast.
+    pub fn cast(&self) -> CastMode {
+        self.cast
     }
 
     /// The header every chunk of this bake is decoded with.
@@ -209,16 +234,24 @@ impl Baker {
     }
 
     /// The visibility cube map of vertex `v` (pixels that matter and their escape counts) and
-    /// the number of rays cast.
-    pub fn cube_map(&self, v: u32) -> ([Option<cubemap::FacePixels>; 6], u64) {
+    /// what casting it cost, cast this bake's way ([`Baker::set_cast`]).
+    pub fn cube_map(&self, v: u32) -> ([Option<cubemap::FacePixels>; 6], CastCounts) {
+        self.cube_map_with(v, self.cast)
+    }
+
+    /// [`Baker::cube_map`] cast the given way.
+    pub fn cube_map_with(
+        &self,
+        v: u32,
+        mode: CastMode,
+    ) -> ([Option<cubemap::FacePixels>; 6], CastCounts) {
         self.vertex_rays(v)
-            .cast(&self.occluder, &self.culler, &self.table)
+            .cast(&self.occluder, &self.culler, &self.walk, &self.table, mode)
     }
 
     /// The cube map of vertex `v` by casting every ray of every pixel that matters against the
-    /// BVH, with no culling: the reference the culled walk must equal.
-    #[cfg(test)]
-    pub(crate) fn brute_force_cube_map(&self, v: u32) -> [Option<cubemap::FacePixels>; 6] {
+    /// BVH, with no culling: the reference both casts must equal (slow; for tests).
+    pub fn reference_cube_map(&self, v: u32) -> [Option<cubemap::FacePixels>; 6] {
         self.vertex_rays(v)
             .cast_brute_force(&self.occluder, &self.table)
     }
@@ -226,13 +259,14 @@ impl Baker {
     /// Bakes one vertex: rays, then one tree per face that has pixels that matter.
     pub fn bake_vertex(&self, v: u32) -> VertexResult {
         let t0 = Instant::now();
-        let (faces, rays) = self.cube_map(v);
+        let (faces, counts) = self.cube_map(v);
         let t1 = Instant::now();
         let (trees, fit) = self.fit_faces(&faces, self.settings.split);
         VertexResult {
             trees,
             fit,
-            rays,
+            rays: counts.rays,
+            traversals: counts.traversals,
             ray_seconds: (t1 - t0).as_secs_f64(),
             fit_seconds: t1.elapsed().as_secs_f64(),
         }
@@ -279,6 +313,7 @@ impl Baker {
                 totals += Totals {
                     vertices: 1,
                     rays: r.rays,
+                    traversals: r.traversals,
                     ray_seconds: r.ray_seconds,
                     fit_seconds: r.fit_seconds,
                     fit: r.fit,
@@ -326,6 +361,7 @@ impl Baker {
             bytes,
             totals,
             seconds: start.elapsed().as_secs_f64(),
+            cast: self.cast,
         })
     }
 }
@@ -354,8 +390,14 @@ mod tests {
             let mut checked = 0;
             let mut occluded_pixels = 0;
             for v in (0..n).step_by(37) {
-                let (walk, rays) = b.cube_map(v);
-                let rays_brute = b.brute_force_cube_map(v);
+                let rays_brute = b.reference_cube_map(v);
+                let (adaptive, _) = b.cube_map_with(v, CastMode::Adaptive);
+                assert_eq!(
+                    adaptive, rays_brute,
+                    "adaptive, vertex {v} at {res}² × {ss}²"
+                );
+                let (walk, counts) = b.cube_map_with(v, CastMode::Full);
+                let rays = counts.rays;
                 assert_eq!(walk, rays_brute, "vertex {v} at {res}² × {ss}²");
                 occluded_pixels += walk
                     .iter()

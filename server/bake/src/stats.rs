@@ -19,8 +19,15 @@ pub struct BakeStats {
     pub ray_thread_seconds_per_vertex: f64,
     /// Fitting thread-seconds per vertex.
     pub fit_thread_seconds_per_vertex: f64,
-    /// Rays cast per vertex.
+    /// Rays tested against geometry per vertex (rays answered by culling alone not counted).
     pub rays_per_vertex: f64,
+    /// Rays per vertex that traversed the BVH (the rest were answered by a candidate list or,
+    /// in the adaptive cast, by a neighbour's blocker).
+    pub traversals_per_vertex: f64,
+    /// Rays tested per ray-casting thread-second.
+    pub rays_per_thread_second: f64,
+    /// How rays were cast (`adaptive` or `full`: the same cube maps).
+    pub cast: crate::CastMode,
     /// Encoded bytes (chunk frames, after zstd).
     pub bytes: u64,
     /// Encoded bytes per vertex.
@@ -52,6 +59,7 @@ impl BakeStats {
         s.epsilon = out.header.epsilon;
         s.supersampling = out.header.supersampling;
         s.split = out.header.split;
+        s.cast = out.cast;
         s
     }
 
@@ -68,6 +76,13 @@ impl BakeStats {
             ray_thread_seconds_per_vertex: t.ray_seconds / v,
             fit_thread_seconds_per_vertex: t.fit_seconds / v,
             rays_per_vertex: t.rays as f64 / v,
+            traversals_per_vertex: t.traversals as f64 / v,
+            rays_per_thread_second: if t.ray_seconds > 0.0 {
+                t.rays as f64 / t.ray_seconds
+            } else {
+                0.0
+            },
+            cast: Default::default(),
             bytes,
             bytes_per_vertex: bytes as f64 / v,
             leaves_per_vertex: t.fit.leaves as f64 / v,

@@ -83,6 +83,7 @@ fn frame_path(out: &std::path::Path, k: usize, frames: usize) -> PathBuf {
 }
 
 pub(crate) fn run(a: RenderArgs) -> Result<()> {
+    anyhow::ensure!(a.env_spin.is_finite(), "--env-spin must be finite");
     let scene = bspvt_client::scene::open(a.scene.as_deref(), a.mesh.as_deref())?;
     let method = method(&a.method)?;
     let label = a

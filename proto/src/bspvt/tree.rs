@@ -220,9 +220,18 @@ impl VertexTrees {
 /// The part of `poly` inside face `frame`'s pyramid (|d·a| ≤ d·w, |d·b| ≤ d·w).
 pub fn clip_to_face(poly: &[DVec3], frame: &FaceFrame) -> Option<SphPoly> {
     let (w, a, b) = (frame.w64(), frame.a64(), frame.b64());
+    let planes = [w - a, w + a, w - b, w + b];
+    // Most polygons miss most faces: reject on the polygon as given, before any copy (a
+    // polygon outside one of the planes stays outside it however the others clip it).
+    if planes
+        .iter()
+        .any(|&n| matches!(sphere::sides(poly, n), Sides::None | Sides::Negative))
+    {
+        return None;
+    }
     let (mut cur, mut next) = (SphPoly::new(), SphPoly::new());
     cur.extend(poly.iter().copied().take(sphere::MAX_VERTS));
-    for n in [w - a, w + a, w - b, w + b] {
+    for n in planes {
         match sphere::sides(&cur, n) {
             Sides::Positive => continue,
             Sides::None | Sides::Negative => return None,

@@ -151,19 +151,52 @@ impl LightFrame {
     /// linear map `m`), the ray along the vector form factor `f` meets the light's plane at
     /// (u, v); the footprint d = distance / √area sets the level, log₂(d · size).
     pub(crate) fn lookup(&self, m: &DMat3, f: DVec3, tex: &LightTexture) -> DVec3 {
-        let (o, e1, e2) = (*m * self.origin, *m * self.e1, *m * self.e2);
+        PlaneLookup::new(self, m, tex).fetch(f, tex)
+    }
+}
+
+/// [`LightFrame::lookup`] for one lobe, with what does not depend on the direction `f` (the
+/// plane in the lobe's space, the level) computed once: the pieces a tree cuts from one light
+/// share it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PlaneLookup {
+    o: DVec3,
+    e1: DVec3,
+    e2: DVec3,
+    ortho: DVec3,
+    area: f64,
+    dist_area: f64,
+    lod: f64,
+}
+
+impl PlaneLookup {
+    pub(crate) fn new(frame: &LightFrame, m: &DMat3, tex: &LightTexture) -> PlaneLookup {
+        let (o, e1, e2) = (*m * frame.origin, *m * frame.e1, *m * frame.e2);
         let ortho = e1.cross(e2);
         let area = ortho.length();
-        let denom = ortho.dot(f);
-        if !(area > 0.0) || !(denom.abs() > 0.0) {
-            return tex.average();
-        }
         let dist_area = ortho.dot(o);
-        let q = f * (dist_area / denom) - o;
-        let uv = uv_in(e1, e2, q);
+        // Not used when the area is 0 (`fetch` returns the average).
         let d = dist_area.abs() / (area * area.sqrt());
         let lod = (d * tex.size() as f64).max(1.0).log2();
-        tex.sample(uv, lod)
+        PlaneLookup {
+            o,
+            e1,
+            e2,
+            ortho,
+            area,
+            dist_area,
+            lod,
+        }
+    }
+
+    /// The filtered texture where the ray along `f` meets the plane.
+    pub(crate) fn fetch(&self, f: DVec3, tex: &LightTexture) -> DVec3 {
+        let denom = self.ortho.dot(f);
+        if !(self.area > 0.0) || !(denom.abs() > 0.0) {
+            return tex.average();
+        }
+        let q = f * (self.dist_area / denom) - self.o;
+        tex.sample(uv_in(self.e1, self.e2, q), self.lod)
     }
 }
 

@@ -40,7 +40,7 @@ pub fn shade_vertex(
     if dirs.len() < 3 {
         return out;
     }
-    let emitter = Emitter::new(light, p);
+    let emitter = Emitter::for_lobes(light, p, lobes);
     out.unshadowed = lobes.shade(&dirs, &emitter);
     let u = out.unshadowed.integrals;
     if u.diffuse <= 0.0 && u.specular <= 0.0 {

@@ -22,7 +22,7 @@ use crate::ggx;
 use crate::light::Light;
 use crate::ltc::polygon::{integrate, vector_form_factor};
 use crate::ltc::table::LtcTable;
-use crate::texture::LightFrame;
+use crate::texture::{LightFrame, PlaneLookup};
 
 /// The two integrals of a light at a point: diffuse D = ∫ V cos/π and specular S = ∫ V D_ltc.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -146,11 +146,11 @@ impl Lobes {
                 let mut out = Shaded::default();
                 if let Some(f) = vector_form_factor(&self.to_local, poly) {
                     out.integrals.diffuse = f.z.min(1.0);
-                    out.diffuse_rgb = emitter.frame.lookup(&self.to_local, f, tex) * f.z.min(1.0);
+                    out.diffuse_rgb = emitter.fetch(0, &self.to_local, f, tex) * f.z.min(1.0);
                 }
                 if let Some(f) = vector_form_factor(&self.to_ltc, poly) {
                     out.integrals.specular = f.z.min(1.0);
-                    out.specular_rgb = emitter.frame.lookup(&self.to_ltc, f, tex) * f.z.min(1.0);
+                    out.specular_rgb = emitter.fetch(1, &self.to_ltc, f, tex) * f.z.min(1.0);
                 }
                 out
             }
@@ -175,6 +175,9 @@ impl Lobes {
 pub(crate) struct Emitter<'a> {
     pub(crate) frame: LightFrame,
     pub(crate) texture: Option<&'a crate::texture::LightTexture>,
+    /// A textured light's lookups for the diffuse and specular lobe, prepared once for the
+    /// many pieces a tree cuts from it ([`Emitter::for_lobes`]).
+    lookups: Option<[PlaneLookup; 2]>,
 }
 
 impl<'a> Emitter<'a> {
@@ -182,6 +185,29 @@ impl<'a> Emitter<'a> {
         Emitter {
             frame: LightFrame::new(&light.vertices, p),
             texture: light.texture.as_deref(),
+            lookups: None,
+        }
+    }
+
+    /// [`Emitter::new`] with the texture lookups of `lobes` prepared: for shading many
+    /// pieces of the light with the same lobes (the same results as without).
+    pub(crate) fn for_lobes(light: &'a Light, p: DVec3, lobes: &Lobes) -> Emitter<'a> {
+        let mut e = Emitter::new(light, p);
+        e.lookups = e.texture.map(|t| {
+            [
+                PlaneLookup::new(&e.frame, &lobes.to_local, t),
+                PlaneLookup::new(&e.frame, &lobes.to_ltc, t),
+            ]
+        });
+        e
+    }
+
+    /// The texture seen along `f` by lobe `lobe` (0 diffuse, 1 specular; `m` its map).
+    #[inline]
+    fn fetch(&self, lobe: usize, m: &DMat3, f: DVec3, tex: &crate::texture::LightTexture) -> DVec3 {
+        match &self.lookups {
+            Some(l) => l[lobe].fetch(f, tex),
+            None => self.frame.lookup(m, f, tex),
         }
     }
 }

@@ -67,7 +67,7 @@ pub fn shade_vertex_sky(
         if dirs.len() < 3 {
             continue;
         }
-        let emitter = Emitter::new(piece, DVec3::ZERO);
+        let emitter = Emitter::for_lobes(piece, DVec3::ZERO, lobes);
         if unshadowed {
             add(
                 &mut out.unshadowed,

@@ -384,7 +384,7 @@ mod tests {
                 .expect("pieces")
                 .posed(10.0);
             let r = Renderer::new(&scene, 64, 64);
-            let (colour, ratio, counts) = r.shade_vertices_sky(&pieces, &trees, true);
+            let (colour, ratio, counts) = r.shade_vertices_sky(&pieces, Some(&trees), true);
             assert!(counts.vertices_shaded > 10);
             let table = LtcTable::builtin();
             let mut worst = 0.0f64;

@@ -15,13 +15,15 @@ use bspvt_raytrace::{Occluder, mesh_triangles};
 use serde::Serialize;
 
 use bspvt_client::envmap::EnvLight;
-use bspvt_client::frame::gbuffer::NONE;
 use bspvt_client::frame::image::Image;
 use bspvt_client::groundtruth::render_mc_env;
 use bspvt_client::method::trees::cached_sky_bake;
 use bspvt_client::render::renderer::{Mode, Renderer, Trees};
 use bspvt_client::sg::{self, SgOptions, SsdfMode};
 use bspvt_client::sky::{DEFAULT_THRESHOLD, SkyPieces};
+
+use crate::bench::median_ms;
+use crate::compare::metrics::{covered, covered_mean, rmse_mae};
 
 /// `bspvt bench-sky`: speed and error of `bspvt-env` per k against SG and Monte Carlo.
 #[derive(clap::Args, Clone, Debug)]
@@ -105,28 +107,23 @@ pub struct Report {
     pub rows: Vec<Row>,
 }
 
-/// (mean |a − b|, RMSE) over the pixels the camera covers, both relative to b's mean there.
-fn errors(a: &Image, b: &Image, r: &Renderer) -> (f64, f64) {
-    let (mut abs, mut sq, mut sum, mut n) = (0.0, 0.0, 0.0, 0usize);
-    for (i, (x, y)) in a.pixels.iter().zip(&b.pixels).enumerate() {
-        if r.gbuffer.tri[i] == NONE {
-            continue;
+impl Row {
+    /// A row of `method` taking `ms` a frame with errors `(mean |error|, RMSE)` relative to
+    /// the reference's mean; the optional fields empty.
+    fn new(method: &str, mode: Mode, ms: f64, (rel_mae, rel_rmse): (f64, f64)) -> Row {
+        Row {
+            method: method.into(),
+            mode: Some(mode),
+            k: None,
+            sky_pieces: None,
+            lobes: None,
+            ms_per_frame: ms,
+            fps: 1e3 / ms.max(1e-9),
+            rel_mae,
+            rel_rmse,
+            tree_pieces_per_vertex: None,
         }
-        for c in 0..3 {
-            let d = f64::from(x[c]) - f64::from(y[c]);
-            abs += d.abs();
-            sq += d * d;
-            sum += f64::from(y[c]);
-        }
-        n += 3;
     }
-    let n = n.max(1) as f64;
-    let mean = (sum / n).max(1e-12);
-    (abs / n / mean, (sq / n).sqrt() / mean)
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    bspvt_client::frame::stats::median(&mut v)
 }
 
 /// The scene measured: the sky alone, subdivided when asked.
@@ -186,6 +183,13 @@ pub fn run(a: &BenchSkyArgs) -> Result<Report> {
         a.spp
     );
     reference.save(&a.out.join("mc-env.png"), 1.0)?;
+    // Mean |error| and RMSE over the covered pixels, relative to the reference's mean there.
+    let covered = covered(&r.gbuffer);
+    let mean = covered_mean(&reference, &covered).max(1e-12);
+    let errors = |img: &Image| {
+        let (rmse, mae) = rmse_mae(img, &reference, &covered);
+        (mae / mean, rmse / mean)
+    };
     let mut rows = Vec::new();
     let mut vertices_shaded = 0;
     let mut push = |row: Row, img: &Image, file: String| -> Result<()> {
@@ -212,41 +216,28 @@ pub fn run(a: &BenchSkyArgs) -> Result<Report> {
         Ok(())
     };
 
-    // The sky through the trees, for each k, both modes; the map turns 1° a frame.
+    // The sky through the trees, for each k, both modes; the map turns 1° a frame (so each
+    // timed frame shades the sky anew); the error is the frame at rotation 0, the reference's.
     for &k in &a.pieces {
         let sky = SkyPieces::new(&env, k, DEFAULT_THRESHOLD, 1.0)?;
         for mode in [Mode::Vertex, Mode::Pixel] {
-            let (mut times, mut last) = (Vec::new(), None);
-            for f in 0..=frames {
-                let t = Instant::now();
-                let out = r.sky(&sky.posed(f as f64), Some(&trees), mode);
-                if f > 0 {
-                    times.push(t.elapsed().as_secs_f64() * 1e3);
-                }
-                if f == 0 {
-                    last = Some(out);
-                }
-            }
-            // The error is the frame at rotation 0, the reference's.
-            let (img, counts) = last.context("a frame")?;
+            let (img, counts) = r.sky(&sky.posed(0.0), Some(&trees), mode);
+            let mut turn = 0.0;
+            let (ms, _) = median_ms(frames, || {
+                turn += 1.0;
+                Ok(r.sky(&sky.posed(turn), Some(&trees), mode))
+            })?;
             vertices_shaded = counts.vertices_shaded;
-            let (mae, rmse) = errors(&img, &reference, &r);
-            let ms = median(times);
+            let row = Row {
+                k: Some(k),
+                sky_pieces: Some(sky.len()),
+                tree_pieces_per_vertex: Some(
+                    counts.pieces as f64 / counts.vertices_shaded.max(1) as f64,
+                ),
+                ..Row::new("bspvt-env", mode, ms, errors(&img))
+            };
             push(
-                Row {
-                    method: "bspvt-env".into(),
-                    mode: Some(mode),
-                    k: Some(k),
-                    sky_pieces: Some(sky.len()),
-                    lobes: None,
-                    ms_per_frame: ms,
-                    fps: 1e3 / ms.max(1e-9),
-                    rel_mae: mae,
-                    rel_rmse: rmse,
-                    tree_pieces_per_vertex: Some(
-                        counts.pieces as f64 / counts.vertices_shaded.max(1) as f64,
-                    ),
-                },
+                row,
                 &img,
                 format!("bspvt-env-k{k}-{mode:?}.png").to_lowercase(),
             )?;
@@ -254,26 +245,13 @@ pub fn run(a: &BenchSkyArgs) -> Result<Report> {
     }
     // Without the trees: what the shadows are worth.
     let sky = SkyPieces::new(&env, 2, DEFAULT_THRESHOLD, 1.0)?;
-    let t = Instant::now();
-    let (img, _) = r.sky(&sky.posed(0.0), None, Mode::Pixel);
-    let ms = t.elapsed().as_secs_f64() * 1e3;
-    let (mae, rmse) = errors(&img, &reference, &r);
-    push(
-        Row {
-            method: "bspvt-env-unshadowed".into(),
-            mode: Some(Mode::Pixel),
-            k: Some(2),
-            sky_pieces: Some(sky.len()),
-            lobes: None,
-            ms_per_frame: ms,
-            fps: 1e3 / ms.max(1e-9),
-            rel_mae: mae,
-            rel_rmse: rmse,
-            tree_pieces_per_vertex: None,
-        },
-        &img,
-        "bspvt-env-unshadowed.png".into(),
-    )?;
+    let (ms, (img, _)) = median_ms(1, || Ok(r.sky(&sky.posed(0.0), None, Mode::Pixel)))?;
+    let row = Row {
+        k: Some(2),
+        sky_pieces: Some(sky.len()),
+        ..Row::new("bspvt-env-unshadowed", Mode::Pixel, ms, errors(&img))
+    };
+    push(row, &img, "bspvt-env-unshadowed.png".into())?;
     // SG with the screen-space SSDF (paper 001) and unshadowed SG.
     sg::halfspace::warm_up();
     for &lobes in &a.lobes {
@@ -286,32 +264,14 @@ pub fn run(a: &BenchSkyArgs) -> Result<Report> {
                 ssdf,
                 ..SgOptions::default()
             };
-            let (mut times, mut img) = (Vec::new(), None);
-            for _ in 0..frames {
-                let t = Instant::now();
-                let (i, _) = sg::render(&scene, &r.view, &r.gbuffer, &fit, Some(&occ), &opts)?;
-                times.push(t.elapsed().as_secs_f64() * 1e3);
-                img = Some(i);
-            }
-            let img = img.context("a frame")?;
-            let (mae, rmse) = errors(&img, &reference, &r);
-            let ms = median(times);
-            push(
-                Row {
-                    method: name.into(),
-                    mode: Some(Mode::Pixel),
-                    k: None,
-                    sky_pieces: None,
-                    lobes: Some(lobes),
-                    ms_per_frame: ms,
-                    fps: 1e3 / ms.max(1e-9),
-                    rel_mae: mae,
-                    rel_rmse: rmse,
-                    tree_pieces_per_vertex: None,
-                },
-                &img,
-                format!("{name}-k{lobes}.png"),
-            )?;
+            let (ms, (img, _)) = median_ms(frames, || {
+                sg::render(&scene, &r.view, &r.gbuffer, &fit, Some(&occ), &opts)
+            })?;
+            let row = Row {
+                lobes: Some(lobes),
+                ..Row::new(name, Mode::Pixel, ms, errors(&img))
+            };
+            push(row, &img, format!("{name}-k{lobes}.png"))?;
         }
     }
     let report = Report {

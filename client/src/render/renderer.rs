@@ -256,15 +256,15 @@ impl<'a> Renderer<'a> {
     pub(crate) fn shade_vertices_sky(
         &self,
         pieces: &[Light],
-        trees: &Trees,
+        trees: Option<&Trees>,
         ratios: bool,
     ) -> (Vec<[f32; 3]>, Vec<[f32; 2]>, FrameCounts) {
         self.per_vertex(|v, lobes, _, nrm| {
-            if !trees.has(v) {
+            let Some(trees) = trees.filter(|t| t.has(v)) else {
                 let s = unshadowed_sky(lobes, pieces, nrm);
                 let c = lobes.radiance(DVec3::ONE, &s);
                 return (c.as_vec3().to_array(), [1.0, 1.0], 0, 0);
-            }
+            };
             let r = shade_vertex_sky(
                 lobes,
                 pieces,
@@ -375,13 +375,8 @@ impl<'a> Renderer<'a> {
     /// One frame of the sky through the baked sky trees in `mode` (`trees`: `None` while none
     /// have arrived: unshadowed).
     pub fn sky(&self, pieces: &[Light], trees: Option<&Trees>, mode: Mode) -> (Image, FrameCounts) {
-        let none = Trees {
-            trees: &[],
-            codec: LineCodec::for_resolution(4),
-            present: None,
-        };
         let (colour, ratio, mut counts) =
-            self.shade_vertices_sky(pieces, trees.unwrap_or(&none), mode == Mode::Pixel);
+            self.shade_vertices_sky(pieces, trees, mode == Mode::Pixel);
         match mode {
             Mode::Vertex => (self.interpolate(&colour), counts),
             Mode::Pixel => {

@@ -215,3 +215,34 @@ fn lamps_and_sky_add_in_one_frame() {
         assert!(lamp.mean() > 0.05 * both.mean() && sky_only.mean() > 0.05 * both.mean());
     }
 }
+
+/// The Cornell box (the project's asset, refined as its lamp asks) lit by the map alone:
+/// `bspvt-env` against `mc-env`. Known to fail — the sky comes out ~47 % too bright in this
+/// room (docs/methods.md, "Known defect"); run it with `--ignored --nocapture` to see the
+/// figures.
+#[test]
+#[ignore = "known defect: the sky is ~47 % too bright in the Cornell box (docs/methods.md)"]
+fn sky_in_the_cornell_box_matches_monte_carlo() {
+    let map = bspvt_client::envmap::default_env_path();
+    if !map.exists() {
+        eprintln!("skipped: no environment map in ../shared/assets");
+        return;
+    }
+    let asset = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/rooms/cornell-box.obj");
+    let mut scene = bspvt_client::scene::open(None, Some(&asset)).unwrap().sky();
+    scene.bake.face_res = 32;
+    let b = bake(&scene);
+    let sky = Trees::full(&b.trees, b.header.codec());
+    let r = Renderer::new(&scene, 128, 128);
+    let env = env_options(map);
+    let reference = frame("mc-env", &scene, &r, &env, None, None, Mode::Pixel, 512);
+    for mode in [Mode::Vertex, Mode::Pixel] {
+        let img = frame("bspvt-env", &scene, &r, &env, Some(&sky), None, mode, 0);
+        let (e, m) = mean_error(&img, &reference, &r);
+        eprintln!(
+            "Cornell box sky, {mode:?}: mean |error| {:.2} % of {m:.4}",
+            100.0 * e / m
+        );
+        assert!(e <= 0.05 * m, "{mode:?}: mean |error| {e} > 5 % of {m}");
+    }
+}

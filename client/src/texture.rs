@@ -150,8 +150,48 @@ impl LightFrame {
     /// Heitz et al. 2016, §5.3 (`FetchFilteredTexture`): in the lobe's cosine space (the
     /// linear map `m`), the ray along the vector form factor `f` meets the light's plane at
     /// (u, v); the footprint d = distance / √area sets the level, log₂(d · size).
+    #[cfg(test)]
     pub(crate) fn lookup(&self, m: &DMat3, f: DVec3, tex: &LightTexture) -> DVec3 {
-        PlaneLookup::new(self, m, tex).fetch(f, tex)
+        PlaneLookup::new(self, m, tex).fetch(f, tex, f64::INFINITY)
+    }
+
+    /// The finest level that still averages over all of `poly`, a part of the light (as
+    /// directions from the shading point) — log₂ of its extent in texels, √(its area on the
+    /// light's plane / the texture's area) · size. The lobe's footprint [Heitz16 §5.3] is the
+    /// filter for a whole light; a piece that a tree or the horizon cuts from it can be much
+    /// smaller, and the lobe is then nearly constant over it, so its integral is the texture's
+    /// mean over the piece, not over the lobe's footprint around it: a sliver of dim horizon
+    /// seen through a doorway must not fetch the bright sky above it. Area ratios on a plane
+    /// are the same in every linear space, so this does not depend on the lobe. +∞ (no limit)
+    /// when the piece cannot be projected (a direction parallel to or away from the plane).
+    pub(crate) fn piece_lod(&self, poly: &[DVec3], tex: &LightTexture) -> f64 {
+        let ortho = self.e1.cross(self.e2);
+        let texture_area = ortho.length();
+        let dist = ortho.dot(self.origin);
+        if !(texture_area > 0.0) || !(dist.abs() > 0.0) {
+            return f64::INFINITY;
+        }
+        let mut twice_area = DVec3::ZERO;
+        let mut first = None;
+        let mut prev = DVec3::ZERO;
+        for &w in poly {
+            let den = ortho.dot(w);
+            if !(den * dist > 0.0) {
+                return f64::INFINITY;
+            }
+            let q = w * (dist / den);
+            match first {
+                None => first = Some(q),
+                Some(_) => twice_area += prev.cross(q),
+            }
+            prev = q;
+        }
+        if let Some(q0) = first {
+            twice_area += prev.cross(q0);
+        }
+        let ratio = 0.5 * twice_area.length() / texture_area;
+        let lod = ((ratio.sqrt()) * tex.size() as f64).max(1.0).log2();
+        if lod.is_finite() { lod } else { f64::INFINITY }
     }
 }
 
@@ -189,14 +229,14 @@ impl PlaneLookup {
         }
     }
 
-    /// The filtered texture where the ray along `f` meets the plane.
-    pub(crate) fn fetch(&self, f: DVec3, tex: &LightTexture) -> DVec3 {
+    /// The filtered texture where the ray along `f` meets the plane; `max_lod` bounds the level: [`LightFrame::piece_lod`] for a piece of the light.
+    pub(crate) fn fetch(&self, f: DVec3, tex: &LightTexture, max_lod: f64) -> DVec3 {
         let denom = self.ortho.dot(f);
         if !(self.area > 0.0) || !(denom.abs() > 0.0) {
             return tex.average();
         }
         let q = f * (self.dist_area / denom) - self.o;
-        tex.sample(uv_in(self.e1, self.e2, q), self.lod)
+        tex.sample(uv_in(self.e1, self.e2, q), self.lod.min(max_lod))
     }
 }
 
@@ -259,5 +299,62 @@ mod tests {
         let t = checker(64);
         let got = f.lookup(&DMat3::IDENTITY, dir, &t);
         assert!(got.is_finite());
+    }
+
+    /// A piece's level is log₂ of its extent in texels: the whole light → log₂ size, a
+    /// quarter of it → log₂ size − 1, whatever the distance; a piece that cannot be projected
+    /// (behind the plane) sets no bound. A half-dark texture fetched over a small bright
+    /// corner piece reads bright, not the half-grey of the lobe's footprint.
+    #[test]
+    fn a_piece_is_filtered_over_itself() {
+        let size = 64;
+        let half: Vec<[f32; 3]> = (0..size * size)
+            .map(|i| {
+                if i % size < size / 2 {
+                    [1.0; 3]
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect();
+        let tex = LightTexture::from_texels(size, size, &half).expect("texture");
+        // A 2 × 2 light at height 1 above the point, facing down; p₀ = (−1, 1, −1).
+        let light = [
+            DVec3::new(-1.0, 1.0, -1.0),
+            DVec3::new(1.0, 1.0, -1.0),
+            DVec3::new(1.0, 1.0, 1.0),
+            DVec3::new(-1.0, 1.0, 1.0),
+        ];
+        let frame = LightFrame::new(&light, DVec3::ZERO);
+        assert!((frame.piece_lod(&light, &tex) - 6.0).abs() < 1e-9);
+        let quarter = [
+            DVec3::new(-1.0, 1.0, -1.0),
+            DVec3::new(0.0, 1.0, -1.0),
+            DVec3::new(0.0, 1.0, 0.0),
+            DVec3::new(-1.0, 1.0, 0.0),
+        ];
+        assert!((frame.piece_lod(&quarter, &tex) - 5.0).abs() < 1e-9);
+        let far = quarter.map(|d| d * 7.0);
+        assert!((frame.piece_lod(&far, &tex) - 5.0).abs() < 1e-9);
+        let behind = [DVec3::NEG_Y, DVec3::X, DVec3::Z];
+        assert_eq!(frame.piece_lod(&behind, &tex), f64::INFINITY);
+
+        // A small piece in the bright half (u < ¼), seen straight on by the cosine lobe.
+        let sliver = [
+            DVec3::new(-0.9, 1.0, -0.1),
+            DVec3::new(-0.7, 1.0, -0.1),
+            DVec3::new(-0.7, 1.0, 0.1),
+            DVec3::new(-0.9, 1.0, 0.1),
+        ];
+        let f = DVec3::new(-0.8, 1.0, 0.0).normalize();
+        let m = DMat3::IDENTITY;
+        let lookup = PlaneLookup::new(&frame, &m, &tex);
+        let lobe_wide = lookup.fetch(f, &tex, f64::INFINITY).x;
+        let own = lookup.fetch(f, &tex, frame.piece_lod(&sliver, &tex)).x;
+        assert!(own > 0.95, "filtered over itself: {own}");
+        assert!(
+            lobe_wide < 0.9,
+            "the lobe's footprint reaches the dark half: {lobe_wide}"
+        );
     }
 }

@@ -216,33 +216,71 @@ fn lamps_and_sky_add_in_one_frame() {
     }
 }
 
-/// The Cornell box (the project's asset, refined as its lamp asks) lit by the map alone:
-/// `bspvt-env` against `mc-env`. Known to fail — the sky comes out ~47 % too bright in this
-/// room (docs/methods.md, "Known defect"); run it with `--ignored --nocapture` to see the
-/// figures.
-#[test]
-#[ignore = "known defect: the sky is ~47 % too bright in the Cornell box (docs/methods.md)"]
-fn sky_in_the_cornell_box_matches_monte_carlo() {
-    let map = bspvt_client::envmap::default_env_path();
-    if !map.exists() {
-        eprintln!("skipped: no environment map in ../shared/assets");
-        return;
-    }
+/// The Cornell box (the project's asset, refined as its lamp asks) lit by a map alone,
+/// `bspvt-env` at `k` pieces a face side against `mc-env` at `spp`: (mean |error| per vertex,
+/// per pixel, the reference's mean), over the covered pixels of a `size`² image.
+fn cornell_sky(map: &Path, size: u32, spp: u32, k: u32) -> [f64; 3] {
     let asset = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/rooms/cornell-box.obj");
     let mut scene = bspvt_client::scene::open(None, Some(&asset)).unwrap().sky();
     scene.bake.face_res = 32;
     let b = bake(&scene);
     let sky = Trees::full(&b.trees, b.header.codec());
-    let r = Renderer::new(&scene, 128, 128);
-    let env = env_options(map);
-    let reference = frame("mc-env", &scene, &r, &env, None, None, Mode::Pixel, 512);
-    for mode in [Mode::Vertex, Mode::Pixel] {
+    let r = Renderer::new(&scene, size, size);
+    let env = EnvOptions {
+        pieces: k,
+        ..env_options(map.to_path_buf())
+    };
+    let reference = frame("mc-env", &scene, &r, &env, None, None, Mode::Pixel, spp);
+    let [v, p] = [Mode::Vertex, Mode::Pixel].map(|mode| {
         let img = frame("bspvt-env", &scene, &r, &env, Some(&sky), None, mode, 0);
         let (e, m) = mean_error(&img, &reference, &r);
         eprintln!(
-            "Cornell box sky, {mode:?}: mean |error| {:.2} % of {m:.4}",
+            "Cornell box, {}, k = {k}, {mode:?}: mean |error| {:.2} % of the mean {m:.4}",
+            map.display(),
             100.0 * e / m
         );
-        assert!(e <= 0.05 * m, "{mode:?}: mean |error| {e} > 5 % of {m}");
+        e
+    });
+    let (_, m) = mean_error(&reference, &reference, &r);
+    [v, p, m]
+}
+
+/// Under a uniform white sky only visibility is left to be wrong (no texture, no colour): the
+/// box is open at the front alone, and a vertex where two of its quads meet must not see the
+/// sky through the other one. Before the bake's rays left boundary vertices from inside their
+/// own surface, half the hemisphere leaked there: 37.6 % here; 7.7 % after. The 5 % goal is
+/// not met yet: the mesh is refined for the lamp, not for the sky, and the ceiling
+/// interpolates the sky's visibility over large triangles (refined uniformly to 40,000
+/// vertices: 2.4 %). The bound guards the leak; docs/methods.md has the figures.
+#[test]
+fn the_cornell_box_under_a_white_sky_does_not_leak() {
+    let dir = tempfile::tempdir().unwrap();
+    let map = dir.path().join("white.hdr");
+    let img = image::Rgb32FImage::from_fn(64, 32, |_, _| image::Rgb([1.0, 1.0, 1.0]));
+    image::DynamicImage::ImageRgb32F(img).save(&map).unwrap();
+    let [v, p, m] = cornell_sky(&map, 48, 4096, 2);
+    assert!(m > 0.0);
+    for (mode, e) in [("vertex", v), ("pixel", p)] {
+        assert!(e <= 0.10 * m, "{mode}: mean |error| {e} > 10 % of {m}");
+    }
+}
+
+/// The shared map in the Cornell box. Known to fail at the default k = 2 (9.4 % per vertex
+/// against a 4096-spp reference at 64²; 7.9 % at k = 4): the room is lit through its open front
+/// only, so each piece of the map is mostly occluded and the ceiling, refined for the lamp and
+/// not for the sky, interpolates the sky's visibility over large triangles (on a mesh refined
+/// uniformly to 40,000 vertices: 6.6 % at k = 2, 3.2 % at k = 4). docs/methods.md, "Known
+/// defect"; run with `--ignored --nocapture` to see the figures.
+#[test]
+#[ignore = "known defect: 9.4 % at the default k in the Cornell box (docs/methods.md)"]
+fn the_cornell_box_under_the_shared_map_matches_monte_carlo() {
+    let map = bspvt_client::envmap::default_env_path();
+    if !map.exists() {
+        eprintln!("skipped: no environment map in ../shared/assets");
+        return;
+    }
+    let [v, p, m] = cornell_sky(&map, 64, 4096, EnvOptions::default().pieces);
+    for (mode, e) in [("vertex", v), ("pixel", p)] {
+        assert!(e <= 0.05 * m, "{mode}: mean |error| {e} > 5 % of {m}");
     }
 }

@@ -63,9 +63,10 @@ pub fn file_stem(name: &str) -> String {
         .collect()
 }
 
-/// The bake of `scene` in `cache` (`NAME-HASH.bspvt`, HASH over the mesh's content hash, the
-/// bake settings and the lights — their regions and planes decide which directions matter
-/// and where rays end; none: the sky's), baking it first when absent. `progress(done, total)` follows the
+/// The bake of `scene` in `cache` (`NAME-HASH.bspvt`, HASH over the bake's
+/// [`bspvt_bake::ALGORITHM_VERSION`], the mesh's content hash, the bake settings and the
+/// lights — their regions and planes decide which directions matter and where rays end; none:
+/// the sky's), baking it first when absent. `progress(done, total)` follows the
 /// vertices while it bakes.
 pub fn cached_bake(
     name: &str,
@@ -76,7 +77,8 @@ pub fn cached_bake(
     let mut h = bspvt_proto::hash::Fnv1a::default();
     h.write(
         format!(
-            "{:x}{:?}{:?}",
+            "{}:{:x}{:?}{:?}",
+            bspvt_bake::ALGORITHM_VERSION,
             scene.mesh.content_hash(),
             scene.bake,
             scene.lights

@@ -21,7 +21,7 @@ use crate::light::Light;
 use crate::ltc::table::LtcTable;
 use crate::shade::bspvt::shade_vertex;
 use crate::shade::sky::{shade_vertex_sky, unshadowed_sky};
-use crate::shade::{Lobes, unshadowed};
+use crate::shade::{Lobes, ShadowRatio, UNSHADOWED, unshadowed};
 
 /// Where shading is evaluated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -198,11 +198,11 @@ impl<'a> Renderer<'a> {
     /// pieces, dropped); vertices the camera does not see are left at zero (ratio 1).
     fn per_vertex(
         &self,
-        shade: impl Fn(u32, &Lobes, DVec3, DVec3) -> ([f32; 3], [f32; 2], u32, u32) + Sync,
-    ) -> (Vec<[f32; 3]>, Vec<[f32; 2]>, FrameCounts) {
+        shade: impl Fn(u32, &Lobes, DVec3, DVec3) -> ([f32; 3], ShadowRatio, u32, u32) + Sync,
+    ) -> (Vec<[f32; 3]>, Vec<ShadowRatio>, FrameCounts) {
         let n = self.scene.mesh.vertex_count();
         // (vertex, radiance, shadow ratios, pieces, dropped)
-        type Shaded = (u32, [f32; 3], [f32; 2], u32, u32);
+        type Shaded = (u32, [f32; 3], ShadowRatio, u32, u32);
         let shaded: Vec<Shaded> = self
             .visible_vertices
             .par_iter()
@@ -213,7 +213,7 @@ impl<'a> Renderer<'a> {
             })
             .collect();
         let mut colour = vec![[0.0; 3]; n];
-        let mut ratio = vec![[1.0; 2]; n];
+        let mut ratio = vec![UNSHADOWED; n];
         let mut counts = FrameCounts {
             vertices_shaded: shaded.len(),
             ..FrameCounts::default()
@@ -233,18 +233,18 @@ impl<'a> Renderer<'a> {
         &self,
         light: &Light,
         trees: &Trees,
-    ) -> (Vec<[f32; 3]>, Vec<[f32; 2]>, FrameCounts) {
+    ) -> (Vec<[f32; 3]>, Vec<ShadowRatio>, FrameCounts) {
         self.per_vertex(|v, lobes, p, nrm| {
             if !trees.has(v) {
                 let i = unshadowed(lobes, light, p, nrm);
                 let c = lobes.radiance(light.radiance, &i);
-                return (c.as_vec3().to_array(), [1.0, 1.0], 0, 0);
+                return (c.as_vec3().to_array(), UNSHADOWED, 0, 0);
             }
             let r = shade_vertex(lobes, light, p, nrm, &trees.trees[v as usize], &trees.codec);
             let c = lobes.radiance(light.radiance, &r.shadowed);
             (
                 c.as_vec3().to_array(),
-                r.shadowed.integrals.ratio(&r.unshadowed.integrals),
+                r.shadowed.ratio(&r.unshadowed),
                 r.pieces,
                 r.dropped,
             )
@@ -258,12 +258,12 @@ impl<'a> Renderer<'a> {
         pieces: &[Light],
         trees: Option<&Trees>,
         ratios: bool,
-    ) -> (Vec<[f32; 3]>, Vec<[f32; 2]>, FrameCounts) {
+    ) -> (Vec<[f32; 3]>, Vec<ShadowRatio>, FrameCounts) {
         self.per_vertex(|v, lobes, _, nrm| {
             let Some(trees) = trees.filter(|t| t.has(v)) else {
                 let s = unshadowed_sky(lobes, pieces, nrm);
                 let c = lobes.radiance(DVec3::ONE, &s);
-                return (c.as_vec3().to_array(), [1.0, 1.0], 0, 0);
+                return (c.as_vec3().to_array(), UNSHADOWED, 0, 0);
             };
             let r = shade_vertex_sky(
                 lobes,
@@ -274,7 +274,7 @@ impl<'a> Renderer<'a> {
                 ratios,
             );
             let c = lobes.radiance(DVec3::ONE, &r.shadowed);
-            let ratio = if ratios { r.ratio() } else { [1.0, 1.0] };
+            let ratio = if ratios { r.ratio() } else { UNSHADOWED };
             (c.as_vec3().to_array(), ratio, r.pieces, r.dropped)
         })
     }
@@ -321,8 +321,8 @@ impl<'a> Renderer<'a> {
     /// shadow ratios interpolated at the pixel ([1, 1] without).
     fn per_pixel(
         &self,
-        ratio: Option<&[[f32; 2]]>,
-        shade: impl Fn(&Lobes, DVec3, DVec3, [f32; 2]) -> DVec3 + Sync,
+        ratio: Option<&[ShadowRatio]>,
+        shade: impl Fn(&Lobes, DVec3, DVec3, ShadowRatio) -> DVec3 + Sync,
     ) -> Image {
         let mesh = &self.scene.mesh;
         let g = &self.gbuffer;
@@ -341,15 +341,15 @@ impl<'a> Renderer<'a> {
                 Some(r) => {
                     let idx = mesh.triangles[s.tri as usize];
                     let w = s.weights;
-                    let f = |k: usize| {
-                        (w[0] * f64::from(r[idx[0] as usize][k])
-                            + w[1] * f64::from(r[idx[1] as usize][k])
-                            + w[2] * f64::from(r[idx[2] as usize][k]))
+                    let f = |lobe: usize, c: usize| {
+                        (w[0] * f64::from(r[idx[0] as usize][lobe][c])
+                            + w[1] * f64::from(r[idx[1] as usize][lobe][c])
+                            + w[2] * f64::from(r[idx[2] as usize][lobe][c]))
                             as f32
                     };
-                    [f(0), f(1)]
+                    [0, 1].map(|lobe| [0, 1, 2].map(|c| f(lobe, c)))
                 }
-                None => [1.0, 1.0],
+                None => UNSHADOWED,
             };
             *px = shade(&lobes, s.position, s.normal, r).as_vec3().to_array();
         });
@@ -357,7 +357,7 @@ impl<'a> Renderer<'a> {
     }
 
     /// Per-pixel LTC times interpolated shadow ratios (`None`: unshadowed).
-    pub fn shade_pixels(&self, light: &Light, ratio: Option<&[[f32; 2]]>) -> Image {
+    pub fn shade_pixels(&self, light: &Light, ratio: Option<&[ShadowRatio]>) -> Image {
         self.per_pixel(ratio, |lobes, p, n, r| {
             let integrals = unshadowed(lobes, light, p, n);
             lobes.radiance_scaled(light.radiance, &integrals, r)
@@ -365,7 +365,11 @@ impl<'a> Renderer<'a> {
     }
 
     /// The unshadowed sky per pixel times interpolated sky shadow ratios.
-    pub(crate) fn shade_pixels_sky(&self, pieces: &[Light], ratio: Option<&[[f32; 2]]>) -> Image {
+    pub(crate) fn shade_pixels_sky(
+        &self,
+        pieces: &[Light],
+        ratio: Option<&[ShadowRatio]>,
+    ) -> Image {
         self.per_pixel(ratio, |lobes, _, n, r| {
             let s = unshadowed_sky(lobes, pieces, n);
             lobes.radiance_scaled(DVec3::ONE, &s, r)

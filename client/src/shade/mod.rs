@@ -72,20 +72,32 @@ impl Shaded {
     }
 }
 
-impl Integrals {
-    /// Shadowed / unshadowed per lobe, 1 where the unshadowed integral is zero (the ratio
-    /// then multiplies nothing).
-    pub(crate) fn ratio(&self, unshadowed: &Integrals) -> [f32; 2] {
-        let r = |s: f64, u: f64| {
-            if u > 0.0 {
-                (s / u).clamp(0.0, 1.0) as f32
-            } else {
-                1.0
-            }
+/// Shadowed / unshadowed per lobe and channel — \[diffuse, specular\] × RGB — the per-vertex
+/// factor the per-pixel mode interpolates and multiplies its own unshadowed shading by. Per
+/// channel, because what a point sees of a coloured light (a textured lamp, the sky through a
+/// doorway) need not have the whole light's colour.
+pub type ShadowRatio = [[f32; 3]; 2];
+
+/// The ratio of a point that nothing shadows.
+pub const UNSHADOWED: ShadowRatio = [[1.0; 3]; 2];
+
+impl Shaded {
+    /// Shadowed (`self`) / `unshadowed` per lobe and channel, clamped to \[0, 1\]; 1 where the
+    /// unshadowed value is zero (the ratio then multiplies nothing).
+    pub(crate) fn ratio(&self, unshadowed: &Shaded) -> ShadowRatio {
+        let r = |s: DVec3, u: DVec3| {
+            let c = |s: f64, u: f64| {
+                if u > 0.0 {
+                    (s / u).clamp(0.0, 1.0) as f32
+                } else {
+                    1.0
+                }
+            };
+            [c(s.x, u.x), c(s.y, u.y), c(s.z, u.z)]
         };
         [
-            r(self.diffuse, unshadowed.diffuse),
-            r(self.specular, unshadowed.specular),
+            r(self.diffuse_rgb, unshadowed.diffuse_rgb),
+            r(self.specular_rgb, unshadowed.specular_rgb),
         ]
     }
 }
@@ -144,13 +156,16 @@ impl Lobes {
             }
             Some(tex) => {
                 let mut out = Shaded::default();
+                let piece_lod = emitter.frame.piece_lod(poly, tex);
                 if let Some(f) = vector_form_factor(&self.to_local, poly) {
                     out.integrals.diffuse = f.z.min(1.0);
-                    out.diffuse_rgb = emitter.fetch(0, &self.to_local, f, tex) * f.z.min(1.0);
+                    out.diffuse_rgb =
+                        emitter.fetch(0, &self.to_local, f, tex, piece_lod) * f.z.min(1.0);
                 }
                 if let Some(f) = vector_form_factor(&self.to_ltc, poly) {
                     out.integrals.specular = f.z.min(1.0);
-                    out.specular_rgb = emitter.fetch(1, &self.to_ltc, f, tex) * f.z.min(1.0);
+                    out.specular_rgb =
+                        emitter.fetch(1, &self.to_ltc, f, tex, piece_lod) * f.z.min(1.0);
                 }
                 out
             }
@@ -165,9 +180,9 @@ impl Lobes {
 
     /// Outgoing radiance with separate shadow ratios [diffuse, specular] (per-pixel mode).
     #[inline]
-    pub(crate) fn radiance_scaled(&self, l: DVec3, s: &Shaded, ratio: [f32; 2]) -> DVec3 {
-        l * (self.albedo * s.diffuse_rgb * f64::from(ratio[0])
-            + self.specular * s.specular_rgb * f64::from(ratio[1]))
+    pub(crate) fn radiance_scaled(&self, l: DVec3, s: &Shaded, ratio: ShadowRatio) -> DVec3 {
+        let [d, sp] = ratio.map(|r| glam::Vec3::from(r).as_dvec3());
+        l * (self.albedo * s.diffuse_rgb * d + self.specular * s.specular_rgb * sp)
     }
 }
 
@@ -204,10 +219,17 @@ impl<'a> Emitter<'a> {
 
     /// The texture seen along `f` by lobe `lobe` (0 diffuse, 1 specular; `m` its map).
     #[inline]
-    fn fetch(&self, lobe: usize, m: &DMat3, f: DVec3, tex: &crate::texture::LightTexture) -> DVec3 {
+    fn fetch(
+        &self,
+        lobe: usize,
+        m: &DMat3,
+        f: DVec3,
+        tex: &crate::texture::LightTexture,
+        max_lod: f64,
+    ) -> DVec3 {
         match &self.lookups {
-            Some(l) => l[lobe].fetch(f, tex),
-            None => self.frame.lookup(m, f, tex),
+            Some(l) => l[lobe].fetch(f, tex, max_lod),
+            None => PlaneLookup::new(&self.frame, m, tex).fetch(f, tex, max_lod),
         }
     }
 }

@@ -6,7 +6,7 @@
 use bspvt_proto::bspvt::{LineCodec, VertexTrees};
 use glam::DVec3;
 
-use super::{Emitter, Lobes, Shaded, light_directions};
+use super::{Emitter, Lobes, Shaded, ShadowRatio, light_directions};
 use crate::light::Light;
 
 /// Σ over the pieces, with each piece's radiance folded into the colours.
@@ -23,22 +23,10 @@ pub struct SkyVertex {
 }
 
 impl SkyVertex {
-    /// Shadowed / unshadowed per lobe, of the luminance of the radiance-weighted integrals
-    /// (what the per-pixel mode interpolates); 1 where nothing lights the lobe.
-    pub fn ratio(&self) -> [f32; 2] {
-        let lum = |c: DVec3| crate::frame::stats::luminance(c.x, c.y, c.z);
-        let r = |s: DVec3, u: DVec3| {
-            let (s, u) = (lum(s), lum(u));
-            if u > 0.0 {
-                (s / u).clamp(0.0, 1.0) as f32
-            } else {
-                1.0
-            }
-        };
-        [
-            r(self.shadowed.diffuse_rgb, self.unshadowed.diffuse_rgb),
-            r(self.shadowed.specular_rgb, self.unshadowed.specular_rgb),
-        ]
+    /// Shadowed / unshadowed per lobe and channel, of the radiance-weighted integrals (what
+    /// the per-pixel mode interpolates).
+    pub fn ratio(&self) -> ShadowRatio {
+        self.shadowed.ratio(&self.unshadowed)
     }
 }
 

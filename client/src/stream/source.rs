@@ -189,10 +189,12 @@ pub(crate) fn open(src: &Source, places: &Places) -> Result<Served> {
     }
 }
 
-/// Identity of a local scene's content: the scene file's bytes (or the built-in's name), and
-/// the mesh file's bytes.
+/// Identity of a local scene's content: the bake's algorithm version, the scene file's bytes
+/// (or the built-in's name), and the mesh file's bytes.
 fn content_key(scene: Option<&str>, mesh: Option<&Path>) -> Result<String> {
     let mut h = Fnv1a::default();
+    // A scene submitted by an older bake is submitted again (new trees) after an upgrade.
+    h.write(&bspvt_bake::ALGORITHM_VERSION.to_le_bytes());
     if let Some(s) = scene {
         h.write(s.as_bytes());
         if !s.starts_with("builtin:") {

@@ -169,11 +169,10 @@ impl LightStop {
 
 /// Where a vertex's rays start and which directions can matter.
 pub(crate) struct VertexRays<'a> {
-    pub position: Vec3,
+    /// Where the rays start: the vertex lifted off its surface ([`crate::origin`]).
+    pub origin: Vec3,
     pub normal: Vec3,
     pub vertex: u32,
-    /// Ray origin offset along the normal (scaled to the scene).
-    pub offset: f32,
     /// Hits nearer than this are not counted ([`crate::RAY_T_MIN_SCALE`] of the scene's
     /// diagonal).
     pub t_min: f32,
@@ -236,7 +235,7 @@ impl VertexRays<'_> {
         table: &RayTable,
         mode: CastMode,
     ) -> ([Option<FacePixels>; FACES], CastCounts) {
-        let origin = self.position + self.normal * self.offset;
+        let origin = self.origin;
         let res = table.res as usize;
         let mut counts = CastCounts::default();
         let mut matters = vec![false; res * res];
@@ -291,7 +290,7 @@ impl VertexRays<'_> {
         occ: &Occluder,
         table: &RayTable,
     ) -> [Option<FacePixels>; FACES] {
-        let origin = self.position + self.normal * self.offset;
+        let origin = self.origin;
         let s = table.samples as usize;
         std::array::from_fn(|f| {
             let mut px = FacePixels::default();

@@ -17,6 +17,7 @@
 pub mod cubemap;
 pub mod fit;
 mod frustum;
+mod origin;
 pub mod refine;
 pub mod stats;
 mod walk;
@@ -28,12 +29,19 @@ use std::time::Instant;
 use bspvt_proto::bspvt::{LineCodec, VertexTrees};
 use bspvt_proto::encoding::{BakeHeader, encode_chunk, encode_header};
 use bspvt_proto::{Aabb, BakeSettings, Mesh, Scene, SplitMethod};
+use glam::Vec3;
 use rayon::prelude::*;
 
 use bspvt_raytrace::Occluder;
 pub use cubemap::{CastCounts, CastMode, LightStop};
 use cubemap::{RayTable, VertexRays};
 use fit::{FitStats, Fitter};
+
+/// Bumped whenever the same scene and settings bake to other bytes (the pinned bakes of
+/// `tests/tests/bake_pinned.rs` change): caches of finished bakes key on it, so that an
+/// upgrade does not serve trees baked by the old rule. 2: rays of open-boundary vertices leave
+/// from inside their own surface ([`origin`]).
+pub const ALGORITHM_VERSION: u32 = 2;
 
 /// Ray origins are offset along the normal by this fraction of the scene's diagonal.
 pub(crate) const RAY_OFFSET_SCALE: f32 = 1e-4;
@@ -59,7 +67,8 @@ pub struct Baker {
     /// How rays are cast (the same cube maps either way).
     cast: CastMode,
     codec: LineCodec,
-    offset: f32,
+    /// Per vertex: where its rays start ([`origin`]).
+    origins: Vec<Vec3>,
     /// See [`RAY_T_MIN_SCALE`].
     t_min: f32,
     header: BakeHeader,
@@ -168,7 +177,7 @@ impl Baker {
         let walk = walk::SurfaceWalk::new(&mesh, &occluder);
         let table = RayTable::new(settings.face_res, settings.supersampling);
         let codec = LineCodec::for_resolution(settings.face_res);
-        let offset = RAY_OFFSET_SCALE * mesh.bounds().diagonal();
+        let origins = origin::ray_origins(&mesh, RAY_OFFSET_SCALE * mesh.bounds().diagonal());
         let t_min = RAY_T_MIN_SCALE * mesh.bounds().diagonal();
         let header = BakeHeader::new(&settings, mesh.vertex_count() as u32, mesh.content_hash());
         Baker {
@@ -182,7 +191,7 @@ impl Baker {
             table,
             cast: CastMode::default(),
             codec,
-            offset,
+            origins,
             t_min,
             header,
         }
@@ -223,10 +232,9 @@ impl Baker {
     /// Where vertex `v`'s rays start and which directions can matter.
     fn vertex_rays(&self, v: u32) -> VertexRays<'_> {
         VertexRays {
-            position: self.mesh.positions[v as usize],
+            origin: self.origins[v as usize],
             normal: self.mesh.normals[v as usize],
             vertex: v,
-            offset: self.offset,
             t_min: self.t_min,
             regions: self.regions.as_deref(),
             stops: &self.stops,

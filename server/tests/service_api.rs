@@ -344,6 +344,7 @@ fn idempotency_key_returns_the_first_scene_refuses_another_body_and_survives_a_r
     let first = post_form(&a, &srv, &form, BOUNDARY, &[key]);
     assert_eq!(first.status, 202, "{}", first.text());
     let id = first.json()["id"].as_str().unwrap().to_string();
+    assert_eq!(first.json()["state"], "queued");
     assert!(first.header("idempotent-replayed").is_none());
 
     // A retry (as curl would send it: another multipart boundary) gets the same scene.

@@ -527,16 +527,20 @@ pub(crate) async fn submit(
     let st2 = st.clone();
     let outcome =
         blocking(move || Ok::<_, anyhow::Error>(accept_or_replay(&st2, up, key))).await??;
-    let (status, live) = match outcome {
-        Submission::Accepted(live) => (StatusCode::ACCEPTED, live),
-        Submission::Replayed(live) => (StatusCode::OK, live),
+    // A new scene is answered as accepted (`queued`); a replay with its state now.
+    let (status, live, state) = match outcome {
+        Submission::Accepted(live) => (StatusCode::ACCEPTED, live, JobState::Queued),
+        Submission::Replayed(live) => {
+            let state = live.state();
+            (StatusCode::OK, live, state)
+        }
     };
     let id = live.row.id.clone();
     let mut r = (
         status,
         Json(Submitted {
             id: id.clone(),
-            state: live.state(),
+            state,
             links: Links::of(&id),
         }),
     )

@@ -197,6 +197,7 @@ fn builtin_scene_bakes_streams_and_matches_the_offline_bake() {
         "/v1/scenes/{id}",
         "/v1/scenes/{id}/events",
         "/v1/scenes/{id}/mesh",
+        "/v1/scenes/{id}/scene",
         "/v1/scenes/{id}/trees",
         "/v1/openapi.json",
         "/healthz",

@@ -1,8 +1,9 @@
 //! HTTP handlers for scenes, meshes, health and metrics. They are thin:
 //! they parse and check the request, call `input`, `jobs` or `store`, and shape the answer.
 //!
-//! Guarantees: writes (`POST`, `DELETE`) need `Authorization: Bearer KEY` when a key is
-//! configured (compared in constant time) and are checked before any body byte is read; an
+//! Guarantees: writes (`POST`, `DELETE`) and the listing need the key when one is configured
+//! (`Authorization: Bearer KEY` or `X-API-Key: KEY`, compared in constant time), checked
+//! before any body byte is read; an
 //! upload is refused before it is read when the queue is full, too many uploads are in
 //! progress or its declared length is over the limit; blocking work (mesh parsing, file and
 //! database I/O) runs on tokio's blocking pool, never on the executor; ids are 128 random bits.
@@ -52,34 +53,51 @@ fn new_id() -> ApiResult<String> {
     Ok(b.iter().map(|x| format!("{x:02x}")).collect())
 }
 
-/// Proof that a write request carries the API key (when one is configured).
-pub(crate) struct WriteAccess;
+/// Proof that a request carries the API key (when one is configured): writes and the listing
+/// need it. The key is accepted as `Authorization: Bearer KEY` (scheme in any case) or as
+/// `X-API-Key: KEY`; every key given must be right (one wrong key is 401 even beside a right
+/// one). Each comparison takes the same time whatever bytes differ.
+pub(crate) struct KeyAccess;
 
-impl FromRequestParts<Shared> for WriteAccess {
+impl FromRequestParts<Shared> for KeyAccess {
     type Rejection = ApiError;
 
-    async fn from_request_parts(parts: &mut Parts, st: &Shared) -> ApiResult<WriteAccess> {
+    async fn from_request_parts(parts: &mut Parts, st: &Shared) -> ApiResult<KeyAccess> {
         let Some(key) = &st.cfg.api_key else {
-            return Ok(WriteAccess);
+            return Ok(KeyAccess);
         };
         let unauthorized =
             |d: &str| ApiError::new(StatusCode::UNAUTHORIZED, "unauthorized", d.to_string());
-        let given = parts
-            .headers
-            .get(header::AUTHORIZATION)
-            .ok_or_else(|| {
-                unauthorized("this server needs `Authorization: Bearer KEY` for writes")
-            })?
-            .to_str()
-            .map_err(|_| unauthorized("the Authorization header is not ASCII"))?;
-        // The scheme is case-insensitive (RFC 9110 §11.1).
-        let token = given
-            .split_once(' ')
-            .filter(|(scheme, _)| scheme.eq_ignore_ascii_case("bearer"))
-            .map(|(_, token)| token)
-            .ok_or_else(|| unauthorized("the Authorization header must be `Bearer KEY`"))?;
-        if constant_time_eq(token.trim().as_bytes(), key.as_bytes()) {
-            Ok(WriteAccess)
+        let mut given = Vec::new();
+        for v in parts.headers.get_all(header::AUTHORIZATION) {
+            let v = v
+                .to_str()
+                .map_err(|_| unauthorized("the Authorization header is not ASCII"))?;
+            // The scheme is case-insensitive (RFC 9110 §11.1).
+            let token = v
+                .split_once(' ')
+                .filter(|(scheme, _)| scheme.eq_ignore_ascii_case("bearer"))
+                .map(|(_, token)| token.trim())
+                .ok_or_else(|| unauthorized("the Authorization header must be `Bearer KEY`"))?;
+            given.push(token);
+        }
+        for v in parts.headers.get_all("x-api-key") {
+            let v = v
+                .to_str()
+                .map_err(|_| unauthorized("the X-API-Key header is not ASCII"))?;
+            given.push(v.trim());
+        }
+        if given.is_empty() {
+            return Err(unauthorized(
+                "this server needs its API key for this request: send `Authorization: Bearer KEY` or `X-API-Key: KEY`",
+            ));
+        }
+        // Every key is compared (no early exit on the first mismatch).
+        let right = given.iter().fold(true, |ok, g| {
+            ok & constant_time_eq(g.as_bytes(), key.as_bytes())
+        });
+        if right {
+            Ok(KeyAccess)
         } else {
             Err(unauthorized("wrong API key"))
         }
@@ -205,8 +223,127 @@ async fn read_upload(mut mp: Multipart, max_mesh: u64, idle: Duration) -> ApiRes
     Ok(up)
 }
 
-/// Parses, stores and queues an upload (blocking: runs on the blocking pool).
-fn accept(st: &Shared, up: Upload) -> ApiResult<Arc<Live>> {
+/// How long an `Idempotency-Key` is remembered after the submission it created: 24 hours.
+pub(crate) const IDEMPOTENCY_TTL_MS: i64 = 24 * 3600 * 1000;
+
+/// What a submission led to.
+enum Submission {
+    /// A new scene, queued.
+    Accepted(Arc<Live>),
+    /// The scene an earlier submission with the same `Idempotency-Key` and body created.
+    Replayed(Arc<Live>),
+}
+
+/// The `Idempotency-Key` header, if any: 1 to 255 visible ASCII characters, optionally in
+/// double quotes (the IETF draft sends it as a structured-field string).
+fn idempotency_key(headers: &HeaderMap) -> ApiResult<Option<String>> {
+    let mut values = headers.get_all("idempotency-key").iter();
+    let Some(v) = values.next() else {
+        return Ok(None);
+    };
+    let bad = |d: String| ApiError::bad_request("invalid_idempotency_key", d);
+    if values.next().is_some() {
+        return Err(bad("more than one Idempotency-Key header".into()));
+    }
+    let raw = v.as_bytes();
+    let key = raw
+        .strip_prefix(b"\"")
+        .and_then(|k| k.strip_suffix(b"\""))
+        .unwrap_or(raw);
+    if key.is_empty() || key.len() > 255 || !key.iter().all(|b| (0x21..=0x7e).contains(b)) {
+        return Err(bad(format!(
+            "the Idempotency-Key must be 1 to 255 visible ASCII characters (e.g. a UUID); got {} bytes",
+            raw.len()
+        )));
+    }
+    Ok(Some(String::from_utf8_lossy(key).into_owned()))
+}
+
+/// An `Idempotency-Key` claimed by the request being handled; released when dropped.
+struct KeyClaim {
+    st: Shared,
+    key: String,
+}
+
+impl KeyClaim {
+    /// Claims `key`, or 409 when another request with it is still being handled.
+    fn claim(st: &Shared, key: &str) -> ApiResult<KeyClaim> {
+        let mut held = st
+            .idempotency_in_flight
+            .lock()
+            .unwrap_or_else(|p| p.into_inner());
+        if !held.insert(key.to_string()) {
+            return Err(ApiError {
+                retry_after: Some(1),
+                ..ApiError::new(
+                    StatusCode::CONFLICT,
+                    "idempotency_key_in_use",
+                    "a request with this Idempotency-Key is still being handled; retry when it has been answered",
+                )
+            });
+        }
+        Ok(KeyClaim {
+            st: st.clone(),
+            key: key.to_string(),
+        })
+    }
+}
+
+impl Drop for KeyClaim {
+    fn drop(&mut self) {
+        self.st
+            .idempotency_in_flight
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .remove(&self.key);
+    }
+}
+
+/// Accepts an upload, or, when its `Idempotency-Key` already created a scene from the same
+/// body, answers with that scene (blocking: runs on the blocking pool).
+fn accept_or_replay(st: &Shared, up: Upload, key: Option<String>) -> ApiResult<Submission> {
+    let Some(key) = key else {
+        return accept(st, up, None).map(Submission::Accepted);
+    };
+    let fp = input::fingerprint(&up);
+    let now = now_ms();
+    let recorded = st
+        .db
+        .idempotent(&key, now - IDEMPOTENCY_TTL_MS)
+        .map_err(|e| ApiError::internal(format!("cannot read the idempotency keys: {e:#}")))?;
+    match recorded {
+        Some(r) if r.fingerprint == fp => {
+            let live = st
+                .jobs
+                .lookup(&r.scene_id)
+                .map_err(|e| ApiError::internal(format!("cannot read the scene: {e:#}")))?
+                .ok_or_else(|| {
+                    ApiError::internal(format!("the key's scene {} is not recorded", r.scene_id))
+                })?;
+            tracing::info!(scene = %r.scene_id, "idempotent resubmission answered with its scene");
+            Ok(Submission::Replayed(live))
+        }
+        Some(r) => Err(ApiError::unprocessable(
+            "idempotency_key_reused",
+            format!(
+                "this Idempotency-Key was used {} s ago for a different request (another mesh, \
+                 scene or settings); a new submission needs a new key (keys are kept {} h)",
+                (now - r.created_ms).max(0) / 1000,
+                IDEMPOTENCY_TTL_MS / 3_600_000
+            ),
+        )),
+        None => {
+            if !st.jobs.has_room() {
+                return Err(queue_full(st.cfg.max_queued_scenes));
+            }
+            accept(st, up, Some((&key, &fp))).map(Submission::Accepted)
+        }
+    }
+}
+
+/// Parses, stores and queues an upload (blocking: runs on the blocking pool), recording the
+/// `Idempotency-Key` and request fingerprint with it.
+fn accept(st: &Shared, up: Upload, key: Option<(&str, &str)>) -> ApiResult<Arc<Live>> {
     let p = input::prepare(up, &st.input_limits())?;
     let id = new_id()?;
     let scene = &p.scene;
@@ -242,7 +379,7 @@ fn accept(st: &Shared, up: Upload) -> ApiResult<Arc<Live>> {
         chunks_corrupt: 0,
         warnings: scene.warnings.clone(),
     };
-    match st.jobs.submit(row) {
+    match st.jobs.submit(row, key) {
         Ok(live) => {
             tracing::info!(
                 scene = %id,
@@ -294,10 +431,11 @@ fn queue_full(n: usize) -> ApiError {
 pub(crate) struct SubmitForm {
     /// The mesh file (`.glb`, `.gltf`, `.obj`, `.ply`, each optionally compressed as `.zst`).
     /// Required unless the scene names only `builtin:` meshes.
-    #[schema(value_type = String, format = Binary)]
+    #[schema(value_type = Option<String>, format = Binary)]
     mesh: Option<Vec<u8>>,
-    /// Scene JSON (docs/scene-format.md). Its non-builtin mesh paths must equal the uploaded
-    /// file's name. Without it the mesh gets the default scene (ground plane, quad light).
+    /// Scene JSON (docs/scene-format.md). Each non-builtin mesh path must end in the uploaded
+    /// file's name (`../meshes/bunny.ply` names an upload `bunny.ply`): the server never reads
+    /// a path. Without it the mesh gets the default scene (ground plane, quad light).
     scene: Option<String>,
     /// Bake settings JSON replacing the scene's `bake` (`face_res`, `epsilon`,
     /// `supersampling`, `split`, `chunk_vertices`).
@@ -309,22 +447,27 @@ pub(crate) struct SubmitForm {
     post,
     path = "/v1/scenes",
     tag = "scenes",
+    params(
+        ("Idempotency-Key" = Option<String>, Header, description = "1 to 255 visible ASCII characters (a UUID, say). A retry with the same key and the same form gets the first submission's scene (200, `Idempotent-Replayed: true`) instead of a second bake; the same key with another form is 422 `idempotency_key_reused`; while the first request is still being handled, 409. Keys are kept 24 hours, across restarts."),
+    ),
     request_body(content = SubmitForm, content_type = "multipart/form-data"),
     responses(
-        (status = 202, description = "Accepted and queued", body = Submitted),
-        (status = 400, description = "Malformed form or scene JSON", body = ErrorBody),
+        (status = 202, description = "Accepted and queued (`Location`: the status)", body = Submitted),
+        (status = 200, description = "A retry with a known Idempotency-Key and the same form: the scene the first request created, in its current state (`Idempotent-Replayed: true`)", body = Submitted),
+        (status = 400, description = "Malformed form, scene JSON or Idempotency-Key", body = ErrorBody),
         (status = 401, description = "Missing or wrong API key", body = ErrorBody),
+        (status = 409, description = "A request with this Idempotency-Key is still being handled", body = ErrorBody),
         (status = 413, description = "Body, field, mesh or scene over a limit", body = ErrorBody),
         (status = 415, description = "Not a multipart form, or unsupported mesh format", body = ErrorBody),
-        (status = 422, description = "Invalid mesh, scene or settings", body = ErrorBody),
+        (status = 422, description = "Invalid mesh, scene or settings; or an Idempotency-Key reused for another form", body = ErrorBody),
         (status = 429, description = "Queue full or too many uploads at once", body = ErrorBody),
         (status = 507, description = "The server's data disk is full (with Retry-After)", body = ErrorBody),
     ),
-    security(("api_key" = []))
+    security(("api_key" = []), ("api_key_header" = []))
 )]
 pub(crate) async fn submit(
     State(st): State<Shared>,
-    _auth: WriteAccess,
+    _auth: KeyAccess,
     headers: HeaderMap,
     client: Option<Extension<Client>>,
     mp: Result<Multipart, MultipartRejection>,
@@ -344,7 +487,9 @@ pub(crate) async fn submit(
             ),
         ));
     }
-    if !st.jobs.has_room() {
+    let key = idempotency_key(&headers)?;
+    // A retry with a known key is answered even when the queue is full (checked again below).
+    if key.is_none() && !st.jobs.has_room() {
         return Err(queue_full(st.cfg.max_queued_scenes));
     }
     // The client's slot first: one address cannot hold every upload slot.
@@ -358,6 +503,10 @@ pub(crate) async fn submit(
         .clone()
         .try_acquire_owned()
         .map_err(|_| ApiError::too_many("too many uploads in progress; retry shortly"))?;
+    let _claim = key
+        .as_deref()
+        .map(|k| KeyClaim::claim(&st, k))
+        .transpose()?;
     let mp = mp.map_err(|r| {
         let status = r.status();
         ApiError::new(
@@ -376,19 +525,202 @@ pub(crate) async fn submit(
     let idle = Duration::from_secs(st.cfg.body_read_timeout_s);
     let up = read_upload(mp, st.cfg.max_mesh_bytes, idle).await?;
     let st2 = st.clone();
-    let live = blocking(move || Ok::<_, anyhow::Error>(accept(&st2, up))).await??;
+    let outcome =
+        blocking(move || Ok::<_, anyhow::Error>(accept_or_replay(&st2, up, key))).await??;
+    // A new scene is answered as accepted (`queued`); a replay with its state now.
+    let (status, live, state) = match outcome {
+        Submission::Accepted(live) => (StatusCode::ACCEPTED, live, JobState::Queued),
+        Submission::Replayed(live) => {
+            let state = live.state();
+            (StatusCode::OK, live, state)
+        }
+    };
     let id = live.row.id.clone();
     let mut r = (
-        StatusCode::ACCEPTED,
+        status,
         Json(Submitted {
             id: id.clone(),
-            state: JobState::Queued,
+            state,
             links: Links::of(&id),
         }),
     )
         .into_response();
     if let Ok(v) = HeaderValue::from_str(&format!("/v1/scenes/{id}")) {
         r.headers_mut().insert(header::LOCATION, v);
+    }
+    if status == StatusCode::OK {
+        r.headers_mut()
+            .insert("idempotent-replayed", HeaderValue::from_static("true"));
+    }
+    Ok(r)
+}
+
+/// Most scenes a listing page holds (`limit`), and how many when not asked.
+pub(crate) const MAX_LIST_LIMIT: u32 = 100;
+const DEFAULT_LIST_LIMIT: u32 = 20;
+
+/// A scene in a listing (from the database: state, counts and times as last recorded).
+#[derive(Serialize, ToSchema)]
+pub(crate) struct SceneListItem {
+    pub id: String,
+    pub state: JobState,
+    /// Why it failed (`failed`), or why it is paused, or who deleted it (`cancelled`).
+    pub reason: Option<String>,
+    pub created_ms: i64,
+    pub finished_ms: Option<i64>,
+    pub vertices_total: u32,
+    pub chunks_done: u32,
+    pub chunks_total: u32,
+    /// How it was submitted, in words.
+    pub source: String,
+    pub links: Links,
+}
+
+/// A page of the listing, newest scene first.
+#[derive(Serialize, ToSchema)]
+pub(crate) struct SceneList {
+    pub scenes: Vec<SceneListItem>,
+    /// The next page's URL (also in the `Link: <…>; rel="next"` header); null on the last
+    /// page.
+    pub next: Option<String>,
+    /// The next page's cursor (`after=`): the id of this page's last scene; null on the last
+    /// page.
+    pub next_cursor: Option<String>,
+}
+
+/// List scenes, newest first, a page at a time.
+#[utoipa::path(
+    get,
+    path = "/v1/scenes",
+    tag = "scenes",
+    params(
+        ("limit" = Option<u32>, Query, description = "Scenes per page, 1 to 100 (default 20)"),
+        ("after" = Option<String>, Query, description = "Cursor: the last id of the previous page (its `next_cursor`); the page holds the scenes submitted before it"),
+        ("state" = Option<String>, Query, description = "Only scenes in these states, comma-separated (`queued,baking,done,failed,cancelled`)"),
+    ),
+    responses(
+        (status = 200, description = "A page of scenes; `next` and `Link: <…>; rel=\"next\"` name the next page", body = SceneList),
+        (status = 400, description = "Bad `limit`, `after`, `state` or an unknown parameter", body = ErrorBody),
+        (status = 401, description = "Missing or wrong API key", body = ErrorBody),
+    ),
+    security(("api_key" = []), ("api_key_header" = []))
+)]
+pub(crate) async fn list_scenes(
+    State(st): State<Shared>,
+    _auth: KeyAccess,
+    RawQuery(q): RawQuery,
+) -> ApiResult<Response> {
+    let mut limit = DEFAULT_LIST_LIMIT;
+    let mut after: Option<String> = None;
+    let mut states: Option<Vec<JobState>> = None;
+    for (k, v) in query_pairs(q.as_deref())? {
+        match k.as_str() {
+            "limit" => {
+                limit = v
+                    .parse::<u32>()
+                    .ok()
+                    .filter(|n| (1..=MAX_LIST_LIMIT).contains(n))
+                    .ok_or_else(|| {
+                        ApiError::bad_request(
+                            "invalid_query",
+                            format!(
+                                "limit must be a whole number from 1 to {MAX_LIST_LIMIT}; got {:?}",
+                                super::error::truncate(&v, 40)
+                            ),
+                        )
+                    })?;
+            }
+            "after" => {
+                check_id(&v).map_err(|_| {
+                    ApiError::bad_request(
+                        "invalid_cursor",
+                        format!(
+                            "after={:?} is not a scene id (use the `next_cursor` of the previous page)",
+                            super::error::truncate(&v, 40)
+                        ),
+                    )
+                })?;
+                after = Some(v);
+            }
+            "state" => {
+                let parsed = v
+                    .split(',')
+                    .map(|s| {
+                        JobState::parse(s.trim()).ok_or_else(|| {
+                            ApiError::bad_request(
+                                "invalid_query",
+                                format!(
+                                    "state {:?} is not one of queued, baking, done, failed, cancelled",
+                                    super::error::truncate(s, 40)
+                                ),
+                            )
+                        })
+                    })
+                    .collect::<ApiResult<Vec<_>>>()?;
+                states = Some(parsed);
+            }
+            other => {
+                return Err(ApiError::bad_request(
+                    "invalid_query",
+                    format!(
+                        "unknown query parameter {:?} (expected limit, after, state)",
+                        super::error::truncate(other, 40)
+                    ),
+                ));
+            }
+        }
+    }
+    let db = st.db.clone();
+    let (cursor, filter) = (after.clone(), states.clone());
+    let rows = blocking(move || db.list_scenes(cursor.as_deref(), filter.as_deref(), limit + 1))
+        .await?
+        .ok_or_else(|| {
+            ApiError::bad_request(
+                "invalid_cursor",
+                format!(
+                    "after={:?} names no scene on this server",
+                    after.as_deref().unwrap_or_default()
+                ),
+            )
+        })?;
+    let more = rows.len() > limit as usize;
+    let scenes: Vec<SceneListItem> = rows
+        .into_iter()
+        .take(limit as usize)
+        .map(|r| SceneListItem {
+            links: Links::of(&r.id),
+            id: r.id,
+            state: r.state,
+            reason: r.reason,
+            created_ms: r.created_ms,
+            finished_ms: r.finished_ms,
+            vertices_total: r.vertex_count,
+            chunks_done: r.chunks_done,
+            chunks_total: r.chunk_count,
+            source: r.source,
+        })
+        .collect();
+    let next_cursor = more.then(|| scenes.last().map(|s| s.id.clone())).flatten();
+    let next = next_cursor.as_ref().map(|c| {
+        let mut url = format!("/v1/scenes?limit={limit}&after={c}");
+        if let Some(s) = &states {
+            let names: Vec<&str> = s.iter().map(|s| s.as_str()).collect();
+            url.push_str(&format!("&state={}", names.join(",")));
+        }
+        url
+    });
+    let mut r = Json(SceneList {
+        scenes,
+        next: next.clone(),
+        next_cursor,
+    })
+    .into_response();
+    let h = r.headers_mut();
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    if let Some(n) = next
+        && let Ok(v) = HeaderValue::from_str(&format!("<{n}>; rel=\"next\""))
+    {
+        h.insert(header::LINK, v);
     }
     Ok(r)
 }
@@ -426,11 +758,11 @@ pub(crate) async fn get_scene(
         (status = 401, description = "Missing or wrong API key", body = ErrorBody),
         (status = 404, description = "Unknown id", body = ErrorBody),
     ),
-    security(("api_key" = []))
+    security(("api_key" = []), ("api_key_header" = []))
 )]
 pub(crate) async fn delete_scene(
     State(st): State<Shared>,
-    _auth: WriteAccess,
+    _auth: KeyAccess,
     Path(id): Path<String>,
 ) -> ApiResult<Response> {
     check_id(&id)?;

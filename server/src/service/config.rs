@@ -93,6 +93,10 @@ pub struct ServeArgs {
     /// Log format on stderr: `text` or `json`.
     #[arg(long, env = "BSPVT_LOG_FORMAT")]
     pub log_format: Option<String>,
+    /// Origins allowed to call the API from a browser (CORS), comma-separated, e.g.
+    /// `https://app.example,http://localhost:5173`; `*` allows any origin. Off when unset.
+    #[arg(long, env = "BSPVT_CORS_ORIGINS", value_delimiter = ',')]
+    pub cors_origins: Option<Vec<String>>,
 }
 
 /// The same settings as a TOML file.
@@ -123,6 +127,7 @@ struct FileConfig {
     max_connections: Option<usize>,
     header_read_timeout_s: Option<u64>,
     log_format: Option<String>,
+    cors_origins: Option<Vec<String>>,
 }
 
 /// Log output format.
@@ -183,6 +188,9 @@ pub struct Config {
     pub header_read_timeout_s: u64,
     /// Log format on stderr.
     pub log_format: LogFormat,
+    /// Browser origins allowed by CORS (`scheme://host[:port]`, or `*` for any); empty: no
+    /// CORS headers are sent and browsers on other origins cannot read the API.
+    pub cors_origins: Vec<String>,
 }
 
 impl Config {
@@ -212,6 +220,7 @@ impl Config {
             max_connections: 4096,
             header_read_timeout_s: 30,
             log_format: LogFormat::Text,
+            cors_origins: Vec::new(),
         }
     }
 
@@ -272,6 +281,13 @@ impl Config {
                 _ => bail!("log format {f:?} is neither `text` nor `json`"),
             };
         }
+        if let Some(o) = args.cors_origins.clone().or(file.cors_origins) {
+            c.cors_origins = o
+                .into_iter()
+                .map(|s| s.trim().to_string())
+                .filter(|s| !s.is_empty())
+                .collect();
+        }
         c.check()?;
         Ok(c)
     }
@@ -329,6 +345,12 @@ impl Config {
                 bspvt_proto::BakeSettings::MAX_SUPERSAMPLING
             );
         }
+        for o in &self.cors_origins {
+            check_origin(o)?;
+        }
+        if self.cors_origins.len() > 1 && self.cors_origins.iter().any(|o| o == "*") {
+            bail!("cors_origins: `*` allows every origin; give it alone, not with a list");
+        }
         // With fewer active scenes than workers a worker could idle while scenes wait.
         self.max_active_scenes = self.max_active_scenes.max(self.workers);
         Ok(())
@@ -338,6 +360,31 @@ impl Config {
     pub(crate) fn db_path(&self) -> PathBuf {
         self.data_dir.join("bspvt.sqlite")
     }
+}
+
+/// A CORS origin as browsers send it: `*`, or `scheme://host[:port]` with `http` or `https`,
+/// no path, no trailing slash (an origin with one never matches a browser's `Origin`).
+fn check_origin(o: &str) -> Result<()> {
+    if o == "*" {
+        return Ok(());
+    }
+    let rest = o
+        .strip_prefix("https://")
+        .or_else(|| o.strip_prefix("http://"))
+        .with_context(|| {
+            format!("CORS origin {o:?} must start with http:// or https:// (or be `*`)")
+        })?;
+    let host_ok = !rest.is_empty()
+        && rest
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b"-.:[]".contains(&b));
+    if !host_ok {
+        bail!(
+            "CORS origin {o:?} must be scheme://host[:port] with no path or trailing slash \
+             (as a browser sends it in `Origin`, e.g. https://app.example:8443)"
+        );
+    }
+    Ok(())
 }
 
 /// The API key in `path`: its first line, surrounding whitespace trimmed; never empty.
@@ -442,6 +489,51 @@ mod tests {
         assert!(
             Config::resolve(&ServeArgs::default()).is_err(),
             "no data dir"
+        );
+        for bad in [
+            "app.example",
+            "https://app.example/",
+            "https://a.example/x",
+            "ftp://a",
+        ] {
+            let args = ServeArgs {
+                data_dir: Some("/x".into()),
+                cors_origins: Some(vec![bad.into()]),
+                ..ServeArgs::default()
+            };
+            assert!(
+                Config::resolve(&args).is_err(),
+                "CORS origin {bad:?} accepted"
+            );
+        }
+    }
+
+    #[test]
+    fn cors_origins_from_flags_or_file() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let file = dir.path().join("bspvt.toml");
+        std::fs::write(
+            &file,
+            "data_dir = \"/x\"\ncors_origins = [\"https://app.example\", \"http://localhost:5173\"]\n",
+        )
+        .expect("write config");
+        let args = ServeArgs {
+            config: Some(file),
+            ..ServeArgs::default()
+        };
+        let c = Config::resolve(&args).expect("valid config");
+        assert_eq!(
+            c.cors_origins,
+            ["https://app.example", "http://localhost:5173"]
+        );
+        let args = ServeArgs {
+            cors_origins: Some(vec!["*".into()]),
+            ..args
+        };
+        assert_eq!(Config::resolve(&args).expect("valid").cors_origins, ["*"]);
+        assert!(
+            Config::with_data_dir("/x").cors_origins.is_empty(),
+            "CORS on by default"
         );
     }
 }

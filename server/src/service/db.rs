@@ -8,7 +8,9 @@
 //! - every commit is synced (`synchronous = FULL`), so what a response reported survives a
 //!   crash or a power cut;
 //! - each process start bumps `generation`, so a chunk row tells which run baked it;
-//! - foreign keys are enforced: chunk rows never outlive their scene row.
+//! - foreign keys are enforced: chunk rows never outlive their scene row;
+//! - an `Idempotency-Key` is recorded in the same transaction as the scene it created, so a
+//!   key never names a scene that was not recorded, nor a recorded scene lack its key.
 
 use std::path::Path;
 use std::sync::{Mutex, MutexGuard};
@@ -62,7 +64,8 @@ pub(crate) struct SceneRow {
     pub warnings: Vec<String>,
 }
 
-/// 2: adds `scenes.warnings` (a version-1 database gains the column on open).
+/// 2: adds `scenes.warnings` (a version-1 database gains the column on open). The
+/// `idempotency_keys` table is created on open when missing (an older build ignores it).
 const SCHEMA_VERSION: i64 = 2;
 
 const SCHEMA: &str = "
@@ -101,7 +104,36 @@ CREATE TABLE IF NOT EXISTS chunks (
     baked_ms INTEGER NOT NULL,
     PRIMARY KEY (scene_id, idx)
 ) WITHOUT ROWID;
+CREATE TABLE IF NOT EXISTS idempotency_keys (
+    key TEXT PRIMARY KEY,
+    fingerprint TEXT NOT NULL,
+    scene_id TEXT NOT NULL REFERENCES scenes(id) ON DELETE CASCADE,
+    created_ms INTEGER NOT NULL
+);
+CREATE INDEX IF NOT EXISTS idempotency_keys_created ON idempotency_keys(created_ms);
 ";
+
+/// A scene as the listing shows it (from its row and its chunk rows).
+#[derive(Clone, Debug)]
+pub(crate) struct SceneSummary {
+    pub id: String,
+    pub state: JobState,
+    pub reason: Option<String>,
+    pub created_ms: i64,
+    pub finished_ms: Option<i64>,
+    pub vertex_count: u32,
+    pub chunk_count: u32,
+    pub chunks_done: u32,
+    pub source: String,
+}
+
+/// The scene an `Idempotency-Key` created, and the fingerprint of the request that did.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct IdempotentRecord {
+    pub fingerprint: String,
+    pub scene_id: String,
+    pub created_ms: i64,
+}
 
 const SCENE_COLUMNS: &str = "id, seq, state, reason, created_ms, started_ms, finished_ms, \
     vertex_count, triangle_count, chunk_count, chunk_vertices, settings, mesh_hash, header, \
@@ -199,9 +231,21 @@ impl Db {
     }
 
     /// Records a newly accepted scene (state `queued`); returns its submission sequence number.
+    #[cfg(test)]
     pub(crate) fn insert_scene(&self, r: &SceneRow) -> Result<i64> {
-        let c = self.conn();
-        c.execute(
+        self.insert_scene_with_key(r, None)
+    }
+
+    /// [`Db::insert_scene`], recording in the same transaction the `Idempotency-Key` (and
+    /// the request's fingerprint) that created it.
+    pub(crate) fn insert_scene_with_key(
+        &self,
+        r: &SceneRow,
+        key: Option<(&str, &str)>,
+    ) -> Result<i64> {
+        let mut c = self.conn();
+        let tx = c.transaction()?;
+        tx.execute(
             "INSERT INTO scenes(id, state, reason, created_ms, vertex_count, triangle_count,
                  chunk_count, chunk_vertices, settings, mesh_hash, header, upload_bytes, source,
                  warnings)
@@ -222,7 +266,104 @@ impl Db {
                 serde_json::to_string(&r.warnings).unwrap_or_else(|_| "[]".into()),
             ],
         )?;
-        Ok(c.last_insert_rowid())
+        let seq = tx.last_insert_rowid();
+        if let Some((key, fingerprint)) = key {
+            tx.execute(
+                "INSERT INTO idempotency_keys(key, fingerprint, scene_id, created_ms)
+                 VALUES(?1, ?2, ?3, ?4)",
+                params![key, fingerprint, r.id, r.created_ms],
+            )?;
+        }
+        tx.commit()?;
+        Ok(seq)
+    }
+
+    /// The scene `key` created, if it was recorded at or after `not_before_ms`; older keys
+    /// have expired and are deleted here.
+    pub(crate) fn idempotent(
+        &self,
+        key: &str,
+        not_before_ms: i64,
+    ) -> Result<Option<IdempotentRecord>> {
+        let c = self.conn();
+        c.execute(
+            "DELETE FROM idempotency_keys WHERE created_ms < ?1",
+            [not_before_ms],
+        )?;
+        Ok(c.query_row(
+            "SELECT fingerprint, scene_id, created_ms FROM idempotency_keys WHERE key = ?1",
+            [key],
+            |r| {
+                Ok(IdempotentRecord {
+                    fingerprint: r.get(0)?,
+                    scene_id: r.get(1)?,
+                    created_ms: r.get(2)?,
+                })
+            },
+        )
+        .optional()?)
+    }
+
+    /// Up to `limit` scenes, newest first, submitted before the scene `before` (a cursor:
+    /// the last id of the previous page), whose state is one of `states` (all when `None`).
+    /// `None` when the cursor names no scene.
+    pub(crate) fn list_scenes(
+        &self,
+        before: Option<&str>,
+        states: Option<&[JobState]>,
+        limit: u32,
+    ) -> Result<Option<Vec<SceneSummary>>> {
+        let c = self.conn();
+        let below = match before {
+            None => i64::MAX,
+            Some(id) => {
+                let seq: Option<i64> = c
+                    .query_row("SELECT seq FROM scenes WHERE id = ?1", [id], |r| r.get(0))
+                    .optional()?;
+                match seq {
+                    Some(s) => s,
+                    None => return Ok(None),
+                }
+            }
+        };
+        // ",done,failed," matches a state by `instr`: one statement, no SQL built from input.
+        let filter: Option<String> = states.map(|s| {
+            let names: Vec<&str> = s.iter().map(|s| s.as_str()).collect();
+            format!(",{},", names.join(","))
+        });
+        let mut st = c.prepare(
+            "SELECT s.id, s.state, s.reason, s.created_ms, s.finished_ms, s.vertex_count,
+                 s.chunk_count, s.source,
+                 (SELECT COUNT(*) FROM chunks c WHERE c.scene_id = s.id)
+             FROM scenes s
+             WHERE s.seq < ?1 AND (?2 IS NULL OR instr(?2, ',' || s.state || ',') > 0)
+             ORDER BY s.seq DESC LIMIT ?3",
+        )?;
+        let rows = st
+            .query_map(params![below, filter, limit], |r| {
+                Ok((
+                    SceneSummary {
+                        id: r.get(0)?,
+                        state: JobState::Queued,
+                        reason: r.get(2)?,
+                        created_ms: r.get(3)?,
+                        finished_ms: r.get(4)?,
+                        vertex_count: r.get(5)?,
+                        chunk_count: r.get(6)?,
+                        source: r.get(7)?,
+                        chunks_done: r.get(8)?,
+                    },
+                    r.get::<_, String>(1)?,
+                ))
+            })?
+            .collect::<rusqlite::Result<Vec<_>>>()?;
+        rows.into_iter()
+            .map(|(mut s, state)| {
+                s.state = parse_state(&state)?;
+                Ok(s)
+            })
+            .collect::<Result<Vec<_>>>()
+            .map(Some)
     }
 
     fn row(r: &rusqlite::Row<'_>) -> rusqlite::Result<(SceneRow, String)> {
@@ -498,5 +639,60 @@ mod tests {
         assert_eq!(db.cancel("zzz").expect("cancel unknown"), None);
         drop(db);
         assert_eq!(Db::open(&path).expect("reopen").generation, 2);
+    }
+
+    /// Pages newest first with the last id as cursor; a state filter; an unknown cursor is
+    /// `None`. Idempotency keys come back with their scene and expire.
+    #[test]
+    fn listing_pages_and_idempotency_keys_expire() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let db = Db::open(&dir.path().join("db.sqlite")).expect("open");
+        for id in ["a", "b", "c", "d", "e"] {
+            db.insert_scene(&row(id)).expect("insert");
+        }
+        db.set_state("b", JobState::Done, None).expect("done");
+        let ids = |v: Vec<SceneSummary>| v.into_iter().map(|s| s.id).collect::<Vec<_>>();
+        let p1 = db.list_scenes(None, None, 2).expect("list").expect("page");
+        assert_eq!(ids(p1), ["e", "d"]);
+        let p2 = db
+            .list_scenes(Some("d"), None, 2)
+            .expect("list")
+            .expect("page");
+        assert_eq!(ids(p2), ["c", "b"]);
+        let p3 = db
+            .list_scenes(Some("b"), None, 2)
+            .expect("list")
+            .expect("page");
+        assert_eq!(ids(p3), ["a"]);
+        let done = db
+            .list_scenes(None, Some(&[JobState::Done]), 10)
+            .expect("list")
+            .expect("page");
+        assert_eq!(ids(done.clone()), ["b"]);
+        assert_eq!(done[0].state, JobState::Done);
+        assert!(db.list_scenes(Some("zz"), None, 2).expect("list").is_none());
+
+        let mut r = row("k");
+        r.created_ms = 1_000;
+        db.insert_scene_with_key(&r, Some(("key-1", "fp")))
+            .expect("insert");
+        let rec = db
+            .idempotent("key-1", 500)
+            .expect("query")
+            .expect("recorded");
+        assert_eq!(
+            (rec.scene_id.as_str(), rec.fingerprint.as_str()),
+            ("k", "fp")
+        );
+        assert_eq!(
+            db.idempotent("key-1", 1_001).expect("query"),
+            None,
+            "not expired"
+        );
+        assert_eq!(
+            db.idempotent("key-1", 0).expect("query"),
+            None,
+            "not deleted"
+        );
     }
 }

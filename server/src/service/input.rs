@@ -6,8 +6,10 @@
 //!   (no panic, no allocation from an unchecked count, glTF external URIs refused); a `.zst`
 //!   mesh is decompressed to at most `max_mesh_bytes` with a bounded zstd window, so a
 //!   decompression bomb is refused after reading at most that many bytes;
-//! - a scene JSON may only name `builtin:` meshes and the uploaded file (by its file name): it
-//!   can never make the server read a path of its own choosing;
+//! - a scene JSON may only name `builtin:` meshes and the uploaded file: a mesh path names the
+//!   upload when its last component is the upload's file name (so the project's scene files,
+//!   whose paths are relative to where they lie, are submitted as they are); the server never
+//!   reads a path of the scene's choosing;
 //! - the scene is composed exactly as [`Scene::from_file`] composes a scene file on disk
 //!   (tested below), so the service bakes what the offline `bspvt-server bake` bakes;
 //! - the stored form ([`encode_scene`]) round-trips every bit (postcard, no JSON floats).
@@ -49,6 +51,49 @@ pub(crate) struct Prepared {
 
 /// Longest zstd window accepted for a compressed mesh (2^24 = 16 MiB of decoder memory).
 const ZSTD_WINDOW_LOG_MAX: u32 = 24;
+
+/// A fingerprint of what was submitted (every field's name, file name and bytes): two requests
+/// with the same `Idempotency-Key` are the same submission when their fingerprints are equal.
+/// FNV-1a 64 and CRC-32 over length-prefixed fields, plus the length (96 bits: retries of one
+/// client are told apart from its other requests, not an adversary's collisions).
+pub(crate) fn fingerprint(up: &Upload) -> String {
+    let mut fnv = bspvt_proto::hash::Fnv1a::default();
+    let mut crc = crc32fast::Hasher::new();
+    let mut total = 0u64;
+    let mut put = |b: &[u8]| {
+        let len = (b.len() as u64).to_le_bytes();
+        for part in [&len[..], b] {
+            fnv.write(part);
+            crc.update(part);
+        }
+        total += b.len() as u64;
+    };
+    match &up.mesh {
+        Some((name, bytes)) => {
+            put(b"mesh");
+            put(name.as_bytes());
+            put(bytes);
+        }
+        None => put(b"no mesh"),
+    }
+    for (field, v) in [("scene", &up.scene), ("settings", &up.settings)] {
+        put(field.as_bytes());
+        match v {
+            Some(t) => put(t.as_bytes()),
+            None => put(b"absent"),
+        }
+    }
+    format!(
+        "fnv1a64:{:016x}/crc32:{:08x}/bytes:{total}",
+        fnv.finish(),
+        crc.finalize()
+    )
+}
+
+/// The last component of a path as a scene file or a client writes it (`/` or `\\`).
+fn file_name(path: &str) -> &str {
+    path.rsplit(['/', '\\']).next().unwrap_or_default()
+}
 
 /// Builds the scene of an upload, applying every limit.
 pub(crate) fn prepare(up: Upload, lim: &InputLimits) -> ApiResult<Prepared> {
@@ -115,14 +160,11 @@ pub(crate) fn prepare(up: Upload, lim: &InputLimits) -> ApiResult<Prepared> {
     })
 }
 
-/// Decompresses (`.zst`) and parses an uploaded mesh; returns its file name and the mesh.
+/// Decompresses (`.zst`) and parses an uploaded mesh; returns its file name (without `.zst`)
+/// and the mesh.
 fn load_upload(name: &str, bytes: Vec<u8>, lim: &Limits) -> ApiResult<(String, Asset)> {
     // Only the last path component of a client-supplied file name means anything.
-    let name = name
-        .rsplit(['/', '\\'])
-        .next()
-        .unwrap_or_default()
-        .to_string();
+    let name = file_name(name).to_string();
     if name.is_empty() {
         return Err(ApiError::bad_request(
             "missing_file_name",
@@ -163,6 +205,8 @@ fn decompress(data: &[u8], max: u64) -> ApiResult<Vec<u8>> {
 /// [`Scene::from_file`] for an upload: `builtin:` meshes and the uploaded mesh only.
 fn compose(file: SceneFile, upload: Option<&(String, Asset)>) -> ApiResult<Scene> {
     let mut parts = Vec::with_capacity(file.meshes.len());
+    // The scene path that named the upload first.
+    let mut named: Option<String> = None;
     for m in &file.meshes {
         if let Some(name) = m.path.strip_prefix("builtin:") {
             let part = bspvt_proto::builtin::mesh(name).ok_or_else(|| {
@@ -179,14 +223,35 @@ fn compose(file: SceneFile, upload: Option<&(String, Asset)>) -> ApiResult<Scene
                 ..Asset::default()
             });
         } else {
+            // The file the path names, as `Scene::load` would read it (`.zst` or not).
+            let wanted = file_name(&m.path);
+            let plain = wanted
+                .strip_suffix(".zst")
+                .or_else(|| wanted.strip_suffix(".ZST"))
+                .unwrap_or(wanted);
             match upload {
-                Some((uploaded, part)) if *uploaded == m.path => parts.push(part.clone()),
+                Some((uploaded, part)) if *uploaded == plain => {
+                    if let Some(other) = named.replace(m.path.clone())
+                        && other != m.path
+                    {
+                        return Err(ApiError::unprocessable(
+                            "invalid_scene",
+                            format!(
+                                "the scene names {:?} and {:?}: both end in the uploaded file's name {uploaded:?}, so which file each means is ambiguous",
+                                super::error::truncate(&other, 200),
+                                super::error::truncate(&m.path, 200)
+                            ),
+                        ));
+                    }
+                    parts.push(part.clone())
+                }
                 Some((uploaded, _)) => {
                     return Err(ApiError::unprocessable(
                         "invalid_scene",
                         format!(
-                            "the scene names mesh {:?}, but the uploaded mesh is {uploaded:?}: a scene may name only `builtin:` meshes and the uploaded file",
-                            super::error::truncate(&m.path, 200)
+                            "the scene names mesh {:?}, but the uploaded mesh is {uploaded:?}: upload that file under its name {:?} (a scene may name only `builtin:` meshes and the uploaded file, matched by file name)",
+                            super::error::truncate(&m.path, 200),
+                            super::error::truncate(wanted, 200)
                         ),
                     ));
                 }
@@ -194,8 +259,9 @@ fn compose(file: SceneFile, upload: Option<&(String, Asset)>) -> ApiResult<Scene
                     return Err(ApiError::bad_request(
                         "missing_field",
                         format!(
-                            "the scene names mesh {:?}, but no `mesh` file was uploaded",
-                            super::error::truncate(&m.path, 200)
+                            "the scene names mesh {:?}, but no `mesh` file was uploaded (upload it as a `mesh` file named {:?})",
+                            super::error::truncate(&m.path, 200),
+                            super::error::truncate(wanted, 200)
                         ),
                     ));
                 }
@@ -335,6 +401,63 @@ mod tests {
         .expect("scene");
         expect.bake.face_res = 8;
         assert_eq!(up.scene, expect);
+    }
+
+    /// A path names the upload by its last component (the project's scene files name meshes
+    /// relative to themselves); two different paths ending in the same name are ambiguous.
+    #[test]
+    fn scene_paths_name_the_upload_by_file_name() {
+        let up = |meshes: &str| {
+            prepare(
+                Upload {
+                    mesh: Some(("tri.obj".into(), OBJ.as_bytes().to_vec())),
+                    scene: Some(format!(
+                        r#"{{"meshes": {meshes}, "lights": [{{"vertices": [[-1,3,-1],[1,3,-1],[1,3,1],[-1,3,1]],
+                            "radiance": [1,1,1], "region": {{"min": [-2,2,-2], "max": [2,4,2]}}}}]}}"#
+                    )),
+                    settings: None,
+                },
+                &limits(),
+            )
+        };
+        let ok = up(r#"[{"path": "../../meshes/tri.obj"}, {"path": "../../meshes/tri.obj"}]"#)
+            .unwrap_or_else(|e| panic!("prepare: {e:?}"));
+        assert_eq!(ok.scene.mesh.vertex_count(), 8, "two copies of the upload");
+        let zst = up(r#"[{"path": "meshes/tri.obj.zst"}]"#).unwrap_or_else(|e| panic!("{e:?}"));
+        assert_eq!(zst.scene.mesh.vertex_count(), 4);
+        let e = up(r#"[{"path": "a/tri.obj"}, {"path": "b/tri.obj"}]"#)
+            .err()
+            .expect("ambiguous paths accepted");
+        assert_eq!(e.code, "invalid_scene");
+        assert!(e.detail.contains("ambiguous"), "{}", e.detail);
+        let e = up(r#"[{"path": "../meshes/other.obj"}]"#)
+            .err()
+            .expect("another file accepted");
+        assert!(e.detail.contains("\"other.obj\""), "{}", e.detail);
+        assert_eq!(
+            fingerprint(&Upload {
+                mesh: None,
+                scene: Some("a".into()),
+                settings: None,
+            }),
+            fingerprint(&Upload {
+                mesh: None,
+                scene: Some("a".into()),
+                settings: None,
+            })
+        );
+        assert_ne!(
+            fingerprint(&Upload {
+                mesh: None,
+                scene: Some("ab".into()),
+                settings: None,
+            }),
+            fingerprint(&Upload {
+                mesh: None,
+                scene: Some("a".into()),
+                settings: Some("b".into()),
+            })
+        );
     }
 
     #[test]

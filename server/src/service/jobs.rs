@@ -396,14 +396,22 @@ impl Jobs {
         Ok(())
     }
 
-    /// Records and queues a new scene (its files are already durable).
-    pub(crate) fn submit(&self, row: SceneRow) -> Result<Arc<Live>, SubmitError> {
+    /// Records and queues a new scene (its files are already durable), with the
+    /// `Idempotency-Key` and request fingerprint that created it, if any.
+    pub(crate) fn submit(
+        &self,
+        row: SceneRow,
+        idempotency: Option<(&str, &str)>,
+    ) -> Result<Arc<Live>, SubmitError> {
         let mut s = lock(&self.sched);
         if s.live.len() >= self.max_queued {
             return Err(SubmitError::QueueFull(self.max_queued));
         }
         let mut row = row;
-        row.seq = self.db.insert_scene(&row).map_err(SubmitError::Db)?;
+        row.seq = self
+            .db
+            .insert_scene_with_key(&row, idempotency)
+            .map_err(SubmitError::Db)?;
         let live = Arc::new(Live::new(row, Vec::new()));
         s.live.insert(live.row.id.clone(), live.clone());
         s.queue.push_back(live.clone());

@@ -2,9 +2,11 @@
 //! few atomic counters and gauges need no metrics framework.
 //!
 //! Guarantees: counters only grow within a process (they restart at 0 with it); every series
-//! has `# HELP` and `# TYPE` lines; recording a metric never blocks on I/O.
+//! has `# HELP` and `# TYPE` lines; recording a metric never blocks on I/O. The request-latency
+//! histogram is labelled by route template (never the raw path), a fixed set of methods and
+//! the status class, so its label values are bounded whatever clients send.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 use std::fmt::Write;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering::Relaxed};
@@ -29,6 +31,23 @@ pub(crate) struct Metrics {
     pub streams_open: AtomicI64,
     pub bake_errors: AtomicU64,
     recent_chunks: Mutex<VecDeque<Instant>>,
+    /// Request latency by (route template, method, status class).
+    latency: Mutex<BTreeMap<(String, &'static str, u16), Histogram>>,
+}
+
+/// Upper bounds (seconds) of the request-latency histogram's buckets (`+Inf` is implied):
+/// from 1 ms (status, metrics) to 60 s (large uploads).
+pub(crate) const LATENCY_BUCKETS_S: [f64; 14] = [
+    0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 60.0,
+];
+
+/// One series of the histogram: cumulative counts are computed when rendered.
+#[derive(Default)]
+struct Histogram {
+    /// Observations per bucket (not cumulative); the last is above every bound.
+    buckets: [u64; LATENCY_BUCKETS_S.len() + 1],
+    sum_s: f64,
+    count: u64,
 }
 
 /// Values read from the scheduler when metrics are rendered.
@@ -64,6 +83,7 @@ impl Default for Metrics {
             streams_open: AtomicI64::new(0),
             bake_errors: AtomicU64::new(0),
             recent_chunks: Mutex::new(VecDeque::new()),
+            latency: Mutex::new(BTreeMap::new()),
         }
     }
 }
@@ -72,6 +92,39 @@ impl Metrics {
     pub(crate) fn response(&self, status: u16) {
         let class = (status / 100).clamp(1, 5) as usize;
         self.responses[class].fetch_add(1, Relaxed);
+    }
+
+    /// A request answered with `status` after `took` (to its response head: a streamed body
+    /// is not included). `route` is the matched route template or `unmatched`.
+    pub(crate) fn request_latency(
+        &self,
+        route: &str,
+        method: &axum::http::Method,
+        status: u16,
+        took: Duration,
+    ) {
+        use axum::http::Method;
+        let method = match *method {
+            Method::GET => "GET",
+            Method::POST => "POST",
+            Method::DELETE => "DELETE",
+            Method::HEAD => "HEAD",
+            Method::OPTIONS => "OPTIONS",
+            Method::PUT => "PUT",
+            Method::PATCH => "PATCH",
+            _ => "other",
+        };
+        let class = (status / 100).clamp(1, 5);
+        let s = took.as_secs_f64();
+        let i = LATENCY_BUCKETS_S
+            .iter()
+            .position(|&b| s <= b)
+            .unwrap_or(LATENCY_BUCKETS_S.len());
+        let mut m = self.latency.lock().unwrap_or_else(|p| p.into_inner());
+        let h = m.entry((route.to_string(), method, class)).or_default();
+        h.buckets[i] += 1;
+        h.sum_s += s;
+        h.count += 1;
     }
 
     /// A chunk became durable.
@@ -234,7 +287,29 @@ impl Metrics {
                 self.responses[class].load(Relaxed)
             );
         }
+        self.render_latency(&mut o);
         o
+    }
+
+    fn render_latency(&self, o: &mut String) {
+        let name = "bspvt_http_request_duration_seconds";
+        let _ = writeln!(
+            o,
+            "# HELP {name} Time from a request's arrival to its response head, by route template, method and status class.\n# TYPE {name} histogram"
+        );
+        let m = self.latency.lock().unwrap_or_else(|p| p.into_inner());
+        for ((route, method, class), h) in m.iter() {
+            // Route templates are the router's own strings: no quote or backslash to escape.
+            let labels = format!("route=\"{route}\",method=\"{method}\",class=\"{class}xx\"");
+            let mut cumulative = 0;
+            for (bound, n) in LATENCY_BUCKETS_S.iter().zip(&h.buckets) {
+                cumulative += n;
+                let _ = writeln!(o, "{name}_bucket{{{labels},le=\"{bound}\"}} {cumulative}");
+            }
+            let _ = writeln!(o, "{name}_bucket{{{labels},le=\"+Inf\"}} {}", h.count);
+            let _ = writeln!(o, "{name}_sum{{{labels}}} {:.6}", h.sum_s);
+            let _ = writeln!(o, "{name}_count{{{labels}}} {}", h.count);
+        }
     }
 }
 
@@ -246,6 +321,10 @@ mod tests {
     fn exposition_has_help_type_and_values() {
         let m = Metrics::default();
         m.response(404);
+        let get = axum::http::Method::GET;
+        m.request_latency("/healthz", &get, 200, Duration::from_micros(300));
+        m.request_latency("/healthz", &get, 200, Duration::from_millis(30));
+        m.request_latency("/healthz", &get, 200, Duration::from_secs(100));
         m.chunk_baked(64, Duration::from_millis(5));
         let t = m.render(&Gauges {
             scenes_queued: 3,
@@ -254,11 +333,46 @@ mod tests {
         assert!(t.contains("bspvt_http_responses_total{class=\"4xx\"} 1\n"));
         assert!(t.contains("bspvt_chunks_baked_total 1\n"));
         assert!(t.contains("bspvt_queue_depth_scenes 3\n"));
+        // Cumulative buckets: 0.3 ms in the first, 30 ms from le=0.05 on, 100 s only in +Inf.
+        let h = |le: &str| {
+            metric_value(
+                &t,
+                &format!(
+                    "bspvt_http_request_duration_seconds_bucket{{route=\"/healthz\",method=\"GET\",class=\"2xx\",le=\"{le}\"}}"
+                ),
+            )
+        };
+        assert_eq!(
+            [h("0.001"), h("0.025"), h("0.05"), h("60"), h("+Inf")],
+            [1.0, 1.0, 2.0, 2.0, 3.0]
+        );
+        assert_eq!(
+            metric_value(
+                &t,
+                "bspvt_http_request_duration_seconds_count{route=\"/healthz\",method=\"GET\",class=\"2xx\"}"
+            ),
+            3.0
+        );
         for line in t.lines().filter(|l| !l.starts_with('#')) {
             let (name, value) = line.rsplit_once(' ').expect("name value");
             assert!(value.parse::<f64>().is_ok(), "{line}");
             let base = name.split('{').next().expect("name");
-            assert!(t.contains(&format!("# TYPE {base} ")), "{base} has no TYPE");
+            let family = ["_bucket", "_sum", "_count"]
+                .iter()
+                .find_map(|s| base.strip_suffix(s))
+                .filter(|f| t.contains(&format!("# TYPE {f} histogram")))
+                .unwrap_or(base);
+            assert!(
+                t.contains(&format!("# TYPE {family} ")),
+                "{base} has no TYPE"
+            );
         }
+    }
+
+    fn metric_value(t: &str, series: &str) -> f64 {
+        t.lines()
+            .find_map(|l| l.strip_prefix(series).and_then(|v| v.strip_prefix(' ')))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("{series} missing in\n{t}"))
     }
 }

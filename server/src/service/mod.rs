@@ -40,11 +40,12 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use axum::Router;
+use axum::extract::MatchedPath;
 use axum::extract::{DefaultBodyLimit, Request, State};
 use axum::http::StatusCode;
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
-use axum::routing::{get, post};
+use axum::routing::{MethodRouter, get};
 use tokio::sync::{Semaphore, watch};
 use tracing::Instrument;
 
@@ -56,27 +57,82 @@ use metrics::Metrics;
 use state::{AppState, Shared};
 use store::Store;
 
+/// Every route: its path template and handlers. The router is built from this list, and a
+/// test checks each path against the OpenAPI document (`openapi::document`).
+pub(crate) fn routes() -> Vec<(&'static str, MethodRouter<Shared>)> {
+    vec![
+        ("/v1/scenes", get(api::list_scenes).post(api::submit)),
+        (
+            "/v1/scenes/{id}",
+            get(api::get_scene).delete(api::delete_scene),
+        ),
+        ("/v1/scenes/{id}/events", get(sse::get_events)),
+        ("/v1/scenes/{id}/mesh", get(api::get_mesh)),
+        ("/v1/scenes/{id}/scene", get(api::get_scene_file)),
+        ("/v1/scenes/{id}/trees", get(stream::get_trees)),
+        ("/v1/openapi.json", get(openapi::openapi)),
+        ("/healthz", get(api::healthz)),
+        ("/metrics", get(api::metrics)),
+    ]
+}
+
 /// The router with its middleware.
 pub(crate) fn router(state: Shared) -> Router {
     let body_limit = usize::try_from(state.cfg.max_body_bytes).unwrap_or(usize::MAX);
-    Router::new()
-        .route("/v1/scenes", post(api::submit))
-        .route(
-            "/v1/scenes/{id}",
-            get(api::get_scene).delete(api::delete_scene),
-        )
-        .route("/v1/scenes/{id}/events", get(sse::get_events))
-        .route("/v1/scenes/{id}/mesh", get(api::get_mesh))
-        .route("/v1/scenes/{id}/scene", get(api::get_scene_file))
-        .route("/v1/scenes/{id}/trees", get(stream::get_trees))
-        .route("/v1/openapi.json", get(openapi::openapi))
-        .route("/healthz", get(api::healthz))
-        .route("/metrics", get(api::metrics))
+    let cors = cors_layer(&state.cfg.cors_origins);
+    let r = routes()
+        .into_iter()
+        .fold(Router::new(), |r, (path, handlers)| r.route(path, handlers))
         .fallback(api::not_found)
         .layer(DefaultBodyLimit::max(body_limit))
         .layer(middleware::from_fn_with_state(state.clone(), observe))
-        .layer(middleware::map_response(error::json_errors))
-        .with_state(state)
+        .layer(middleware::map_response(error::json_errors));
+    // Outermost: preflights are answered before limits and keys, and every response, errors
+    // included, carries the CORS headers a browser needs to read it.
+    match cors {
+        Some(c) => r.layer(c),
+        None => r,
+    }
+    .with_state(state)
+}
+
+/// CORS for browser clients on `origins` (`*`: any); none when the list is empty. Requests
+/// carry keys in headers, never cookies, so credentials are not allowed.
+fn cors_layer(origins: &[String]) -> Option<tower_http::cors::CorsLayer> {
+    use axum::http::{HeaderName, HeaderValue, Method, header};
+    use tower_http::cors::{AllowOrigin, CorsLayer};
+    if origins.is_empty() {
+        return None;
+    }
+    let allow = if origins.iter().any(|o| o == "*") {
+        AllowOrigin::any()
+    } else {
+        // Checked by `Config::check`: every origin is a valid header value.
+        AllowOrigin::list(origins.iter().filter_map(|o| HeaderValue::from_str(o).ok()))
+    };
+    Some(
+        CorsLayer::new()
+            .allow_origin(allow)
+            .allow_methods([Method::GET, Method::POST, Method::DELETE])
+            .allow_headers([
+                header::AUTHORIZATION,
+                header::CONTENT_TYPE,
+                header::IF_NONE_MATCH,
+                HeaderName::from_static("x-api-key"),
+                HeaderName::from_static("idempotency-key"),
+            ])
+            .expose_headers([
+                header::LOCATION,
+                header::ETAG,
+                header::LINK,
+                header::RETRY_AFTER,
+                HeaderName::from_static("idempotent-replayed"),
+                HeaderName::from_static("x-bspvt-vertices"),
+                HeaderName::from_static("x-bspvt-chunks"),
+                HeaderName::from_static("x-bspvt-mesh-hash"),
+            ])
+            .max_age(Duration::from_secs(600)),
+    )
 }
 
 /// Per-request span, log line, metrics, concurrency limit and timeout.
@@ -84,6 +140,12 @@ async fn observe(State(st): State<Shared>, req: Request, next: Next) -> Response
     let n = st.next_request.fetch_add(1, Ordering::Relaxed);
     let method = req.method().clone();
     let path = error::truncate(req.uri().path(), 200);
+    // The route's template (`/v1/scenes/{id}`), never the raw path: bounded label values.
+    let route = req
+        .extensions()
+        .get::<MatchedPath>()
+        .map_or("unmatched", |m| m.as_str())
+        .to_string();
     let span = tracing::info_span!("request", id = n, method = %method, path = %path);
     async move {
         let t0 = Instant::now();
@@ -95,6 +157,8 @@ async fn observe(State(st): State<Shared>, req: Request, next: Next) -> Response
                 Ok(p) => Some(p),
                 Err(_) => {
                     st.metrics.response(429);
+                    st.metrics
+                        .request_latency(&route, &method, 429, t0.elapsed());
                     tracing::warn!("too many concurrent requests");
                     return ApiError::too_many("too many concurrent requests; retry shortly")
                         .into_response();
@@ -114,7 +178,10 @@ async fn observe(State(st): State<Shared>, req: Request, next: Next) -> Response
         drop(permit);
         let status = response.status();
         st.metrics.response(status.as_u16());
-        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let took = t0.elapsed();
+        st.metrics
+            .request_latency(&route, &method, status.as_u16(), took);
+        let ms = took.as_secs_f64() * 1e3;
         if status.is_server_error() {
             tracing::error!(status = status.as_u16(), ms, "request failed");
         } else if status.is_client_error() {
@@ -227,6 +294,7 @@ impl Service {
             shutdown: stop_rx,
             started: Instant::now(),
             next_request: AtomicU64::new(0),
+            idempotency_in_flight: Default::default(),
         });
         Ok(Service {
             state,
@@ -448,5 +516,25 @@ impl Background {
 impl Drop for Background {
     fn drop(&mut self) {
         let _ = self.shutdown();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// Every route the router serves is in the OpenAPI document, and the document names no
+    /// path the router lacks (the methods of each are checked against the live server in
+    /// `server/tests/service_api.rs`).
+    #[test]
+    fn every_route_is_documented() {
+        let doc = super::openapi::document();
+        let documented: std::collections::BTreeSet<&str> = doc["paths"]
+            .as_object()
+            .expect("paths")
+            .keys()
+            .map(String::as_str)
+            .collect();
+        let routed: std::collections::BTreeSet<&str> =
+            super::routes().into_iter().map(|(p, _)| p).collect();
+        assert_eq!(routed, documented);
     }
 }

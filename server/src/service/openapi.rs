@@ -6,7 +6,7 @@
 use std::sync::OnceLock;
 
 use utoipa::OpenApi;
-use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+use utoipa::openapi::security::{ApiKey, ApiKeyValue, HttpAuthScheme, HttpBuilder, SecurityScheme};
 
 use axum::Json;
 use axum::response::{IntoResponse, Response};
@@ -18,10 +18,12 @@ use super::{api, sse, stream};
     info(
         title = "bspvt baking service",
         description = "Bakes per-vertex BSPVT light-visibility trees for uploaded meshes and \
-            streams them. Writes need `Authorization: Bearer KEY` when the server has an API key. \
-            Every error is JSON `{\"error\": CODE, \"detail\": TEXT}`. See docs/service.md."
+            streams them. Writes and the listing need the key when the server has one, as \
+            `Authorization: Bearer KEY` or `X-API-Key: KEY`. Every error is JSON \
+            `{\"error\": CODE, \"detail\": TEXT}`. See docs/service.md."
     ),
     paths(
+        api::list_scenes,
         api::submit,
         api::get_scene,
         api::delete_scene,
@@ -35,6 +37,8 @@ use super::{api, sse, stream};
     ),
     components(schemas(
         api::Submitted,
+        api::SceneList,
+        api::SceneListItem,
         bspvt_proto::api::SceneStatus,
         bspvt_proto::api::Sizes,
         bspvt_proto::api::Links,
@@ -58,6 +62,11 @@ impl utoipa::Modify for BearerAuth {
         components.add_security_scheme(
             "api_key",
             SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()),
+        );
+        // The same key in its own header; either scheme is enough.
+        components.add_security_scheme(
+            "api_key_header",
+            SecurityScheme::ApiKey(ApiKey::Header(ApiKeyValue::new("X-API-Key"))),
         );
     }
 }

@@ -42,6 +42,8 @@ pub(crate) struct AppState {
     pub started: Instant,
     /// Number of the next request (its tracing span id).
     pub next_request: AtomicU64,
+    /// `Idempotency-Key`s of submissions being handled now (a concurrent retry gets 409).
+    pub idempotency_in_flight: std::sync::Mutex<std::collections::HashSet<String>>,
 }
 
 pub(crate) type Shared = Arc<AppState>;

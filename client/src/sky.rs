@@ -102,16 +102,20 @@ impl SkyPieces {
         // Pieces holding much more than an even share of the power (a sun) and brighter than
         // the map on average are split into 2×2 until they are not, so that a small bright
         // source is as small as it is: one texture fetch per tree piece cannot place it
-        // within a large piece. A constant map is never split.
+        // within a large piece. A piece whose texture varies across it (a horizon) is split
+        // once too (SPLIT_VARIATION). A constant map is never split.
         let share = SPLIT_SHARE / (FACES as f64 * f64::from(k * k));
         let omega: f64 = built.iter().map(|(p, _, _)| p.solid_angle).sum();
         let mean = total / omega.max(1e-300);
         loop {
             let (split, keep): (Vec<_>, Vec<_>) = built.into_iter().partition(|(p, w, c)| {
-                total > 0.0
-                    && *w > share * total
+                let sun = *w > share * total
                     && *w > SPLIT_CONTRAST * mean * p.solid_angle
-                    && c.depth < MAX_SPLIT_DEPTH
+                    && c.depth < MAX_SPLIT_DEPTH;
+                let varied = c.depth < MAX_VARIATION_DEPTH
+                    && *w > VARIATION_SHARE * share * total
+                    && p.texture.quadrant_variation() > SPLIT_VARIATION;
+                total > 0.0 && (sun || varied)
             });
             built = keep;
             if split.is_empty() {
@@ -209,6 +213,14 @@ const SPLIT_SHARE: f64 = 1.0;
 const SPLIT_CONTRAST: f64 = 1.1;
 /// Splits of a piece at most (a piece of side 2/k is split down to 2/(k·2⁵)).
 const MAX_SPLIT_DEPTH: u32 = 5;
+/// A piece whose quadrants' mean luminances differ by more than this fraction of its mean (a
+/// horizon, a skyline) is split 2×2 too, at most [`MAX_VARIATION_DEPTH`] times, when it holds
+/// at least [`VARIATION_SHARE`] of an even share of the power: a tree piece seen through a
+/// doorway reads one filtered texel of its piece, and a sky-and-ground piece has none that
+/// fits both halves.
+const SPLIT_VARIATION: f64 = 0.5;
+const MAX_VARIATION_DEPTH: u32 = 1;
+const VARIATION_SHARE: f64 = 0.25;
 /// Smallest texture side of a split piece.
 const MIN_TEXTURE_SIDE: usize = 4;
 

@@ -122,6 +122,42 @@ impl LightTexture {
     pub(crate) fn average(&self) -> DVec3 {
         self.levels[self.levels.len() - 1].texels[0]
     }
+
+    /// How much the texture varies at its coarsest useful scale: (max − min) / mean of the
+    /// luminances of its four quadrants' means (finest level); 0 for a texture too small to
+    /// have quadrants or with a zero mean.
+    pub(crate) fn quadrant_variation(&self) -> f64 {
+        let l = &self.levels[0];
+        if l.w < 2 || l.h < 2 {
+            return 0.0;
+        }
+        let mut sums = [0.0f64; 4];
+        let mut counts = [0usize; 4];
+        for y in 0..l.h {
+            for x in 0..l.w {
+                let q = usize::from(2 * x >= l.w) + 2 * usize::from(2 * y >= l.h);
+                let t = l.texels[y * l.w + x];
+                sums[q] += crate::frame::stats::luminance(t.x, t.y, t.z);
+                counts[q] += 1;
+            }
+        }
+        let means: Vec<f64> = sums
+            .iter()
+            .zip(counts)
+            .map(|(s, c)| s / c.max(1) as f64)
+            .collect();
+        let mean = means.iter().sum::<f64>() / 4.0;
+        let (lo, hi) = means
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &m| {
+                (a.min(m), b.max(m))
+            });
+        if mean > 0.0 && (hi - lo).is_finite() {
+            (hi - lo) / mean
+        } else {
+            0.0
+        }
+    }
 }
 
 /// The light's plane frame relative to a shading point: p₀ − p, e₁ = p₁ − p₀, e₂ = pₙ₋₁ − p₀.

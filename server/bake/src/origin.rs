@@ -36,7 +36,7 @@ pub(crate) fn ray_origins(mesh: &Mesh, offset: f32) -> Vec<Vec3> {
 
 /// Per vertex: zero inside a surface; on an open boundary, the unit tangential direction from
 /// the vertex toward the centroids of the triangles around it (the side its surface lies on).
-fn boundary_inward(mesh: &Mesh) -> Vec<Vec3> {
+pub(crate) fn boundary_inward(mesh: &Mesh) -> Vec<Vec3> {
     let n = mesh.positions.len();
     let mut uses: HashMap<(u32, u32), u32> = HashMap::with_capacity(mesh.triangles.len() * 3 / 2);
     for t in &mesh.triangles {
@@ -76,17 +76,20 @@ fn boundary_inward(mesh: &Mesh) -> Vec<Vec3> {
     toward
         .iter()
         .zip(&mesh.normals)
-        .map(|(&s, &nrm)| {
-            let nrm = nrm.as_dvec3();
-            let tangential = s - nrm * s.dot(nrm);
-            let len = tangential.length();
-            if len > 0.0 && len.is_finite() {
-                (tangential / len).as_vec3()
-            } else {
-                Vec3::ZERO
-            }
-        })
+        .map(|(&s, &nrm)| tangential_unit(s, nrm))
         .collect()
+}
+
+/// The unit component of `toward` perpendicular to `normal` (zero when there is none).
+pub(crate) fn tangential_unit(toward: glam::DVec3, normal: Vec3) -> Vec3 {
+    let nrm = normal.as_dvec3();
+    let tangential = toward - nrm * toward.dot(nrm);
+    let len = tangential.length();
+    if len > 0.0 && len.is_finite() {
+        (tangential / len).as_vec3()
+    } else {
+        Vec3::ZERO
+    }
 }
 
 #[cfg(test)]

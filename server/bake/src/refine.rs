@@ -61,7 +61,8 @@ pub fn resolved_min_edge(settings: &RefineSettings, mesh: &Mesh) -> f32 {
 }
 
 /// Refines `scene`'s mesh in place when its bake settings ask for it (`bake.refine`) and it
-/// does not move (a moving part's vertex ranges must stay as they are). Returns what was done.
+/// does not move; for its lamps, and for the sky too when it has an environment (the sky's
+/// trees are baked on the same mesh, [`Visibility::with_sky`]) (a moving part's vertex ranges must stay as they are). Returns what was done.
 pub fn refine_scene(scene: &mut bspvt_proto::Scene) -> Result<Option<RefineStats>, RefineError> {
     let Some(settings) = scene.bake.refine else {
         return Ok(None);
@@ -69,7 +70,8 @@ pub fn refine_scene(scene: &mut bspvt_proto::Scene) -> Result<Option<RefineStats
     if scene.is_dynamic() {
         return Ok(None);
     }
-    let (mesh, stats) = try_refine(&scene.mesh, &scene.lights, &settings)?;
+    let sky = scene.environment.is_some();
+    let (mesh, stats) = refine_for(&scene.mesh, &scene.lights, sky, &settings)?;
     scene.mesh = mesh;
     Ok(Some(stats))
 }
@@ -111,6 +113,23 @@ const SHORT_OF_SAMPLE: f32 = 1e-4;
 /// Samples per light without a region, aimed at (fan triangles get ⌈√(target / triangles)⌉²
 /// each: 49 for a triangle, 50 for a quad, 45–64 for 5 to 8 corners).
 const POLYGON_SAMPLES: usize = 40;
+/// Directions of the sky's measure ([`Visibility::with_sky`]): ~32 above any horizon, about
+/// 20° apart.
+pub const SKY_DIRECTIONS: usize = 64;
+
+/// `n` unit directions spread evenly over the sphere (the spherical Fibonacci lattice).
+fn fibonacci_sphere(n: usize) -> Vec<Vec3> {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..n)
+        .map(|i| {
+            let z = 1.0 - (2.0 * i as f64 + 1.0) / n as f64;
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            let phi = golden * i as f64;
+            glam::DVec3::new(r * phi.cos(), z, r * phi.sin()).as_vec3()
+        })
+        .collect()
+}
+
 /// Samples per light with a region, aimed at (at most [`MAX_REGION_SAMPLES`]).
 const REGION_SAMPLES: f32 = 48.0;
 const MAX_REGION_SAMPLES: usize = 64;
@@ -288,6 +307,8 @@ pub struct Visibility {
     /// `None`: no usable triangle, nothing occludes.
     occluder: Option<Occluder>,
     lights: Vec<LightSamples>,
+    /// The sky's sample directions ([`Visibility::with_sky`]); empty without a sky.
+    sky: Vec<Vec3>,
     stops: Vec<LightStop>,
     offset: f32,
     /// Hits nearer than this are not counted, as in the bake ([`crate::RAY_T_MIN_SCALE`]).
@@ -346,6 +367,14 @@ impl Visibility {
     /// (exact in floating point), so that the BVH builder never sees areas that overflow f32
     /// and squared distances do not underflow.
     pub fn new(mesh: &Mesh, lights: &[PolygonLight]) -> Visibility {
+        Visibility::with_sky(mesh, lights, false)
+    }
+
+    /// [`Visibility::new`], and with `sky` the sky counted as one more light: V_sky(p, n) =
+    /// Σ_{d seen} n·d / Σ_d n·d over [`SKY_DIRECTIONS`] fixed directions (a spherical
+    /// Fibonacci set) above the horizon, rays to infinity — the cosine-weighted share of the
+    /// sky a point sees, whatever the map (it turns at run time).
+    pub fn with_sky(mesh: &Mesh, lights: &[PolygonLight], sky: bool) -> Visibility {
         let scale = working_scale(mesh, lights);
         let n = mesh.positions.len();
         let usable = |t: &[u32; 3]| {
@@ -375,6 +404,11 @@ impl Visibility {
         Visibility {
             occluder,
             lights,
+            sky: if sky {
+                fibonacci_sphere(SKY_DIRECTIONS)
+            } else {
+                Vec::new()
+            },
             stops,
             offset,
             t_min,
@@ -428,7 +462,7 @@ impl Visibility {
 
     /// V and the number of rays cast.
     fn eval(&self, position: Vec3, normal: Vec3, skip: u32) -> (f32, u64) {
-        if self.lights.is_empty() {
+        if self.lights.is_empty() && self.sky.is_empty() {
             return (0.0, 0);
         }
         let n = normal.normalize_or_zero();
@@ -466,10 +500,40 @@ impl Visibility {
             }
             sum += seen / l.total;
         }
-        (
-            ((sum / self.lights.len() as f64) as f32).clamp(0.0, 1.0),
-            rays,
-        )
+        let mut count = self.lights.len();
+        if !self.sky.is_empty() {
+            let (mut seen, mut total) = (0.0f64, 0.0f64);
+            for &d in &self.sky {
+                let w = f64::from(d.dot(n));
+                if !(w > 0.0) {
+                    continue;
+                }
+                total += w;
+                rays += 1;
+                let clear = self
+                    .occluder
+                    .as_ref()
+                    .is_none_or(|occ| !occ.occluded_between(o, d, self.t_min, f32::INFINITY, skip));
+                if clear {
+                    seen += w;
+                }
+            }
+            if total > 0.0 {
+                sum += seen / total;
+            }
+            count += 1;
+        }
+        (((sum / count as f64) as f32).clamp(0.0, 1.0), rays)
+    }
+
+    /// How far a point's rays start inside its own surface on an open boundary, in world
+    /// units (the bake's rule, [`crate::origin`]).
+    fn boundary_push(&self) -> f32 {
+        if self.scale > 0.0 {
+            self.offset / self.scale
+        } else {
+            0.0
+        }
     }
 }
 
@@ -550,12 +614,22 @@ pub fn try_refine(
     lights: &[PolygonLight],
     settings: &RefineSettings,
 ) -> Result<(Mesh, RefineStats), RefineError> {
+    refine_for(mesh, lights, false, settings)
+}
+
+/// [`try_refine`] for `lights` and, when `sky`, the sky's visibility ([`Visibility::with_sky`]).
+pub fn refine_for(
+    mesh: &Mesh,
+    lights: &[PolygonLight],
+    sky: bool,
+    settings: &RefineSettings,
+) -> Result<(Mesh, RefineStats), RefineError> {
     let start = Instant::now();
     settings
         .validate()
         .map_err(|e| RefineError::Settings(e.to_string()))?;
     mesh.validate()?;
-    let vis = Visibility::new(mesh, lights);
+    let vis = Visibility::with_sky(mesh, lights, sky);
     let mut r = Refiner::new(mesh, &vis, settings);
     r.run();
     Ok(r.finish(mesh, start))
@@ -636,6 +710,9 @@ struct Refiner<'a> {
     dark: f64,
     pos: Vec<Vec3>,
     nrm: Vec<Vec3>,
+    /// Per vertex: the unit direction into its own surface on an open boundary, else zero
+    /// (the bake's ray origins, [`crate::origin`]).
+    inward: Vec<Vec3>,
     tris: Vec<[u32; 3]>,
     mats: Vec<u32>,
     version: Vec<u32>,
@@ -675,6 +752,7 @@ impl<'a> Refiner<'a> {
             dark: DARK_FRACTION * brightest_irradiance(mesh, vis),
             pos: mesh.positions.clone(),
             nrm: mesh.normals.clone(),
+            inward: crate::origin::boundary_inward(mesh),
             tris: mesh.triangles.clone(),
             mats: mesh.material_ids.clone(),
             version: vec![0; mesh.triangles.len()],
@@ -769,7 +847,19 @@ impl<'a> Refiner<'a> {
             .unwrap_or(Vec3::Y)
     }
 
-    /// Where a point is, its normal and the vertex its rays skip.
+    /// An edge used by one triangle is on an open boundary: the unit direction from its
+    /// midpoint into that triangle, along the surface of normal `n`; zero otherwise.
+    fn edge_inward(&self, e: Edge, tris: &[u32], n: Vec3) -> Vec3 {
+        let [t] = tris else {
+            return Vec3::ZERO;
+        };
+        let c = self.tris[*t as usize].map(|i| self.pos[i as usize].as_dvec3());
+        let m = midpoint(self.pos[e.0 as usize], self.pos[e.1 as usize]).as_dvec3();
+        crate::origin::tangential_unit((c[0] + c[1] + c[2]) / 3.0 - m, n)
+    }
+
+    /// Where a point's rays start (on an open boundary, inside its own surface), its normal
+    /// and the vertex its rays skip.
     fn geometry(&self, p: Point) -> (Vec3, Vec3, u32) {
         match p {
             Point::Vertex(v) => {
@@ -778,13 +868,16 @@ impl<'a> Refiner<'a> {
                 } else {
                     u32::MAX
                 };
-                (self.pos[v as usize], self.nrm[v as usize], skip)
+                let push = self.inward[v as usize] * self.vis.boundary_push();
+                (self.pos[v as usize] + push, self.nrm[v as usize], skip)
             }
             Point::Midpoint(e) => {
                 let tris = self.edges.get(&e).map(Vec::as_slice).unwrap_or(&[]);
+                let n = self.edge_normal(e, tris);
+                let push = self.edge_inward(e, tris, n) * self.vis.boundary_push();
                 (
-                    midpoint(self.pos[e.0 as usize], self.pos[e.1 as usize]),
-                    self.edge_normal(e, tris),
+                    midpoint(self.pos[e.0 as usize], self.pos[e.1 as usize]) + push,
+                    n,
                     u32::MAX,
                 )
             }
@@ -966,9 +1059,11 @@ impl<'a> Refiner<'a> {
         ts.sort_unstable();
         ts.dedup();
         let normal = self.edge_normal(e, &ts);
+        let inward = self.edge_inward(e, &ts, normal);
         let m = self.pos.len() as u32;
         self.pos.push(pm);
         self.nrm.push(normal);
+        self.inward.push(inward);
         let cached = self
             .mid_v
             .remove(&e)

@@ -3,6 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::SceneError;
+use crate::texture::MaterialMaps;
 
 /// A GGX microfacet material.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -20,6 +21,11 @@ pub struct Material {
     /// Specular colour F0 (Fresnel at normal incidence), linear RGB in [0, 1].
     #[serde(default = "default_specular")]
     pub specular: [f32; 3],
+    /// Textures modulating the material through the mesh's UVs (an asset's; not written in
+    /// scene files). When present, the constant fields above hold the material at the
+    /// textures' means ([`MaterialMaps::at_mean`]).
+    #[serde(skip)]
+    pub maps: Option<MaterialMaps>,
 }
 
 fn default_roughness() -> f32 {
@@ -39,6 +45,7 @@ impl Default for Material {
             roughness: default_roughness(),
             albedo: default_albedo(),
             specular: default_specular(),
+            maps: None,
         }
     }
 }

@@ -766,6 +766,29 @@ mod tests {
         assert_eq!(decode_scene(&encode_scene(&p)).as_ref(), Ok(&p));
     }
 
+    /// A version-4 stored scene (before textures and punctual lights) still reads, with
+    /// none; the version-5 encoding of an untextured scene is version 4's and five empty
+    /// lists (4 bytes more).
+    #[test]
+    fn version_4_reads() {
+        let mut p = crate::builtin::scene("room").expect("builtin");
+        p.warnings.clear();
+        let v4 = postcard::to_stdvec(&StoredSceneV4 {
+            version: 4,
+            mesh: p.mesh.clone(),
+            materials: p.materials.clone(),
+            lights: p.lights.iter().map(StoredLight::from).collect(),
+            camera: StoredCamera::from(&p.camera),
+            bake: p.bake.clone(),
+            motion: p.motion.clone(),
+        })
+        .expect("encode v4");
+        assert_eq!(decode_scene(&v4).as_ref(), Ok(&p));
+        let v5 = encode_scene(&p);
+        assert_eq!(v5.len(), v4.len() + 5, "the five empty lists");
+        assert_eq!(decode_scene(&v5).as_ref(), Ok(&p));
+    }
+
     #[test]
     fn job_states_round_trip_through_their_names() {
         for s in [

@@ -127,7 +127,7 @@ fn gltf(
     let mut accessors = Vec::new();
     let mut meshes = Vec::new();
     let mut push = |data: Vec<u8>, acc: Value, bin: &mut Vec<u8>| -> usize {
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         views.push(json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": data.len()}));

@@ -30,12 +30,22 @@
 //!
 //! Materials (metallic-roughness, per primitive): GGX α = roughness², diffuse albedo =
 //! baseColor · (1 − metallic), F0 = mix(0.04, baseColor, metallic) (the glTF 2.0
-//! specification's appendix B BRDF); a primitive without a material gets the specification's
-//! default material. A material whose `emissiveFactor` × `KHR_materials_emissive_strength` is
-//! non-zero makes its triangles lamps (`lamps.rs`), two-sided when the material is
-//! `doubleSided`. The first perspective camera instanced by the scene becomes the scene's
-//! camera (looking down its node's −Z with +Y up). Textures, other extensions, punctual lights
-//! and orthographic cameras are not used; each kind is named in the warnings.
+//! specification's appendix B BRDF), each factor times its texture (`baseColorTexture` RGB,
+//! sRGB; `metallicRoughnessTexture` B = metallic, G = roughness) through `TEXCOORD_0`, which
+//! is read only for primitives whose material is textured; a primitive without a material
+//! gets the specification's default material. Images are decoded once each, when a material
+//! first uses them (buffer view, `data:` URI, or a file next to the glTF), bounded by
+//! `texture::MAX_*`; one that cannot be read is a warning and the factor is used alone. A
+//! material whose `emissiveFactor` × `KHR_materials_emissive_strength` is non-zero makes its
+//! triangles lamps (`lamps.rs`), two-sided when the material is `doubleSided`; its
+//! `emissiveTexture` becomes the lamp's texture. `KHR_lights_punctual` point and spot lights of
+//! the instanced nodes are placed by the node's world transform (spots point down its −Z). The
+//! first perspective camera instanced by the scene becomes the scene's camera (looking down its
+//! node's −Z with +Y up). Normal and occlusion textures, other texture coordinate sets,
+//! `KHR_texture_transform` and other extensions, directional lights and orthographic cameras
+//! are not used; each kind is named in the warnings. Image and light JSON is read from the
+//! document's JSON, not through the `gltf` crate's accessors that `unwrap` (an image with a
+//! buffer view but no MIME type would panic there).
 
 use std::borrow::Cow;
 use std::collections::HashMap;
@@ -1041,15 +1051,13 @@ impl Builder<'_> {
         } else {
             None
         };
-        let maps =
-            (base_color_texture.is_some() || metallic_roughness_texture.is_some()).then(|| {
-                MaterialMaps::MetallicRoughness {
-                    base_color: base,
-                    metallic,
-                    roughness,
-                    base_color_texture,
-                    metallic_roughness_texture,
-                }
+        let maps = (base_color_texture.is_some() || metallic_roughness_texture.is_some())
+            .then_some(MaterialMaps::MetallicRoughness {
+                base_color: base,
+                metallic,
+                roughness,
+                base_color_texture,
+                metallic_roughness_texture,
             });
         let mut material = Material {
             name,

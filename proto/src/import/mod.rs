@@ -337,8 +337,8 @@ pub(crate) fn finish_asset(raw: Raw) -> Result<Asset, MeshError> {
             Ok(image) => light.image = Some(std::sync::Arc::new(image)),
             Err(why) => {
                 let mean = tex.texture.mean(true);
-                for k in 0..3 {
-                    light.radiance[k] *= mean[k];
+                for (r, m) in light.radiance.iter_mut().zip(mean) {
+                    *r *= m;
                 }
                 warnings.push(format!(
                     "the lamp of emissive texture {:?}: {why}; its mean is used as a \

@@ -9,9 +9,10 @@ use serde::{Deserialize, Serialize};
 
 use std::sync::Arc;
 
+use crate::material::MaterialMaps;
 use crate::motion::MovingPart;
 use crate::scene::{Camera, Material, PolygonLight, PunctualLight, Region};
-use crate::texture::{LightImage, MaterialMaps, Texture, TextureRef, Wrap};
+use crate::texture::{LightImage, Texture, TextureRef, Wrap};
 use crate::{BakeSettings, Mesh, Scene};
 
 /// The body of every error answer: `{"error": CODE, "detail": TEXT}`.

@@ -1,6 +1,6 @@
 //! Surface textures: images read from an asset (glTF base-colour, metallic-roughness and
-//! emissive textures, OBJ/MTL `map_Kd`), sampled through a mesh's UVs, and the material they
-//! modulate evaluated at a UV ([`MaterialMaps`]).
+//! emissive textures, OBJ/MTL `map_Kd`), sampled through a mesh's UVs (the material they
+//! modulate is `crate::material::MaterialMaps`).
 //!
 //! **UV convention** (glTF 2.0 §3.8.4): (0, 0) is the top-left corner of the image, u to the
 //! right, v down the rows. OBJ `vt` (v up) is flipped to this convention on import.
@@ -18,8 +18,6 @@
 use std::sync::{Arc, OnceLock};
 
 use glam::Vec2;
-
-use crate::material::Material;
 
 /// Most texels per side of one texture.
 pub const MAX_TEXTURE_SIDE: u32 = 8192;
@@ -241,125 +239,6 @@ impl LightImage {
                 .iter()
                 .flatten()
                 .all(|c| c.is_finite() && *c >= 0.0)
-    }
-}
-
-/// What modulates a material over its surface, through the mesh's UVs.
-#[derive(Clone, Debug, PartialEq)]
-pub enum MaterialMaps {
-    /// glTF 2.0 metallic-roughness (§3.9.2; BRDF of appendix B): base colour = factor ×
-    /// texture (sRGB), metallic = factor × texture B, perceptual roughness = factor ×
-    /// texture G; diffuse albedo = base · (1 − metallic), F0 = mix(0.04, base, metallic),
-    /// GGX α = roughness².
-    MetallicRoughness {
-        /// `baseColorFactor` (RGB, linear).
-        base_color: [f32; 3],
-        /// `metallicFactor`.
-        metallic: f32,
-        /// `roughnessFactor` (perceptual).
-        roughness: f32,
-        /// `baseColorTexture`.
-        base_color_texture: Option<TextureRef>,
-        /// `metallicRoughnessTexture`.
-        metallic_roughness_texture: Option<TextureRef>,
-    },
-    /// OBJ/MTL `map_Kd`: diffuse albedo = `Kd` (the material's albedo) × texture (sRGB);
-    /// F0 and α are the material's.
-    Diffuse {
-        /// `Kd`.
-        kd: [f32; 3],
-        /// The `map_Kd` image.
-        texture: TextureRef,
-    },
-}
-
-/// Smallest GGX α a textured material gets (as the importers' [`Material`]s).
-const MIN_ALPHA: f32 = 1e-3;
-
-impl MaterialMaps {
-    /// The textures it samples (for storing a scene).
-    pub fn textures(&self) -> Vec<&TextureRef> {
-        match self {
-            MaterialMaps::MetallicRoughness {
-                base_color_texture,
-                metallic_roughness_texture,
-                ..
-            } => base_color_texture
-                .iter()
-                .chain(metallic_roughness_texture)
-                .collect(),
-            MaterialMaps::Diffuse { texture, .. } => vec![texture],
-        }
-    }
-
-    /// The material at a texel value: `sample(texture, srgb)` gives each texture's value.
-    fn eval(&self, base: &Material, sample: impl Fn(&TextureRef, bool) -> [f32; 4]) -> Material {
-        let unit = |x: f32| {
-            if x.is_finite() {
-                x.clamp(0.0, 1.0)
-            } else {
-                0.0
-            }
-        };
-        match self {
-            MaterialMaps::MetallicRoughness {
-                base_color,
-                metallic,
-                roughness,
-                base_color_texture,
-                metallic_roughness_texture,
-            } => {
-                let bc = base_color_texture
-                    .as_ref()
-                    .map_or([1.0; 4], |t| sample(t, true));
-                let mr = metallic_roughness_texture
-                    .as_ref()
-                    .map_or([1.0; 4], |t| sample(t, false));
-                let c: [f32; 3] = std::array::from_fn(|k| unit(base_color[k] * bc[k]));
-                let m = unit(metallic * mr[2]);
-                let r = unit(roughness * mr[1]);
-                Material {
-                    name: String::new(),
-                    roughness: (r * r).clamp(MIN_ALPHA, 1.0),
-                    albedo: c.map(|x| x * (1.0 - m)),
-                    specular: c.map(|x| 0.04 + (x - 0.04) * m),
-                    maps: None,
-                }
-            }
-            MaterialMaps::Diffuse { kd, texture } => {
-                let t = sample(texture, true);
-                Material {
-                    name: String::new(),
-                    roughness: base.roughness,
-                    albedo: std::array::from_fn(|k| unit(kd[k] * t[k])),
-                    specular: base.specular,
-                    maps: None,
-                }
-            }
-        }
-    }
-
-    /// The material at `uv` (bilinear texels).
-    pub fn at(&self, base: &Material, uv: Vec2) -> Material {
-        self.eval(base, |t, srgb| t.texture.sample(uv, t.wrap, srgb))
-    }
-
-    /// The material at each texture's mean texel: the constant the material's own fields
-    /// hold, for the paths that do not evaluate textures (the SG method, the Mitsuba export,
-    /// a mesh without UVs).
-    pub fn at_mean(&self, base: &Material) -> Material {
-        self.eval(base, |t, srgb| t.texture.mean(srgb))
-    }
-}
-
-impl Material {
-    /// The material at a surface point with texture coordinates `uv` (`None`: a mesh without
-    /// UVs, the material's constant fields). Untextured materials are returned as they are.
-    pub fn at(&self, uv: Option<Vec2>) -> std::borrow::Cow<'_, Material> {
-        match (&self.maps, uv) {
-            (Some(m), Some(uv)) => std::borrow::Cow::Owned(m.at(self, uv)),
-            _ => std::borrow::Cow::Borrowed(self),
-        }
     }
 }
 

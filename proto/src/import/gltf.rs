@@ -65,8 +65,9 @@ use crate::camera::Camera;
 use crate::error::MeshError;
 use crate::light::{PunctualLight, Spot};
 use crate::material::Material;
+use crate::material::MaterialMaps;
 use crate::mesh::Mesh;
-use crate::texture::{MAX_ASSET_TEXELS, MaterialMaps, Texture, TextureRef, Wrap};
+use crate::texture::{MAX_ASSET_TEXELS, Texture, TextureRef, Wrap};
 
 fn malformed(message: impl Into<String>) -> MeshError {
     MeshError::Malformed {

@@ -270,7 +270,7 @@ pub(super) fn parse(
                 if textured(*m) && t.iter().any(|c| c.2 == NONE) {
                     *m = *plain.entry(*m).or_insert_with(|| {
                         let mut copy = materials[*m as usize].clone();
-                        if let Some(crate::texture::MaterialMaps::Diffuse { kd, .. }) =
+                        if let Some(crate::material::MaterialMaps::Diffuse { kd, .. }) =
                             copy.material.maps.take()
                         {
                             copy.material.albedo = kd;
@@ -441,7 +441,7 @@ fn resolve_materials(
                 && let Some(file) = lib.map_kd(name)
                 && let Some(texture) = map_kd(file, warnings)
             {
-                let maps = crate::texture::MaterialMaps::Diffuse {
+                let maps = crate::material::MaterialMaps::Diffuse {
                     kd: m.material.albedo,
                     texture: crate::texture::TextureRef {
                         texture,

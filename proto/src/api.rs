@@ -192,8 +192,8 @@ pub struct SceneStatus {
 // The scene as stored and served (`GET /v1/scenes/{id}/scene`).
 
 /// 2: adds the moving parts ([`bspvt_proto::motion`]); 3: adds `bake.refine`; 4: adds the
-/// camera's `aspect`; 5: adds the mesh's UVs, the materials' textures (zstd-compressed RGBA8,
-/// each image once), the lamps' texture images and the punctual lights. Versions 1 to 4
+/// camera's `aspect`; 5: adds the mesh's UVs, the materials' textures (each image once, as the
+/// PNG or JPEG it came from), the lamps' texture images and the punctual lights. Versions 1 to 4
 /// still read.
 const STORED_VERSION: u16 = 5;
 
@@ -228,13 +228,22 @@ struct StoredSceneV4 {
     motion: Vec<MovingPart>,
 }
 
-/// A [`Texture`], its RGBA8 texels zstd-compressed.
+/// A [`Texture`]: the PNG or JPEG it was decoded from (decoded again, with the same limits,
+/// when read), or for a texture made in memory its RGBA8 texels zstd-compressed.
 #[derive(Serialize, Deserialize)]
 struct StoredTexture {
     name: String,
-    width: u32,
-    height: u32,
-    rgba_zstd: Vec<u8>,
+    pixels: StoredPixels,
+}
+
+#[derive(Serialize, Deserialize)]
+enum StoredPixels {
+    Encoded(Vec<u8>),
+    Rgba8Zstd {
+        width: u32,
+        height: u32,
+        rgba_zstd: Vec<u8>,
+    },
 }
 
 #[derive(Serialize, Deserialize)]
@@ -314,42 +323,54 @@ impl TextureTable {
 fn store_texture(t: &Texture) -> StoredTexture {
     StoredTexture {
         name: t.name.clone(),
-        width: t.width,
-        height: t.height,
-        rgba_zstd: zstd::bulk::compress(&t.rgba, 3).unwrap_or_default(),
+        pixels: if t.source.is_empty() {
+            StoredPixels::Rgba8Zstd {
+                width: t.width,
+                height: t.height,
+                rgba_zstd: zstd::bulk::compress(&t.rgba, 3).unwrap_or_default(),
+            }
+        } else {
+            StoredPixels::Encoded(t.source.clone())
+        },
     }
 }
 
 fn load_texture(t: StoredTexture) -> Result<Arc<Texture>, String> {
-    let texels = u64::from(t.width) * u64::from(t.height);
-    if t.width == 0
-        || t.height == 0
-        || t.width > crate::texture::MAX_TEXTURE_SIDE
-        || t.height > crate::texture::MAX_TEXTURE_SIDE
+    let bad = |e: String| format!("stored texture {:?}: {e}", t.name);
+    let (width, height, rgba_zstd) = match t.pixels {
+        StoredPixels::Encoded(bytes) => {
+            return Texture::decode(&bytes, &t.name).map(Arc::new).map_err(bad);
+        }
+        StoredPixels::Rgba8Zstd {
+            width,
+            height,
+            rgba_zstd,
+        } => (width, height, rgba_zstd),
+    };
+    let texels = u64::from(width) * u64::from(height);
+    if width == 0
+        || height == 0
+        || width > crate::texture::MAX_TEXTURE_SIDE
+        || height > crate::texture::MAX_TEXTURE_SIDE
         || texels > crate::texture::MAX_TEXTURE_TEXELS
     {
-        return Err(format!(
-            "stored texture {:?} has an invalid size {}×{}",
-            t.name, t.width, t.height
-        ));
+        return Err(bad(format!("invalid size {width}×{height}")));
     }
     let len = 4 * texels as usize;
-    let rgba = zstd::bulk::decompress(&t.rgba_zstd, len)
-        .map_err(|e| format!("stored texture {:?} does not decompress: {e}", t.name))?;
+    let rgba = zstd::bulk::decompress(&rgba_zstd, len)
+        .map_err(|e| bad(format!("does not decompress: {e}")))?;
     if rgba.len() != len {
-        return Err(format!(
-            "stored texture {:?} has {} bytes for {}×{} texels",
-            t.name,
-            rgba.len(),
-            t.width,
-            t.height
-        ));
+        return Err(bad(format!(
+            "{} bytes for {width}×{height} texels",
+            rgba.len()
+        )));
     }
     Ok(Arc::new(Texture {
         name: t.name,
-        width: t.width,
-        height: t.height,
+        width,
+        height,
         rgba,
+        source: Vec::new(),
     }))
 }
 

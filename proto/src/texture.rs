@@ -37,6 +37,9 @@ pub struct Texture {
     pub height: u32,
     /// `width × height × 4` bytes, RGBA.
     pub rgba: Vec<u8>,
+    /// The encoded image (PNG or JPEG) it was decoded from, which is what a stored scene
+    /// keeps (empty: made in memory; stored as compressed texels).
+    pub source: Vec<u8>,
 }
 
 impl std::fmt::Debug for Texture {
@@ -205,6 +208,7 @@ impl Texture {
             width: rgba.width(),
             height: rgba.height(),
             rgba: rgba.into_raw(),
+            source: bytes.to_vec(),
         })
     }
 }
@@ -256,6 +260,7 @@ mod tests {
                 255, 0, 0, 255, 0, 255, 0, 255, //
                 0, 0, 255, 255, 255, 255, 255, 255,
             ],
+            source: Vec::new(),
         }
     }
 
@@ -298,6 +303,7 @@ mod tests {
             width: 1,
             height: 1,
             rgba: vec![188, 188, 188, 255],
+            source: Vec::new(),
         };
         // sRGB 188/255 ≈ 0.5029 linear; the data path reads 188/255 ≈ 0.737.
         assert!((t.sample(Vec2::ZERO, [Wrap::Repeat; 2], true)[0] - 0.5029).abs() < 1e-3);

@@ -918,3 +918,118 @@ fn crc32(bytes: &[u8]) -> u32 {
     }
     !c
 }
+
+/// The same texture read three ways gives the same material: a `data:` URI, a buffer view
+/// (as in a GLB; with and without `mimeType`), and a file next to the `.gltf`; a JPEG decodes
+/// too (lossy: its uniform colour within 2/255). An upload cannot name the file.
+#[test]
+fn textures_from_buffer_views_files_and_jpeg() {
+    let mats = || {
+        json!([
+            {"name": "floor", "pbrMetallicRoughness": {"metallicFactor": 0.0,
+                "baseColorTexture": {"index": 0}}},
+            lamp_material(None)
+        ])
+    };
+    let png_bytes = checker();
+    let by_uri = asset(&gltf(
+        &[floor(0), lamp(1, false)],
+        mats(),
+        &[png_bytes.clone()],
+        CLAMP(),
+        with_emissive_strength,
+    ));
+    let want = by_uri.materials[0].clone();
+    assert!(want.maps.is_some());
+    // The same material and texels (the texture's name says where it came from).
+    let texels = |m: &Material| match &m.maps {
+        Some(bspvt_proto::scene::MaterialMaps::MetallicRoughness {
+            base_color_texture: Some(t),
+            ..
+        }) => t.texture.rgba.clone(),
+        _ => Vec::new(),
+    };
+    let same = |m: &Material| {
+        m.albedo == want.albedo
+            && m.specular == want.specular
+            && m.roughness == want.roughness
+            && texels(m) == texels(&want)
+            && !texels(m).is_empty()
+    };
+    // The image as a buffer view of a second buffer (a data: URI holding the PNG).
+    for mime in [Some("image/png"), None] {
+        let bytes = gltf(
+            &[floor(0), lamp(1, false)],
+            mats(),
+            &[png_bytes.clone()],
+            CLAMP(),
+            |d| {
+                with_emissive_strength(d);
+                let n = d["bufferViews"].as_array().expect("views").len();
+                d["buffers"].as_array_mut().expect("buffers").push(json!({
+                "byteLength": png_bytes.len(),
+                "uri": format!("data:application/octet-stream;base64,{}", base64(&png_bytes))}));
+                d["bufferViews"]
+                    .as_array_mut()
+                    .expect("views")
+                    .push(json!({"buffer": 1, "byteLength": png_bytes.len()}));
+                d["images"][0] = json!({"bufferView": n});
+                if let Some(m) = mime {
+                    d["images"][0]["mimeType"] = json!(m);
+                }
+            },
+        );
+        match load_asset_bytes(&bytes, Format::Gltf, &Limits::default()) {
+            Ok(a) => assert!(same(&a.materials[0]), "buffer view, mimeType {mime:?}"),
+            // Without the required mimeType the validator may refuse the file: an error,
+            // never a panic.
+            Err(e) => assert!(mime.is_none(), "{e}"),
+        }
+    }
+    // A file next to the .gltf, read from a path; refused from bytes (an upload).
+    let dir = tempfile::tempdir().expect("tmp");
+    std::fs::write(dir.path().join("checker.png"), &png_bytes).expect("png");
+    let bytes = gltf(
+        &[floor(0), lamp(1, false)],
+        mats(),
+        &[png_bytes.clone()],
+        CLAMP(),
+        |d| {
+            with_emissive_strength(d);
+            d["images"][0] = json!({"uri": "checker.png"});
+        },
+    );
+    std::fs::write(dir.path().join("a.gltf"), &bytes).expect("gltf");
+    let from_file = load_asset(&dir.path().join("a.gltf")).expect("loads");
+    assert!(
+        same(&from_file.materials[0]),
+        "{:?}",
+        from_file.materials[0]
+    );
+    let e = load_asset_bytes(&bytes, Format::Gltf, &Limits::default()).expect_err("upload");
+    assert!(e.to_string().contains("self-contained"), "{e}");
+    // A missing file: a warning, not a failure.
+    std::fs::remove_file(dir.path().join("checker.png")).expect("rm");
+    let missing = load_asset(&dir.path().join("a.gltf")).expect("loads without it");
+    assert!(missing.materials[0].maps.is_none());
+    assert!(
+        missing
+            .warnings
+            .iter()
+            .any(|w| w.contains("\"checker.png\" could not be read")),
+        "{:?}",
+        missing.warnings
+    );
+    // JPEG: a uniform (200, 100, 50) image.
+    let img = image::RgbImage::from_pixel(8, 8, image::Rgb([200, 100, 50]));
+    let mut jpg = Cursor::new(Vec::new());
+    img.write_to(&mut jpg, image::ImageFormat::Jpeg)
+        .expect("jpeg");
+    let t = bspvt_proto::texture::Texture::decode(&jpg.into_inner(), "j").expect("jpeg decodes");
+    assert_eq!((t.width, t.height), (8, 8));
+    for px in t.rgba.chunks_exact(4) {
+        for (got, want) in px.iter().zip([200u8, 100, 50, 255]) {
+            assert!(got.abs_diff(want) <= 2, "{px:?}");
+        }
+    }
+}

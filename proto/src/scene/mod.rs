@@ -474,11 +474,13 @@ impl Scene {
                     }
                     punctual.push(l);
                 }
-            } else if !lamps.is_empty() {
+            } else if !lamps.is_empty() || !points.is_empty() {
                 warnings.push(format!(
-                    "{}: its {} lamps are not used (asset_lights is false)",
+                    "{}: its {} lamps and {} punctual lights are not used (asset_lights is \
+                     false)",
                     m.path,
-                    lamps.len()
+                    lamps.len(),
+                    points.len()
                 ));
             }
             if asset_camera.is_none() && affine.is_none() {

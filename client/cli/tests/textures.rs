@@ -935,7 +935,7 @@ fn textures_from_buffer_views_files_and_jpeg() {
     let by_uri = asset(&gltf(
         &[floor(0), lamp(1, false)],
         mats(),
-        &[png_bytes.clone()],
+        std::slice::from_ref(&png_bytes),
         CLAMP(),
         with_emissive_strength,
     ));
@@ -961,7 +961,7 @@ fn textures_from_buffer_views_files_and_jpeg() {
         let bytes = gltf(
             &[floor(0), lamp(1, false)],
             mats(),
-            &[png_bytes.clone()],
+            std::slice::from_ref(&png_bytes),
             CLAMP(),
             |d| {
                 with_emissive_strength(d);
@@ -992,7 +992,7 @@ fn textures_from_buffer_views_files_and_jpeg() {
     let bytes = gltf(
         &[floor(0), lamp(1, false)],
         mats(),
-        &[png_bytes.clone()],
+        std::slice::from_ref(&png_bytes),
         CLAMP(),
         |d| {
             with_emissive_strength(d);

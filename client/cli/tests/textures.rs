@@ -1033,3 +1033,63 @@ fn textures_from_buffer_views_files_and_jpeg() {
         }
     }
 }
+
+/// The project's textured asset given alone (`--mesh`): BSPVT per pixel — textured floor,
+/// textured lamp, refined mesh — against the Monte Carlo reference evaluating the same
+/// textures exactly (2048 samples a pixel), no NaN. Measured, converged (8192 samples): 4.8 %
+/// mean |error| of the mean radiance; the same asset without textures 1.8 %, with the
+/// base-colour texture alone 3.1 % (coloured albedo leaves more of each channel to the
+/// specular lobe, where the LTC fit's error is), and the lamp's texture adds 1.7 % (LTC
+/// fetches a prefiltered textured light once per lobe [Heitz16 §5.3]; Monte Carlo reads every
+/// sample's texel). The bound, 5.5 %, leaves 2048 samples' noise (≈ 0.2 %) above that; it is
+/// above the rooms' 5 %, and the textured lamp is why. Per vertex the texture is only sampled
+/// at the 61 vertices (≈ 23 %), reported, not bounded.
+#[test]
+fn textured_asset_bspvt_against_monte_carlo() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../assets/rooms/textured-floor.gltf");
+    let scene = bspvt_client::scene::open(None, Some(&path)).expect("scene");
+    assert!(scene.mesh.vertex_count() > 4, "refined");
+    let bytes = bspvt_bake::Baker::new(&scene)
+        .bake_all(&|_, _| {}, &std::sync::atomic::AtomicBool::new(false))
+        .expect("bake")
+        .bytes;
+    let b = bspvt_proto::encoding::decode_bake(&bytes).expect("decode");
+    let trees = bspvt_client::render::renderer::Trees::full(&b.trees, b.header.codec());
+    let r = Renderer::new(&scene, 64, 64);
+    let light = Light::load(&scene.lights[0]).expect("light");
+    let (pixel, _) = r.bspvt(&light, &trees, Mode::Pixel);
+    let (vertex, _) = r.bspvt(&light, &trees, Mode::Vertex);
+    let occ =
+        bspvt_raytrace::Occluder::new(&scene.mesh, &bspvt_raytrace::mesh_triangles(&scene.mesh));
+    let (mc, _) =
+        bspvt_client::groundtruth::render_mc(&scene, &r.view, &r.gbuffer, &light, &occ, 2048, 11);
+    let mean = |img: &Image| {
+        img.pixels
+            .iter()
+            .flatten()
+            .map(|&x| f64::from(x))
+            .sum::<f64>()
+            / (3 * img.pixels.len()) as f64
+    };
+    let mad = |a: &Image| {
+        a.pixels
+            .iter()
+            .zip(&mc.pixels)
+            .map(|(x, y)| (0..3).map(|k| f64::from((x[k] - y[k]).abs())).sum::<f64>() / 3.0)
+            .sum::<f64>()
+            / a.pixels.len() as f64
+    };
+    for img in [&pixel, &vertex, &mc] {
+        assert!(img.pixels.iter().flatten().all(|x| x.is_finite()));
+    }
+    let (e_pixel, e_vertex) = (mad(&pixel) / mean(&mc), mad(&vertex) / mean(&mc));
+    eprintln!(
+        "textured asset: mean |BSPVT − MC| / mean MC = {e_pixel:.4} per pixel, {e_vertex:.4} per vertex"
+    );
+    assert!(e_pixel <= 0.055, "per pixel {e_pixel}");
+    assert!(
+        e_vertex > e_pixel,
+        "per vertex {e_vertex} (the texture between the vertices is lost)"
+    );
+}

@@ -36,11 +36,18 @@ impl Light {
         }
     }
 
-    /// [`Self::from_scene`] with the light's texture loaded (paths are resolved by the scene
-    /// loader).
+    /// [`Self::from_scene`] with the light's texture loaded: the asset's own image (a glTF
+    /// lamp's emissive texture) when it has one, else the file it names (paths are resolved
+    /// by the scene loader).
     pub fn load(l: &PolygonLight) -> Result<Light> {
         let mut light = Light::from_scene(l);
-        if let Some(t) = &l.texture {
+        if let Some(image) = &l.image {
+            light.texture = Some(Arc::new(LightTexture::from_texels(
+                image.width as usize,
+                image.height as usize,
+                &image.texels,
+            )?));
+        } else if let Some(t) = &l.texture {
             light.texture = Some(Arc::new(load_texture(std::path::Path::new(t))?));
         }
         Ok(light)

@@ -54,7 +54,7 @@ pub(crate) fn ratio_sums(
             let Some(pt) = McPoint::new(&sp, light) else {
                 return (0.0, 0.0);
             };
-            let brdf = ctx.brdf(s.tri);
+            let brdf = &ctx.brdf(&s);
             let mut rng = Pcg32::for_key(seed, i as u64);
             let (mut sh, mut un) = (0.0, 0.0);
             for _ in 0..spp {

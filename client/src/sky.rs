@@ -353,6 +353,7 @@ mod tests {
             },
             motion: Vec::new(),
             warnings: Vec::new(),
+            punctual: Vec::new(),
         };
         scene.validate().expect("valid scene");
         let out = bspvt_bake::Baker::new(&scene)
@@ -389,6 +390,7 @@ mod tests {
                 roughness: alpha,
                 albedo: [0.5, 0.5, 0.5],
                 specular: [0.04; 3],
+                maps: None,
             };
             let (scene, bake) = open_plane(m.clone());
             let trees = Trees::full(&bake.trees, bake.header.codec());
@@ -449,6 +451,7 @@ mod tests {
             roughness: 0.3,
             albedo: [0.6, 0.5, 0.4],
             specular: [0.04; 3],
+            maps: None,
         };
         let (scene, bake) = open_plane(m);
         let trees = Trees::full(&bake.trees, bake.header.codec());

@@ -7,8 +7,12 @@
 
 use serde::{Deserialize, Serialize};
 
+use std::sync::Arc;
+
+use crate::material::MaterialMaps;
 use crate::motion::MovingPart;
-use crate::scene::{Camera, Material, PolygonLight, Region};
+use crate::scene::{Camera, Material, PolygonLight, PunctualLight, Region};
+use crate::texture::{LightImage, Texture, TextureRef, Wrap};
 use crate::{BakeSettings, Mesh, Scene};
 
 /// The body of every error answer: `{"error": CODE, "detail": TEXT}`.
@@ -188,8 +192,10 @@ pub struct SceneStatus {
 // The scene as stored and served (`GET /v1/scenes/{id}/scene`).
 
 /// 2: adds the moving parts ([`bspvt_proto::motion`]); 3: adds `bake.refine`; 4: adds the
-/// camera's `aspect`. Versions 1 to 3 still read.
-const STORED_VERSION: u16 = 4;
+/// camera's `aspect`; 5: adds the mesh's UVs, the materials' textures (each image once, as the
+/// PNG or JPEG it came from), the lamps' texture images and the punctual lights. Versions 1 to 4
+/// still read.
+const STORED_VERSION: u16 = 5;
 
 #[derive(Serialize, Deserialize)]
 struct StoredScene {
@@ -200,6 +206,204 @@ struct StoredScene {
     camera: StoredCamera,
     bake: BakeSettings,
     motion: Vec<MovingPart>,
+    /// Empty, or one per vertex.
+    uvs: Vec<[f32; 2]>,
+    textures: Vec<StoredTexture>,
+    /// One per material (or empty: none is textured).
+    maps: Vec<Option<StoredMaps>>,
+    /// One per light (or empty: none has an image).
+    light_images: Vec<Option<StoredLightImage>>,
+    punctual: Vec<PunctualLight>,
+}
+
+/// Version 4: version 5 without textures, UVs and punctual lights.
+#[derive(Serialize, Deserialize)]
+struct StoredSceneV4 {
+    version: u16,
+    mesh: Mesh,
+    materials: Vec<Material>,
+    lights: Vec<StoredLight>,
+    camera: StoredCamera,
+    bake: BakeSettings,
+    motion: Vec<MovingPart>,
+}
+
+/// A [`Texture`]: the PNG or JPEG it was decoded from (decoded again, with the same limits,
+/// when read), or for a texture made in memory its RGBA8 texels zstd-compressed.
+#[derive(Serialize, Deserialize)]
+struct StoredTexture {
+    name: String,
+    pixels: StoredPixels,
+}
+
+#[derive(Serialize, Deserialize)]
+enum StoredPixels {
+    Encoded(Vec<u8>),
+    Rgba8Zstd {
+        width: u32,
+        height: u32,
+        rgba_zstd: Vec<u8>,
+    },
+}
+
+#[derive(Serialize, Deserialize)]
+struct StoredTextureRef {
+    texture: u32,
+    wrap: [Wrap; 2],
+}
+
+/// [`MaterialMaps`] with its textures as indices into `StoredScene::textures`.
+#[derive(Serialize, Deserialize)]
+enum StoredMaps {
+    MetallicRoughness {
+        base_color: [f32; 3],
+        metallic: f32,
+        roughness: f32,
+        base_color_texture: Option<StoredTextureRef>,
+        metallic_roughness_texture: Option<StoredTextureRef>,
+    },
+    Diffuse {
+        kd: [f32; 3],
+        texture: StoredTextureRef,
+    },
+}
+
+#[derive(Serialize, Deserialize)]
+struct StoredLightImage {
+    width: u32,
+    height: u32,
+    texels: Vec<[f32; 3]>,
+}
+
+/// The scene's textures, each image once (shared `Arc`s are one image).
+struct TextureTable {
+    images: Vec<Arc<Texture>>,
+}
+
+impl TextureTable {
+    fn index(&mut self, t: &TextureRef) -> StoredTextureRef {
+        let i = match self.images.iter().position(|x| Arc::ptr_eq(x, &t.texture)) {
+            Some(i) => i,
+            None => {
+                self.images.push(t.texture.clone());
+                self.images.len() - 1
+            }
+        };
+        StoredTextureRef {
+            texture: i as u32,
+            wrap: t.wrap,
+        }
+    }
+
+    fn maps(&mut self, m: &MaterialMaps) -> StoredMaps {
+        match m {
+            MaterialMaps::MetallicRoughness {
+                base_color,
+                metallic,
+                roughness,
+                base_color_texture,
+                metallic_roughness_texture,
+            } => StoredMaps::MetallicRoughness {
+                base_color: *base_color,
+                metallic: *metallic,
+                roughness: *roughness,
+                base_color_texture: base_color_texture.as_ref().map(|t| self.index(t)),
+                metallic_roughness_texture: metallic_roughness_texture
+                    .as_ref()
+                    .map(|t| self.index(t)),
+            },
+            MaterialMaps::Diffuse { kd, texture } => StoredMaps::Diffuse {
+                kd: *kd,
+                texture: self.index(texture),
+            },
+        }
+    }
+}
+
+fn store_texture(t: &Texture) -> StoredTexture {
+    StoredTexture {
+        name: t.name.clone(),
+        pixels: if t.source.is_empty() {
+            StoredPixels::Rgba8Zstd {
+                width: t.width,
+                height: t.height,
+                rgba_zstd: zstd::bulk::compress(&t.rgba, 3).unwrap_or_default(),
+            }
+        } else {
+            StoredPixels::Encoded(t.source.clone())
+        },
+    }
+}
+
+fn load_texture(t: StoredTexture) -> Result<Arc<Texture>, String> {
+    let bad = |e: String| format!("stored texture {:?}: {e}", t.name);
+    let (width, height, rgba_zstd) = match t.pixels {
+        StoredPixels::Encoded(bytes) => {
+            return Texture::decode(&bytes, &t.name).map(Arc::new).map_err(bad);
+        }
+        StoredPixels::Rgba8Zstd {
+            width,
+            height,
+            rgba_zstd,
+        } => (width, height, rgba_zstd),
+    };
+    let texels = u64::from(width) * u64::from(height);
+    if width == 0
+        || height == 0
+        || width > crate::texture::MAX_TEXTURE_SIDE
+        || height > crate::texture::MAX_TEXTURE_SIDE
+        || texels > crate::texture::MAX_TEXTURE_TEXELS
+    {
+        return Err(bad(format!("invalid size {width}×{height}")));
+    }
+    let len = 4 * texels as usize;
+    let rgba = zstd::bulk::decompress(&rgba_zstd, len)
+        .map_err(|e| bad(format!("does not decompress: {e}")))?;
+    if rgba.len() != len {
+        return Err(bad(format!(
+            "{} bytes for {width}×{height} texels",
+            rgba.len()
+        )));
+    }
+    Ok(Arc::new(Texture {
+        name: t.name,
+        width,
+        height,
+        rgba,
+        source: Vec::new(),
+    }))
+}
+
+fn load_maps(m: StoredMaps, textures: &[Arc<Texture>]) -> Result<MaterialMaps, String> {
+    let get = |r: StoredTextureRef| -> Result<TextureRef, String> {
+        let texture = textures
+            .get(r.texture as usize)
+            .cloned()
+            .ok_or_else(|| format!("stored material names texture {}", r.texture))?;
+        Ok(TextureRef {
+            texture,
+            wrap: r.wrap,
+        })
+    };
+    Ok(match m {
+        StoredMaps::MetallicRoughness {
+            base_color,
+            metallic,
+            roughness,
+            base_color_texture,
+            metallic_roughness_texture,
+        } => MaterialMaps::MetallicRoughness {
+            base_color,
+            metallic,
+            roughness,
+            base_color_texture: base_color_texture.map(get).transpose()?,
+            metallic_roughness_texture: metallic_roughness_texture.map(get).transpose()?,
+        },
+        StoredMaps::Diffuse { kd, texture } => MaterialMaps::Diffuse {
+            kd,
+            texture: get(texture)?,
+        },
+    })
 }
 
 /// Version 3: [`StoredScene`] with [`CameraV3`].
@@ -339,6 +543,29 @@ impl From<&PolygonLight> for StoredLight {
 
 /// The scene as stored in `scene.bin` (postcard; exact floats).
 pub fn encode_scene(s: &Scene) -> Vec<u8> {
+    let mut table = TextureTable { images: Vec::new() };
+    let maps: Vec<Option<StoredMaps>> = if s.materials.iter().any(|m| m.maps.is_some()) {
+        s.materials
+            .iter()
+            .map(|m| m.maps.as_ref().map(|x| table.maps(x)))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let light_images = if s.lights.iter().any(|l| l.image.is_some()) {
+        s.lights
+            .iter()
+            .map(|l| {
+                l.image.as_ref().map(|i| StoredLightImage {
+                    width: i.width,
+                    height: i.height,
+                    texels: i.texels.clone(),
+                })
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let stored = StoredScene {
         version: STORED_VERSION,
         mesh: s.mesh.clone(),
@@ -347,8 +574,31 @@ pub fn encode_scene(s: &Scene) -> Vec<u8> {
         camera: StoredCamera::from(&s.camera),
         bake: s.bake.clone(),
         motion: s.motion.clone(),
+        uvs: s.mesh.uvs.iter().map(|v| v.to_array()).collect(),
+        textures: table.images.iter().map(|t| store_texture(t)).collect(),
+        maps,
+        light_images,
+        punctual: s.punctual.clone(),
     };
     postcard::to_stdvec(&stored).unwrap_or_default()
+}
+
+/// Version 4 and before: nothing textured, no punctual lights.
+fn from_v4(v: StoredSceneV4) -> StoredScene {
+    StoredScene {
+        version: v.version,
+        mesh: v.mesh,
+        materials: v.materials,
+        lights: v.lights,
+        camera: v.camera,
+        bake: v.bake,
+        motion: v.motion,
+        uvs: Vec::new(),
+        textures: Vec::new(),
+        maps: Vec::new(),
+        light_images: Vec::new(),
+        punctual: Vec::new(),
+    }
 }
 
 /// Reads back [`encode_scene`]'s bytes (and version 1's).
@@ -358,7 +608,7 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
     let s = match version {
         1 => {
             let v1: StoredSceneV1 = postcard::from_bytes(bytes).map_err(bad)?;
-            StoredScene {
+            from_v4(StoredSceneV4 {
                 version: v1.version,
                 mesh: v1.mesh,
                 materials: v1.materials,
@@ -366,11 +616,11 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
                 camera: v1.camera.into(),
                 bake: v1.bake.into(),
                 motion: Vec::new(),
-            }
+            })
         }
         2 => {
             let v2: StoredSceneV2 = postcard::from_bytes(bytes).map_err(bad)?;
-            StoredScene {
+            from_v4(StoredSceneV4 {
                 version: v2.version,
                 mesh: v2.mesh,
                 materials: v2.materials,
@@ -378,11 +628,11 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
                 camera: v2.camera.into(),
                 bake: v2.bake.into(),
                 motion: v2.motion,
-            }
+            })
         }
         3 => {
             let v3: StoredSceneV3 = postcard::from_bytes(bytes).map_err(bad)?;
-            StoredScene {
+            from_v4(StoredSceneV4 {
                 version: v3.version,
                 mesh: v3.mesh,
                 materials: v3.materials,
@@ -390,14 +640,35 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
                 camera: v3.camera.into(),
                 bake: v3.bake,
                 motion: v3.motion,
-            }
+            })
         }
+        4 => from_v4(postcard::from_bytes(bytes).map_err(bad)?),
         STORED_VERSION => postcard::from_bytes(bytes).map_err(bad)?,
         v => return Err(format!("stored scene has version {v}")),
     };
+    let textures = s
+        .textures
+        .into_iter()
+        .map(load_texture)
+        .collect::<Result<Vec<_>, String>>()?;
+    let mut materials = s.materials;
+    if !s.maps.is_empty() {
+        if s.maps.len() != materials.len() {
+            return Err("stored scene: texture maps do not match the materials".into());
+        }
+        for (m, maps) in materials.iter_mut().zip(s.maps) {
+            m.maps = maps.map(|x| load_maps(x, &textures)).transpose()?;
+        }
+    }
+    if !s.light_images.is_empty() && s.light_images.len() != s.lights.len() {
+        return Err("stored scene: light images do not match the lights".into());
+    }
+    let mut images = s.light_images.into_iter();
+    let mut mesh = s.mesh;
+    mesh.uvs = s.uvs.into_iter().map(glam::Vec2::from).collect();
     let scene = Scene {
-        mesh: s.mesh,
-        materials: s.materials,
+        mesh,
+        materials,
         lights: s
             .lights
             .into_iter()
@@ -407,8 +678,16 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
                 two_sided: l.two_sided,
                 texture: l.texture,
                 region: l.region,
+                image: images.next().flatten().map(|i| {
+                    Arc::new(LightImage {
+                        width: i.width,
+                        height: i.height,
+                        texels: i.texels,
+                    })
+                }),
             })
             .collect(),
+        punctual: s.punctual,
         environment: None,
         camera: s.camera.into(),
         bake: s.bake,
@@ -507,6 +786,29 @@ mod tests {
             max_vertices: 1234,
         });
         assert_eq!(decode_scene(&encode_scene(&p)).as_ref(), Ok(&p));
+    }
+
+    /// A version-4 stored scene (before textures and punctual lights) still reads, with
+    /// none; the version-5 encoding of an untextured scene is version 4's and five empty
+    /// lists (4 bytes more).
+    #[test]
+    fn version_4_reads() {
+        let mut p = crate::builtin::scene("room").expect("builtin");
+        p.warnings.clear();
+        let v4 = postcard::to_stdvec(&StoredSceneV4 {
+            version: 4,
+            mesh: p.mesh.clone(),
+            materials: p.materials.clone(),
+            lights: p.lights.iter().map(StoredLight::from).collect(),
+            camera: StoredCamera::from(&p.camera),
+            bake: p.bake.clone(),
+            motion: p.motion.clone(),
+        })
+        .expect("encode v4");
+        assert_eq!(decode_scene(&v4).as_ref(), Ok(&p));
+        let v5 = encode_scene(&p);
+        assert_eq!(v5.len(), v4.len() + 5, "the five empty lists");
+        assert_eq!(decode_scene(&v5).as_ref(), Ok(&p));
     }
 
     #[test]

@@ -14,6 +14,8 @@
 //! - [`encoding`]: the compact, versioned, checksummed chunk encoding of trees.
 //! - [`api`]: the wire types of the baking service's HTTP API (status, job state, errors,
 //!   the stored scene), so that a client needs no server code.
+//! - [`texture`]: surface textures (decoded images, bilinear sampling) and the material they
+//!   modulate.
 //! - [`paths`]: where files not given on the command line are looked for, at run time.
 //!
 //! - [`error`]: the errors of user-supplied data; [`hash`]: FNV-1a for content identity.
@@ -40,6 +42,7 @@ pub mod motion;
 pub mod paths;
 pub mod scene;
 pub mod sphere;
+pub mod texture;
 
 pub use error::{DecodeError, MeshError, SceneError};
 pub use mesh::{Aabb, Mesh};

@@ -3,8 +3,11 @@
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+use std::sync::Arc;
+
 use crate::error::SceneError;
 use crate::mesh::Aabb;
+use crate::texture::LightImage;
 
 /// A planar convex polygonal light of uniform (or textured) radiance.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -25,6 +28,11 @@ pub struct PolygonLight {
     /// reach this box can never see the light, so the bake treats them as "don't care".
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub region: Option<Region>,
+    /// The texture itself, when it comes from an asset rather than a file (a glTF lamp's
+    /// emissive texture, resampled onto the polygon's parametrisation); wins over `texture`.
+    /// Not written in scene files; the stored scene carries it (`api`, version 5).
+    #[serde(skip)]
+    pub image: Option<Arc<LightImage>>,
 }
 
 /// An axis-aligned region of space, as written in scene files.
@@ -94,6 +102,9 @@ impl PolygonLight {
                 ));
             }
         }
+        if self.image.as_ref().is_some_and(|i| !i.is_valid()) {
+            return bad("its texture image is empty or not finite".into());
+        }
         if let Some(r) = &self.region {
             let b = r.aabb();
             if !b.is_valid() {
@@ -117,4 +128,91 @@ pub(crate) fn newell_normal(p: &[Vec3]) -> Vec3 {
         n += p[i].cross(p[(i + 1) % p.len()]);
     }
     n
+}
+
+/// A `KHR_lights_punctual` light (point or spot), placed by its node: what the point-light
+/// methods (paper 003) shade with when an asset has them. Polygon-light methods ignore it.
+///
+/// Units: `intensity` is the glTF colour × intensity, read as radiant intensity in the
+/// renderer's linear units per steradian (the glTF candela taken as W·sr⁻¹, no 683 lm/W
+/// factor, as emissive strengths are taken as radiance). Irradiance at distance d, normal
+/// incidence: I / d² × the spot's and the range's attenuation ([`PunctualLight::falloff`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PunctualLight {
+    /// The light's name in the file (for messages).
+    pub name: String,
+    /// World position (the node's origin).
+    pub position: [f32; 3],
+    /// Radiant intensity, linear RGB (colour × intensity).
+    pub intensity: [f32; 3],
+    /// glTF `range`: beyond it the light is off (`None`: infinite).
+    pub range: Option<f32>,
+    /// A spot's cone (`None`: a point light, emitting in every direction).
+    pub spot: Option<Spot>,
+}
+
+/// A spot light's cone (KHR_lights_punctual `spot`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Spot {
+    /// Unit direction the spot points (the node's −Z).
+    pub direction: [f32; 3],
+    /// Full intensity within this angle of `direction` (radians).
+    pub inner_cone_angle: f32,
+    /// No light beyond this angle (radians).
+    pub outer_cone_angle: f32,
+}
+
+impl PunctualLight {
+    /// The factor by which `intensity` is scaled toward the point `p`, without the 1/d² of
+    /// distance: the spot's smooth falloff and the range window, as the KHR_lights_punctual
+    /// specification recommends:
+    ///
+    /// ```text
+    /// scale  = 1 / max(0.001, cos(inner) − cos(outer)),  offset = −cos(outer) · scale
+    /// spot   = saturate(cos θ · scale + offset)²
+    /// window = saturate(1 − (d / range)⁴)²   (the spec's recommended range falloff)
+    /// ```
+    pub fn falloff(&self, p: Vec3) -> f32 {
+        let to = p - Vec3::from(self.position);
+        let d = to.length();
+        if !(d > 0.0) || !d.is_finite() {
+            return 0.0;
+        }
+        let mut f = 1.0;
+        if let Some(s) = &self.spot {
+            let cos = Vec3::from(s.direction).normalize_or_zero().dot(to / d);
+            let (ci, co) = (s.inner_cone_angle.cos(), s.outer_cone_angle.cos());
+            let scale = 1.0 / (ci - co).max(0.001);
+            let a = (cos * scale - co * scale).clamp(0.0, 1.0);
+            f *= a * a;
+        }
+        if let Some(r) = self.range.filter(|r| *r > 0.0) {
+            let w = (1.0 - (d / r).powi(4)).clamp(0.0, 1.0);
+            f *= w * w;
+        }
+        if f.is_finite() { f } else { 0.0 }
+    }
+
+    pub(crate) fn validate(&self, index: usize) -> Result<(), SceneError> {
+        let bad = |m: &str| Err(SceneError::Invalid(format!("punctual light {index}: {m}")));
+        if self.position.iter().any(|x| !x.is_finite()) {
+            return bad("its position is not finite");
+        }
+        if self.intensity.iter().any(|x| !x.is_finite() || *x < 0.0) {
+            return bad("its intensity must be finite and ≥ 0");
+        }
+        if let Some(s) = &self.spot {
+            let d = Vec3::from(s.direction);
+            if !d.is_finite() || d.length_squared() < 1e-12 {
+                return bad("its spot direction is not a direction");
+            }
+            if !(0.0 <= s.inner_cone_angle
+                && s.inner_cone_angle < s.outer_cone_angle
+                && s.outer_cone_angle <= std::f32::consts::FRAC_PI_2)
+            {
+                return bad("its cone angles must satisfy 0 ≤ inner < outer ≤ π/2");
+            }
+        }
+        Ok(())
+    }
 }

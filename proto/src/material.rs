@@ -3,6 +3,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::SceneError;
+use glam::Vec2;
+
+use crate::texture::TextureRef;
 
 /// A GGX microfacet material.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -20,6 +23,11 @@ pub struct Material {
     /// Specular colour F0 (Fresnel at normal incidence), linear RGB in [0, 1].
     #[serde(default = "default_specular")]
     pub specular: [f32; 3],
+    /// Textures modulating the material through the mesh's UVs (an asset's; not written in
+    /// scene files). When present, the constant fields above hold the material at the
+    /// textures' means ([`MaterialMaps::at_mean`]).
+    #[serde(skip)]
+    pub maps: Option<MaterialMaps>,
 }
 
 fn default_roughness() -> f32 {
@@ -39,6 +47,7 @@ impl Default for Material {
             roughness: default_roughness(),
             albedo: default_albedo(),
             specular: default_specular(),
+            maps: None,
         }
     }
 }
@@ -57,5 +66,124 @@ impl Material {
             return bad("specular must be in [0, 1]".into());
         }
         Ok(())
+    }
+}
+
+/// What modulates a material over its surface, through the mesh's UVs.
+#[derive(Clone, Debug, PartialEq)]
+pub enum MaterialMaps {
+    /// glTF 2.0 metallic-roughness (§3.9.2; BRDF of appendix B): base colour = factor ×
+    /// texture (sRGB), metallic = factor × texture B, perceptual roughness = factor ×
+    /// texture G; diffuse albedo = base · (1 − metallic), F0 = mix(0.04, base, metallic),
+    /// GGX α = roughness².
+    MetallicRoughness {
+        /// `baseColorFactor` (RGB, linear).
+        base_color: [f32; 3],
+        /// `metallicFactor`.
+        metallic: f32,
+        /// `roughnessFactor` (perceptual).
+        roughness: f32,
+        /// `baseColorTexture`.
+        base_color_texture: Option<TextureRef>,
+        /// `metallicRoughnessTexture`.
+        metallic_roughness_texture: Option<TextureRef>,
+    },
+    /// OBJ/MTL `map_Kd`: diffuse albedo = `Kd` (the material's albedo) × texture (sRGB);
+    /// F0 and α are the material's.
+    Diffuse {
+        /// `Kd`.
+        kd: [f32; 3],
+        /// The `map_Kd` image.
+        texture: TextureRef,
+    },
+}
+
+/// Smallest GGX α a textured material gets (as the importers' [`Material`]s).
+const MIN_ALPHA: f32 = 1e-3;
+
+impl MaterialMaps {
+    /// The textures it samples (for storing a scene).
+    pub fn textures(&self) -> Vec<&TextureRef> {
+        match self {
+            MaterialMaps::MetallicRoughness {
+                base_color_texture,
+                metallic_roughness_texture,
+                ..
+            } => base_color_texture
+                .iter()
+                .chain(metallic_roughness_texture)
+                .collect(),
+            MaterialMaps::Diffuse { texture, .. } => vec![texture],
+        }
+    }
+
+    /// The material at a texel value: `sample(texture, srgb)` gives each texture's value.
+    fn eval(&self, base: &Material, sample: impl Fn(&TextureRef, bool) -> [f32; 4]) -> Material {
+        let unit = |x: f32| {
+            if x.is_finite() {
+                x.clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        };
+        match self {
+            MaterialMaps::MetallicRoughness {
+                base_color,
+                metallic,
+                roughness,
+                base_color_texture,
+                metallic_roughness_texture,
+            } => {
+                let bc = base_color_texture
+                    .as_ref()
+                    .map_or([1.0; 4], |t| sample(t, true));
+                let mr = metallic_roughness_texture
+                    .as_ref()
+                    .map_or([1.0; 4], |t| sample(t, false));
+                let c: [f32; 3] = std::array::from_fn(|k| unit(base_color[k] * bc[k]));
+                let m = unit(metallic * mr[2]);
+                let r = unit(roughness * mr[1]);
+                Material {
+                    name: String::new(),
+                    roughness: (r * r).clamp(MIN_ALPHA, 1.0),
+                    albedo: c.map(|x| x * (1.0 - m)),
+                    specular: c.map(|x| 0.04 + (x - 0.04) * m),
+                    maps: None,
+                }
+            }
+            MaterialMaps::Diffuse { kd, texture } => {
+                let t = sample(texture, true);
+                Material {
+                    name: String::new(),
+                    roughness: base.roughness,
+                    albedo: std::array::from_fn(|k| unit(kd[k] * t[k])),
+                    specular: base.specular,
+                    maps: None,
+                }
+            }
+        }
+    }
+
+    /// The material at `uv` (bilinear texels).
+    pub fn at(&self, base: &Material, uv: Vec2) -> Material {
+        self.eval(base, |t, srgb| t.texture.sample(uv, t.wrap, srgb))
+    }
+
+    /// The material at each texture's mean texel: the constant the material's own fields
+    /// hold, for the paths that do not evaluate textures (the SG method, the Mitsuba export,
+    /// a mesh without UVs).
+    pub fn at_mean(&self, base: &Material) -> Material {
+        self.eval(base, |t, srgb| t.texture.mean(srgb))
+    }
+}
+
+impl Material {
+    /// The material at a surface point with texture coordinates `uv` (`None`: a mesh without
+    /// UVs, the material's constant fields). Untextured materials are returned as they are.
+    pub fn at(&self, uv: Option<Vec2>) -> std::borrow::Cow<'_, Material> {
+        match (&self.maps, uv) {
+            (Some(m), Some(uv)) => std::borrow::Cow::Owned(m.at(self, uv)),
+            _ => std::borrow::Cow::Borrowed(self),
+        }
     }
 }

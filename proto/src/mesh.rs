@@ -3,7 +3,7 @@
 //! Vertex order is tree order: the bake produces one set of visibility trees per vertex, in the
 //! order of [`Mesh::positions`].
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::MeshError;
@@ -19,6 +19,12 @@ pub struct Mesh {
     pub triangles: Vec<[u32; 3]>,
     /// Index into the scene's materials, one per triangle.
     pub material_ids: Vec<u32>,
+    /// Texture coordinates (glTF's convention: (0, 0) the image's top-left), one per position,
+    /// or empty: only a mesh whose materials are textured carries them. Not part of the
+    /// postcard form of `Mesh` (nor of [`Mesh::content_hash`]: the bake does not depend on
+    /// them); the stored scene carries them beside the mesh (`api`, version 5).
+    #[serde(skip)]
+    pub uvs: Vec<Vec2>,
 }
 
 /// An axis-aligned box.
@@ -90,6 +96,16 @@ impl Aabb {
 }
 
 impl Mesh {
+    /// The texture coordinates at barycentric `weights` of triangle `tri` (`None`: no UVs).
+    pub fn uv_at(&self, tri: usize, weights: [f64; 3]) -> Option<Vec2> {
+        let t = self.triangles.get(tri)?;
+        let mut uv = glam::DVec2::ZERO;
+        for (k, &i) in t.iter().enumerate() {
+            uv += self.uvs.get(i as usize)?.as_dvec2() * weights[k];
+        }
+        Some(uv.as_vec2())
+    }
+
     /// Number of vertices.
     pub fn vertex_count(&self) -> usize {
         self.positions.len()
@@ -134,6 +150,18 @@ impl Mesh {
         }
         if let Some(i) = self.normals.iter().position(|p| !p.is_finite()) {
             return Err(MeshError::Invalid(format!("normal {i} is not finite")));
+        }
+        if !self.uvs.is_empty() && self.uvs.len() != self.positions.len() {
+            return Err(MeshError::Invalid(format!(
+                "{} texture coordinates for {} positions",
+                self.uvs.len(),
+                self.positions.len()
+            )));
+        }
+        if let Some(i) = self.uvs.iter().position(|p| !p.is_finite()) {
+            return Err(MeshError::Invalid(format!(
+                "texture coordinate {i} is not finite"
+            )));
         }
         Ok(())
     }
@@ -189,6 +217,17 @@ impl Mesh {
         if self.normals.len() == used.len() {
             self.normals = keep(&self.normals);
         }
+        if self.uvs.len() == used.len() {
+            self.uvs = self
+                .uvs
+                .iter()
+                .zip(&used)
+                .filter(|(_, u)| **u)
+                .map(|(p, _)| *p)
+                .collect();
+        } else {
+            self.uvs.clear();
+        }
         for tri in &mut self.triangles {
             *tri = tri.map(|i| remap[i as usize]);
         }
@@ -207,8 +246,18 @@ impl Mesh {
     }
 
     /// Appends `other`, shifting its indices and its material ids by `material_offset`.
+    /// When either carries UVs the result does, (0, 0) for the vertices of the one without.
     pub fn append(&mut self, other: &Mesh, material_offset: u32) {
         let base = self.positions.len() as u32;
+        if !self.uvs.is_empty() || !other.uvs.is_empty() {
+            self.uvs.resize(self.positions.len(), Vec2::ZERO);
+            if other.uvs.len() == other.positions.len() {
+                self.uvs.extend_from_slice(&other.uvs);
+            } else {
+                self.uvs
+                    .resize(self.positions.len() + other.positions.len(), Vec2::ZERO);
+            }
+        }
         self.positions.extend_from_slice(&other.positions);
         self.normals.extend_from_slice(&other.normals);
         self.triangles

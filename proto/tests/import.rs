@@ -1222,6 +1222,14 @@ fn valid_samples() -> Vec<(Format, Vec<u8>)> {
         (Format::Ply, ply_binary(true)),
         (Format::Glb, test_glb()),
         (Format::Gltf, data_uri.into_bytes()),
+        // Textures (base colour, emissive, embedded PNGs), TEXCOORD_0, a punctual spot.
+        (
+            Format::Gltf,
+            std::fs::read(
+                Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/rooms/textured-floor.gltf"),
+            )
+            .expect("the textured asset"),
+        ),
     ]
 }
 
@@ -1255,6 +1263,15 @@ fn must_not_panic(bytes: &[u8], format: Format) {
         for l in &a.lights {
             assert!(l.vertices.len() >= 3 && l.vertices.len() <= 8);
             assert!(l.radiance.iter().all(|x| x.is_finite() && *x >= 0.0));
+            assert!(l.image.as_ref().is_none_or(|i| i.is_valid()));
+        }
+        assert!(a.mesh.uvs.is_empty() || a.mesh.uvs.len() == a.mesh.positions.len());
+        assert!(a.mesh.uvs.iter().all(|u| u.is_finite()));
+        for (i, p) in a.punctual.iter().enumerate() {
+            assert!(
+                p.position.iter().chain(&p.intensity).all(|x| x.is_finite()),
+                "{i}: {p:?}"
+            );
         }
     }
 }
@@ -1294,7 +1311,7 @@ proptest! {
 
     #[test]
     fn fuzz_mutated_valid_files(
-        which in 0usize..6,
+        which in 0usize..7,
         flips in proptest::collection::vec((any::<prop::sample::Index>(), 0u8..8), 1..8),
         bytes_set in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 0..3),
         cut in proptest::option::of(any::<prop::sample::Index>()),
@@ -1316,7 +1333,7 @@ proptest! {
     }
 
     #[test]
-    fn fuzz_digit_mutations(which in 0usize..6, at in any::<prop::sample::Index>(), digits in "[0-9]{1,12}") {
+    fn fuzz_digit_mutations(which in 0usize..7, at in any::<prop::sample::Index>(), digits in "[0-9]{1,12}") {
         // Replace one ASCII digit run position with a long number: counts, indices and offsets
         // become huge.
         let samples = valid_samples();

@@ -79,9 +79,13 @@ pub fn run(args: &ExportArgs) -> Result<()> {
             let Some(l) = scene.lights.get(k) else {
                 bail!("--light {k}: the scene has {} light(s)", scene.lights.len());
             };
-            vec![Light::from_scene(l)]
+            vec![Light::load(l)?]
         }
-        None => scene.lights.iter().map(Light::from_scene).collect(),
+        None => scene
+            .lights
+            .iter()
+            .map(Light::load)
+            .collect::<Result<_>>()?,
     };
     let opts = ExportOptions {
         width: args.width,
@@ -214,6 +218,12 @@ pub fn export(
                 scene.materials.len()
             );
         };
+        if mat.maps.is_some() {
+            warnings.push(format!(
+                "material {:?}'s textures are not exported: Mitsuba renders the textures' mean",
+                mat.name
+            ));
+        }
         let alpha = bspvt_client::ggx::clamp_alpha(f64::from(mat.roughness));
         let f0 = mat.specular.map(f64::from);
         let albedo = mat.albedo.map(f64::from);

@@ -218,7 +218,7 @@ pub fn render_mc_env(
             let mut rng = Pcg32::for_key(seed, i as u64);
             Some(shade_point(
                 &sp,
-                ctx.brdf(s.tri),
+                &ctx.brdf(&s),
                 env,
                 sampler.as_ref(),
                 &ctx.shadows,

@@ -241,7 +241,7 @@ pub fn render_ltc_exact_visibility(
                 return [0.0; 3];
             };
             let sp = ShadingPoint::from_surface(&s, view.eye);
-            let brdf = ctx.brdf(s.tri);
+            let brdf = &ctx.brdf(&s);
             let frame = ShadingFrame::new(sp.normal, sp.wo);
             let lobe = lookup(brdf.alpha, frame.cos_view(sp.wo));
             let mut rng = Pcg32::for_key(seed, i as u64);

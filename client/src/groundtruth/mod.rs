@@ -422,13 +422,22 @@ impl<'a> Ctx<'a> {
         }
     }
 
-    pub(crate) fn brdf(&self, tri: u32) -> &Brdf {
-        self.scene
-            .mesh
-            .material_ids
-            .get(tri as usize)
-            .and_then(|&m| self.brdfs.get(m as usize))
-            .unwrap_or(&self.fallback)
+    /// The BRDF at a shading point: its triangle's material, evaluated through the mesh's
+    /// UVs where the material is textured (the same texel the per-pixel LTC shades with).
+    pub(crate) fn brdf(&self, s: &crate::frame::gbuffer::Surface) -> Brdf {
+        let mesh = &self.scene.mesh;
+        let id = mesh.material_ids.get(s.tri as usize).copied();
+        let textured = id
+            .and_then(|m| self.scene.materials.get(m as usize))
+            .filter(|m| m.maps.is_some());
+        if let Some(m) = textured
+            && let Some(uv) = mesh.uv_at(s.tri as usize, s.weights)
+        {
+            return Brdf::from_material(&m.at(Some(uv)));
+        }
+        id.and_then(|m| self.brdfs.get(m as usize))
+            .copied()
+            .unwrap_or(self.fallback)
     }
 }
 
@@ -531,7 +540,7 @@ fn centre_pass(
                 return Some(Estimate::default());
             }
             let sp = ShadingPoint::from_surface(&s, view.eye);
-            let brdf = ctx.brdf(s.tri);
+            let brdf = &ctx.brdf(&s);
             let mut rng = Pcg32::for_key(seed, i as u64);
             let mut est = Estimate::default();
             match McPoint::new(&sp, light) {
@@ -580,7 +589,7 @@ pub fn render_mc_box(
                         let sp = ShadingPoint::from_surface(&s, view.eye);
                         match McPoint::new(&sp, light) {
                             None => DVec3::ZERO,
-                            Some(pt) => pt.sample(ctx.brdf(s.tri), light, &ctx.shadows, &mut rng),
+                            Some(pt) => pt.sample(&ctx.brdf(&s), light, &ctx.shadows, &mut rng),
                         }
                     }
                 };

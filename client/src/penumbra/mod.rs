@@ -89,7 +89,9 @@ pub fn shadow_factor(
     ))
 }
 
-/// One frame: the unshadowed per-pixel LTC shading × the technique's shadow factor.
+/// One frame: the unshadowed per-pixel LTC shading × the technique's shadow factor. When the
+/// scene has punctual lights (glTF `KHR_lights_punctual`), they are the point lights instead
+/// of the polygon's centroid ([`render_punctual`]).
 pub fn render(
     r: &Renderer,
     light: &Light,
@@ -97,9 +99,66 @@ pub fn render(
     occluder: Option<&Occluder>,
     params: &Params,
 ) -> Result<Image> {
+    if !r.scene.punctual.is_empty() {
+        return render_punctual(r, technique, occluder, params);
+    }
     let guide = Guide::new(r);
     let s = shadow_factor(r, &guide, light, technique, occluder, params)?;
     Ok(compose(&r.shade_pixels(light, None), &s))
+}
+
+/// The scene's punctual lights: Σ over the lights of the unshadowed punctual shading
+/// ([`Renderer::shade_pixels_punctual`]) × the technique's shadow factor for that light. A
+/// punctual light has no size: its shadow is cast from a point ([`point_caster`]), so the
+/// similar-triangles width W is 0 and rt-penumbra and PCSS give hard shadows; PCF and VSM keep
+/// their fixed filters.
+pub fn render_punctual(
+    r: &Renderer,
+    technique: Technique,
+    occluder: Option<&Occluder>,
+    params: &Params,
+) -> Result<Image> {
+    let guide = Guide::new(r);
+    let mut out = Image::new(r.gbuffer.width, r.gbuffer.height);
+    for p in &r.scene.punctual {
+        let caster = point_caster(r.scene, p);
+        let s = shadow_factor(r, &guide, &caster, technique, occluder, params)?;
+        let lit = compose(&r.shade_pixels_punctual(p), &s);
+        for (o, l) in out.pixels.iter_mut().zip(&lit.pixels) {
+            for k in 0..3 {
+                o[k] += l[k];
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The light the shadow techniques cast a punctual light's shadow from: a square of side
+/// 10⁻⁶ × the scene's diagonal (a point for every purpose: W_light ≈ 0) at its position,
+/// facing along a spot's axis, or for a point light toward the centre of the mesh's bounds
+/// (the shadow map's view; −Y when the light sits at the centre).
+pub(crate) fn point_caster(
+    scene: &bspvt_proto::Scene,
+    p: &bspvt_proto::scene::PunctualLight,
+) -> Light {
+    let pos = glam::Vec3::from(p.position).as_dvec3();
+    let bounds = scene.mesh.bounds();
+    let normal = match &p.spot {
+        Some(s) => glam::Vec3::from(s.direction).as_dvec3(),
+        None => bounds.center().as_dvec3() - pos,
+    }
+    .normalize_or(DVec3::NEG_Y);
+    let side = 1e-6 * f64::from(bounds.diagonal()).max(1e-6);
+    let u = normal.any_orthonormal_vector() * (0.5 * side);
+    let v = normal.cross(u);
+    Light {
+        // Counter-clockwise about `normal`: (v1 − v0) × (v2 − v0) ∥ normal.
+        vertices: vec![pos - u - v, pos + u - v, pos + u + v, pos - u + v],
+        normal,
+        radiance: DVec3::ZERO,
+        two_sided: false,
+        texture: None,
+    }
 }
 
 /// Settings shared by the methods.

@@ -95,6 +95,8 @@ pub struct Renderer<'a> {
     pub(crate) table: &'static LtcTable,
     /// The scene's materials, with the roughness override applied.
     materials: Vec<Material>,
+    /// The roughness override (applied again after a texture lookup).
+    roughness: Option<f32>,
 }
 
 impl<'a> Renderer<'a> {
@@ -131,6 +133,7 @@ impl<'a> Renderer<'a> {
             vertex_material,
             table: LtcTable::builtin(),
             materials: scene.materials.clone(),
+            roughness: None,
         }
     }
 
@@ -151,6 +154,7 @@ impl<'a> Renderer<'a> {
     /// Overrides every material's GGX roughness α (`None`: the scene's own).
     pub(crate) fn set_roughness(&mut self, alpha: Option<f32>) {
         self.materials = self.scene.materials.clone();
+        self.roughness = alpha;
         if let Some(a) = alpha {
             for m in &mut self.materials {
                 m.roughness = a;
@@ -184,14 +188,32 @@ impl<'a> Renderer<'a> {
         &m[(id as usize).min(m.len().saturating_sub(1))]
     }
 
+    /// Material `id` at texture coordinates `uv`: its textures looked up there (bilinear, the
+    /// finest level), the roughness override applied after (`Material::at`).
+    fn material_at(&self, id: u32, uv: Option<glam::Vec2>) -> std::borrow::Cow<'_, Material> {
+        let m = self.material(id);
+        match m.at(uv) {
+            std::borrow::Cow::Owned(mut x) => {
+                if let Some(a) = self.roughness {
+                    x.roughness = a;
+                }
+                std::borrow::Cow::Owned(x)
+            }
+            b => b,
+        }
+    }
+
     fn vertex_lobes(&self, v: u32) -> (Lobes, DVec3, DVec3) {
         let p = self.scene.mesh.positions[v as usize].as_dvec3();
         let n = self.scene.mesh.normals[v as usize]
             .as_dvec3()
             .normalize_or(DVec3::Y);
         let wo = (self.view.eye - p).normalize_or(n);
-        let m = self.material(self.vertex_material[v as usize]);
-        (Lobes::new(self.table, m, n, wo), p, n)
+        // Per vertex, a textured material is the texture at the vertex's own UV (docs/
+        // scene-format.md "Textures"), interpolated over the triangle like the lighting.
+        let uv = self.scene.mesh.uvs.get(v as usize).copied();
+        let m = self.material_at(self.vertex_material[v as usize], uv);
+        (Lobes::new(self.table, &m, n, wo), p, n)
     }
 
     /// Shades every visible vertex with `shade(v, lobes, p, n)` → (radiance, shadow ratios,
@@ -335,8 +357,9 @@ impl<'a> Renderer<'a> {
             if !crate::shade::sees_viewer(s.normal, wo) {
                 return;
             }
-            let m = self.material(mesh.material_ids.get(s.tri as usize).copied().unwrap_or(0));
-            let lobes = Lobes::new(self.table, m, s.normal, wo);
+            let id = mesh.material_ids.get(s.tri as usize).copied().unwrap_or(0);
+            let m = self.material_at(id, mesh.uv_at(s.tri as usize, s.weights));
+            let lobes = Lobes::new(self.table, &m, s.normal, wo);
             let r = match ratio {
                 Some(r) => {
                     let idx = mesh.triangles[s.tri as usize];
@@ -352,6 +375,46 @@ impl<'a> Renderer<'a> {
                 None => UNSHADOWED,
             };
             *px = shade(&lobes, s.position, s.normal, r).as_vec3().to_array();
+        });
+        img
+    }
+
+    /// A punctual light's unshadowed radiance per pixel (KHR_lights_punctual): the exact BRDF
+    /// at the pixel's material (textures looked up) times the light's intensity, its spot and
+    /// range falloff, and 1 / d² — a point light is a delta, there is nothing to integrate.
+    pub(crate) fn shade_pixels_punctual(&self, light: &bspvt_proto::scene::PunctualLight) -> Image {
+        let mesh = &self.scene.mesh;
+        let g = &self.gbuffer;
+        let pos = glam::Vec3::from(light.position).as_dvec3();
+        let intensity = glam::Vec3::from(light.intensity).as_dvec3();
+        let mut img = Image::new(g.width, g.height);
+        img.pixels.par_iter_mut().enumerate().for_each(|(i, px)| {
+            let Some(s) = g.surface(mesh, &self.view, i) else {
+                return;
+            };
+            let wo = (self.view.eye - s.position).normalize_or(s.normal);
+            if !crate::shade::sees_viewer(s.normal, wo) {
+                return;
+            }
+            let to = pos - s.position;
+            let d2 = to.length_squared();
+            if !(d2 > 0.0) || !d2.is_finite() {
+                return;
+            }
+            let wi = to / d2.sqrt();
+            let falloff = f64::from(light.falloff(s.position.as_vec3()));
+            if !(falloff > 0.0) {
+                return;
+            }
+            let id = mesh.material_ids.get(s.tri as usize).copied().unwrap_or(0);
+            let m = self.material_at(id, mesh.uv_at(s.tri as usize, s.weights));
+            let brdf = crate::frame::brdf::Brdf::from_material(&m);
+            let frame = crate::frame::shading::ShadingFrame::new(s.normal, wo);
+            let f = brdf.eval_cos(frame.to_local(wo), frame.to_local(wi));
+            let c = f * intensity * (falloff / d2);
+            if c.is_finite() {
+                *px = c.as_vec3().to_array();
+            }
         });
         img
     }

@@ -458,6 +458,7 @@ mod tests {
             normals: Vec::new(),
             triangles: vec![[0, 2, 1], [0, 3, 2], [4, 6, 5], [4, 7, 6]],
             material_ids: vec![0; 4],
+            uvs: Vec::new(),
         };
         m.compute_normals();
         m

@@ -30,30 +30,44 @@
 //!
 //! Materials (metallic-roughness, per primitive): GGX α = roughness², diffuse albedo =
 //! baseColor · (1 − metallic), F0 = mix(0.04, baseColor, metallic) (the glTF 2.0
-//! specification's appendix B BRDF); a primitive without a material gets the specification's
-//! default material. A material whose `emissiveFactor` × `KHR_materials_emissive_strength` is
-//! non-zero makes its triangles lamps (`lamps.rs`), two-sided when the material is
-//! `doubleSided`. The first perspective camera instanced by the scene becomes the scene's
-//! camera (looking down its node's −Z with +Y up). Textures, other extensions, punctual lights
-//! and orthographic cameras are not used; each kind is named in the warnings.
+//! specification's appendix B BRDF), each factor times its texture (`baseColorTexture` RGB,
+//! sRGB; `metallicRoughnessTexture` B = metallic, G = roughness) through `TEXCOORD_0`, which
+//! is read only for primitives whose material is textured; a primitive without a material
+//! gets the specification's default material. Images are decoded once each, when a material
+//! first uses them (buffer view, `data:` URI, or a file next to the glTF), bounded by
+//! `texture::MAX_*`; one that cannot be read is a warning and the factor is used alone. A
+//! material whose `emissiveFactor` × `KHR_materials_emissive_strength` is non-zero makes its
+//! triangles lamps (`lamps.rs`), two-sided when the material is `doubleSided`; its
+//! `emissiveTexture` becomes the lamp's texture. `KHR_lights_punctual` point and spot lights of
+//! the instanced nodes are placed by the node's world transform (spots point down its −Z). The
+//! first perspective camera instanced by the scene becomes the scene's camera (looking down its
+//! node's −Z with +Y up). Normal and occlusion textures, other texture coordinate sets,
+//! `KHR_texture_transform` and other extensions, directional lights and orthographic cameras
+//! are not used; each kind is named in the warnings. Image and light JSON is read from the
+//! document's JSON, not through the `gltf` crate's accessors that `unwrap` (an image with a
+//! buffer view but no MIME type would panic there).
 
 use std::borrow::Cow;
 use std::collections::HashMap;
 use std::path::Path;
 use std::rc::Rc;
+use std::sync::Arc;
 
 use ::gltf::Document;
 use ::gltf::accessor::{Accessor, DataType, Dimensions};
 use ::gltf::buffer::View;
 use ::gltf::mesh::{Mode, Semantic};
-use glam::{Mat3, Mat4, Vec3};
+use glam::{Mat3, Mat4, Vec2, Vec3};
 
 use super::mtl::MIN_ALPHA;
 use super::{FileMaterial, Limits, Raw, is_degenerate, usable_normals};
 use crate::camera::Camera;
 use crate::error::MeshError;
+use crate::light::{PunctualLight, Spot};
 use crate::material::Material;
+use crate::material::MaterialMaps;
 use crate::mesh::Mesh;
+use crate::texture::{MAX_ASSET_TEXELS, Texture, TextureRef, Wrap};
 
 fn malformed(message: impl Into<String>) -> MeshError {
     MeshError::Malformed {
@@ -75,14 +89,13 @@ pub(super) fn parse(
     let doc = parse_document(json)?;
     let (buffers, total_bytes) = load_buffers(&doc, bin, base_dir, limits, bytes.len() as u64)?;
     if base_dir.is_none() {
-        for image in doc.images() {
-            if let ::gltf::image::Source::Uri { uri, .. } = image.source()
+        for (i, image) in doc.as_json().images.iter().enumerate() {
+            if let (None, Some(uri)) = (&image.buffer_view, &image.uri)
                 && !uri.starts_with("data:")
             {
                 return Err(malformed(format!(
-                    "image {} refers to the external file {:?}; an uploaded glTF must be \
+                    "image {i} refers to the external file {:?}; an uploaded glTF must be \
                      self-contained (use a .glb, or data: URIs)",
-                    image.index(),
                     short(uri)
                 )));
             }
@@ -101,85 +114,63 @@ pub(super) fn parse(
             .max_vertices
             .saturating_add(limits.max_triangles.saturating_mul(3))
             .saturating_mul(2),
-        materials: doc.materials().map(|m| material(&m)).collect(),
+        materials: Vec::new(),
         default_material: None,
+        untextured: HashMap::new(),
         camera: None,
+        punctual: Vec::new(),
         warnings: Vec::new(),
+        base_dir,
+        images: HashMap::new(),
+        texels: 0,
     };
+    reader.materials = doc.materials().map(|m| reader.material(&doc, &m)).collect();
     reader.read_scenes(&doc)?;
     let mut warnings = unused_features(&doc);
     warnings.append(&mut reader.warnings);
+    if !reader.punctual.is_empty() {
+        warnings.push(format!(
+            "{} punctual lights feed the point-light methods only (the polygon-light methods \
+             ignore them)",
+            reader.punctual.len()
+        ));
+    }
     Ok(Raw {
         mesh: reader.mesh,
         materials: reader.materials,
         camera: reader.camera,
+        punctual: reader.punctual,
         warnings,
     })
 }
 
-/// A glTF metallic-roughness material in bspvt's GGX model (see the module documentation).
-fn material(m: &::gltf::Material<'_>) -> FileMaterial {
-    let pbr = m.pbr_metallic_roughness();
-    let [r, g, b, _] = pbr.base_color_factor();
-    let base = [r, g, b].map(|x| {
-        if x.is_finite() {
-            x.clamp(0.0, 1.0)
-        } else {
-            0.0
-        }
-    });
-    let fin = |x: f32, d: f32| if x.is_finite() { x.clamp(0.0, 1.0) } else { d };
-    let metallic = fin(pbr.metallic_factor(), 1.0);
-    let roughness = fin(pbr.roughness_factor(), 1.0);
-    let strength = m
-        .emissive_strength()
-        .filter(|s| s.is_finite() && *s >= 0.0)
-        .unwrap_or(1.0);
-    let emission = m.emissive_factor().map(|e| {
-        if e.is_finite() {
-            (e.max(0.0) * strength).min(1e30)
-        } else {
-            0.0
-        }
-    });
-    FileMaterial {
-        material: Material {
-            name: m.name().map_or_else(
-                || format!("material {}", m.index().unwrap_or(0)),
-                str::to_string,
-            ),
-            roughness: (roughness * roughness).clamp(MIN_ALPHA, 1.0),
-            albedo: base.map(|c| c * (1.0 - metallic)),
-            specular: base.map(|c| 0.04 + (c - 0.04) * metallic),
-        },
-        emission,
-        two_sided: m.double_sided(),
-    }
+/// A texture reference's wrap modes (glTF 2.0 §5.26; the default sampler repeats).
+fn wrap_modes(t: &::gltf::texture::Texture) -> [Wrap; 2] {
+    use ::gltf::texture::WrappingMode as W;
+    let json = &t.sampler();
+    let w = |m: W| match m {
+        W::ClampToEdge => Wrap::Clamp,
+        W::MirroredRepeat => Wrap::Mirror,
+        W::Repeat => Wrap::Repeat,
+    };
+    [w(json.wrap_s()), w(json.wrap_t())]
 }
 
 /// Warnings for what the file holds and bspvt does not use: extensions, textures, punctual
 /// lights, non-opaque materials.
 fn unused_features(doc: &Document) -> Vec<String> {
-    const READ: &[&str] = &["KHR_materials_emissive_strength", "KHR_mesh_quantization"];
+    const READ: &[&str] = &[
+        "KHR_materials_emissive_strength",
+        "KHR_mesh_quantization",
+        "KHR_lights_punctual",
+    ];
     let mut w: Vec<String> = doc
         .extensions_used()
-        .filter(|e| !READ.contains(e) && *e != "KHR_lights_punctual")
+        .filter(|e| !READ.contains(e))
         .map(|e| format!("extension {e} is not supported and was ignored"))
         .collect();
     let count = |f: &dyn Fn(&::gltf::Material) -> bool| doc.materials().filter(|m| f(m)).count();
     let textures = [
-        (
-            count(&|m| m.pbr_metallic_roughness().base_color_texture().is_some()),
-            "base-colour textures (the base-colour factor is used)",
-        ),
-        (
-            count(&|m| {
-                m.pbr_metallic_roughness()
-                    .metallic_roughness_texture()
-                    .is_some()
-            }),
-            "metallic-roughness textures (the factors are used)",
-        ),
         (
             count(&|m| m.normal_texture().is_some()),
             "normal maps (the mesh normals are used)",
@@ -187,10 +178,6 @@ fn unused_features(doc: &Document) -> Vec<String> {
         (
             count(&|m| m.occlusion_texture().is_some()),
             "occlusion textures",
-        ),
-        (
-            count(&|m| m.emissive_texture().is_some()),
-            "emissive textures (the emissive factor is the lamp's radiance)",
         ),
         (
             count(&|m| m.alpha_mode() != ::gltf::material::AlphaMode::Opaque),
@@ -201,14 +188,6 @@ fn unused_features(doc: &Document) -> Vec<String> {
         if n > 0 {
             w.push(format!("{n} materials have {what}: ignored"));
         }
-    }
-    if let Some(lights) = doc.lights()
-        && lights.len() > 0
-    {
-        w.push(format!(
-            "{} KHR_lights_punctual lights were ignored (only emissive surfaces become lights)",
-            lights.len()
-        ));
     }
     w
 }
@@ -547,12 +526,22 @@ struct Builder<'a> {
     vec3s: HashMap<(usize, bool), Rc<Vec<Vec3>>>,
     indices: HashMap<usize, Rc<Vec<u32>>>,
     primitives: HashMap<(usize, usize), Option<Rc<Primitive>>>,
-    /// The file's materials, then (when a primitive has none) the default material.
+    /// The file's materials, then (when a primitive has none) the default material, then
+    /// untextured copies of textured materials for primitives without `TEXCOORD_0`.
     materials: Vec<FileMaterial>,
     default_material: Option<u32>,
+    untextured: HashMap<u32, u32>,
     /// The first valid perspective camera met.
     camera: Option<Camera>,
+    /// `KHR_lights_punctual` point and spot lights of the instanced nodes.
+    punctual: Vec<PunctualLight>,
     warnings: Vec<String>,
+    /// Where external image files are looked for (`None`: an upload, none are read).
+    base_dir: Option<&'a Path>,
+    /// Images decoded so far (`None`: could not be read; warned once), by image index.
+    images: HashMap<usize, Option<Arc<Texture>>>,
+    /// Texels decoded so far, against [`MAX_ASSET_TEXELS`].
+    texels: u64,
     /// Accessor elements decoded and indices assembled so far, and the most allowed. Output is
     /// bounded by the limits; this bounds the work spent on input that yields no output (for
     /// example many primitives sharing one large accessor of degenerate triangles).
@@ -564,6 +553,8 @@ struct Builder<'a> {
 struct Primitive {
     positions: Rc<Vec<Vec3>>,
     normals: Option<Rc<Vec<Vec3>>>,
+    /// `TEXCOORD_0`, read only when the primitive's material is textured.
+    uvs: Option<Rc<Vec<Vec2>>>,
     /// Checked against `positions`, degenerate ones removed; never empty.
     triangles: Vec<[u32; 3]>,
 }
@@ -606,6 +597,9 @@ impl Builder<'_> {
                         Err(w) => self.warnings.push(w),
                     }
                 }
+                if let Some(light) = node.light() {
+                    self.punctual_light(&world, &light);
+                }
                 if let Some(mesh) = node.mesh() {
                     self.add_mesh(&mesh, world)?;
                 }
@@ -633,10 +627,13 @@ impl Builder<'_> {
             let Some(p) = self.primitive(mesh, &prim)? else {
                 continue;
             };
-            let material = match prim.material().index() {
+            let mut material = match prim.material().index() {
                 Some(i) if i < self.materials.len() => i as u32,
                 _ => self.default_material(),
             };
+            if p.uvs.is_none() && self.textured(Some(material as usize)) {
+                material = self.untextured_material(material);
+            }
             let n = p.positions.len();
             self.limits
                 .check_vertices(self.mesh.positions.len() as u64 + n as u64)?;
@@ -681,6 +678,7 @@ impl Builder<'_> {
                     .unwrap_or_default(),
                 material_ids: vec![material; triangles.len()],
                 triangles,
+                uvs: p.uvs.as_ref().map(|u| u.to_vec()).unwrap_or_default(),
             };
             if usable_normals(&piece.normals, n) {
                 piece.normals.iter_mut().for_each(|v| *v = v.normalize());
@@ -706,9 +704,11 @@ impl Builder<'_> {
                     roughness: 1.0,
                     albedo: [0.0; 3],
                     specular: [1.0; 3],
+                    maps: None,
                 },
                 emission: [0.0; 3],
                 two_sided: false,
+                emissive_texture: None,
             });
             self.materials.len() as u32 - 1
         })
@@ -778,6 +778,20 @@ impl Builder<'_> {
             }
             None => None,
         };
+        let uvs = match prim.get(&Semantic::TexCoords(0)) {
+            Some(acc) if self.textured(prim.material().index()) => {
+                let uvs = self.read_uvs(&acc, &what("TEXCOORD_0"))?;
+                if uvs.len() != n {
+                    return Err(malformed(format!(
+                        "{} has {} elements but POSITION has {n}",
+                        what("TEXCOORD_0"),
+                        uvs.len()
+                    )));
+                }
+                Some(uvs)
+            }
+            _ => None,
+        };
         let mut triangles = match prim.indices() {
             Some(acc) => {
                 let indices = self.read_indices(&acc, &what("indices"))?;
@@ -805,6 +819,7 @@ impl Builder<'_> {
         Ok(Some(Primitive {
             positions,
             normals,
+            uvs,
             triangles,
         }))
     }
@@ -996,6 +1011,290 @@ impl Builder<'_> {
                 view.length()
             ))),
         }
+    }
+}
+
+/// Materials, textures and punctual lights.
+impl Builder<'_> {
+    /// A glTF metallic-roughness material in bspvt's GGX model (see the module documentation),
+    /// with its textures (decoded here; one that cannot be read is warned about and left out).
+    fn material(&mut self, doc: &Document, m: &::gltf::Material<'_>) -> FileMaterial {
+        let pbr = m.pbr_metallic_roughness();
+        let [r, g, b, _] = pbr.base_color_factor();
+        let fin = |x: f32, d: f32| if x.is_finite() { x.clamp(0.0, 1.0) } else { d };
+        let base = [r, g, b].map(|x| fin(x, 0.0));
+        let metallic = fin(pbr.metallic_factor(), 1.0);
+        let roughness = fin(pbr.roughness_factor(), 1.0);
+        let strength = m
+            .emissive_strength()
+            .filter(|s| s.is_finite() && *s >= 0.0)
+            .unwrap_or(1.0);
+        let emission = m.emissive_factor().map(|e| {
+            if e.is_finite() {
+                (e.max(0.0) * strength).min(1e30)
+            } else {
+                0.0
+            }
+        });
+        let name = m.name().map_or_else(
+            || format!("material {}", m.index().unwrap_or(0)),
+            str::to_string,
+        );
+        let base_color_texture = pbr
+            .base_color_texture()
+            .and_then(|t| self.texture(doc, &name, "base-colour", &t));
+        let metallic_roughness_texture = pbr
+            .metallic_roughness_texture()
+            .and_then(|t| self.texture(doc, &name, "metallic-roughness", &t));
+        let emissive_texture = if emission.iter().any(|&e| e > 0.0) {
+            m.emissive_texture()
+                .and_then(|t| self.texture(doc, &name, "emissive", &t))
+        } else {
+            None
+        };
+        let maps = (base_color_texture.is_some() || metallic_roughness_texture.is_some())
+            .then_some(MaterialMaps::MetallicRoughness {
+                base_color: base,
+                metallic,
+                roughness,
+                base_color_texture,
+                metallic_roughness_texture,
+            });
+        let mut material = Material {
+            name,
+            roughness: (roughness * roughness).clamp(MIN_ALPHA, 1.0),
+            albedo: base.map(|c| c * (1.0 - metallic)),
+            specular: base.map(|c| 0.04 + (c - 0.04) * metallic),
+            maps: None,
+        };
+        if let Some(maps) = maps {
+            // The constant fields: the material at the textures' means (module docs).
+            let mean = maps.at_mean(&material);
+            material.roughness = mean.roughness;
+            material.albedo = mean.albedo;
+            material.specular = mean.specular;
+            material.maps = Some(maps);
+        }
+        FileMaterial {
+            material,
+            emission,
+            two_sided: m.double_sided(),
+            emissive_texture,
+        }
+    }
+
+    /// The texture an `info` names, decoded; `None` (with a warning) when it cannot be used.
+    fn texture(
+        &mut self,
+        doc: &Document,
+        material: &str,
+        what: &str,
+        info: &::gltf::texture::Info<'_>,
+    ) -> Option<TextureRef> {
+        if info.tex_coord() != 0 {
+            self.warnings.push(format!(
+                "material {material:?}: its {what} texture uses TEXCOORD_{}; only TEXCOORD_0 \
+                 is read: using the factor alone",
+                info.tex_coord()
+            ));
+            return None;
+        }
+        let t = info.texture();
+        let image = t.source().index();
+        let texture = self.image(doc, image)?;
+        Some(TextureRef {
+            texture,
+            wrap: wrap_modes(&t),
+        })
+    }
+
+    /// Image `i` decoded (once); `None` when it cannot be read (warned once).
+    fn image(&mut self, doc: &Document, i: usize) -> Option<Arc<Texture>> {
+        if let Some(t) = self.images.get(&i) {
+            return t.clone();
+        }
+        let json = doc.as_json().images.get(i);
+        let name = json
+            .and_then(|j| {
+                j.name
+                    .clone()
+                    .or_else(|| j.uri.clone().filter(|u| !u.starts_with("data:")))
+            })
+            .map_or_else(|| format!("image {i}"), |n| short(&n));
+        let decoded = self.image_bytes(doc, i).and_then(|bytes| {
+            let t = Texture::decode(&bytes, &name)?;
+            let texels = u64::from(t.width) * u64::from(t.height);
+            if self.texels.saturating_add(texels) > MAX_ASSET_TEXELS {
+                return Err(format!(
+                    "the asset's textures would exceed {MAX_ASSET_TEXELS} texels in all"
+                ));
+            }
+            self.texels += texels;
+            Ok(Arc::new(t))
+        });
+        let t = match decoded {
+            Ok(t) => Some(t),
+            Err(e) => {
+                self.warnings.push(format!(
+                    "texture {name:?} could not be read: {e}; using the factor alone"
+                ));
+                None
+            }
+        };
+        self.images.insert(i, t.clone());
+        t
+    }
+
+    /// The encoded bytes of image `i`: a buffer view, a `data:` URI, or a file next to the
+    /// glTF (counted against the byte limit).
+    fn image_bytes(&mut self, doc: &Document, i: usize) -> Result<Vec<u8>, String> {
+        let json = doc
+            .as_json()
+            .images
+            .get(i)
+            .ok_or_else(|| format!("there is no image {i}"))?;
+        if let Some(v) = &json.buffer_view {
+            let view = doc
+                .views()
+                .nth(v.value())
+                .ok_or_else(|| format!("buffer view {} does not exist", v.value()))?;
+            let buffer = self
+                .buffers
+                .get(view.buffer().index())
+                .ok_or("its buffer is missing")?;
+            return view
+                .offset()
+                .checked_add(view.length())
+                .and_then(|end| buffer.get(view.offset()..end))
+                .map(<[u8]>::to_vec)
+                .ok_or_else(|| format!("buffer view {} lies outside its buffer", view.index()));
+        }
+        let uri = json
+            .uri
+            .as_deref()
+            .ok_or("it has neither a buffer view nor a URI")?;
+        if let Some(rest) = uri.strip_prefix("data:") {
+            return decode_data_uri(rest);
+        }
+        let base = self
+            .base_dir
+            .ok_or("an uploaded glTF cannot name other files")?;
+        let bytes =
+            read_external(base, uri, self.limits, self.file_bytes).map_err(|e| e.to_string())?;
+        self.file_bytes += bytes.len() as u64;
+        Ok(bytes)
+    }
+
+    /// The material a primitive without `TEXCOORD_0` uses instead of textured material `m`:
+    /// a copy without its textures (the factors alone), made once, with a warning.
+    fn untextured_material(&mut self, m: u32) -> u32 {
+        if let Some(&u) = self.untextured.get(&m) {
+            return u;
+        }
+        let Some(f) = self.materials.get(m as usize) else {
+            return m;
+        };
+        let mut copy = f.clone();
+        let name = copy.material.name.clone();
+        if let Some(maps) = copy.material.maps.take()
+            && let MaterialMaps::MetallicRoughness {
+                base_color,
+                metallic,
+                roughness,
+                ..
+            } = maps
+        {
+            copy.material.roughness = (roughness * roughness).clamp(MIN_ALPHA, 1.0);
+            copy.material.albedo = base_color.map(|c| c * (1.0 - metallic));
+            copy.material.specular = base_color.map(|c| 0.04 + (c - 0.04) * metallic);
+        }
+        copy.emissive_texture = None;
+        copy.material.name = format!("{name} (no TEXCOORD_0)");
+        self.warnings.push(format!(
+            "material {name:?} is textured but a primitive using it has no TEXCOORD_0: the \
+             factors alone are used there"
+        ));
+        self.materials.push(copy);
+        let u = self.materials.len() as u32 - 1;
+        self.untextured.insert(m, u);
+        u
+    }
+
+    /// Whether material `m` samples a texture through the mesh's UVs.
+    fn textured(&self, m: Option<usize>) -> bool {
+        m.and_then(|i| self.materials.get(i))
+            .is_some_and(|f| f.material.maps.is_some() || f.emissive_texture.is_some())
+    }
+
+    /// A `KHR_lights_punctual` light placed by its node's world transform (position: the
+    /// node's origin; a spot points down the node's −Z).
+    fn punctual_light(&mut self, world: &Mat4, light: &::gltf::khr_lights_punctual::Light) {
+        use ::gltf::khr_lights_punctual::Kind;
+        let name = light
+            .name()
+            .map_or_else(|| format!("light {}", light.index()), short);
+        let spot = match light.kind() {
+            Kind::Directional => {
+                self.warnings.push(format!(
+                    "directional light {name:?} was ignored (only point and spot lights are read)"
+                ));
+                return;
+            }
+            Kind::Point => None,
+            Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => {
+                let dir = (Mat3::from_mat4(*world) * Vec3::NEG_Z).normalize_or_zero();
+                Some(Spot {
+                    direction: dir.to_array(),
+                    inner_cone_angle,
+                    outer_cone_angle,
+                })
+            }
+        };
+        let colour = light.color();
+        let l = PunctualLight {
+            name: name.clone(),
+            position: affine_point(world, Vec3::ZERO).to_array(),
+            intensity: colour.map(|c| c * light.intensity()),
+            range: light.range(),
+            spot,
+        };
+        match l.validate(self.punctual.len()) {
+            Ok(()) => self.punctual.push(l),
+            Err(e) => self
+                .warnings
+                .push(format!("punctual light {name:?} was ignored: {e}")),
+        }
+    }
+
+    fn read_uvs(&mut self, acc: &Accessor, what: &str) -> Result<Rc<Vec<Vec2>>, MeshError> {
+        let dt = acc.data_type();
+        let normalized = acc.normalized();
+        let ok = acc.dimensions() == Dimensions::Vec2
+            && match dt {
+                DataType::F32 => true,
+                DataType::U8 | DataType::U16 | DataType::I8 | DataType::I16 => normalized,
+                DataType::U32 => false,
+            };
+        if !ok {
+            return Err(malformed(format!(
+                "{what} has type {:?} {dt:?}, which is not a valid TEXCOORD",
+                acc.dimensions()
+            )));
+        }
+        let size = component_size(dt);
+        let uvs = self.read_elements(acc, what, 2 * size, Vec2::ZERO, |b| {
+            Vec2::new(
+                component(b, 0, dt, normalized),
+                component(b, size, dt, normalized),
+            )
+        })?;
+        if let Some(k) = uvs.iter().position(|v| !v.is_finite()) {
+            return Err(malformed(format!("{what}: element {k} is not finite")));
+        }
+        Ok(Rc::new(uvs))
     }
 }
 

@@ -14,9 +14,10 @@
 
 use std::collections::HashMap;
 
-use glam::Vec3;
+use glam::{DVec2, DVec3, Vec2, Vec3};
 
 use crate::light::PolygonLight;
+use crate::texture::{LightImage, TextureRef};
 
 /// Most lights taken from one asset: shading costs one polygon integral per light and pixel.
 pub(crate) const MAX_LAMPS: usize = 64;
@@ -34,12 +35,16 @@ pub(crate) struct Emitter {
     pub radiance: [f32; 3],
     /// Emits from both sides.
     pub two_sided: bool,
+    /// The emissive texture (glTF `emissiveTexture`) and the corners' UVs.
+    pub texture: Option<(TextureRef, [Vec2; 3])>,
 }
 
 /// What [`merge`] made of the emitters.
 pub(crate) struct Lamps {
     /// The lights, most powerful first.
     pub lights: Vec<PolygonLight>,
+    /// For each light, the emitters of the coplanar group it was cut from.
+    pub groups: Vec<Vec<usize>>,
     /// Emitting polygons left out by [`MAX_LAMPS`].
     pub dropped: usize,
     /// Emitting triangles with no area (skipped).
@@ -76,6 +81,13 @@ pub(crate) fn merge(emitters: &[Emitter]) -> Lamps {
         let (e, f) = (&emitters[tris[t].2], &emitters[tris[u].2]);
         e.radiance == f.radiance
             && e.two_sided == f.two_sided
+            && match (&e.texture, &f.texture) {
+                (None, None) => true,
+                (Some((a, _)), Some((b, _))) => {
+                    std::sync::Arc::ptr_eq(&a.texture, &b.texture) && a.wrap == b.wrap
+                }
+                _ => false,
+            }
             && tris[t].1.dot(tris[u].1) >= 1.0 - 1e-5
     };
     // The neighbour of `t` across its edge k, when compatible.
@@ -85,7 +97,8 @@ pub(crate) fn merge(emitters: &[Emitter]) -> Lamps {
         (u != t && compatible(t, u)).then_some(u)
     };
     let mut used = vec![false; tris.len()];
-    let mut polygons: Vec<(Vec<Vec3>, usize, f32)> = Vec::new();
+    let mut polygons: Vec<(Vec<Vec3>, usize, f32, usize)> = Vec::new();
+    let mut groups: Vec<Vec<usize>> = Vec::new();
     for start in 0..tris.len() {
         if used[start] {
             continue;
@@ -119,28 +132,139 @@ pub(crate) fn merge(emitters: &[Emitter]) -> Lamps {
             let e = &emitters[src];
             let area = 0.5 * crate::light::newell_normal(&poly).length();
             let power = area * (e.radiance[0] + e.radiance[1] + e.radiance[2]);
-            polygons.push((poly, src, power));
+            polygons.push((poly, src, power, groups.len()));
         }
+        groups.push(group.iter().map(|&t| tris[t].2).collect());
     }
     // Most powerful first; ties keep file order (the sort is stable).
     polygons.sort_by(|a, b| b.2.total_cmp(&a.2));
     let dropped = polygons.len().saturating_sub(MAX_LAMPS);
     polygons.truncate(MAX_LAMPS);
+    let light_groups = polygons
+        .iter()
+        .map(|(_, _, _, g)| groups[*g].clone())
+        .collect();
     let lights = polygons
         .into_iter()
-        .map(|(poly, src, _)| PolygonLight {
+        .map(|(poly, src, _, _)| PolygonLight {
             vertices: poly.iter().map(|p| p.to_array()).collect(),
             radiance: emitters[src].radiance,
             two_sided: emitters[src].two_sided,
             texture: None,
             region: None,
+            image: None,
         })
         .collect();
     Lamps {
         lights,
+        groups: light_groups,
         dropped,
         degenerate,
     }
+}
+
+/// Most texels per side of a lamp's resampled emissive texture.
+pub(crate) const MAX_LAMP_TEXELS_PER_SIDE: usize = 256;
+
+/// The emissive texture of a lamp cut from the emitters `group`, resampled onto the light's
+/// parametrisation ((u, v) in the basis (p₁ − p₀, pₙ₋₁ − p₀), v down the rows: what
+/// `bspvt_client::texture` reads). The group's UVs must be one affine map of its plane —
+/// checked at every corner to 10⁻³ of the UVs' extent — else `Err` says why (the caller then
+/// uses the texture's mean). Each axis gets as many texels as the texture has across the
+/// polygon's extent along it, between 1 and [`MAX_LAMP_TEXELS_PER_SIDE`]; each texel is the
+/// bilinear, linearised (sRGB) emissive texture at its centre's UV.
+pub(crate) fn lamp_image(
+    light: &PolygonLight,
+    group: &[usize],
+    emitters: &[Emitter],
+) -> Result<LightImage, String> {
+    let corners: Vec<(DVec3, DVec2, &TextureRef)> = group
+        .iter()
+        .filter_map(|&i| emitters.get(i))
+        .filter_map(|e| {
+            let (t, uv) = e.texture.as_ref()?;
+            Some((0..3).map(move |k| (e.corners[k].as_dvec3(), uv[k].as_dvec2(), t)))
+        })
+        .flatten()
+        .collect();
+    let Some(&(_, _, tex)) = corners.first() else {
+        return Err("it has no texture coordinates".into());
+    };
+    // The affine map from the first triangle with area: p = a + s e₁ + t e₂ ↦ uv_a + s d₁ + t d₂.
+    let map = corners
+        .chunks_exact(3)
+        .find_map(|c| {
+            let (a, e1, e2) = (c[0].0, c[1].0 - c[0].0, c[2].0 - c[0].0);
+            let (g11, g12, g22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+            let det = g11 * g22 - g12 * g12;
+            (det > 1e-12 * g11 * g22 && det.is_finite()).then_some((
+                a,
+                e1,
+                e2,
+                [g11, g12, g22, det],
+                c[0].1,
+                c[1].1 - c[0].1,
+                c[2].1 - c[0].1,
+            ))
+        })
+        .ok_or("its triangles have no area")?;
+    let (a, e1, e2, [g11, g12, g22, det], uva, d1, d2) = map;
+    let uv_of = |p: DVec3| {
+        let r = p - a;
+        let (x, y) = (r.dot(e1), r.dot(e2));
+        let s = (g22 * x - g12 * y) / det;
+        let t = (g11 * y - g12 * x) / det;
+        uva + s * d1 + t * d2
+    };
+    let (lo, hi) = corners.iter().fold(
+        (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
+        |(lo, hi), c| (lo.min(c.1), hi.max(c.1)),
+    );
+    let tol = 1e-3 * (hi - lo).max_element().max(1e-6);
+    if let Some(c) = corners
+        .iter()
+        .find(|c| (uv_of(c.0) - c.1).abs().max_element() > tol)
+    {
+        return Err(format!(
+            "its texture coordinates are not an affine map of the lamp's plane (a corner at \
+             UV ({:.4}, {:.4}) where the map gives ({:.4}, {:.4}))",
+            c.1.x,
+            c.1.y,
+            uv_of(c.0).x,
+            uv_of(c.0).y
+        ));
+    }
+    let p = light.points();
+    let n = p.len();
+    let (p0, l1, l2) = (
+        p[0].as_dvec3(),
+        (p[1 % n] - p[0]).as_dvec3(),
+        (p[n - 1] - p[0]).as_dvec3(),
+    );
+    let size = DVec2::new(f64::from(tex.texture.width), f64::from(tex.texture.height));
+    let texels_along = |l: DVec3| {
+        let span = ((uv_of(p0 + l) - uv_of(p0)) * size).length();
+        if span.is_finite() {
+            (span.ceil() as usize).clamp(1, MAX_LAMP_TEXELS_PER_SIDE)
+        } else {
+            1
+        }
+    };
+    let (w, h) = (texels_along(l1), texels_along(l2));
+    let mut texels = Vec::with_capacity(w * h);
+    for j in 0..h {
+        for i in 0..w {
+            let (u, v) = ((i as f64 + 0.5) / w as f64, (j as f64 + 0.5) / h as f64);
+            let uv = uv_of(p0 + u * l1 + v * l2).as_vec2();
+            let t = tex.texture.sample(uv, tex.wrap, true);
+            texels.push([t[0], t[1], t[2]].map(|x| if x.is_finite() { x.max(0.0) } else { 0.0 }));
+        }
+    }
+    Ok(LightImage {
+        width: w as u32,
+        height: h as u32,
+        texels,
+    })
 }
 
 /// Convex polygons of at most 8 vertices covering a connected coplanar `group`: its outline
@@ -263,6 +387,7 @@ mod tests {
             normal_hint: hint,
             radiance: [5.0, 4.0, 3.0],
             two_sided: false,
+            texture: None,
         }
     }
 

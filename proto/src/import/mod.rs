@@ -31,9 +31,10 @@ use glam::Vec3;
 
 use crate::camera::Camera;
 use crate::error::MeshError;
-use crate::light::PolygonLight;
+use crate::light::{PolygonLight, PunctualLight};
 use crate::material::Material;
 use crate::mesh::Mesh;
+use crate::texture::TextureRef;
 
 mod gltf;
 mod lamps;
@@ -50,6 +51,8 @@ pub struct Asset {
     pub materials: Vec<Material>,
     /// The lamps: emitting triangles merged into convex polygons, most powerful first.
     pub lights: Vec<PolygonLight>,
+    /// `KHR_lights_punctual` point and spot lights, placed by their nodes.
+    pub punctual: Vec<PunctualLight>,
     /// The file's first perspective camera, placed by its node.
     pub camera: Option<Camera>,
     /// What the file holds that was not used (textures, extensions, punctual lights, …), one
@@ -65,6 +68,8 @@ pub(crate) struct FileMaterial {
     pub emission: [f32; 3],
     /// Emits (and is seen) from both sides.
     pub two_sided: bool,
+    /// glTF `emissiveTexture` (it becomes the lamp's texture).
+    pub emissive_texture: Option<TextureRef>,
 }
 
 /// What a format's reader hands to [`finish_asset`].
@@ -75,6 +80,7 @@ pub(crate) struct Raw {
     pub mesh: Mesh,
     pub materials: Vec<FileMaterial>,
     pub camera: Option<Camera>,
+    pub punctual: Vec<PunctualLight>,
     pub warnings: Vec<String>,
 }
 
@@ -274,6 +280,7 @@ pub(crate) fn finish_asset(raw: Raw) -> Result<Asset, MeshError> {
         mut mesh,
         materials,
         camera,
+        punctual,
         mut warnings,
     } = raw;
     check_indices(&mesh)?;
@@ -287,9 +294,11 @@ pub(crate) fn finish_asset(raw: Raw) -> Result<Asset, MeshError> {
             .is_some_and(|f| f.emission.iter().any(|&e| e > 0.0))
     };
     let mut emitters = Vec::new();
+    let has_uvs = mesh.uvs.len() == mesh.positions.len();
     let mut kept = Mesh {
         positions: std::mem::take(&mut mesh.positions),
         normals: std::mem::take(&mut mesh.normals),
+        uvs: std::mem::take(&mut mesh.uvs),
         ..Mesh::default()
     };
     for (t, &m) in mesh.triangles.iter().zip(&mesh.material_ids) {
@@ -312,9 +321,33 @@ pub(crate) fn finish_asset(raw: Raw) -> Result<Asset, MeshError> {
             normal_hint,
             radiance: f.emission,
             two_sided: f.two_sided,
+            texture: f
+                .emissive_texture
+                .clone()
+                .filter(|_| has_uvs)
+                .map(|tex| (tex, t.map(|i| kept.uvs[i as usize]))),
         });
     }
-    let lamps = lamps::merge(&emitters);
+    let mut lamps = lamps::merge(&emitters);
+    for (light, group) in lamps.lights.iter_mut().zip(&lamps.groups) {
+        let Some((tex, _)) = group.first().and_then(|&e| emitters[e].texture.as_ref()) else {
+            continue;
+        };
+        match lamps::lamp_image(light, group, &emitters) {
+            Ok(image) => light.image = Some(std::sync::Arc::new(image)),
+            Err(why) => {
+                let mean = tex.texture.mean(true);
+                for (r, m) in light.radiance.iter_mut().zip(mean) {
+                    *r *= m;
+                }
+                warnings.push(format!(
+                    "the lamp of emissive texture {:?}: {why}; its mean is used as a \
+                     constant radiance",
+                    tex.texture.name
+                ));
+            }
+        }
+    }
     if lamps.dropped > 0 {
         warnings.push(format!(
             "{} emitting polygons beyond the {} most powerful were not made lights",
@@ -334,6 +367,14 @@ pub(crate) fn finish_asset(raw: Raw) -> Result<Asset, MeshError> {
             mesh.triangles.len()
         )));
     }
+    // UVs only where a kept triangle's material samples a texture.
+    if !kept.material_ids.iter().any(|&m| {
+        materials
+            .get(m as usize)
+            .is_some_and(|f| f.material.maps.is_some())
+    }) {
+        kept.uvs.clear();
+    }
     let ids = std::mem::take(&mut kept.material_ids);
     let mut mesh = finish(kept)?;
     mesh.material_ids = ids;
@@ -341,6 +382,7 @@ pub(crate) fn finish_asset(raw: Raw) -> Result<Asset, MeshError> {
         mesh,
         materials: materials.into_iter().map(|f| f.material).collect(),
         lights: lamps.lights,
+        punctual,
         camera,
         warnings,
     })
@@ -376,6 +418,9 @@ pub(crate) fn finish(mut mesh: Mesh) -> Result<Mesh, MeshError> {
     let n = mesh.positions.len();
     if mesh.normals.len() != n {
         mesh.normals.clear();
+    }
+    if mesh.uvs.len() != n {
+        mesh.uvs.clear();
     }
     mesh.drop_unused_vertices();
     mesh.material_ids = vec![0; mesh.triangles.len()];

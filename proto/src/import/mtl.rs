@@ -2,8 +2,10 @@
 //!
 //! Read: `newmtl`, `Kd` (diffuse albedo), `Ks` (specular colour, used as F0), `Ns` (Phong
 //! exponent), `Ke` (emitted radiance: the face is a lamp), `Pr` (PBR roughness, when an
-//! exporter writes it). Everything else is ignored; texture maps (`map_*`, `bump`, `disp`,
-//! `refl`) and transparency (`d` < 1, `Tr` > 0) are reported as warnings, once per kind.
+//! exporter writes it), `map_Kd` (a PNG or JPEG next to the OBJ: albedo = `Kd` × texture,
+//! sRGB; its options such as `-s`/`-o` are not read, only the file name, its last word).
+//! Everything else is ignored; other texture maps (`map_Ks`, `bump`, `disp`, `refl`, …) and
+//! transparency (`d` < 1, `Tr` > 0) are reported as warnings, once per kind.
 //!
 //! **Ns → GGX α.** `α = sqrt(2 / (Ns + 2))`, Walter et al. 2007 §5.2's equivalence between a
 //! Phong lobe of exponent Ns and a Beckmann lobe of roughness α, which GGX matches closely at
@@ -27,6 +29,7 @@ struct Entry {
     ns: Option<f32>,
     pr: Option<f32>,
     ke: Option<[f32; 3]>,
+    map_kd: Option<String>,
 }
 
 /// A parsed library: materials by name, and what was ignored.
@@ -107,6 +110,16 @@ impl Library {
                 "Tr" if scalar(&rest).is_some_and(|t| t > 0.0) => {
                     lib.ignored.insert("transparency (Tr > 0)".into());
                 }
+                "map_Kd" => match rest.last() {
+                    Some(file) => {
+                        if rest.len() > 1 {
+                            lib.ignored
+                                .insert("map_Kd options (only the file is read)".into());
+                        }
+                        entry.map_kd = Some((*file).to_string());
+                    }
+                    None => bad(&mut lib, key),
+                },
                 k if k.starts_with("map_")
                     || matches!(k, "bump" | "disp" | "decal" | "refl" | "norm") =>
                 {
@@ -116,6 +129,11 @@ impl Library {
             }
         }
         lib
+    }
+
+    /// The `map_Kd` file of material `name`, if it names one.
+    pub(crate) fn map_kd(&self, name: &str) -> Option<&str> {
+        self.entries.get(name)?.map_kd.as_deref()
     }
 
     /// The material named `name`, mapped to bspvt's GGX model (see the module documentation).
@@ -133,9 +151,11 @@ impl Library {
                 roughness: alpha.clamp(MIN_ALPHA, 1.0),
                 albedo: e.kd.map_or(Material::default().albedo, unit),
                 specular: e.ks.map_or([0.04; 3], unit),
+                maps: None,
             },
             emission: e.ke.map_or([0.0; 3], |c| c.map(|x| x.max(0.0))),
             two_sided: false,
+            emissive_texture: None,
         })
     }
 }
@@ -158,7 +178,8 @@ Kd 0.1 0.2 0.3\r\nKs 0.5 0.5 0.5\r\nNs 98\r\nmap_Kd wood.png\r\nd 0.5\r\n";
         // α = sqrt(2 / 100).
         assert!((shiny.material.roughness - 0.141_421_36).abs() < 1e-6);
         assert_eq!(shiny.emission, [0.0; 3]);
-        assert!(lib.ignored.contains("texture map_Kd"), "{:?}", lib.ignored);
+        assert_eq!(lib.map_kd("shiny"), Some("wood.png"));
+        assert!(lib.map_kd("light").is_none());
         assert!(lib.ignored.contains("transparency (d < 1)"));
         assert!(lib.material("absent").is_none());
     }

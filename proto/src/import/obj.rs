@@ -16,15 +16,19 @@
 //! numbers ignored), `vn`, and `f` with corners `v`, `v/vt`, `v//vn` or `v/vt/vn`, 1-based or
 //! negative (relative to the elements defined so far). Polygons are fan-triangulated. `usemtl`
 //! gives the faces after it their material, read from the `mtllib` files next to the OBJ
-//! (`mtl.rs`; a material with `Ke` makes its faces lamps). Groups, objects, smoothing groups,
-//! texture coordinates, lines and points are ignored, so every group lands in one mesh. Lines may end in `\n` or `\r\n`, a trailing `\` continues a
+//! (`mtl.rs`; a material with `Ke` makes its faces lamps; `map_Kd` textures it). Groups,
+//! objects, smoothing groups, lines and points are ignored, so every group lands in one mesh.
+//! `vt` (u v, flipped to glTF's convention: v' = 1 − v) is read when a material has a
+//! `map_Kd` that could be read; otherwise texture coordinates are ignored. Lines may end in `\n` or `\r\n`, a trailing `\` continues a
 //! line, and `#` starts a comment.
 //!
-//! Vertices: without complete normals (some face corner names none), a mesh vertex is an OBJ
-//! `v`, in file order. When every corner names a `vn`, a mesh vertex is a distinct
-//! (`v`, `vn`) pair, ordered by `v` then `vn`, so hard edges keep their normals.
+//! Vertices: without complete normals (some face corner names none) and without textures, a
+//! mesh vertex is an OBJ `v`, in file order. When every corner names a `vn`, or a material is
+//! textured, a mesh vertex is a distinct (`v`, `vn`, `vt`) corner (a missing index counting as
+//! one value), ordered by `v`, then `vn`, then `vt`, so hard edges keep their normals and UV
+//! seams their texture coordinates.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -58,12 +62,13 @@ pub(super) fn parse(
     let mut triangle_materials: Vec<u32> = Vec::new();
     let mut libraries: Vec<String> = Vec::new();
     let mut normals: Vec<Vec3> = Vec::new();
-    // Triangles as (v, vn) corners; positive indices are checked once the file is read (OBJ
+    let mut texcoords: Vec<Vec2> = Vec::new();
+    // Triangles as (v, vn, vt) corners; positive indices are checked once the file is read (OBJ
     // readers conventionally accept forward references), relative ones when met.
-    let mut corners: Vec<[(u32, u32); 3]> = Vec::new();
+    let mut corners: Vec<[(u32, u32, u32); 3]> = Vec::new();
     let mut all_have_normals = true;
 
-    let mut poly: Vec<(u32, u32)> = Vec::new();
+    let mut poly: Vec<(u32, u32, u32)> = Vec::new();
     let mut joined: Vec<u8> = Vec::new();
     let mut line_no = 0usize;
     let mut rest = bytes;
@@ -122,10 +127,27 @@ pub(super) fn parse(
                 limits.check_vertices(normals.len() as u64 + 1)?;
                 normals.push(p);
             }
+            b"vt" => {
+                let mut uv = [0f32; 2];
+                for x in &mut uv {
+                    *x = words
+                        .next()
+                        .and_then(|w| std::str::from_utf8(w).ok()?.parse().ok())
+                        .filter(|x: &f32| x.is_finite())
+                        .ok_or_else(|| {
+                            malformed(
+                                n,
+                                "a texture coordinate needs two finite numbers (`vt u v`)",
+                            )
+                        })?;
+                }
+                limits.check_vertices(texcoords.len() as u64 + 1)?;
+                texcoords.push(Vec2::new(uv[0], 1.0 - uv[1]));
+            }
             b"f" | b"fo" => {
                 poly.clear();
                 for w in words {
-                    let c = match parse_corner(w, positions.len(), normals.len()) {
+                    let c = match parse_corner(w, positions.len(), normals.len(), texcoords.len()) {
                         Ok(c) => c,
                         Err(CornerError::OutOfRange(index)) => {
                             return Err(MeshError::IndexOutOfRange {
@@ -187,7 +209,7 @@ pub(super) fn parse(
 
     let n = positions.len();
     for (t, tri) in corners.iter().enumerate() {
-        for &(v, vn) in tri {
+        for &(v, vn, _) in tri {
             if v as usize >= n {
                 return Err(MeshError::IndexOutOfRange {
                     triangle: t,
@@ -211,32 +233,15 @@ pub(super) fn parse(
         return Err(MeshError::NoTriangles);
     }
 
-    let mut mesh = if all_have_normals {
-        // One vertex per distinct (v, vn) pair, ordered by v then vn.
-        let mut pairs: Vec<(u32, u32)> = corners.iter().flatten().copied().collect();
-        pairs.sort_unstable();
-        pairs.dedup();
-        let index = |c: &(u32, u32)| pairs.binary_search(c).map_or(0, |i| i as u32);
-        let triangles = corners.iter().map(|t| t.map(|c| index(&c))).collect();
-        Mesh {
-            positions: pairs.iter().map(|&(v, _)| positions[v as usize]).collect(),
-            normals: pairs.iter().map(|&(_, vn)| normals[vn as usize]).collect(),
-            triangles,
-            material_ids: Vec::new(),
+    for c in corners.iter_mut().flatten() {
+        if c.2 != NONE && c.2 as usize >= texcoords.len() {
+            c.2 = NONE;
         }
-    } else {
-        Mesh {
-            positions,
-            normals: Vec::new(),
-            triangles: corners.iter().map(|t| t.map(|c| c.0)).collect(),
-            material_ids: Vec::new(),
-        }
-    };
+    }
     let mut warnings = Vec::new();
-    let materials = if material_names.is_empty() {
+    let mut materials = if material_names.is_empty() {
         Vec::new()
     } else {
-        mesh.material_ids = triangle_materials;
         resolve_materials(&material_names, &libraries, base_dir, &mut warnings)
     };
     if material_names.is_empty() && !libraries.is_empty() {
@@ -245,10 +250,96 @@ pub(super) fn parse(
             libraries.join(", ")
         ));
     }
+    // Texture coordinates only when a material samples a texture.
+    let is_textured: Vec<bool> = materials
+        .iter()
+        .map(|f| f.material.maps.is_some())
+        .collect();
+    let textured = |m: u32| is_textured.get(m as usize).copied().unwrap_or(false);
+    let use_uvs = triangle_materials.iter().any(|&m| textured(m));
+    if use_uvs {
+        let missing = corners
+            .iter()
+            .zip(&triangle_materials)
+            .filter(|(t, m)| textured(**m) && t.iter().any(|c| c.2 == NONE))
+            .count();
+        if missing > 0 {
+            // Those faces get the factor alone: their material without its texture.
+            let mut plain: HashMap<u32, u32> = HashMap::new();
+            for (t, m) in corners.iter().zip(triangle_materials.iter_mut()) {
+                if textured(*m) && t.iter().any(|c| c.2 == NONE) {
+                    *m = *plain.entry(*m).or_insert_with(|| {
+                        let mut copy = materials[*m as usize].clone();
+                        if let Some(crate::material::MaterialMaps::Diffuse { kd, .. }) =
+                            copy.material.maps.take()
+                        {
+                            copy.material.albedo = kd;
+                        }
+                        copy.material.name.push_str(" (no vt)");
+                        materials.push(copy);
+                        materials.len() as u32 - 1
+                    });
+                }
+            }
+            warnings.push(format!(
+                "{missing} faces with a map_Kd material name no texture coordinate (`vt`): the \
+                 Kd alone is used there"
+            ));
+        }
+    }
+    let mut mesh = if all_have_normals || use_uvs {
+        // One vertex per distinct corner, ordered by v, then vn, then vt.
+        let key = |c: &(u32, u32, u32)| {
+            (
+                c.0,
+                if all_have_normals { c.1 } else { NONE },
+                if use_uvs { c.2 } else { NONE },
+            )
+        };
+        let mut keys: Vec<(u32, u32, u32)> = corners.iter().flatten().map(key).collect();
+        keys.sort_unstable();
+        keys.dedup();
+        let index = |c: &(u32, u32, u32)| keys.binary_search(&key(c)).map_or(0, |i| i as u32);
+        let triangles = corners.iter().map(|t| t.map(|c| index(&c))).collect();
+        Mesh {
+            positions: keys
+                .iter()
+                .map(|&(v, _, _)| positions[v as usize])
+                .collect(),
+            normals: if all_have_normals {
+                keys.iter()
+                    .map(|&(_, vn, _)| normals[vn as usize])
+                    .collect()
+            } else {
+                Vec::new()
+            },
+            triangles,
+            material_ids: Vec::new(),
+            uvs: if use_uvs {
+                keys.iter()
+                    .map(|&(_, _, vt)| texcoords.get(vt as usize).copied().unwrap_or(Vec2::ZERO))
+                    .collect()
+            } else {
+                Vec::new()
+            },
+        }
+    } else {
+        Mesh {
+            positions,
+            normals: Vec::new(),
+            triangles: corners.iter().map(|t| t.map(|c| c.0)).collect(),
+            material_ids: Vec::new(),
+            uvs: Vec::new(),
+        }
+    };
+    if !material_names.is_empty() {
+        mesh.material_ids = triangle_materials;
+    }
     Ok(Raw {
         mesh,
         materials,
         camera: None,
+        punctual: Vec::new(),
         warnings,
     })
 }
@@ -292,10 +383,75 @@ fn resolve_materials(
             },
         }
     }
+    let mut textures: HashMap<String, Option<std::sync::Arc<crate::texture::Texture>>> =
+        HashMap::new();
+    let mut texels = 0u64;
+    let mut map_kd = |file: &str, warnings: &mut Vec<String>| {
+        if let Some(t) = textures.get(file) {
+            return t.clone();
+        }
+        let safe = !file.is_empty()
+            && Path::new(file)
+                .components()
+                .all(|c| matches!(c, std::path::Component::Normal(_)));
+        let read = match base_dir {
+            _ if !safe => Err("only files next to the OBJ are read".to_string()),
+            None => Err("an uploaded OBJ cannot name other files".to_string()),
+            Some(dir) => std::fs::metadata(dir.join(file))
+                .map_err(|e| e.to_string())
+                .and_then(|m| {
+                    // A PNG or JPEG of the largest texture allowed is far below 256 MiB.
+                    if m.len() > 256 << 20 {
+                        Err(format!("{} bytes is over 256 MiB", m.len()))
+                    } else {
+                        std::fs::read(dir.join(file)).map_err(|e| e.to_string())
+                    }
+                })
+                .and_then(|b| crate::texture::Texture::decode(&b, file))
+                .and_then(|t| {
+                    let n = u64::from(t.width) * u64::from(t.height);
+                    texels = texels.saturating_add(n);
+                    if texels > crate::texture::MAX_ASSET_TEXELS {
+                        Err(format!(
+                            "the asset's textures would exceed {} texels in all",
+                            crate::texture::MAX_ASSET_TEXELS
+                        ))
+                    } else {
+                        Ok(std::sync::Arc::new(t))
+                    }
+                }),
+        };
+        let t = match read {
+            Ok(t) => Some(t),
+            Err(e) => {
+                warnings.push(format!(
+                    "texture {file:?} could not be read: {e}; using the factor alone"
+                ));
+                None
+            }
+        };
+        textures.insert(file.to_string(), t.clone());
+        t
+    };
     names
         .iter()
         .enumerate()
         .map(|(i, name)| {
+            if let Some((lib, mut m)) = libs.iter().find_map(|l| Some((l, l.material(name)?)))
+                && let Some(file) = lib.map_kd(name)
+                && let Some(texture) = map_kd(file, warnings)
+            {
+                let maps = crate::material::MaterialMaps::Diffuse {
+                    kd: m.material.albedo,
+                    texture: crate::texture::TextureRef {
+                        texture,
+                        wrap: [crate::texture::Wrap::Repeat; 2],
+                    },
+                };
+                m.material.albedo = maps.at_mean(&m.material).albedo;
+                m.material.maps = Some(maps);
+                return m;
+            }
             if i == 0 && name.is_empty() {
                 return FileMaterial {
                     material: Material {
@@ -339,13 +495,19 @@ enum CornerError {
     Bad(String),
 }
 
-/// One face corner `v[/vt[/vn]]` as 0-based (position, normal or [`NONE`]).
-fn parse_corner(word: &[u8], positions: usize, normals: usize) -> Result<(u32, u32), CornerError> {
+/// One face corner `v[/vt[/vn]]` as 0-based (position, normal or [`NONE`], texture
+/// coordinate or [`NONE`]).
+fn parse_corner(
+    word: &[u8],
+    positions: usize,
+    normals: usize,
+    texcoords: usize,
+) -> Result<(u32, u32, u32), CornerError> {
     let text = std::str::from_utf8(word)
         .map_err(|_| CornerError::Bad("a face corner is not text".into()))?;
     let mut parts = text.split('/');
     let v = parts.next().unwrap_or("");
-    let _vt = parts.next();
+    let vt = parts.next();
     let vn = parts.next();
     if parts.next().is_some() {
         return Err(CornerError::Bad(format!(
@@ -358,7 +520,13 @@ fn parse_corner(word: &[u8], positions: usize, normals: usize) -> Result<(u32, u
         None | Some("") => NONE,
         Some(s) => resolve(s, normals, "normal")?,
     };
-    Ok((v, vn))
+    // Texture coordinates are read only for textured materials: an unreadable `vt` index is
+    // "none" (such a face then gets its material's factor alone), never an error.
+    let vt = match vt {
+        None | Some("") => NONE,
+        Some(s) => resolve(s, texcoords, "texture coordinate").unwrap_or(NONE),
+    };
+    Ok((v, vn, vt))
 }
 
 /// A 1-based or negative (relative) OBJ index as a 0-based index.

@@ -490,6 +490,7 @@ pub(super) fn parse(bytes: &[u8], limits: &Limits) -> Result<Mesh, MeshError> {
         }),
         triangles: Vec::with_capacity(tri_reserve as usize),
         material_ids: Vec::new(),
+        uvs: Vec::new(),
     };
     let mut reader = Reader {
         header: &header,

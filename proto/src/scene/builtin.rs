@@ -116,6 +116,7 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
             min: [-2.5, 2.0, -2.5],
             max: [2.5, 4.0, 2.5],
         }),
+        image: None,
     };
     Scene {
         mesh,
@@ -125,18 +126,21 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
                 roughness: 0.35,
                 albedo: [0.55, 0.55, 0.52],
                 specular: [0.04; 3],
+                maps: None,
             },
             Material {
                 name: "sphere".into(),
                 roughness: 0.15,
                 albedo: [0.6, 0.15, 0.1],
                 specular: [0.05; 3],
+                maps: None,
             },
             Material {
                 name: "slab".into(),
                 roughness: 0.5,
                 albedo: [0.2, 0.35, 0.6],
                 specular: [0.04; 3],
+                maps: None,
             },
         ],
         lights: vec![light],
@@ -151,6 +155,7 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
         bake: BakeSettings::default(),
         motion: Vec::new(),
         warnings: Vec::new(),
+        punctual: Vec::new(),
     }
 }
 
@@ -243,6 +248,7 @@ pub fn icosphere(subdiv: u32, material: u32) -> Mesh {
         positions: pos,
         material_ids: vec![material; tris.len()],
         triangles: tris,
+        uvs: Vec::new(),
     }
 }
 
@@ -313,5 +319,6 @@ pub(crate) fn quad_light_above(bounds: &Aabb, radiance: [f32; 3]) -> PolygonLigh
         two_sided: false,
         texture: None,
         region: None,
+        image: None,
     }
 }

@@ -17,8 +17,8 @@ pub mod builtin;
 
 pub use crate::camera::Camera;
 pub use crate::environment::Environment;
-pub use crate::light::{PolygonLight, Region};
-pub use crate::material::Material;
+pub use crate::light::{PolygonLight, PunctualLight, Region, Spot};
+pub use crate::material::{Material, MaterialMaps};
 
 /// How the BSPVT builder chooses a split line.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -285,6 +285,8 @@ pub struct Scene {
     pub materials: Vec<Material>,
     /// The polygonal lights (none: a scene lit by its environment alone).
     pub lights: Vec<PolygonLight>,
+    /// The assets' `KHR_lights_punctual` lights, for the point-light methods only.
+    pub punctual: Vec<PunctualLight>,
     /// The environment light, its path resolved (not part of the bake's identity: the
     /// service does not store it).
     pub environment: Option<Environment>,
@@ -321,6 +323,9 @@ impl Scene {
             )));
         }
         for (i, l) in self.lights.iter().enumerate() {
+            l.validate(i)?;
+        }
+        for (i, l) in self.punctual.iter().enumerate() {
             l.validate(i)?;
         }
         if let Some(e) = &self.environment {
@@ -428,6 +433,7 @@ impl Scene {
         let mut motion = Vec::new();
         let mut warnings = Vec::new();
         let mut lights = std::mem::take(&mut file.lights);
+        let mut punctual = Vec::new();
         let mut asset_camera = None;
         let mut materials = std::mem::take(&mut file.materials);
         for (i, (m, asset)) in file.meshes.iter().zip(parts).enumerate() {
@@ -435,6 +441,7 @@ impl Scene {
                 mesh: mut part,
                 materials: own,
                 lights: lamps,
+                punctual: points,
                 camera,
                 warnings: w,
             } = asset;
@@ -457,11 +464,23 @@ impl Scene {
                     l.vertices = l.vertices.iter().map(|&v| place(v)).collect();
                     lights.push(l);
                 }
-            } else if !lamps.is_empty() {
+                for mut l in points {
+                    l.position = place(l.position);
+                    if let (Some(s), Some(a)) = (&mut l.spot, &affine) {
+                        s.direction = a
+                            .transform_vector3(Vec3::from(s.direction))
+                            .normalize_or_zero()
+                            .to_array();
+                    }
+                    punctual.push(l);
+                }
+            } else if !lamps.is_empty() || !points.is_empty() {
                 warnings.push(format!(
-                    "{}: its {} lamps are not used (asset_lights is false)",
+                    "{}: its {} lamps and {} punctual lights are not used (asset_lights is \
+                     false)",
                     m.path,
-                    lamps.len()
+                    lamps.len(),
+                    points.len()
                 ));
             }
             if asset_camera.is_none() && affine.is_none() {
@@ -533,6 +552,7 @@ impl Scene {
             mesh,
             materials,
             lights,
+            punctual,
             environment: file.environment,
             camera,
             bake: file.bake,
@@ -577,6 +597,7 @@ impl Scene {
             mesh: self.mesh.clone(),
             materials: self.materials.clone(),
             lights: self.lights.clone(),
+            punctual: self.punctual.clone(),
             environment: self.environment.clone(),
             camera: self.camera.clone(),
             bake: self.bake.clone(),
@@ -606,6 +627,7 @@ impl Scene {
             mut mesh,
             materials,
             lights,
+            punctual,
             camera,
             mut warnings,
         } = asset;
@@ -630,6 +652,7 @@ impl Scene {
                 roughness: 0.5,
                 albedo: [0.5, 0.5, 0.5],
                 specular: [0.04; 3],
+                maps: None,
             });
             mesh.append(&builtin::ground_under(&bounds, ground_id), 0);
             let light = builtin::quad_light_above(&bounds, [8.0, 8.0, 8.0]);
@@ -650,6 +673,7 @@ impl Scene {
             mesh,
             materials,
             lights,
+            punctual,
             environment: None,
             bake,
             motion: Vec::new(),

@@ -102,6 +102,7 @@ mod tests {
             normals: vec![normal; 4],
             triangles: vec![[0, 1, 2], [0, 2, 3]],
             material_ids: vec![0, 0],
+            ..Mesh::default()
         }
     }
 
@@ -135,6 +136,7 @@ mod tests {
                 .collect(),
             triangles: vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
             material_ids: vec![0; 4],
+            ..Mesh::default()
         };
         let o = ray_origins(&tet, 0.01);
         for v in 0..4 {

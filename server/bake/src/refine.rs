@@ -386,6 +386,7 @@ impl Visibility {
             normals: Vec::new(),
             triangles: mesh.triangles.iter().copied().filter(usable).collect(),
             material_ids: Vec::new(),
+            uvs: Vec::new(),
         };
         let occluder = (!occ_mesh.triangles.is_empty()).then(|| {
             let tris = bspvt_raytrace::mesh_triangles(&occ_mesh);
@@ -713,6 +714,8 @@ struct Refiner<'a> {
     /// Per vertex: the unit direction into its own surface on an open boundary, else zero
     /// (the bake's ray origins, [`crate::origin`]).
     inward: Vec<Vec3>,
+    /// Texture coordinates, one per vertex, or empty (a mesh without UVs).
+    uvs: Vec<glam::Vec2>,
     tris: Vec<[u32; 3]>,
     mats: Vec<u32>,
     version: Vec<u32>,
@@ -753,6 +756,7 @@ impl<'a> Refiner<'a> {
             pos: mesh.positions.clone(),
             nrm: mesh.normals.clone(),
             inward: crate::origin::boundary_inward(mesh),
+            uvs: mesh.uvs.clone(),
             tris: mesh.triangles.clone(),
             mats: mesh.material_ids.clone(),
             version: vec![0; mesh.triangles.len()],
@@ -784,6 +788,7 @@ impl<'a> Refiner<'a> {
             normals: self.nrm,
             triangles: self.tris,
             material_ids: self.mats,
+            uvs: self.uvs,
         };
         (out, stats)
     }
@@ -1064,6 +1069,12 @@ impl<'a> Refiner<'a> {
         self.pos.push(pm);
         self.nrm.push(normal);
         self.inward.push(inward);
+        // Texture coordinates are affine over a triangle: the edge's midpoint has the mean UV
+        // (UV seams split vertices, so an edge has one UV at each end).
+        if !self.uvs.is_empty() {
+            let (ua, ub) = (self.uvs[e.0 as usize], self.uvs[e.1 as usize]);
+            self.uvs.push(0.5 * (ua + ub));
+        }
         let cached = self
             .mid_v
             .remove(&e)

@@ -22,6 +22,7 @@ fn down_light(y: f32, h: f32) -> PolygonLight {
         two_sided: false,
         texture: None,
         region: None,
+        image: None,
     }
 }
 
@@ -37,6 +38,7 @@ fn tile(cx: f32, y: f32, cz: f32, h: f32, material: u32) -> Mesh {
         normals: vec![Vec3::Y; 4],
         triangles: vec![[0, 1, 2], [0, 2, 3]],
         material_ids: vec![material; 2],
+        uvs: Vec::new(),
     }
 }
 

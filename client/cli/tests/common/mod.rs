@@ -12,6 +12,7 @@ use bspvt_client::session::connect::ConnectOptions;
 use bspvt_proto::encoding::{Bake, decode_bake};
 use bspvt_proto::scene::open_scene;
 
+#[allow(unused_imports, reason = "not every test binary uses every helper")]
 pub use bspvt_tests::service::{Server, plate_small};
 
 /// The client's binary: `bspvt serve` runs the same service.

@@ -1,0 +1,312 @@
+//! Surface textures: images read from an asset (glTF base-colour, metallic-roughness and
+//! emissive textures, OBJ/MTL `map_Kd`), sampled through a mesh's UVs (the material they
+//! modulate is `crate::material::MaterialMaps`).
+//!
+//! **UV convention** (glTF 2.0 §3.8.4): (0, 0) is the top-left corner of the image, u to the
+//! right, v down the rows. OBJ `vt` (v up) is flipped to this convention on import.
+//!
+//! **Sampling**: bilinear between the four nearest texel centres, wrapped per axis as the
+//! glTF sampler says (repeat, the default; clamp to edge; mirrored repeat); no mipmaps (a
+//! pixel or a vertex takes the finest level). Colour textures (base colour, `map_Kd`,
+//! emissive) are sRGB-encoded and converted to linear before filtering (IEC 61966-2-1);
+//! data textures (metallic-roughness) are read as they are.
+//!
+//! **Limits**: a texture has at most [`MAX_TEXTURE_SIDE`] texels per side and
+//! [`MAX_TEXTURE_TEXELS`] texels; an asset's textures at most [`MAX_ASSET_TEXELS`] texels in
+//! all. The image's header is checked before its pixels are decoded.
+
+use std::sync::{Arc, OnceLock};
+
+use glam::Vec2;
+
+/// Most texels per side of one texture.
+pub const MAX_TEXTURE_SIDE: u32 = 8192;
+/// Most texels of one texture (4096², 64 MiB as RGBA8).
+pub const MAX_TEXTURE_TEXELS: u64 = 1 << 24;
+/// Most texels of all the textures of one asset (256 MiB as RGBA8).
+pub const MAX_ASSET_TEXELS: u64 = 1 << 26;
+
+/// A decoded image: RGBA8 texels, row-major from the top row.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Texture {
+    /// What the asset calls it (an image name, a file name or `image N`), for messages.
+    pub name: String,
+    /// Texels per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// `width × height × 4` bytes, RGBA.
+    pub rgba: Vec<u8>,
+    /// The encoded image (PNG or JPEG) it was decoded from, which is what a stored scene
+    /// keeps (empty: made in memory; stored as compressed texels).
+    pub source: Vec<u8>,
+}
+
+impl std::fmt::Debug for Texture {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "Texture({:?}, {}×{})",
+            self.name, self.width, self.height
+        )
+    }
+}
+
+/// How a texture repeats outside [0, 1] (glTF 2.0 §5.26 `sampler.wrapS` / `wrapT`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Wrap {
+    /// `REPEAT` (10497), glTF's default.
+    #[default]
+    Repeat,
+    /// `CLAMP_TO_EDGE` (33071).
+    Clamp,
+    /// `MIRRORED_REPEAT` (33648).
+    Mirror,
+}
+
+impl Wrap {
+    fn index(self, i: i64, n: i64) -> usize {
+        let i = match self {
+            Wrap::Clamp => i.clamp(0, n - 1),
+            Wrap::Repeat => i.rem_euclid(n),
+            Wrap::Mirror => {
+                let m = i.rem_euclid(2 * n);
+                if m < n { m } else { 2 * n - 1 - m }
+            }
+        };
+        i as usize
+    }
+}
+
+/// A texture as a material uses it: the image and its sampler's wrap modes (u, v).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TextureRef {
+    /// The image (shared by every material and light that uses it).
+    pub texture: Arc<Texture>,
+    /// Wrap modes along u and v.
+    pub wrap: [Wrap; 2],
+}
+
+/// The sRGB → linear table for 8-bit values (IEC 61966-2-1).
+fn srgb_table() -> &'static [f32; 256] {
+    static TABLE: OnceLock<[f32; 256]> = OnceLock::new();
+    TABLE.get_or_init(|| {
+        std::array::from_fn(|i| {
+            let c = i as f32 / 255.0;
+            if c <= 0.04045 {
+                c / 12.92
+            } else {
+                ((c + 0.055) / 1.055).powf(2.4)
+            }
+        })
+    })
+}
+
+impl Texture {
+    /// The texel at (x, y) in [0, 1]: RGB through the sRGB curve when `srgb`, alpha linear.
+    fn texel(&self, x: usize, y: usize, srgb: bool) -> [f32; 4] {
+        let i = 4 * (y * self.width as usize + x);
+        let Some(t) = self.rgba.get(i..i + 4) else {
+            return [0.0; 4];
+        };
+        let lin = |b: u8| {
+            if srgb {
+                srgb_table()[b as usize]
+            } else {
+                f32::from(b) / 255.0
+            }
+        };
+        [lin(t[0]), lin(t[1]), lin(t[2]), f32::from(t[3]) / 255.0]
+    }
+
+    /// Bilinear lookup at `uv` (see the module documentation); `srgb`: a colour texture,
+    /// linearised before filtering. Non-finite UVs read the texel at (0, 0).
+    pub fn sample(&self, uv: Vec2, wrap: [Wrap; 2], srgb: bool) -> [f32; 4] {
+        let (w, h) = (i64::from(self.width), i64::from(self.height));
+        if w == 0 || h == 0 {
+            return [0.0; 4];
+        }
+        let uv = if uv.is_finite() { uv } else { Vec2::ZERO };
+        let x = f64::from(uv.x) * w as f64 - 0.5;
+        let y = f64::from(uv.y) * h as f64 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+        // `as` saturates: a huge UV stays a (wrapped) valid index.
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let xs = [wrap[0].index(x0, w), wrap[0].index(x0.saturating_add(1), w)];
+        let ys = [wrap[1].index(y0, h), wrap[1].index(y0.saturating_add(1), h)];
+        let t = |i: usize, j: usize| self.texel(xs[i], ys[j], srgb);
+        let (a, b, c, d) = (t(0, 0), t(1, 0), t(0, 1), t(1, 1));
+        std::array::from_fn(|k| {
+            let top = a[k] + (b[k] - a[k]) * fx;
+            let bottom = c[k] + (d[k] - c[k]) * fx;
+            top + (bottom - top) * fy
+        })
+    }
+
+    /// The mean texel (RGB linearised when `srgb`).
+    pub fn mean(&self, srgb: bool) -> [f32; 4] {
+        let n = (self.width as usize) * (self.height as usize);
+        if n == 0 {
+            return [0.0; 4];
+        }
+        let mut s = [0.0f64; 4];
+        for y in 0..self.height as usize {
+            for x in 0..self.width as usize {
+                let t = self.texel(x, y, srgb);
+                for k in 0..4 {
+                    s[k] += f64::from(t[k]);
+                }
+            }
+        }
+        s.map(|v| (v / n as f64) as f32)
+    }
+
+    /// Decodes a PNG or JPEG (the format read from its first bytes), refusing an image over
+    /// the limits before its pixels are decoded. `name` is for messages.
+    pub fn decode(bytes: &[u8], name: &str) -> Result<Texture, String> {
+        use image::ImageDecoder;
+        let format = image::guess_format(bytes)
+            .map_err(|_| "not a PNG or JPEG image".to_string())
+            .and_then(|f| match f {
+                image::ImageFormat::Png | image::ImageFormat::Jpeg => Ok(f),
+                other => Err(format!("{other:?} images are not read (PNG or JPEG only)")),
+            })?;
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(MAX_TEXTURE_SIDE);
+        limits.max_image_height = Some(MAX_TEXTURE_SIDE);
+        limits.max_alloc = Some(MAX_TEXTURE_TEXELS * 16);
+        let over = format!(
+            "over the limit ({MAX_TEXTURE_SIDE} texels per side, {MAX_TEXTURE_TEXELS} in all)"
+        );
+        let err = |e: image::ImageError| match e {
+            image::ImageError::Limits(_) => over.clone(),
+            e => e.to_string(),
+        };
+        let cursor = std::io::Cursor::new(bytes);
+        let mut decoder: Box<dyn ImageDecoder> = match format {
+            image::ImageFormat::Png => Box::new(
+                image::codecs::png::PngDecoder::with_limits(cursor, limits.clone()).map_err(err)?,
+            ),
+            _ => Box::new(image::codecs::jpeg::JpegDecoder::new(cursor).map_err(err)?),
+        };
+        let (w, h) = decoder.dimensions();
+        if w == 0 || h == 0 {
+            return Err("the image is empty".into());
+        }
+        if w > MAX_TEXTURE_SIDE
+            || h > MAX_TEXTURE_SIDE
+            || u64::from(w) * u64::from(h) > MAX_TEXTURE_TEXELS
+        {
+            return Err(format!("{w}×{h} texels is {over}"));
+        }
+        decoder.set_limits(limits).map_err(err)?;
+        let img = image::DynamicImage::from_decoder(decoder).map_err(err)?;
+        let rgba = img.into_rgba8();
+        Ok(Texture {
+            name: name.to_string(),
+            width: rgba.width(),
+            height: rgba.height(),
+            rgba: rgba.into_raw(),
+            source: bytes.to_vec(),
+        })
+    }
+}
+
+/// A light's texture in the light's own parametrisation (see `bspvt_client::texture`: (u, v)
+/// in the basis (p₁ − p₀, pₙ₋₁ − p₀) of its plane, v down the rows): linear RGB multipliers
+/// of the light's radiance, row-major from the top.
+#[derive(Clone, PartialEq)]
+pub struct LightImage {
+    /// Texels per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// `width × height` linear RGB texels, each finite and ≥ 0.
+    pub texels: Vec<[f32; 3]>,
+}
+
+impl std::fmt::Debug for LightImage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "LightImage({}×{})", self.width, self.height)
+    }
+}
+
+impl LightImage {
+    /// Whether the size matches the data and every texel is finite and ≥ 0.
+    pub fn is_valid(&self) -> bool {
+        self.width > 0
+            && self.height > 0
+            && self.texels.len() as u64 == u64::from(self.width) * u64::from(self.height)
+            && self
+                .texels
+                .iter()
+                .flatten()
+                .all(|c| c.is_finite() && *c >= 0.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn checker() -> Texture {
+        // 2×2: red, green / blue, white (sRGB 255 = linear 1).
+        Texture {
+            name: "checker".into(),
+            width: 2,
+            height: 2,
+            rgba: vec![
+                255, 0, 0, 255, 0, 255, 0, 255, //
+                0, 0, 255, 255, 255, 255, 255, 255,
+            ],
+            source: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn texel_centres_read_their_texel_and_wrap_modes_differ_outside() {
+        let t = checker();
+        let r = [Wrap::Repeat; 2];
+        assert_eq!(
+            t.sample(Vec2::new(0.25, 0.25), r, true),
+            [1.0, 0.0, 0.0, 1.0]
+        );
+        assert_eq!(
+            t.sample(Vec2::new(0.75, 0.25), r, true),
+            [0.0, 1.0, 0.0, 1.0]
+        );
+        assert_eq!(
+            t.sample(Vec2::new(0.25, 0.75), r, true),
+            [0.0, 0.0, 1.0, 1.0]
+        );
+        // Half-way between red and green: 0.5 each (linear filtering).
+        let mid = t.sample(Vec2::new(0.5, 0.25), r, true);
+        assert!((mid[0] - 0.5).abs() < 1e-6 && (mid[1] - 0.5).abs() < 1e-6);
+        // u = 1.25: repeat reads red's column again, clamp the green column.
+        assert_eq!(t.sample(Vec2::new(1.25, 0.25), r, true)[0], 1.0);
+        let c = t.sample(Vec2::new(1.25, 0.25), [Wrap::Clamp; 2], true);
+        assert_eq!(c[1], 1.0);
+        let m = t.sample(Vec2::new(1.25, 0.25), [Wrap::Mirror; 2], true);
+        assert_eq!(m[1], 1.0);
+        assert!(
+            t.sample(Vec2::new(f32::NAN, 1e30), r, true)
+                .iter()
+                .all(|x| x.is_finite())
+        );
+    }
+
+    #[test]
+    fn srgb_mid_grey_is_linearised() {
+        let t = Texture {
+            name: "grey".into(),
+            width: 1,
+            height: 1,
+            rgba: vec![188, 188, 188, 255],
+            source: Vec::new(),
+        };
+        // sRGB 188/255 ≈ 0.5029 linear; the data path reads 188/255 ≈ 0.737.
+        assert!((t.sample(Vec2::ZERO, [Wrap::Repeat; 2], true)[0] - 0.5029).abs() < 1e-3);
+        assert!((t.sample(Vec2::ZERO, [Wrap::Repeat; 2], false)[0] - 0.7373).abs() < 1e-3);
+    }
+}

@@ -1093,3 +1093,77 @@ fn textured_asset_bspvt_against_monte_carlo() {
         "per vertex {e_vertex} (the texture between the vertices is lost)"
     );
 }
+
+/// An asset whose only lights are punctual is still the whole scene (KHR_lights_punctual are
+/// its lights: no ground, no added quad light), says so loudly, and the point-light method
+/// lights it through the command line.
+#[test]
+fn an_asset_with_punctual_lights_only_gets_no_ground_and_no_default_lamp() {
+    let mats = json!([
+        {"name": "floor", "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.8, 0.8, 1.0],
+            "metallicFactor": 0.0, "roughnessFactor": 1.0}}
+    ]);
+    let bytes = gltf(&[floor(0)], mats, &[], json!({}), |doc| {
+        doc["extensionsUsed"] = json!(["KHR_lights_punctual"]);
+        doc["extensions"] = json!({"KHR_lights_punctual": {"lights": [
+            {"name": "bulb", "type": "point", "intensity": 20.0}
+        ]}});
+        let nodes = doc["nodes"].as_array_mut().expect("nodes");
+        let n = nodes.len();
+        nodes.push(json!({"translation": [0.0, 1.5, 0.0],
+                          "extensions": {"KHR_lights_punctual": {"light": 0}}}));
+        doc["scenes"][0]["nodes"]
+            .as_array_mut()
+            .expect("scene nodes")
+            .push(json!(n));
+    });
+    let a = asset(&bytes);
+    let vertices = a.mesh.positions.len();
+    let scene = Scene::from_asset(a).expect("scene");
+    assert_eq!(scene.mesh.positions.len(), vertices, "a ground was added");
+    assert!(scene.lights.is_empty(), "{:?}", scene.lights);
+    assert_eq!(scene.punctual.len(), 1);
+    assert!(
+        scene
+            .warnings
+            .iter()
+            .any(|w| w.contains("only lights are 1 punctual light")),
+        "{:?}",
+        scene.warnings
+    );
+
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("bulb.glb");
+    std::fs::write(&path, &bytes).expect("write");
+    let out = dir.path().join("hard.png");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_bspvt"))
+        .args(["render", "--mesh"])
+        .arg(&path)
+        .args([
+            "--method", "rt-hard", "--width", "32", "--height", "32", "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("bspvt runs");
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    // The floor covers ~16 % of the framed image, all of it under the bulb.
+    let img = image::open(&out).expect("png").to_rgb8();
+    let lit = img.pixels().filter(|p| p.0.iter().any(|&c| c > 0)).count();
+    assert!(lit > 32 * 32 / 10, "{lit} lit pixels of {}", 32 * 32);
+    // A polygon-light method has no light here: a clear error, not a black image.
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_bspvt"))
+        .args(["render", "--mesh"])
+        .arg(&path)
+        .args([
+            "--method", "ltc", "--width", "32", "--height", "32", "--out",
+        ])
+        .arg(dir.path().join("ltc.png"))
+        .output()
+        .expect("bspvt runs");
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success() && err.contains("no light"), "{err}");
+}

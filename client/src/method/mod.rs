@@ -55,6 +55,9 @@ pub struct Needs {
     pub env_map: bool,
     /// A polygonal light of the scene.
     pub polygon_light: bool,
+    /// The scene's punctual lights (glTF `KHR_lights_punctual`) stand in for the polygonal
+    /// light when it has them: a scene whose only lights are punctual is enough.
+    pub punctual: bool,
 }
 
 impl Needs {

@@ -30,6 +30,7 @@ impl FrameMethod for PointShadow {
         Needs {
             rays: self.technique.needs_rays(),
             polygon_light: true,
+            punctual: true,
             ..Needs::default()
         }
     }
@@ -56,7 +57,11 @@ struct State {
 impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
         let occ = self.technique.needs_rays().then(|| f.scene.occluder());
-        let image = penumbra::render(f.renderer, f.light()?, self.technique, occ, &self.params)?;
+        let image = if f.renderer.scene.punctual.is_empty() {
+            penumbra::render(f.renderer, f.light()?, self.technique, occ, &self.params)?
+        } else {
+            penumbra::render_punctual(f.renderer, self.technique, occ, &self.params)?
+        };
         Ok(Frame::new(
             image,
             FrameCounts {

@@ -113,7 +113,10 @@ pub fn render_sequence(
     // Polygon-light methods follow the light's path, and so do the lamps a sky method draws
     // beside the sky; the environment methods play the scene's motion (frame k at cycle time
     // k / frames).
-    let lamp = needs.polygon_light || (needs.sky_trees && !scene.lights.is_empty());
+    // A point-light method on a scene whose only lights are punctual needs no polygon light.
+    let punctual_only = needs.punctual && !scene.punctual.is_empty() && scene.lights.is_empty();
+    let lamp =
+        (needs.polygon_light && !punctual_only) || (needs.sky_trees && !scene.lights.is_empty());
     let light = if lamp {
         let Some(light) = scene.lights.get(opts.light) else {
             bail!("the scene has no light {}", opts.light);

@@ -618,8 +618,8 @@ impl Scene {
 
     /// The scene of an asset given alone (`--mesh`, or an upload without a scene file).
     ///
-    /// With lamps (emissive materials) the asset is the whole scene: its lamps, its materials,
-    /// its camera or one framing it, no ground. Without, it gets a tessellated ground plane
+    /// With lamps (emissive materials) or punctual lights the asset is the whole scene: its
+    /// lights, its materials, its camera or one framing it, no ground. Without, it gets a tessellated ground plane
     /// under it and a quad light above it, and a warning says so. Without materials of its
     /// own, it gets a grey GGX (and the ground a slightly rougher grey).
     pub fn from_asset(asset: Asset) -> Result<Scene, SceneError> {
@@ -645,7 +645,19 @@ impl Scene {
             materials
         };
         let mut bake = BakeSettings::default();
-        let lights = if lights.is_empty() {
+        let lights = if lights.is_empty() && !punctual.is_empty() {
+            // The asset brings its own lights, punctual ones only: it is still the whole
+            // scene (no ground, no added lamp), and the polygon-light methods have nothing
+            // to shade — said loudly, never a silent black image.
+            warnings.push(format!(
+                "the asset's only lights are {} punctual light(s): they light the point-light \
+                 methods (rt-hard, rt-penumbra, pcss, pcf, vsm); the polygon-light methods \
+                 (bspvt, ltc, …) have no light to shade here — add a polygon light in a scene \
+                 file",
+                punctual.len()
+            ));
+            lights
+        } else if lights.is_empty() {
             let ground_id = materials.len() as u32;
             materials.push(Material {
                 name: "ground".into(),

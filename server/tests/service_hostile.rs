@@ -915,3 +915,50 @@ fn a_stalled_upload_times_out_and_frees_its_slot() {
     let json = plate_small_json(8, 4096);
     submit_ok(&agent(), &srv, &[("scene", None, json.as_bytes())], None);
 }
+
+/// A client that closes the connection in the middle of an upload is not a server error: the
+/// request counts as 499 (nginx's "client closed request") in 4xx and in
+/// `bspvt_http_client_aborts_total`, never in 5xx, and the service goes on.
+#[test]
+fn a_client_abort_is_counted_apart_from_server_errors() {
+    use std::io::Write;
+    use std::net::TcpStream;
+
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let srv = start(&tmp.path().join("data"), &[]);
+    let metric = |name: &str| -> u64 {
+        let text = get(&agent(), &srv.url("/metrics")).text();
+        text.lines()
+            .find_map(|l| l.strip_prefix(name)?.trim().parse().ok())
+            .unwrap_or_else(|| panic!("no {name} in {text}"))
+    };
+    let before_5xx = metric("bspvt_http_responses_total{class=\"5xx\"}");
+    let before_aborts = metric("bspvt_http_client_aborts_total");
+    assert_eq!(before_aborts, 0);
+    {
+        let mut s = TcpStream::connect(&srv.addr).unwrap();
+        let head = format!(
+            "POST /v1/scenes HTTP/1.1\r\nHost: x\r\nContent-Type: multipart/form-data; \
+             boundary={BOUNDARY}\r\nContent-Length: 100000\r\n\r\n--{BOUNDARY}\r\n\
+             Content-Disposition: form-data; name=\"mesh\"; filename=\"m.obj\"\r\n\r\nv 0 0 0\n"
+        );
+        s.write_all(head.as_bytes()).unwrap();
+        s.flush().unwrap();
+        std::thread::sleep(Duration::from_millis(200));
+        // Dropped here: the body ends 99.9 KB early.
+    }
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while metric("bspvt_http_client_aborts_total") == 0 {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the abort was never counted"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_eq!(metric("bspvt_http_client_aborts_total"), 1);
+    assert_eq!(
+        metric("bspvt_http_responses_total{class=\"5xx\"}"),
+        before_5xx
+    );
+    assert_eq!(get(&agent(), &srv.url("/healthz")).status, 200);
+}

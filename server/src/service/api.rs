@@ -110,6 +110,14 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
 
 fn multipart_error(e: MultipartError) -> ApiError {
     let status = e.status();
+    // axum answers 500 when the body stream itself fails: the connection closed (or reset)
+    // before the body's end — the client's doing, not the server's.
+    if status.is_server_error() {
+        return ApiError::client_closed(format!(
+            "the upload ended before its body did: {}",
+            e.body_text()
+        ));
+    }
     let code = if status == StatusCode::PAYLOAD_TOO_LARGE {
         "body_too_large"
     } else {

@@ -36,6 +36,10 @@ pub(crate) fn is_disk_full(e: &anyhow::Error) -> bool {
 
 pub(crate) use bspvt_proto::api::ErrorBody;
 
+/// 499, nginx's "client closed request": the client went away before its request's body
+/// ended. Not a server error: counted as 4xx and apart (`bspvt_http_client_aborts_total`).
+pub(crate) const CLIENT_CLOSED_REQUEST: u16 = 499;
+
 /// An error answered to a client.
 #[derive(Debug)]
 pub(crate) struct ApiError {
@@ -87,6 +91,13 @@ impl ApiError {
             retry_after: Some(1),
             ..ApiError::new(StatusCode::TOO_MANY_REQUESTS, "too_many_requests", detail)
         }
+    }
+
+    /// The client closed the connection before its body ended ([`CLIENT_CLOSED_REQUEST`]; the
+    /// answer reaches no one, the metrics count it).
+    pub(crate) fn client_closed(detail: impl Into<String>) -> ApiError {
+        let status = StatusCode::from_u16(CLIENT_CLOSED_REQUEST).unwrap_or(StatusCode::BAD_REQUEST);
+        ApiError::new(status, "client_closed_request", detail)
     }
 
     /// A failure of the service itself (storage, database): logged, answered with 500.

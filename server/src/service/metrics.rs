@@ -17,6 +17,8 @@ pub(crate) struct Metrics {
     started: Instant,
     /// Responses by status class (index 1..=5).
     responses: [AtomicU64; 6],
+    /// Requests whose client went away before its body ended (status 499, counted in 4xx too).
+    client_aborts: AtomicU64,
     pub scenes_submitted: AtomicU64,
     pub scenes_done: AtomicU64,
     pub scenes_failed: AtomicU64,
@@ -69,6 +71,7 @@ impl Default for Metrics {
         Metrics {
             started: Instant::now(),
             responses: Default::default(),
+            client_aborts: AtomicU64::new(0),
             scenes_submitted: AtomicU64::new(0),
             scenes_done: AtomicU64::new(0),
             scenes_failed: AtomicU64::new(0),
@@ -92,6 +95,9 @@ impl Metrics {
     pub(crate) fn response(&self, status: u16) {
         let class = (status / 100).clamp(1, 5) as usize;
         self.responses[class].fetch_add(1, Relaxed);
+        if status == super::error::CLIENT_CLOSED_REQUEST {
+            self.client_aborts.fetch_add(1, Relaxed);
+        }
     }
 
     /// A request answered with `status` after `took` (to its response head: a streamed body
@@ -287,6 +293,11 @@ impl Metrics {
                 self.responses[class].load(Relaxed)
             );
         }
+        let _ = writeln!(
+            o,
+            "# HELP bspvt_http_client_aborts_total Requests whose client closed the connection before its body ended (answered 499, nginx's convention, and counted as 4xx: not a server error).\n# TYPE bspvt_http_client_aborts_total counter\nbspvt_http_client_aborts_total {}",
+            self.client_aborts.load(Relaxed)
+        );
         self.render_latency(&mut o);
         o
     }

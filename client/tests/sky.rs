@@ -248,7 +248,7 @@ fn cornell_sky(map: &Path, size: u32, spp: u32, k: u32) -> [f64; 3] {
     .unwrap();
     eprintln!("{} sky pieces at k = {k}", pieces.len());
     let reference = frame("mc-env", &scene, &r, &env, None, None, Mode::Pixel, spp);
-    let [v, p] = [Mode::Vertex, Mode::Pixel].map(|mode| {
+    let [(v, m), (p, _)] = [Mode::Vertex, Mode::Pixel].map(|mode| {
         let img = frame("bspvt-env", &scene, &r, &env, Some(&sky), None, mode, 0);
         let (e, m) = mean_error(&img, &reference, &r);
         eprintln!(
@@ -256,9 +256,8 @@ fn cornell_sky(map: &Path, size: u32, spp: u32, k: u32) -> [f64; 3] {
             map.display(),
             100.0 * e / m
         );
-        e
+        (e, m)
     });
-    let (_, m) = mean_error(&reference, &reference, &r);
     [v, p, m]
 }
 

@@ -15,7 +15,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::frame::camera::View;
-use crate::frame::gbuffer::{GBuffer, NONE};
+use crate::frame::gbuffer::{GBuffer, NONE, Surface};
 use crate::frame::image::Image;
 use crate::light::Light;
 use crate::ltc::table::LtcTable;
@@ -339,12 +339,12 @@ impl<'a> Renderer<'a> {
         img
     }
 
-    /// Shades every covered pixel with `shade(lobes, p, n, ratio)`, `ratio` the per-vertex
-    /// shadow ratios interpolated at the pixel ([1, 1] without).
-    fn per_pixel(
+    /// Every covered pixel that faces the viewer, with its surface, the unit direction to the
+    /// eye and its material (textures looked up at its UV): `shade` gives its radiance (`None`
+    /// leaves it black). The one per-pixel loop of the LTC, sky and punctual shaders.
+    fn per_surface(
         &self,
-        ratio: Option<&[ShadowRatio]>,
-        shade: impl Fn(&Lobes, DVec3, DVec3, ShadowRatio) -> DVec3 + Sync,
+        shade: impl Fn(&Surface, DVec3, &Material) -> Option<DVec3> + Sync,
     ) -> Image {
         let mesh = &self.scene.mesh;
         let g = &self.gbuffer;
@@ -359,7 +359,23 @@ impl<'a> Renderer<'a> {
             }
             let id = mesh.material_ids.get(s.tri as usize).copied().unwrap_or(0);
             let m = self.material_at(id, mesh.uv_at(s.tri as usize, s.weights));
-            let lobes = Lobes::new(self.table, &m, s.normal, wo);
+            if let Some(c) = shade(&s, wo, &m) {
+                *px = c.as_vec3().to_array();
+            }
+        });
+        img
+    }
+
+    /// Shades every covered pixel with `shade(lobes, p, n, ratio)`, `ratio` the per-vertex
+    /// shadow ratios interpolated at the pixel ([`UNSHADOWED`] without).
+    fn per_pixel(
+        &self,
+        ratio: Option<&[ShadowRatio]>,
+        shade: impl Fn(&Lobes, DVec3, DVec3, ShadowRatio) -> DVec3 + Sync,
+    ) -> Image {
+        let mesh = &self.scene.mesh;
+        self.per_surface(|s, wo, m| {
+            let lobes = Lobes::new(self.table, m, s.normal, wo);
             let r = match ratio {
                 Some(r) => {
                     let idx = mesh.triangles[s.tri as usize];
@@ -374,49 +390,33 @@ impl<'a> Renderer<'a> {
                 }
                 None => UNSHADOWED,
             };
-            *px = shade(&lobes, s.position, s.normal, r).as_vec3().to_array();
-        });
-        img
+            Some(shade(&lobes, s.position, s.normal, r))
+        })
     }
 
     /// A punctual light's unshadowed radiance per pixel (KHR_lights_punctual): the exact BRDF
     /// at the pixel's material (textures looked up) times the light's intensity, its spot and
     /// range falloff, and 1 / d² — a point light is a delta, there is nothing to integrate.
     pub(crate) fn shade_pixels_punctual(&self, light: &bspvt_proto::scene::PunctualLight) -> Image {
-        let mesh = &self.scene.mesh;
-        let g = &self.gbuffer;
         let pos = glam::Vec3::from(light.position).as_dvec3();
         let intensity = glam::Vec3::from(light.intensity).as_dvec3();
-        let mut img = Image::new(g.width, g.height);
-        img.pixels.par_iter_mut().enumerate().for_each(|(i, px)| {
-            let Some(s) = g.surface(mesh, &self.view, i) else {
-                return;
-            };
-            let wo = (self.view.eye - s.position).normalize_or(s.normal);
-            if !crate::shade::sees_viewer(s.normal, wo) {
-                return;
-            }
+        self.per_surface(|s, wo, m| {
             let to = pos - s.position;
             let d2 = to.length_squared();
             if !(d2 > 0.0) || !d2.is_finite() {
-                return;
+                return None;
             }
             let wi = to / d2.sqrt();
             let falloff = f64::from(light.falloff(s.position.as_vec3()));
             if !(falloff > 0.0) {
-                return;
+                return None;
             }
-            let id = mesh.material_ids.get(s.tri as usize).copied().unwrap_or(0);
-            let m = self.material_at(id, mesh.uv_at(s.tri as usize, s.weights));
-            let brdf = crate::frame::brdf::Brdf::from_material(&m);
+            let brdf = crate::frame::brdf::Brdf::from_material(m);
             let frame = crate::frame::shading::ShadingFrame::new(s.normal, wo);
             let f = brdf.eval_cos(frame.to_local(wo), frame.to_local(wi));
             let c = f * intensity * (falloff / d2);
-            if c.is_finite() {
-                *px = c.as_vec3().to_array();
-            }
-        });
-        img
+            c.is_finite().then_some(c)
+        })
     }
 
     /// Per-pixel LTC times interpolated shadow ratios (`None`: unshadowed).

@@ -59,13 +59,10 @@ pub(crate) fn boundary_inward(mesh: &Mesh) -> Vec<Vec3> {
     // sum's order (triangle order) cannot change a bit of the result's direction materially.
     let mut toward = vec![glam::DVec3::ZERO; n];
     for t in &mesh.triangles {
-        let Some(corners) = t
-            .iter()
-            .map(|&v| mesh.positions.get(v as usize).map(|p| p.as_dvec3()))
-            .collect::<Option<Vec<_>>>()
-        else {
+        let [Some(a), Some(b), Some(c)] = t.map(|v| mesh.positions.get(v as usize)) else {
             continue;
         };
+        let corners = [a, b, c].map(|p| p.as_dvec3());
         let centroid = (corners[0] + corners[1] + corners[2]) / 3.0;
         for (&v, &p) in t.iter().zip(&corners) {
             if on_boundary[v as usize] {

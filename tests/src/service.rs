@@ -107,6 +107,35 @@ impl Server {
             .expect("VmRSS")
     }
 
+    /// Peak resident set size in KiB (`VmHWM`: the high-water mark since the start).
+    pub fn hwm_kib(&self) -> u64 {
+        let s = std::fs::read_to_string(format!("/proc/{}/status", self.child.id()))
+            .expect("read /proc status");
+        s.lines()
+            .find_map(|l| l.strip_prefix("VmHWM:"))
+            .and_then(|v| v.split_whitespace().next())
+            .and_then(|v| v.parse().ok())
+            .expect("VmHWM")
+    }
+
+    /// SIGTERM (by `kill`, the test crates deny `unsafe`), then waits up to `limit` for the
+    /// process to exit; returns how long it took, `None` if it was still running.
+    pub fn terminate(&mut self, limit: Duration) -> Option<Duration> {
+        let t0 = Instant::now();
+        let st = Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .status()
+            .expect("run kill");
+        assert!(st.success(), "kill -TERM failed");
+        while t0.elapsed() < limit {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return Some(t0.elapsed());
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        None
+    }
+
     pub fn is_running(&mut self) -> bool {
         matches!(self.child.try_wait(), Ok(None))
     }

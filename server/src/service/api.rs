@@ -10,7 +10,7 @@
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use axum::extract::multipart::{Field, MultipartError, MultipartRejection};
 use axum::extract::{FromRequestParts, Multipart, Path, RawQuery, State};
@@ -30,6 +30,8 @@ use super::error::{ApiError, ApiResult, ErrorBody, gone};
 use super::http::{not_modified, not_modified_response, query_pairs};
 use super::input::{self, Upload};
 use super::jobs::{Live, SubmitError};
+use super::memory::Reservation;
+use super::metrics::Gauges;
 use super::state::{Shared, blocking, check_id, lookup, status_of};
 
 /// Largest `scene` field (scene JSON).
@@ -128,14 +130,65 @@ fn multipart_error(e: MultipartError) -> ApiError {
 
 /// Awaits the next piece of an upload's body, or 408 when the client sends nothing for `idle`
 /// (nginx's `client_body_timeout`: the time between two reads, not for the whole body).
-async fn within<T>(idle: Duration, next: impl std::future::Future<Output = T>) -> ApiResult<T> {
-    tokio::time::timeout(idle, next).await.map_err(|_| {
-        ApiError::new(
-            StatusCode::REQUEST_TIMEOUT,
-            "body_timeout",
-            format!("the upload sent nothing for {} s", idle.as_secs()),
-        )
-    })
+/// How fast an upload must send: a read may wait at most `idle` (nginx's
+/// `client_body_timeout`), and after that grace period the body must average `min_rate`
+/// bytes/s (Apache's `RequestReadTimeout body=… MinRate=…`): each byte received buys
+/// 1/min_rate s more, so a client trickling a byte a minute is cut off, not only a silent one.
+#[derive(Clone, Copy)]
+struct Pace {
+    start: Instant,
+    received: u64,
+    idle: Duration,
+    min_rate: u64,
+}
+
+impl Pace {
+    fn new(idle: Duration, min_rate: u64) -> Pace {
+        Pace {
+            start: Instant::now(),
+            received: 0,
+            idle,
+            min_rate,
+        }
+    }
+
+    /// How long the next read may take: `idle`, or less when the average rate would fall
+    /// below `min_rate` sooner.
+    fn budget(&self) -> Duration {
+        if self.min_rate == 0 {
+            return self.idle;
+        }
+        let earned =
+            self.idle + Duration::from_secs_f64(self.received as f64 / self.min_rate as f64);
+        earned.saturating_sub(self.start.elapsed()).min(self.idle)
+    }
+
+    /// Awaits `next` within [`Pace::budget`]; 408 when it runs out.
+    async fn within<T>(&self, next: impl std::future::Future<Output = T>) -> ApiResult<T> {
+        let budget = self.budget();
+        tokio::time::timeout(budget, next).await.map_err(|_| {
+            let secs = self.start.elapsed().as_secs_f64();
+            if budget < self.idle {
+                ApiError::new(
+                    StatusCode::REQUEST_TIMEOUT,
+                    "body_too_slow",
+                    format!(
+                        "the upload sent {} bytes in {secs:.0} s; after the first {} s an \
+                         upload must average at least {} bytes/s",
+                        self.received,
+                        self.idle.as_secs(),
+                        self.min_rate
+                    ),
+                )
+            } else {
+                ApiError::new(
+                    StatusCode::REQUEST_TIMEOUT,
+                    "body_timeout",
+                    format!("the upload sent nothing for {} s", self.idle.as_secs()),
+                )
+            }
+        })
+    }
 }
 
 /// Reads one form field, refusing it past `max` bytes.
@@ -143,13 +196,11 @@ async fn read_field(
     mut field: Field<'_>,
     max: u64,
     what: &str,
-    idle: Duration,
+    pace: &mut Pace,
 ) -> ApiResult<Vec<u8>> {
     let mut buf = Vec::new();
-    while let Some(chunk) = within(idle, field.chunk())
-        .await?
-        .map_err(multipart_error)?
-    {
+    while let Some(chunk) = pace.within(field.chunk()).await?.map_err(multipart_error)? {
+        pace.received += chunk.len() as u64;
         if (buf.len() + chunk.len()) as u64 > max {
             return Err(ApiError::too_large(
                 "field_too_large",
@@ -161,7 +212,19 @@ async fn read_field(
     Ok(buf)
 }
 
-async fn read_upload(mut mp: Multipart, max_mesh: u64, idle: Duration) -> ApiResult<Upload> {
+/// Reads and discards a form, at most `max` bytes at the upload's pace (errors end it).
+async fn drain(mut mp: Multipart, max: u64, mut pace: Pace) {
+    while let Ok(Ok(Some(mut field))) = pace.within(mp.next_field()).await {
+        while let Ok(Ok(Some(chunk))) = pace.within(field.chunk()).await {
+            pace.received += chunk.len() as u64;
+            if pace.received > max {
+                return;
+            }
+        }
+    }
+}
+
+async fn read_upload(mut mp: Multipart, max_mesh: u64, mut pace: Pace) -> ApiResult<Upload> {
     let mut up = Upload {
         mesh: None,
         scene: None,
@@ -178,7 +241,8 @@ async fn read_upload(mut mp: Multipart, max_mesh: u64, idle: Duration) -> ApiRes
             format!("the form has more than one `{what}` field"),
         )
     };
-    while let Some(field) = within(idle, mp.next_field())
+    while let Some(field) = pace
+        .within(mp.next_field())
         .await?
         .map_err(multipart_error)?
     {
@@ -196,7 +260,7 @@ async fn read_upload(mut mp: Multipart, max_mesh: u64, idle: Duration) -> ApiRes
                     ));
                 }
                 // The compressed size is bounded too: no upload is larger than the mesh limit.
-                let bytes = read_field(field, max_mesh, "mesh", idle).await?;
+                let bytes = read_field(field, max_mesh, "mesh", &mut pace).await?;
                 up.mesh = Some((file_name, bytes));
             }
             "scene" => {
@@ -204,7 +268,7 @@ async fn read_upload(mut mp: Multipart, max_mesh: u64, idle: Duration) -> ApiRes
                     return Err(duplicate("scene"));
                 }
                 up.scene = Some(text(
-                    read_field(field, MAX_SCENE_JSON_BYTES, "scene", idle).await?,
+                    read_field(field, MAX_SCENE_JSON_BYTES, "scene", &mut pace).await?,
                     "scene",
                 )?);
             }
@@ -213,7 +277,7 @@ async fn read_upload(mut mp: Multipart, max_mesh: u64, idle: Duration) -> ApiRes
                     return Err(duplicate("settings"));
                 }
                 up.settings = Some(text(
-                    read_field(field, MAX_SETTINGS_JSON_BYTES, "settings", idle).await?,
+                    read_field(field, MAX_SETTINGS_JSON_BYTES, "settings", &mut pace).await?,
                     "settings",
                 )?);
             }
@@ -309,9 +373,14 @@ impl Drop for KeyClaim {
 
 /// Accepts an upload, or, when its `Idempotency-Key` already created a scene from the same
 /// body, answers with that scene (blocking: runs on the blocking pool).
-fn accept_or_replay(st: &Shared, up: Upload, key: Option<String>) -> ApiResult<Submission> {
+fn accept_or_replay(
+    st: &Shared,
+    up: Upload,
+    key: Option<String>,
+    mem: &mut Reservation,
+) -> ApiResult<Submission> {
     let Some(key) = key else {
-        return accept(st, up, None).map(Submission::Accepted);
+        return accept(st, up, None, mem).map(Submission::Accepted);
     };
     let fp = input::fingerprint(&up);
     let now = now_ms();
@@ -344,17 +413,30 @@ fn accept_or_replay(st: &Shared, up: Upload, key: Option<String>) -> ApiResult<S
             if !st.jobs.has_room() {
                 return Err(queue_full(st.cfg.max_queued_scenes));
             }
-            accept(st, up, Some((&key, &fp))).map(Submission::Accepted)
+            accept(st, up, Some((&key, &fp)), mem).map(Submission::Accepted)
         }
     }
 }
 
 /// Parses, stores and queues an upload (blocking: runs on the blocking pool), recording the
 /// `Idempotency-Key` and request fingerprint with it.
-fn accept(st: &Shared, up: Upload, key: Option<(&str, &str)>) -> ApiResult<Arc<Live>> {
-    let p = input::prepare(up, &st.input_limits())?;
-    let id = new_id()?;
+fn accept(
+    st: &Shared,
+    up: Upload,
+    key: Option<(&str, &str)>,
+    mem: &mut Reservation,
+) -> ApiResult<Arc<Live>> {
+    let p = input::prepare(up, &st.input_limits(), mem)?;
     let scene = &p.scene;
+    // A scene whose bake could never fit is refused now, not failed later.
+    st.memory
+        .check_fits(st.jobs.bake_estimate(
+            scene.mesh.vertex_count() as u64,
+            scene.mesh.triangles.len() as u64,
+            scene.bake.face_res,
+        ))
+        .map_err(|r| ApiError::memory("baking this scene", r))?;
+    let id = new_id()?;
     let vertex_count = scene.mesh.vertex_count() as u32;
     let header = BakeHeader::new(&scene.bake, vertex_count, scene.mesh.content_hash());
     st.store
@@ -530,11 +612,28 @@ pub(crate) async fn submit(
             ),
         )
     })?;
-    let idle = Duration::from_secs(st.cfg.body_read_timeout_s);
-    let up = read_upload(mp, st.cfg.max_mesh_bytes, idle).await?;
+    let pace = Pace::new(
+        Duration::from_secs(st.cfg.body_read_timeout_s),
+        st.cfg.min_upload_rate,
+    );
+    // The body, then the parse, are held against the memory budget (memory.rs).
+    let mut mem = match st
+        .memory
+        .try_reserve(declared.unwrap_or(st.cfg.max_body_bytes))
+    {
+        Ok(r) => r,
+        Err(refusal) => {
+            // Read and drop the body first, as nginx's lingering close does: a client still
+            // sending would otherwise meet a reset instead of the answer.
+            drain(mp, st.cfg.max_body_bytes, pace).await;
+            return Err(ApiError::memory("this upload", refusal));
+        }
+    };
+    let up = read_upload(mp, st.cfg.max_mesh_bytes, pace).await?;
     let st2 = st.clone();
     let outcome =
-        blocking(move || Ok::<_, anyhow::Error>(accept_or_replay(&st2, up, key))).await??;
+        blocking(move || Ok::<_, anyhow::Error>(accept_or_replay(&st2, up, key, &mut mem)))
+            .await??;
     // A new scene is answered as accepted (`queued`); a replay with its state now.
     let (status, live, state) = match outcome {
         Submission::Accepted(live) => (StatusCode::ACCEPTED, live, JobState::Queued),
@@ -1001,7 +1100,11 @@ pub(crate) async fn healthz(State(st): State<Shared>) -> ApiResult<Json<Health>>
     responses((status = 200, description = "Metrics", content_type = "text/plain"))
 )]
 pub(crate) async fn metrics(State(st): State<Shared>) -> Response {
-    let text = st.metrics.render(&st.jobs.gauges());
+    let text = st.metrics.render(&Gauges {
+        memory_budget_bytes: st.memory.total(),
+        memory_reserved_bytes: st.memory.used(),
+        ..st.jobs.gauges()
+    });
     let mut r = text.into_response();
     r.headers_mut().insert(
         header::CONTENT_TYPE,

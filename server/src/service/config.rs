@@ -81,9 +81,21 @@ pub struct ServeArgs {
     /// Seconds an upload may send nothing before it is cut off (408), between two reads.
     #[arg(long, env = "BSPVT_BODY_READ_TIMEOUT_S")]
     pub body_read_timeout_s: Option<u64>,
+    /// Least average rate of an upload, bytes per second, once `body_read_timeout_s` has
+    /// passed (Apache's `RequestReadTimeout … MinRate`); 0 turns the check off.
+    #[arg(long, env = "BSPVT_MIN_UPLOAD_RATE")]
+    pub min_upload_rate: Option<u64>,
     /// Seconds a non-streaming request (including an upload) may take.
     #[arg(long, env = "BSPVT_REQUEST_TIMEOUT_S")]
     pub request_timeout_s: Option<u64>,
+    /// Memory the service may plan for, in MiB: uploads being parsed and scenes being baked
+    /// reserve their estimated peak from it (default: half the machine's memory).
+    #[arg(long, env = "BSPVT_MEMORY_BUDGET_MIB")]
+    pub memory_budget_mib: Option<u64>,
+    /// Seconds SIGTERM/SIGINT waits for open requests and for chunks being baked before the
+    /// process exits (unfinished chunks are baked again at the next start).
+    #[arg(long, env = "BSPVT_SHUTDOWN_TIMEOUT_S")]
+    pub shutdown_timeout_s: Option<u64>,
     /// Most open client connections; further connections are closed at once.
     #[arg(long, env = "BSPVT_MAX_CONNECTIONS")]
     pub max_connections: Option<usize>,
@@ -123,7 +135,10 @@ struct FileConfig {
     max_uploads_per_client: Option<u32>,
     max_streams_per_client: Option<u32>,
     body_read_timeout_s: Option<u64>,
+    min_upload_rate: Option<u64>,
     request_timeout_s: Option<u64>,
+    memory_budget_mib: Option<u64>,
+    shutdown_timeout_s: Option<u64>,
     max_connections: Option<usize>,
     header_read_timeout_s: Option<u64>,
     log_format: Option<String>,
@@ -180,8 +195,14 @@ pub struct Config {
     pub max_streams_per_client: u32,
     /// Seconds an upload may send nothing (between two reads) before 408.
     pub body_read_timeout_s: u64,
+    /// Least average upload rate in bytes/s after `body_read_timeout_s` (0: no check).
+    pub min_upload_rate: u64,
     /// Seconds a non-streaming request may take.
     pub request_timeout_s: u64,
+    /// Memory for uploads being parsed and scenes being baked, in MiB.
+    pub memory_budget_mib: u64,
+    /// Seconds a shutdown waits for requests and chunks in progress.
+    pub shutdown_timeout_s: u64,
     /// Most open client connections.
     pub max_connections: usize,
     /// Seconds a client may take to send a request's headers.
@@ -216,7 +237,10 @@ impl Config {
             max_uploads_per_client: 2,
             max_streams_per_client: 64,
             body_read_timeout_s: 60,
+            min_upload_rate: 500,
             request_timeout_s: 300,
+            memory_budget_mib: super::memory::default_budget_mib(),
+            shutdown_timeout_s: 30,
             max_connections: 4096,
             header_read_timeout_s: 30,
             log_format: LogFormat::Text,
@@ -270,7 +294,10 @@ impl Config {
             max_uploads_per_client,
             max_streams_per_client,
             body_read_timeout_s,
+            min_upload_rate,
             request_timeout_s,
+            memory_budget_mib,
+            shutdown_timeout_s,
             max_connections,
             header_read_timeout_s
         );
@@ -320,6 +347,8 @@ impl Config {
             ),
             ("body_read_timeout_s", self.body_read_timeout_s),
             ("request_timeout_s", self.request_timeout_s),
+            ("memory_budget_mib", self.memory_budget_mib),
+            ("shutdown_timeout_s", self.shutdown_timeout_s),
             ("max_connections", self.max_connections as u64),
             ("header_read_timeout_s", self.header_read_timeout_s),
         ];

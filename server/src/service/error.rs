@@ -100,6 +100,24 @@ impl ApiError {
         ApiError::new(status, "client_closed_request", detail)
     }
 
+    /// The memory budget refused `what`: 413 when it can never fit, 503 with `Retry-After`
+    /// while other uploads and bakes hold the budget.
+    pub(crate) fn memory(what: &str, r: super::memory::Refusal) -> ApiError {
+        match r {
+            super::memory::Refusal::Never { .. } => {
+                ApiError::too_large("over_memory_budget", format!("{what} {r}"))
+            }
+            super::memory::Refusal::Busy { .. } => ApiError {
+                retry_after: Some(5),
+                ..ApiError::new(
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    "memory_busy",
+                    format!("{what} {r}; retry shortly"),
+                )
+            },
+        }
+    }
+
     /// A failure of the service itself (storage, database): logged, answered with 500.
     pub(crate) fn internal(detail: impl Into<String>) -> ApiError {
         let detail = detail.into();

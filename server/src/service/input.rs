@@ -21,6 +21,7 @@ use bspvt_proto::scene::SceneFile;
 use bspvt_proto::{BakeSettings, Scene, SceneError};
 
 use super::error::{ApiError, ApiResult};
+use super::memory::{Reservation, parse_bytes};
 
 /// What a submission may contain.
 pub(crate) struct Upload {
@@ -95,13 +96,15 @@ fn file_name(path: &str) -> &str {
     path.rsplit(['/', '\\']).next().unwrap_or_default()
 }
 
-/// Builds the scene of an upload, applying every limit.
-pub(crate) fn prepare(up: Upload, lim: &InputLimits) -> ApiResult<Prepared> {
+/// Builds the scene of an upload, applying every limit; `mem` (holding the body's bytes)
+/// grows to the decompressed file and the parse's estimated working set before they are
+/// allocated.
+pub(crate) fn prepare(up: Upload, lim: &InputLimits, mem: &mut Reservation) -> ApiResult<Prepared> {
     let upload_bytes = up.mesh.as_ref().map_or(0, |m| m.1.len() as u64)
         + up.scene.as_ref().map_or(0, |s| s.len() as u64)
         + up.settings.as_ref().map_or(0, |s| s.len() as u64);
     let mesh = match up.mesh {
-        Some((name, bytes)) => Some(load_upload(&name, bytes, &lim.mesh)?),
+        Some((name, bytes)) => Some(load_upload(&name, bytes, &lim.mesh, mem)?),
         None => None,
     };
     let (mut scene, mut source) = match (up.scene, mesh) {
@@ -162,7 +165,12 @@ pub(crate) fn prepare(up: Upload, lim: &InputLimits) -> ApiResult<Prepared> {
 
 /// Decompresses (`.zst`) and parses an uploaded mesh; returns its file name (without `.zst`)
 /// and the mesh.
-fn load_upload(name: &str, bytes: Vec<u8>, lim: &Limits) -> ApiResult<(String, Asset)> {
+fn load_upload(
+    name: &str,
+    bytes: Vec<u8>,
+    lim: &Limits,
+    mem: &mut Reservation,
+) -> ApiResult<(String, Asset)> {
     // Only the last path component of a client-supplied file name means anything.
     let name = file_name(name).to_string();
     if name.is_empty() {
@@ -175,24 +183,45 @@ fn load_upload(name: &str, bytes: Vec<u8>, lim: &Limits) -> ApiResult<(String, A
     let (inner, bytes) = match lower.strip_suffix(".zst") {
         Some(_) => {
             let inner = name[..name.len() - 4].to_string();
-            (inner, decompress(&bytes, lim.max_bytes)?)
+            (inner, decompress(&bytes, lim.max_bytes, mem)?)
         }
         None => (name.clone(), bytes),
     };
     let format = Format::from_name(&inner)?;
+    mem.grow_to(mem.bytes() + parse_bytes(bytes.len() as u64))
+        .map_err(|r| ApiError::memory("parsing this mesh", r))?;
     let asset = load_asset_bytes(&bytes, format, lim)?;
     Ok((inner, asset))
 }
 
-/// zstd decompression that stops at `max` bytes of output.
-fn decompress(data: &[u8], max: u64) -> ApiResult<Vec<u8>> {
+/// Bytes of decompressed output reserved at a time.
+const DECOMPRESS_STEP: u64 = 8 << 20;
+
+/// zstd decompression that stops at `max` bytes of output, reserving the output from `mem`
+/// a step ahead of writing it.
+fn decompress(data: &[u8], max: u64, mem: &mut Reservation) -> ApiResult<Vec<u8>> {
     let bad = |e: std::io::Error| {
         ApiError::unprocessable("invalid_compression", format!("bad zstd data: {e}"))
     };
     let mut dec = zstd::stream::read::Decoder::new(data).map_err(bad)?;
     dec.window_log_max(ZSTD_WINDOW_LOG_MAX).map_err(bad)?;
+    let base = mem.bytes();
     let mut out = Vec::new();
-    dec.take(max + 1).read_to_end(&mut out).map_err(bad)?;
+    let mut dec = dec.take(max + 1);
+    loop {
+        // Room for the next step and for the Vec's doubling on growth.
+        let next = (out.len() as u64 + DECOMPRESS_STEP).min(max + 1);
+        mem.grow_to(base + 2 * next)
+            .map_err(|r| ApiError::memory("decompressing this mesh", r))?;
+        let before = out.len();
+        (&mut dec)
+            .take(next - before as u64)
+            .read_to_end(&mut out)
+            .map_err(bad)?;
+        if out.len() == before || out.len() as u64 > max {
+            break;
+        }
+    }
     if out.len() as u64 > max {
         return Err(ApiError::too_large(
             "mesh_too_large",
@@ -315,6 +344,13 @@ pub(crate) use bspvt_proto::api::{decode_scene, encode_scene};
 mod tests {
     use super::*;
 
+    /// A reservation that always grows (its budget is gone): these tests are not about memory.
+    fn unbounded() -> crate::service::memory::Reservation {
+        crate::service::memory::MemoryBudget::new(u64::MAX)
+            .try_reserve(0)
+            .expect("an empty reservation")
+    }
+
     fn limits() -> InputLimits {
         InputLimits {
             mesh: Limits::default(),
@@ -348,6 +384,7 @@ mod tests {
                 settings: None,
             },
             &limits(),
+            &mut unbounded(),
         )
         .unwrap_or_else(|e| panic!("prepare: {e:?}"));
         assert_eq!(up.scene, disk);
@@ -368,6 +405,7 @@ mod tests {
                 settings: None,
             },
             &limits(),
+            &mut unbounded(),
         )
         .unwrap_or_else(|e| panic!("prepare: {e:?}"));
         assert_eq!(up.scene, s);
@@ -392,6 +430,7 @@ mod tests {
                 settings: Some(r#"{"face_res": 8}"#.into()),
             },
             &limits(),
+            &mut unbounded(),
         )
         .unwrap_or_else(|e| panic!("prepare: {e:?}"));
         let mut expect = Scene::from_mesh(
@@ -418,6 +457,7 @@ mod tests {
                     settings: None,
                 },
                 &limits(),
+                &mut unbounded(),
             )
         };
         let ok = up(r#"[{"path": "../../meshes/tri.obj"}, {"path": "../../meshes/tri.obj"}]"#)
@@ -469,6 +509,7 @@ mod tests {
                 settings: None,
             },
             &limits(),
+            &mut unbounded(),
         )
         .err()
         .expect("refused");
@@ -488,6 +529,7 @@ mod tests {
                 settings: None,
             },
             &lim,
+            &mut unbounded(),
         )
         .err()
         .expect("refused");

@@ -31,7 +31,9 @@ use anyhow::{Context, Result};
 use bspvt_proto::encoding::encode_header;
 use tokio::sync::watch;
 
+use super::config::Config;
 use super::db::{ChunkMeta, Db, JobState, SceneRow, now_ms};
+use super::memory::{MemoryBudget, Refusal, Reservation};
 use super::metrics::{Gauges, Metrics};
 use super::store::Store;
 use bspvt_bake::Baker;
@@ -59,6 +61,10 @@ pub(crate) struct Jobs {
     baked_here: Mutex<HashMap<String, u32>>,
     /// Set while the data disk is full: how long a worker waits before it tries again.
     space_wait: Mutex<Option<Duration>>,
+    /// A scene starts baking only once its estimated peak memory is reserved here.
+    memory: Arc<MemoryBudget>,
+    /// Threads of the bake pool.
+    threads: usize,
 }
 
 /// The first wait after the disk filled up; it doubles up to [`SPACE_WAIT_MAX`].
@@ -89,6 +95,8 @@ pub(crate) struct Live {
     tx: watch::Sender<u64>,
     cancel: AtomicBool,
     baker: Mutex<Option<Arc<Baker>>>,
+    /// The bake's memory, held from activation until the scene ends.
+    memory: Mutex<Option<Reservation>>,
 }
 
 struct Progress {
@@ -190,6 +198,7 @@ impl Live {
             tx: watch::channel(0).0,
             cancel: AtomicBool::new(false),
             baker: Mutex::new(None),
+            memory: Mutex::new(None),
         }
     }
 
@@ -265,16 +274,17 @@ impl Jobs {
         db: Arc<Db>,
         store: Arc<Store>,
         metrics: Arc<Metrics>,
-        workers: usize,
-        threads: usize,
-        max_active: usize,
-        max_queued: usize,
+        memory: Arc<MemoryBudget>,
+        cfg: &Config,
     ) -> Result<Arc<Jobs>> {
+        let (workers, threads) = (cfg.workers, cfg.threads);
+        let (max_active, max_queued) = (cfg.max_active_scenes, cfg.max_queued_scenes);
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .thread_name(|i| format!("bake-pool-{i}"))
             .build()
             .context("cannot start the bake thread pool")?;
+        let pool_threads = pool.current_num_threads();
         let jobs = Arc::new(Jobs {
             db,
             store,
@@ -288,6 +298,17 @@ impl Jobs {
             handles: Mutex::new(Vec::new()),
             baked_here: Mutex::new(HashMap::new()),
             space_wait: Mutex::new(None),
+            memory,
+            threads: pool_threads,
+        });
+        // Memory given back may let a waiting scene start.
+        let weak = Arc::downgrade(&jobs);
+        jobs.memory.set_on_release(move || {
+            if let Some(j) = weak.upgrade() {
+                // Taking the lock orders the wake-up after a waiter's check.
+                drop(lock(&j.sched));
+                j.work.notify_all();
+            }
         });
         jobs.collect_garbage()?;
         jobs.reopen_incomplete()?;
@@ -423,6 +444,17 @@ impl Jobs {
         Ok(live)
     }
 
+    /// The estimated peak memory of baking a scene of these counts on this server's pool.
+    pub(crate) fn bake_estimate(&self, vertices: u64, triangles: u64, face_res: u32) -> u64 {
+        super::memory::bake_bytes(vertices, triangles, face_res, self.threads)
+    }
+
+    fn estimate(&self, row: &SceneRow) -> u64 {
+        let face_res = serde_json::from_str::<bspvt_proto::BakeSettings>(&row.settings_json)
+            .map_or(bspvt_proto::BakeSettings::MAX_FACE_RES, |b| b.face_res);
+        self.bake_estimate(u64::from(row.vertex_count), row.triangle_count, face_res)
+    }
+
     /// Whether a submission would be queued now.
     pub(crate) fn has_room(&self) -> bool {
         lock(&self.sched).live.len() < self.max_queued
@@ -493,6 +525,7 @@ impl Jobs {
             // worker sees the cancellation and the baker goes with the scene).
             if let Ok(mut b) = l.baker.try_lock() {
                 *b = None;
+                *lock(&l.memory) = None;
             }
             l.bump();
         }
@@ -683,10 +716,32 @@ impl Jobs {
             if s.stop {
                 return None;
             }
+            let mut refused = Vec::new();
             while s.active.len() < self.max_active {
-                let Some(l) = s.queue.pop_front() else { break };
+                let Some(l) = s.queue.front().cloned() else {
+                    break;
+                };
+                // In submission order: the head waits for memory rather than be overtaken.
+                match self.memory.try_reserve(self.estimate(&l.row)) {
+                    Ok(r) => *lock(&l.memory) = Some(r),
+                    Err(Refusal::Busy { .. }) => break,
+                    Err(never @ Refusal::Never { .. }) => {
+                        s.queue.pop_front();
+                        refused.push((l, never));
+                        continue;
+                    }
+                }
+                s.queue.pop_front();
                 self.activate(&l);
                 s.active.push_back(l);
+            }
+            if !refused.is_empty() {
+                drop(s);
+                for (l, why) in refused {
+                    self.fail(&l, format!("baking this scene {why}"));
+                }
+                s = lock(&self.sched);
+                continue;
             }
             let mut finished = Vec::new();
             let mut found = None;
@@ -751,6 +806,12 @@ impl Jobs {
             Ok(b) => b,
             Err(reason) => return self.fail(live, reason),
         };
+        if live.cancelled() {
+            // Deleted while its BVH was built: the baker and its memory go now.
+            *lock(&live.baker) = None;
+            *lock(&live.memory) = None;
+            return;
+        }
         let t0 = Instant::now();
         let result = std::panic::catch_unwind(AssertUnwindSafe(|| {
             self.pool.install(|| baker.bake_chunk(c))
@@ -889,6 +950,7 @@ impl Jobs {
         s.queue.retain(|l| !Arc::ptr_eq(l, live));
         drop(s);
         *lock(&live.baker) = None;
+        *lock(&live.memory) = None;
         live.bump();
         self.metrics.scenes_done.fetch_add(1, Ordering::Relaxed);
         tracing::info!(scene = %live.id(), "bake done");
@@ -918,6 +980,7 @@ impl Jobs {
         s.queue.retain(|l| !Arc::ptr_eq(l, live));
         drop(s);
         *lock(&live.baker) = None;
+        *lock(&live.memory) = None;
         live.bump();
         self.metrics.scenes_failed.fetch_add(1, Ordering::Relaxed);
         self.metrics.bake_errors.fetch_add(1, Ordering::Relaxed);

@@ -61,6 +61,8 @@ pub(crate) struct Gauges {
     pub chunks_in_flight: u64,
     pub workers: u64,
     pub generation: i64,
+    pub memory_budget_bytes: u64,
+    pub memory_reserved_bytes: u64,
 }
 
 /// Window over which `bspvt_chunks_per_second` is averaged.
@@ -188,6 +190,18 @@ impl Metrics {
             "gauge",
             "Bake workers.",
             g.workers.to_string(),
+        );
+        one(
+            "bspvt_memory_budget_bytes",
+            "gauge",
+            "Memory the service plans for (memory_budget_mib).",
+            g.memory_budget_bytes.to_string(),
+        );
+        one(
+            "bspvt_memory_reserved_bytes",
+            "gauge",
+            "Estimated peak memory reserved now by the idle service, uploads being parsed and scenes being baked.",
+            g.memory_reserved_bytes.to_string(),
         );
         one(
             "bspvt_queue_depth_scenes",

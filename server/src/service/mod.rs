@@ -8,7 +8,8 @@
 //! `db` (SQLite), `input` (uploads → scenes), `metrics`, `error`. Only [`config`] and
 //! the service handles below are public. The modules depend on each other without cycles, top
 //! to bottom: this module (router, server) → `openapi` → the handlers `api`, `stream`, `sse` →
-//! `state`, `http` → `jobs` → `store`, `input`, `metrics` → `db`, `error`, `config`.
+//! `state`, `http` → `jobs` → `store`, `input`, `metrics` → `db`, `error`, `config` →
+//! `memory` (the memory budget).
 //! docs/service.md describes the API, the storage layout and the invariants.
 //!
 //! Guarantees of this module: every request runs in a tracing span (id, method, path) and is
@@ -26,6 +27,7 @@ mod error;
 mod http;
 mod input;
 mod jobs;
+mod memory;
 mod metrics;
 mod openapi;
 mod sse;
@@ -260,20 +262,12 @@ impl Service {
                 .with_context(|| format!("cannot open the store in {}", cfg.data_dir.display()))?,
         );
         let metrics = Arc::new(Metrics::default());
+        let memory = memory::MemoryBudget::new(cfg.memory_budget_mib.saturating_mul(memory::MIB));
         let jobs = {
             let (db, store, metrics, c) = (db.clone(), store.clone(), metrics.clone(), cfg.clone());
-            tokio::task::spawn_blocking(move || {
-                Jobs::start(
-                    db,
-                    store,
-                    metrics,
-                    c.workers,
-                    c.threads,
-                    c.max_active_scenes,
-                    c.max_queued_scenes,
-                )
-            })
-            .await??
+            let memory = memory.clone();
+            tokio::task::spawn_blocking(move || Jobs::start(db, store, metrics, memory, &c))
+                .await??
         };
         let listener = tokio::net::TcpListener::bind(cfg.addr)
             .await
@@ -291,6 +285,7 @@ impl Service {
             store,
             jobs,
             metrics,
+            memory,
             shutdown: stop_rx,
             started: Instant::now(),
             next_request: AtomicU64::new(0),
@@ -304,8 +299,10 @@ impl Service {
         })
     }
 
-    /// Serves until `stop` resolves, then shuts down: streams end, connections get 10 s to
-    /// finish, workers get 30 s to store the chunks they are baking.
+    /// Serves until `stop` resolves, then shuts down within `shutdown_timeout_s`: streams
+    /// end, connections get up to a third of it to finish, workers the rest to store the
+    /// chunks they are baking (a chunk not stored by then is baked again at the next start;
+    /// a worker still building a BVH is abandoned, not waited for).
     pub(crate) async fn run(
         self,
         stop: impl std::future::Future<Output = ()> + Send + 'static,
@@ -317,9 +314,11 @@ impl Service {
             stop_tx,
         } = self;
         let jobs = state.jobs.clone();
+        let shutdown = Duration::from_secs(state.cfg.shutdown_timeout_s);
         let limits = ConnLimits {
             max: state.cfg.max_connections,
             header_timeout: Duration::from_secs(state.cfg.header_read_timeout_s),
+            grace: Duration::from_secs(state.cfg.shutdown_timeout_s) / 3,
         };
         let app = router(state);
         let stopped = stop_tx.subscribe();
@@ -329,8 +328,10 @@ impl Service {
             let _ = stop_tx.send(true);
         });
         tracing::info!(%addr, "serving");
-        accept_loop(listener, app, stopped, limits).await;
-        tokio::task::spawn_blocking(move || jobs.shutdown(Duration::from_secs(30))).await?;
+        let stop_at = accept_loop(listener, app, stopped, limits).await;
+        // The clock starts at the signal: the connections' grace period is part of it.
+        let left = shutdown.saturating_sub(stop_at.elapsed());
+        tokio::task::spawn_blocking(move || jobs.shutdown(left)).await?;
         Ok(())
     }
 }
@@ -338,16 +339,19 @@ impl Service {
 struct ConnLimits {
     max: usize,
     header_timeout: Duration,
+    /// How long open connections may take to finish after a shutdown begins.
+    grace: Duration,
 }
 
 /// Accepts HTTP/1.1 connections (hyper, with a header-read timeout against slow clients and a
 /// cap on open connections) until `stop` turns true, then shuts them down gracefully.
+/// Returns when `stop` was seen.
 async fn accept_loop(
     listener: tokio::net::TcpListener,
     app: Router,
     mut stop: watch::Receiver<bool>,
     limits: ConnLimits,
-) {
+) -> Instant {
     use hyper_util::rt::{TokioIo, TokioTimer};
     let graceful = hyper_util::server::graceful::GracefulShutdown::new();
     let open = Arc::new(Semaphore::new(limits.max));
@@ -385,12 +389,14 @@ async fn accept_loop(
             drop(permit);
         });
     }
+    let stop_at = Instant::now();
     tokio::select! {
         _ = graceful.shutdown() => {}
-        _ = tokio::time::sleep(Duration::from_secs(10)) => {
-            tracing::warn!("connections still open 10 s after shutdown; closing them");
+        _ = tokio::time::sleep(limits.grace) => {
+            tracing::warn!(grace_s = limits.grace.as_secs_f64(), "connections still open after the shutdown grace period; closing them");
         }
     }
+    stop_at
 }
 
 /// SIGINT or SIGTERM.
@@ -443,7 +449,7 @@ pub fn serve_command(args: &ServeArgs) -> Result<()> {
         .thread_name("bspvt-http")
         .build()
         .context("cannot start the async runtime")?;
-    rt.block_on(async move {
+    let result = rt.block_on(async move {
         let svc = Service::open(cfg).await?;
         {
             use std::io::Write;
@@ -452,7 +458,11 @@ pub fn serve_command(args: &ServeArgs) -> Result<()> {
             out.flush()?;
         }
         svc.run(signal()).await
-    })
+    });
+    // Work still running on the blocking pool (an upload being parsed) is abandoned, not
+    // waited for: nothing of it was reported, and the deadline has passed.
+    rt.shutdown_timeout(Duration::from_millis(200));
+    result
 }
 
 /// A service running on its own runtime thread (benchmarks, embedding).

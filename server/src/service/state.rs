@@ -27,6 +27,8 @@ pub(crate) struct AppState {
     pub store: Arc<Store>,
     pub jobs: Arc<Jobs>,
     pub metrics: Arc<Metrics>,
+    /// Memory reserved by uploads being parsed and scenes being baked.
+    pub memory: Arc<super::memory::MemoryBudget>,
     /// Uploads being read or parsed.
     pub uploads: Arc<Semaphore>,
     /// Open tree and event streams.

@@ -290,3 +290,91 @@ fn sigterm_exits_within_the_deadline_and_the_bake_resumes() {
         200
     );
 }
+
+/// Opens `GET path` as an event stream on a new connection and reads until `until` appears
+/// (or 10 s pass); returns the connection and what it read.
+fn open_events(addr: &str, path: &str, until: &str) -> (TcpStream, String) {
+    let mut s = TcpStream::connect(addr).expect("connect");
+    s.set_read_timeout(Some(Duration::from_millis(200)))
+        .expect("timeout");
+    s.write_all(
+        format!("GET {path} HTTP/1.1\r\nHost: x\r\nAccept: text/event-stream\r\n\r\n").as_bytes(),
+    )
+    .expect("write");
+    let text = read_until(&mut s, until, Duration::from_secs(10));
+    (s, text)
+}
+
+fn read_until(s: &mut TcpStream, until: &str, limit: Duration) -> String {
+    let t0 = Instant::now();
+    let mut got = Vec::new();
+    let mut buf = [0u8; 4096];
+    while t0.elapsed() < limit && !String::from_utf8_lossy(&got).contains(until) {
+        match s.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => got.extend_from_slice(&buf[..n]),
+            Err(_) => {}
+        }
+    }
+    String::from_utf8_lossy(&got).into_owned()
+}
+
+/// Every stream slot held by idle event streams: a new stream is refused (429) while they are
+/// younger than `--shed-idle-streams-after-s`; after that, the stream idle the longest is
+/// ended with a `shed` event (and a `retry:` hint) and the new stream gets its slot.
+#[test]
+fn the_idlest_event_stream_is_shed_for_a_new_stream() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let srv = start(
+        &tmp.path().join("data"),
+        &[
+            "--max-streams",
+            "4",
+            "--max-streams-per-client",
+            "8",
+            "--shed-idle-streams-after-s",
+            "2",
+            "--workers",
+            "1",
+        ],
+    );
+    // A slow bake (one big chunk): its event streams stay open and quiet.
+    let obj = grid_obj(200);
+    let settings = r#"{"face_res": 64, "chunk_vertices": 60000}"#;
+    let id = submit_ok(
+        &agent(),
+        &srv,
+        &[
+            ("mesh", Some("grid.obj"), &obj),
+            ("settings", None, settings.as_bytes()),
+        ],
+        None,
+    );
+    let path = format!("/v1/scenes/{id}/events");
+    let mut held: Vec<TcpStream> = (0..4)
+        .map(|_| {
+            let (s, text) = open_events(&srv.addr, &path, "event: status");
+            assert!(text.starts_with("HTTP/1.1 200"), "{text}");
+            s
+        })
+        .collect();
+    // Too young to shed: refused.
+    let (_, text) = open_events(&srv.addr, &path, "\r\n\r\n");
+    assert!(text.starts_with("HTTP/1.1 429"), "{text}");
+    std::thread::sleep(Duration::from_millis(2500));
+    let (_new, text) = open_events(&srv.addr, &path, "event: status");
+    assert!(text.starts_with("HTTP/1.1 200"), "{text}");
+    assert!(text.contains("event: status"), "{text}");
+    // Exactly one of the old streams was told and ended.
+    let mut shed = 0;
+    for s in &mut held {
+        let rest = read_until(s, "event: shed", Duration::from_millis(600));
+        if rest.contains("event: shed") {
+            assert!(rest.contains("retry: 30000"), "{rest}");
+            shed += 1;
+        }
+    }
+    assert_eq!(shed, 1);
+    assert_eq!(metric_of(&srv, "bspvt_streams_shed_total"), 1.0);
+    delete(&agent(), &srv.url(&format!("/v1/scenes/{id}")), None);
+}

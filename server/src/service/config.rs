@@ -78,6 +78,10 @@ pub struct ServeArgs {
     /// Open tree and event streams from one remote address at once.
     #[arg(long, env = "BSPVT_MAX_STREAMS_PER_CLIENT")]
     pub max_streams_per_client: Option<u32>,
+    /// Seconds an event stream must have sent no status before it may be shed, when every
+    /// stream slot is taken, for a new stream.
+    #[arg(long, env = "BSPVT_SHED_IDLE_STREAMS_AFTER_S")]
+    pub shed_idle_streams_after_s: Option<u64>,
     /// Seconds an upload may send nothing before it is cut off (408), between two reads.
     #[arg(long, env = "BSPVT_BODY_READ_TIMEOUT_S")]
     pub body_read_timeout_s: Option<u64>,
@@ -135,6 +139,7 @@ struct FileConfig {
     max_uploads_per_client: Option<u32>,
     max_streams_per_client: Option<u32>,
     body_read_timeout_s: Option<u64>,
+    shed_idle_streams_after_s: Option<u64>,
     min_upload_rate: Option<u64>,
     request_timeout_s: Option<u64>,
     memory_budget_mib: Option<u64>,
@@ -193,6 +198,9 @@ pub struct Config {
     pub max_uploads_per_client: u32,
     /// Open streams from one remote address at once.
     pub max_streams_per_client: u32,
+    /// Seconds an event stream must have sent no status before it may be shed for a new
+    /// stream when every stream slot is taken.
+    pub shed_idle_streams_after_s: u64,
     /// Seconds an upload may send nothing (between two reads) before 408.
     pub body_read_timeout_s: u64,
     /// Least average upload rate in bytes/s after `body_read_timeout_s` (0: no check).
@@ -237,6 +245,7 @@ impl Config {
             max_uploads_per_client: 2,
             max_streams_per_client: 64,
             body_read_timeout_s: 60,
+            shed_idle_streams_after_s: 30,
             min_upload_rate: 500,
             request_timeout_s: 300,
             memory_budget_mib: super::memory::default_budget_mib(),
@@ -294,6 +303,7 @@ impl Config {
             max_uploads_per_client,
             max_streams_per_client,
             body_read_timeout_s,
+            shed_idle_streams_after_s,
             min_upload_rate,
             request_timeout_s,
             memory_budget_mib,

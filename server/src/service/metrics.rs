@@ -31,6 +31,8 @@ pub(crate) struct Metrics {
     pub tree_bytes_served: AtomicU64,
     pub other_bytes_served: AtomicU64,
     pub streams_open: AtomicI64,
+    /// Idle event streams ended to free a slot.
+    pub streams_shed: AtomicU64,
     pub bake_errors: AtomicU64,
     recent_chunks: Mutex<VecDeque<Instant>>,
     /// Request latency by (route template, method, status class).
@@ -86,6 +88,7 @@ impl Default for Metrics {
             tree_bytes_served: AtomicU64::new(0),
             other_bytes_served: AtomicU64::new(0),
             streams_open: AtomicI64::new(0),
+            streams_shed: AtomicU64::new(0),
             bake_errors: AtomicU64::new(0),
             recent_chunks: Mutex::new(VecDeque::new()),
             latency: Mutex::new(BTreeMap::new()),
@@ -279,6 +282,11 @@ impl Metrics {
             o,
             "# HELP bspvt_streams_open Tree and event streams open now.\n# TYPE bspvt_streams_open gauge\nbspvt_streams_open {}",
             self.streams_open.load(Relaxed)
+        );
+        let _ = writeln!(
+            o,
+            "# HELP bspvt_streams_shed_total Idle event streams ended to give their slot to a new stream.\n# TYPE bspvt_streams_shed_total counter\nbspvt_streams_shed_total {}",
+            self.streams_shed.load(Relaxed)
         );
         let _ = writeln!(
             o,

@@ -25,6 +25,7 @@ pub mod config;
 mod db;
 mod error;
 mod http;
+mod idle;
 mod input;
 mod jobs;
 mod memory;
@@ -278,6 +279,7 @@ impl Service {
             uploads: Arc::new(Semaphore::new(cfg.max_uploads)),
             streams: Arc::new(Semaphore::new(cfg.max_streams)),
             clients: Arc::new(clients::ClientSlots::default()),
+            idle_streams: Arc::new(idle::IdleStreams::default()),
             requests: Arc::new(Semaphore::new(cfg.max_concurrent_requests)),
             reencode: Semaphore::new(std::thread::available_parallelism().map_or(2, |n| n.get())),
             cfg,

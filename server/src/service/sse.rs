@@ -3,7 +3,9 @@
 //! Guarantees: the first event is the current status; another follows every change (changes
 //! that happen faster than the client reads are coalesced, never queued without bound); the
 //! last event carries a terminal state (`done`, `failed`, `cancelled`) and then the stream
-//! ends. Keep-alive comments flow every 15 s. Event streams count against `max_streams`.
+//! ends. Keep-alive comments flow every 15 s. Event streams count against `max_streams`;
+//! when those run out, the stream idle the longest may be shed (`idle`): it ends with a
+//! `shed` event that asks the client to reconnect after [`SHED_RETRY_MS`].
 
 use std::convert::Infallible;
 use std::sync::Arc;
@@ -20,8 +22,12 @@ use super::error::{ApiResult, ErrorBody};
 use super::jobs::Live;
 use super::state::{Shared, StreamGuard, lookup, status_of};
 
+/// The reconnection delay a shed stream asks of its client (`retry:`).
+const SHED_RETRY_MS: u64 = 30_000;
+
 struct Events {
     st: Shared,
+    reg: super::idle::Registration,
     live: Arc<Live>,
     rx: watch::Receiver<u64>,
     shutdown: watch::Receiver<bool>,
@@ -38,7 +44,7 @@ struct Events {
     tag = "scenes",
     params(("id" = String, Path, description = "Scene id")),
     responses(
-        (status = 200, description = "text/event-stream of `status` events, each with a SceneStatus JSON; ends after a terminal state", content_type = "text/event-stream"),
+        (status = 200, description = "text/event-stream of `status` events, each with a SceneStatus JSON; ends after a terminal state, or with a `shed` event (and `retry:`) when the server closes an idle stream to free a slot", content_type = "text/event-stream"),
         (status = 404, description = "Unknown id", body = ErrorBody),
         (status = 429, description = "Too many open streams", body = ErrorBody),
     )
@@ -49,8 +55,9 @@ pub(crate) async fn get_events(
     client: Option<Extension<Client>>,
 ) -> ApiResult<Sse<impl Stream<Item = Result<Event, Infallible>>>> {
     let live = lookup(&st, &id).await?;
-    let guard = StreamGuard::open(&st, client.map(|Extension(c)| c))?;
+    let guard = StreamGuard::open(&st, client.map(|Extension(c)| c)).await?;
     let events = Events {
+        reg: st.idle_streams.register(),
         rx: live.subscribe(),
         shutdown: st.shutdown.clone(),
         _guard: guard,
@@ -72,12 +79,21 @@ pub(crate) async fn get_events(
                     }
                 }
                 _ = e.shutdown.changed() => return None,
+                _ = e.reg.shed.notified() => {
+                    e.done = true;
+                    let event = Event::default()
+                        .event("shed")
+                        .retry(Duration::from_millis(SHED_RETRY_MS))
+                        .data("this idle stream was closed to free a slot for another client; reconnect later");
+                    return Some((Ok(event), e));
+                }
             }
         }
         e.first = false;
         e.rx.borrow_and_update();
         let status = status_of(&e.st, &e.live);
         e.done = status.state.is_terminal();
+        e.reg.touch();
         e.seq += 1;
         let event = Event::default()
             .event("status")

@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use anyhow::Result;
 use bspvt_proto::api::{JobState, Links, SceneStatus, Sizes};
@@ -33,6 +33,8 @@ pub(crate) struct AppState {
     pub uploads: Arc<Semaphore>,
     /// Open tree and event streams.
     pub streams: Arc<Semaphore>,
+    /// Event streams, the idlest of which is shed when stream slots run out.
+    pub idle_streams: Arc<super::idle::IdleStreams>,
     /// Uploads and streams held per remote address.
     pub clients: Arc<super::clients::ClientSlots>,
     /// Requests being handled (streams count until their headers are sent).
@@ -149,16 +151,30 @@ pub(crate) struct StreamGuard {
 
 impl StreamGuard {
     /// A stream slot for `client` (at most `max_streams_per_client` per address) and one of
-    /// the server's `max_streams`; 429 when either is taken.
-    pub(crate) fn open(st: &Shared, client: Option<Client>) -> ApiResult<StreamGuard> {
+    /// the server's `max_streams`; when those are all taken, the event stream idle the
+    /// longest (at least `shed_idle_streams_after_s`) is asked to end and its slot is taken;
+    /// 429 when the client holds its most or no stream can be shed.
+    pub(crate) async fn open(st: &Shared, client: Option<Client>) -> ApiResult<StreamGuard> {
         let slot = st
             .clients
             .acquire(client, Kind::Stream, st.cfg.max_streams_per_client)?;
-        let permit = st
-            .streams
-            .clone()
-            .try_acquire_owned()
-            .map_err(|_| ApiError::too_many("too many open streams; retry shortly"))?;
+        let busy = || ApiError::too_many("too many open streams; retry shortly");
+        let permit = match st.streams.clone().try_acquire_owned() {
+            Ok(p) => p,
+            Err(_) => {
+                let min_idle = Duration::from_secs(st.cfg.shed_idle_streams_after_s);
+                if !st.idle_streams.shed_one(min_idle) {
+                    return Err(busy());
+                }
+                st.metrics.streams_shed.fetch_add(1, Ordering::Relaxed);
+                // The shed stream sends its last event and ends, giving its permit back.
+                tokio::time::timeout(Duration::from_secs(2), st.streams.clone().acquire_owned())
+                    .await
+                    .ok()
+                    .and_then(Result::ok)
+                    .ok_or_else(busy)?
+            }
+        };
         st.metrics.streams_open.fetch_add(1, Ordering::Relaxed);
         Ok(StreamGuard {
             st: st.clone(),

@@ -227,7 +227,7 @@ pub(crate) async fn get_trees(
     {
         return Ok(not_modified_response(e));
     }
-    let guard = StreamGuard::open(&st, client.map(|Extension(c)| c))?;
+    let guard = StreamGuard::open(&st, client.map(|Extension(c)| c)).await?;
     let cv = live.row.chunk_vertices;
     let covered = format!(
         "{}..{}",

@@ -266,19 +266,28 @@ impl Mesh {
             .extend(other.material_ids.iter().map(|m| m + material_offset));
     }
 
-    /// Indices of the triangles that are not copies of an earlier one (the same three vertex
-    /// indices, in any order or winding), in mesh order. Copies change no ray's answer — the
-    /// same vertices, so the same skip rule and the same hits — and are left out of the ray
-    /// casters' BVHs: a million copies of one face kept a BVH build busy for hours.
+    /// Indices of the triangles a ray can meet, in mesh order: of each set of coincident
+    /// triangles (the same three positions, bit for bit, in any order or winding, whatever
+    /// their vertex indices) the first, and no triangle whose three corners are one point.
+    /// The others are left out of the ray casters' BVHs: a copy answers every ray as the first
+    /// does — or, when it lies on other vertices (a doubled sheet), would only shadow the first
+    /// one's vertices, which the vertices' own triangles never do —, a point is never hit (its
+    /// edges are zero: the intersection's t is 0 · ∞ = NaN, which no ray accepts), and a
+    /// million copies of one face, or of one point, kept a BVH build busy for hours.
     pub fn unique_triangles(&self) -> Vec<u32> {
-        let mut keyed: Vec<([u32; 3], u32)> = self
+        let bits = |i: u32| {
+            self.positions
+                .get(i as usize)
+                .map_or([u32::MAX; 3], |p| p.to_array().map(f32::to_bits))
+        };
+        let mut keyed: Vec<([[u32; 3]; 3], u32)> = self
             .triangles
             .iter()
             .enumerate()
-            .map(|(i, t)| {
-                let mut k = *t;
+            .filter_map(|(i, t)| {
+                let mut k = t.map(bits);
                 k.sort_unstable();
-                (k, i as u32)
+                (k[0] != k[2]).then_some((k, i as u32))
             })
             .collect();
         keyed.sort_unstable();

@@ -421,3 +421,49 @@ fn a_million_coincident_triangles_bake_in_seconds() {
     let warnings = s["warnings"].to_string();
     assert!(warnings.contains("999999 triangles repeat"), "{s}");
 }
+
+/// The same attack on other vertices: 200,000 copies of one face, each on its own three
+/// vertices, and 200,000 triangles that are one point. Before, the BVH build of such a mesh
+/// never ended (`bspvt-server bake` was still building after 120 s with 300,000 of each kind,
+/// in PLOC's search for the best pair); now the copies and the points are left out of the
+/// BVH with a warning, the first chunk is durable in seconds, and `DELETE` answers at once.
+#[test]
+fn coincident_faces_on_their_own_vertices_and_point_triangles_do_not_stall() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let srv = start(&tmp.path().join("data"), &["--workers", "1"]);
+    let a = agent();
+    let obj = "v 0 0 0\nv 1 0 0\nv 0 0 1\nf -3 -1 -2\n".repeat(200_000)
+        + &"v 0.5 0 0.5\nv 0.5 0 0.5\nv 0.5 0 0.5\nf -3 -2 -1\n".repeat(200_000);
+    let z = zstd::bulk::compress(obj.as_bytes(), 19).unwrap();
+    let t = std::time::Instant::now();
+    let id = submit_ok(
+        &a,
+        &srv,
+        &[
+            ("mesh", Some("coincident.obj.zst"), &z),
+            (
+                "settings",
+                None,
+                br#"{"face_res": 8, "chunk_vertices": 1024}"#,
+            ),
+        ],
+        None,
+    );
+    let s = wait_status(&a, &srv, &id, std::time::Duration::from_secs(60), |s| {
+        s["chunks_done"].as_u64().unwrap_or(0) >= 1
+    });
+    eprintln!(
+        "first chunk durable {:.1} s after the upload",
+        t.elapsed().as_secs_f64()
+    );
+    let warnings = s["warnings"].to_string();
+    assert!(warnings.contains("399999 triangles repeat"), "{s}");
+    let t = std::time::Instant::now();
+    let d = delete(&a, &srv.url(&format!("/v1/scenes/{id}")), None);
+    assert_eq!(d.status, 200);
+    assert!(
+        t.elapsed() < std::time::Duration::from_secs(1),
+        "{:?}",
+        t.elapsed()
+    );
+}

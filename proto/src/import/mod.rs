@@ -262,11 +262,11 @@ fn load(
             ..Asset::default()
         },
     };
-    let copies = asset.mesh.triangles.len() - asset.mesh.unique_triangles().len();
-    if copies > 0 {
+    let left_out = asset.mesh.triangles.len() - asset.mesh.unique_triangles().len();
+    if left_out > 0 {
         asset.warnings.push(format!(
-            "{copies} triangles repeat another triangle's vertices: kept for shading, left out \
-             of the rays' BVH (they change no ray's answer)"
+            "{left_out} triangles repeat another triangle's corners or are a single point: kept \
+             for shading, left out of the rays' BVH (they change no ray's answer)"
         ));
     }
     Ok(asset)

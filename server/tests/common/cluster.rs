@@ -324,6 +324,7 @@ impl Worker {
     fn signal_quiet(&self) {
         let _ = Command::new("kill")
             .args(["-CONT", &self.child.id().to_string()])
+            .stderr(Stdio::null())
             .status();
     }
 }

@@ -11,9 +11,9 @@
 
 #![allow(clippy::unwrap_used)]
 
-mod common;
 #[path = "common/cluster.rs"]
 mod cluster;
+mod common;
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -26,7 +26,8 @@ use common::*;
 /// faces and 8 vertices per chunk the bunny is 57 chunks of about 0.2 s each on one thread:
 /// slow enough to kill things mid-bake, quick enough for CI.
 fn scene(dir: &Path, face_res: u32, chunk_vertices: u32) -> (String, Option<(String, Vec<u8>)>) {
-    let bunny = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/assets/meshes/bunny_res4.ply");
+    let bunny =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/assets/meshes/bunny_res4.ply");
     match std::fs::read(&bunny) {
         Ok(bytes) => {
             std::fs::write(dir.join("bunny_res4.ply"), &bytes).unwrap();
@@ -44,7 +45,12 @@ fn scene(dir: &Path, face_res: u32, chunk_vertices: u32) -> (String, Option<(Str
     }
 }
 
-fn submit_scene(a: &ureq::Agent, srv: &Server, json: &str, mesh: &Option<(String, Vec<u8>)>) -> String {
+fn submit_scene(
+    a: &ureq::Agent,
+    srv: &Server,
+    json: &str,
+    mesh: &Option<(String, Vec<u8>)>,
+) -> String {
     let mut parts: Vec<Part> = vec![("scene", None, json.as_bytes())];
     if let Some((name, bytes)) = mesh {
         parts.push(("mesh", Some(name.as_str()), bytes));
@@ -80,7 +86,14 @@ fn three_workers_bake_like_offline_and_survive_a_killed_worker_and_api() {
     let (json, mesh) = scene(&dir, 256, 8);
     let offline = offline_bake(&dir, &json, "offline");
     let a = agent();
-    let mut api1 = api(&dir, "api1", &pg, &s3, "t1", &["--workers", "0", "--lease-s", "4"]);
+    let mut api1 = api(
+        &dir,
+        "api1",
+        &pg,
+        &s3,
+        "t1",
+        &["--workers", "0", "--lease-s", "4"],
+    );
     let id = submit_scene(&a, &api1, &json, &mesh);
     let total = status(&a, &api1, &id)["chunks_total"].as_u64().unwrap();
     let w = ["--threads", "1", "--chunks", "1", "--lease-s", "4"];
@@ -95,7 +108,10 @@ fn three_workers_bake_like_offline_and_survive_a_killed_worker_and_api() {
         if h["workers"].as_array().is_some_and(|w| w.len() == 3) {
             break;
         }
-        assert!(t0.elapsed() < Duration::from_secs(30), "workers not listed: {h}");
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "workers not listed: {h}"
+        );
         std::thread::sleep(Duration::from_millis(100));
     }
     wait_status(&a, &api1, &id, Duration::from_secs(120), |s| {
@@ -106,11 +122,19 @@ fn three_workers_bake_like_offline_and_survive_a_killed_worker_and_api() {
     let held = pg.number(&format!(
         "SELECT count(*) FROM tasks WHERE scene_id = '{id}' AND worker = 'w1'"
     ));
-    let done_at_kill = pg.number(&format!("SELECT count(*) FROM chunks WHERE scene_id = '{id}'"));
+    let done_at_kill = pg.number(&format!(
+        "SELECT count(*) FROM chunks WHERE scene_id = '{id}'"
+    ));
     eprintln!("w1 killed holding {held} lease(s); {done_at_kill}/{total} chunks durable");
-    assert!((done_at_kill as u64) < total, "the bake finished before the kill");
+    assert!(
+        (done_at_kill as u64) < total,
+        "the bake finished before the kill"
+    );
     let m = get(&a, &api1.url("/metrics")).text();
-    assert!(m.contains("bspvt_worker_chunks_done_total{worker=\"w2\"}"), "{m}");
+    assert!(
+        m.contains("bspvt_worker_chunks_done_total{worker=\"w2\"}"),
+        "{m}"
+    );
 
     // SIGKILL the API instance too, and take over from another one on another port.
     wait_status(&a, &api1, &id, Duration::from_secs(120), |s| {
@@ -118,16 +142,29 @@ fn three_workers_bake_like_offline_and_survive_a_killed_worker_and_api() {
     });
     let port1 = api1.addr.clone();
     api1.kill();
-    let api2 = api(&dir, "api2", &pg, &s3, "t1", &["--workers", "0", "--lease-s", "4"]);
+    let api2 = api(
+        &dir,
+        "api2",
+        &pg,
+        &s3,
+        "t1",
+        &["--workers", "0", "--lease-s", "4"],
+    );
     assert_ne!(api2.addr, port1);
     let s = status(&a, &api2, &id);
     assert!(s["chunks_done"].as_u64() > Some(done_at_kill as u64), "{s}");
     // It streams the trees while the bake runs (the stream waits for the missing chunks).
     let served = get(&a, &api2.url(&format!("/v1/scenes/{id}/trees"))).body;
     let s = wait_done(&a, &api2, &id);
-    assert!(served == offline, "the streamed trees differ from the offline bake");
+    assert!(
+        served == offline,
+        "the streamed trees differ from the offline bake"
+    );
     let again = get(&a, &api2.url(&format!("/v1/scenes/{id}/trees"))).body;
-    assert!(again == offline, "the finished trees differ from the offline bake");
+    assert!(
+        again == offline,
+        "the finished trees differ from the offline bake"
+    );
 
     // Counted: every chunk recorded once; leased more than once only for w1's leases.
     assert_eq!(s["chunks_baked_total"].as_u64(), Some(total), "{s}");
@@ -136,7 +173,10 @@ fn three_workers_bake_like_offline_and_survive_a_killed_worker_and_api() {
     ));
     let twice = leased - total as i64;
     eprintln!("chunks leased {leased} for {total} chunks: {twice} baked twice (w1 held {held})");
-    assert!(twice <= held, "{twice} chunks baked twice, w1 held only {held}");
+    assert!(
+        twice <= held,
+        "{twice} chunks baked twice, w1 held only {held}"
+    );
     let h = get(&a, &api2.url("/healthz")).json();
     let live: Vec<&str> = h["workers"]
         .as_array()
@@ -157,12 +197,21 @@ fn stale_worker_is_fenced_and_a_postgres_restart_loses_nothing() {
     let (json, mesh) = scene(&dir, 256, 8);
     let offline = offline_bake(&dir, &json, "offline");
     let a = agent();
-    let srv = api(&dir, "api", &pg, &s3, "t2", &["--workers", "0", "--lease-s", "2"]);
+    let srv = api(
+        &dir,
+        "api",
+        &pg,
+        &s3,
+        "t2",
+        &["--workers", "0", "--lease-s", "2"],
+    );
     let id = submit_scene(&a, &srv, &json, &mesh);
     let total = status(&a, &srv, &id)["chunks_total"].as_u64().unwrap() as i64;
     // No worker: the scene says why it does not advance.
     let s = wait_status(&a, &srv, &id, Duration::from_secs(30), |s| {
-        s["reason"].as_str().is_some_and(|r| r.contains("no live bake worker"))
+        s["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("no live bake worker"))
     });
     eprintln!("without workers: {}", s["reason"]);
 
@@ -187,15 +236,23 @@ fn stale_worker_is_fenced_and_a_postgres_restart_loses_nothing() {
         "SELECT count(*) FROM chunks WHERE scene_id = '{id}' AND idx = {held_chunk}"
     )) == 0
     {
-        assert!(t0.elapsed() < Duration::from_secs(60), "chunk {held_chunk} never taken over");
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "chunk {held_chunk} never taken over"
+        );
         std::thread::sleep(Duration::from_millis(50));
     }
     let recorded_by = pg.sql(&format!(
         "SELECT worker FROM chunks WHERE scene_id = '{id}' AND idx = {held_chunk}"
     ));
     assert_eq!(recorded_by, "fresh");
-    let done_now = pg.number(&format!("SELECT count(*) FROM chunks WHERE scene_id = '{id}'"));
-    assert!(done_now < total, "the bake finished before the stale worker came back");
+    let done_now = pg.number(&format!(
+        "SELECT count(*) FROM chunks WHERE scene_id = '{id}'"
+    ));
+    assert!(
+        done_now < total,
+        "the bake finished before the stale worker came back"
+    );
     // Back: it finishes its chunk and tries to record it; the database refuses (fenced).
     wa.signal("CONT");
     let t0 = Instant::now();
@@ -207,12 +264,18 @@ fn stale_worker_is_fenced_and_a_postgres_restart_loses_nothing() {
         );
         std::thread::sleep(Duration::from_millis(50));
     }
-    assert_eq!(recorded_by, pg.sql(&format!(
-        "SELECT worker FROM chunks WHERE scene_id = '{id}' AND idx = {held_chunk}"
-    )), "the stale worker overwrote the record");
+    assert_eq!(
+        recorded_by,
+        pg.sql(&format!(
+            "SELECT worker FROM chunks WHERE scene_id = '{id}' AND idx = {held_chunk}"
+        )),
+        "the stale worker overwrote the record"
+    );
 
     // PostgreSQL restarted mid-bake (as after a crash): everyone reconnects.
-    let before = pg.number(&format!("SELECT count(*) FROM chunks WHERE scene_id = '{id}'"));
+    let before = pg.number(&format!(
+        "SELECT count(*) FROM chunks WHERE scene_id = '{id}'"
+    ));
     if before < total {
         pg.restart();
         eprintln!("PostgreSQL restarted with {before}/{total} chunks recorded");
@@ -220,13 +283,18 @@ fn stale_worker_is_fenced_and_a_postgres_restart_loses_nothing() {
     let s = wait_done(&a, &srv, &id);
     assert_eq!(s["chunks_baked_total"].as_i64(), Some(total), "{s}");
     assert_eq!(
-        pg.number(&format!("SELECT count(*) FROM chunks WHERE scene_id = '{id}'")),
+        pg.number(&format!(
+            "SELECT count(*) FROM chunks WHERE scene_id = '{id}'"
+        )),
         total
     );
     let served = get(&a, &srv.url(&format!("/v1/scenes/{id}/trees"))).body;
     assert!(served == offline, "the trees differ from the offline bake");
     let m = get(&a, &srv.url("/metrics")).text();
-    assert!(metric(&m, "bspvt_cluster_chunks_fenced_total") >= 1.0, "{m}");
+    assert!(
+        metric(&m, "bspvt_cluster_chunks_fenced_total") >= 1.0,
+        "{m}"
+    );
     drop(wb);
     drop(wa);
 }
@@ -245,11 +313,23 @@ fn bench_distributed_against_embedded() {
     let Some((pg, s3)) = engines(&dir, "bench_distributed_against_embedded") else {
         return;
     };
-    let var = |k: &str, d: u32| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
-    let (face_res, chunk) = (var("BSPVT_BENCH_FACE_RES", 24), var("BSPVT_BENCH_CHUNK", 32));
+    let var = |k: &str, d: u32| {
+        std::env::var(k)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(d)
+    };
+    let (face_res, chunk) = (
+        var("BSPVT_BENCH_FACE_RES", 24),
+        var("BSPVT_BENCH_CHUNK", 32),
+    );
     let (json, mesh) = match std::env::var("BSPVT_BENCH_MESH") {
         Ok(p) => {
-            let name = Path::new(&p).file_name().unwrap().to_string_lossy().into_owned();
+            let name = Path::new(&p)
+                .file_name()
+                .unwrap()
+                .to_string_lossy()
+                .into_owned();
             let json = format!(
                 r#"{{"meshes": [{{"path": "{name}"}}],
   "bake": {{"face_res": {face_res}, "chunk_vertices": {chunk}}}}}"#
@@ -260,7 +340,9 @@ fn bench_distributed_against_embedded() {
     };
     let a = agent();
     let wall = |srv: &Server, id: &str| {
-        let s = wait_status(&a, srv, id, Duration::from_secs(3600), |s| s["state"] == "done");
+        let s = wait_status(&a, srv, id, Duration::from_secs(3600), |s| {
+            s["state"] == "done"
+        });
         let ms = s["finished_ms"].as_i64().unwrap() - s["created_ms"].as_i64().unwrap();
         (ms as f64 / 1e3, s)
     };
@@ -268,12 +350,22 @@ fn bench_distributed_against_embedded() {
     println!("|---|---:|---:|---:|");
     for n in [1usize, 2, 4] {
         let ns = n.to_string();
-        let emb = start(&dir.join(format!("emb{n}")), &["--workers", &ns, "--threads", &ns]);
+        let emb = start(
+            &dir.join(format!("emb{n}")),
+            &["--workers", &ns, "--threads", &ns],
+        );
         let id = submit_scene(&a, &emb, &json, &mesh);
         let (te, s) = wall(&emb, &id);
         drop(emb);
         let prefix = format!("bench{n}");
-        let srv = api(&dir, &format!("api{n}"), &pg, &s3, &prefix, &["--workers", "0"]);
+        let srv = api(
+            &dir,
+            &format!("api{n}"),
+            &pg,
+            &s3,
+            &prefix,
+            &["--workers", "0"],
+        );
         let workers: Vec<Worker> = (0..n)
             .map(|i| {
                 let w = ["--threads", "1", "--chunks", "1"];

@@ -14,7 +14,11 @@ use super::store::Store;
 
 /// Builds the baker (BVH and all) of scene `row` from its stored scene. The error is public
 /// (a scene's reason).
-pub(crate) fn baker(store: &Store, row: &SceneRow, pool: &rayon::ThreadPool) -> Result<Baker, String> {
+pub(crate) fn baker(
+    store: &Store,
+    row: &SceneRow,
+    pool: &rayon::ThreadPool,
+) -> Result<Baker, String> {
     let bytes = store.read_scene(&row.id)?;
     let scene = super::input::decode_scene(&bytes)?;
     if scene.mesh.content_hash() != row.mesh_hash {
@@ -35,7 +39,8 @@ pub(crate) fn bake(
     c: u32,
     pool: &rayon::ThreadPool,
 ) -> Result<(Vec<u8>, ChunkMeta, u64), String> {
-    let result = std::panic::catch_unwind(AssertUnwindSafe(|| pool.install(|| baker.bake_chunk(c))));
+    let result =
+        std::panic::catch_unwind(AssertUnwindSafe(|| pool.install(|| baker.bake_chunk(c))));
     match result {
         Ok((frame, totals)) => {
             let meta = ChunkMeta {

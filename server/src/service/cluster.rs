@@ -136,7 +136,9 @@ impl Workers {
                         }
                     }
                 }
-                Err(e) => tracing::warn!(worker = %self.id, error = %format!("{e:#}"), "heartbeat failed"),
+                Err(e) => {
+                    tracing::warn!(worker = %self.id, error = %format!("{e:#}"), "heartbeat failed")
+                }
             }
             let t0 = Instant::now();
             while t0.elapsed() < every && !self.stopping() {
@@ -203,10 +205,16 @@ impl Workers {
         match pg.complete(&self.id, lease, meta)? {
             Recorded::Yes => {
                 self.metrics.chunk_baked(vertices, t0.elapsed());
-                tracing::debug!(bytes = meta.bytes, ms = t0.elapsed().as_secs_f64() * 1e3, "chunk durable");
+                tracing::debug!(
+                    bytes = meta.bytes,
+                    ms = t0.elapsed().as_secs_f64() * 1e3,
+                    "chunk durable"
+                );
             }
             Recorded::Fenced => {
-                tracing::warn!("stale lease: another worker baked this chunk; result dropped (fenced)");
+                tracing::warn!(
+                    "stale lease: another worker baked this chunk; result dropped (fenced)"
+                );
             }
             Recorded::SceneGone => {
                 tracing::info!("scene deleted or failed; chunk object removed");

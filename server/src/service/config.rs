@@ -347,7 +347,11 @@ impl Config {
             if !(2..=3600).contains(&self.lease_s) {
                 bail!("lease_s = {} is outside 2..=3600", self.lease_s);
             }
-        } else if self.store.as_deref().is_some_and(|s| s.starts_with("s3://")) {
+        } else if self
+            .store
+            .as_deref()
+            .is_some_and(|s| s.starts_with("s3://"))
+        {
             bail!(
                 "an s3:// store needs a postgres:// database (the embedded SQLite database is \
                  one machine's; give --database postgres://…)"

@@ -44,8 +44,5 @@ where
     F: Future<Output = Result<T>> + Send + 'static,
     T: Send + 'static,
 {
-    runtime()?
-        .spawn(f)
-        .await
-        .context("a network task failed")?
+    runtime()?.spawn(f).await.context("a network task failed")?
 }

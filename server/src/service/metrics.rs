@@ -78,18 +78,35 @@ fn render_cluster(o: &mut String, cl: &super::pg::ClusterGauges) {
         cl.chunks_fenced
     );
     let series: [(&str, &str, &str); 3] = [
-        ("bspvt_worker_chunks_leased", "gauge", "Chunks a worker holds a lease on."),
-        ("bspvt_worker_chunks_done_total", "counter", "Chunks a worker recorded."),
-        ("bspvt_worker_last_seen_seconds", "gauge", "Seconds since a worker's last heartbeat."),
+        (
+            "bspvt_worker_chunks_leased",
+            "gauge",
+            "Chunks a worker holds a lease on.",
+        ),
+        (
+            "bspvt_worker_chunks_done_total",
+            "counter",
+            "Chunks a worker recorded.",
+        ),
+        (
+            "bspvt_worker_last_seen_seconds",
+            "gauge",
+            "Seconds since a worker's last heartbeat.",
+        ),
     ];
     for (name, kind, help) in series {
         let _ = writeln!(o, "# HELP {name} {help}\n# TYPE {name} {kind}");
         for w in &cl.workers {
-            let id: String = w
-                .id
-                .chars()
-                .map(|c| if c == '"' || c == '\\' || c.is_control() { '_' } else { c })
-                .collect();
+            let id: String =
+                w.id.chars()
+                    .map(|c| {
+                        if c == '"' || c == '\\' || c.is_control() {
+                            '_'
+                        } else {
+                            c
+                        }
+                    })
+                    .collect();
             let v = match name {
                 "bspvt_worker_chunks_leased" => w.chunks_leased.to_string(),
                 "bspvt_worker_chunks_done_total" => w.chunks_done.to_string(),

@@ -332,7 +332,10 @@ impl Service {
         })
         .await??;
         let (db, store, jobs, metrics) = jobs_db_store;
-        tracing::info!(workers = cfg.workers, "distributed shape: PostgreSQL and object store");
+        tracing::info!(
+            workers = cfg.workers,
+            "distributed shape: PostgreSQL and object store"
+        );
         Service::listen(cfg, db, store, jobs, metrics).await
     }
 
@@ -535,7 +538,9 @@ pub fn worker_command(args: &WorkerArgs) -> Result<()> {
         anyhow::bail!("--database must be a postgres:// URL (workers share a PostgreSQL database)");
     }
     if !(2..=3600).contains(&args.lease_s) || args.chunks == 0 || args.max_chunk_failures == 0 {
-        anyhow::bail!("--lease-s must be in 2..=3600, --chunks and --max-chunk-failures at least 1");
+        anyhow::bail!(
+            "--lease-s must be in 2..=3600, --chunks and --max-chunk-failures at least 1"
+        );
     }
     let db = Arc::new(Db::Pg(pg::PgDb::open(
         &args.database,

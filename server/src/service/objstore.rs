@@ -216,7 +216,9 @@ impl ObjStore {
             for k in keys {
                 match inner.delete(&k).await {
                     Ok(()) | Err(object_store::Error::NotFound { .. }) => {}
-                    Err(e) => return Err(anyhow::Error::new(e).context(format!("cannot delete {k}"))),
+                    Err(e) => {
+                        return Err(anyhow::Error::new(e).context(format!("cannot delete {k}")));
+                    }
                 }
             }
             Ok(())

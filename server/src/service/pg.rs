@@ -267,11 +267,7 @@ fn scene_row(r: &tokio_postgres::Row) -> Result<SceneRow> {
 
 /// Marks scene `id` done if no task is left (run after a record's commit: of two records
 /// committing together, the later check sees both).
-async fn finish_if_complete(
-    c: &Object,
-    id: &str,
-    now: i64,
-) -> Result<(), tokio_postgres::Error> {
+async fn finish_if_complete(c: &Object, id: &str, now: i64) -> Result<(), tokio_postgres::Error> {
     c.execute(
         &format!(
             "UPDATE scenes SET state = 'done', reason = NULL, finished_ms = $2, xid = {XID}
@@ -322,7 +318,8 @@ impl PgDb {
         let generation = io::block_on(retry(p, "schema", |c| {
             Box::pin(async move {
                 let tx = c.transaction().await?;
-                tx.execute("SELECT pg_advisory_xact_lock(2020)", &[]).await?;
+                tx.execute("SELECT pg_advisory_xact_lock(2020)", &[])
+                    .await?;
                 tx.batch_execute(SCHEMA).await?;
                 let g: i64 = tx
                     .query_one(
@@ -555,12 +552,7 @@ impl PgDb {
         })?;
         Ok(rows
             .iter()
-            .map(|r| {
-                (
-                    r.get::<_, i32>(0) as u32,
-                    chunk_meta(r.get(1), r.get(2)),
-                )
-            })
+            .map(|r| (r.get::<_, i32>(0) as u32, chunk_meta(r.get(1), r.get(2))))
             .collect())
     }
 

@@ -144,14 +144,19 @@ impl Postgres {
 
     /// Stops the server at once (as a crash would: `-m immediate`) and starts it again.
     pub fn restart(&self) {
-        self.pg_ctl(&["-m", "immediate", "stop"]).expect("stop PostgreSQL");
+        self.pg_ctl(&["-m", "immediate", "stop"])
+            .expect("stop PostgreSQL");
         self.pg_ctl(&["start"]).expect("start PostgreSQL again");
     }
 
     /// Runs one SQL query with `psql` and returns its unaligned output.
     pub fn sql(&self, q: &str) -> String {
         let psql = self.bin.join("psql");
-        let psql = if psql.exists() { psql } else { PathBuf::from("psql") };
+        let psql = if psql.exists() {
+            psql
+        } else {
+            PathBuf::from("psql")
+        };
         let out = Command::new(psql)
             .args(["-X", "-A", "-t", "-q", "-d", &self.url, "-c", q])
             .output()
@@ -267,15 +272,32 @@ pub struct Worker {
 }
 
 impl Worker {
-    pub fn start(dir: &Path, id: &str, pg: &Postgres, s3: &S3, prefix: &str, extra: &[&str]) -> Worker {
+    pub fn start(
+        dir: &Path,
+        id: &str,
+        pg: &Postgres,
+        s3: &S3,
+        prefix: &str,
+        extra: &[&str],
+    ) -> Worker {
         let log = dir.join(format!("{id}.log"));
         let mut child = Command::new(BIN)
-            .args(["worker", "--database", &pg.url, "--store", &s3.url(prefix), "--id", id])
+            .args([
+                "worker",
+                "--database",
+                &pg.url,
+                "--store",
+                &s3.url(prefix),
+                "--id",
+                id,
+            ])
             .args(extra)
             .envs(s3.env())
             .env("RUST_LOG", "info,bspvt_server::service::cluster=debug")
             .stdout(Stdio::piped())
-            .stderr(Stdio::from(std::fs::File::create(&log).expect("worker log")))
+            .stderr(Stdio::from(
+                std::fs::File::create(&log).expect("worker log"),
+            ))
             .spawn()
             .expect("start a worker");
         let mut line = String::new();

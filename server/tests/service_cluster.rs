@@ -299,6 +299,42 @@ fn stale_worker_is_fenced_and_a_postgres_restart_loses_nothing() {
     drop(wa);
 }
 
+#[test]
+fn a_chunk_failing_on_three_workers_fails_its_scene_with_the_reason() {
+    let (_t, dir) = tmp();
+    let Some((pg, s3)) = engines(&dir, "a_chunk_failing_on_three_workers…") else {
+        return;
+    };
+    let (json, mesh) = scene(&dir, 16, 64);
+    let a = agent();
+    let srv = api(&dir, "api", &pg, &s3, "t3", &["--workers", "0"]);
+    let id = submit_scene(&a, &srv, &json, &mesh);
+    // Workers pointed at another prefix of the bucket cannot read the stored scene.
+    let w = ["--threads", "1", "--chunks", "1"];
+    let _w: Vec<Worker> = (0..3)
+        .map(|i| Worker::start(&dir, &format!("lost{i}"), &pg, &s3, "elsewhere", &w))
+        .collect();
+    let t0 = Instant::now();
+    let s = loop {
+        let s = status(&a, &srv, &id);
+        if s["state"] == "failed" {
+            break s;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(60), "not failed: {s}");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let reason = s["reason"].as_str().unwrap();
+    assert!(
+        reason.contains("failed on 3 different workers") && reason.contains("stored scene"),
+        "{reason}"
+    );
+    assert_eq!(
+        pg.number("SELECT count(*) FROM tasks"),
+        0,
+        "a failed scene keeps no task"
+    );
+}
+
 /// Benchmark, not run by default:
 /// `cargo test --release -p bspvt-server --test service_cluster -- --ignored --nocapture`.
 /// The same scene baked by the embedded service (`--workers N --threads N`) and by one API

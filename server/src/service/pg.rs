@@ -298,7 +298,7 @@ impl PgDb {
         // for longer than a lease: the server aborts the transaction, and the process's retry
         // finds itself fenced.
         let idle_ms = lease_ttl.as_millis().max(1000);
-        pg.options(&format!("-c idle_in_transaction_session_timeout={idle_ms}"));
+        pg.options(format!("-c idle_in_transaction_session_timeout={idle_ms}"));
         let mgr = Manager::from_config(
             pg,
             NoTls,

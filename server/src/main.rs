@@ -27,6 +27,11 @@ enum Command {
     Bench(BenchArgs),
     /// Run the HTTP baking service (docs/service.md).
     Serve(Box<bspvt_server::service::ServeArgs>),
+    /// Bake chunks for the distributed service: leases them from its PostgreSQL database and
+    /// writes them to its store (docs/service.md, "Scale-out").
+    Worker(Box<bspvt_server::service::WorkerArgs>),
+    /// Measure the distributed shape's coordination cost on a PostgreSQL database.
+    BenchCluster(bspvt_server::service::ClusterBenchArgs),
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -79,6 +84,8 @@ fn main() -> std::process::ExitCode {
         Command::Bench(a) => bench::run(&a),
 
         Command::Serve(a) => bspvt_server::service::serve_command(&a),
+        Command::Worker(a) => bspvt_server::service::worker_command(&a),
+        Command::BenchCluster(a) => bspvt_server::service::cluster_bench_command(&a),
     };
     bspvt_proto::error::exit_code(result)
 }

@@ -29,6 +29,17 @@ impl Server {
     /// `data_dir` listening on `addr` (e.g. `127.0.0.1:0`) with extra flags; waits for its
     /// address.
     pub fn start(bin: &str, data_dir: &Path, addr: &str, extra: &[&str]) -> Server {
+        Server::start_env(bin, data_dir, addr, extra, &[])
+    }
+
+    /// [`Server::start`] with extra environment variables.
+    pub fn start_env(
+        bin: &str,
+        data_dir: &Path,
+        addr: &str,
+        extra: &[&str],
+        env: &[(&str, &str)],
+    ) -> Server {
         let n = std::fs::read_dir(data_dir.parent().unwrap_or(data_dir))
             .map(|d| d.count())
             .unwrap_or(0);
@@ -41,6 +52,7 @@ impl Server {
             .args(["--addr", addr])
             .args(extra)
             .env("RUST_LOG", "info,bspvt_server::service::jobs=debug")
+            .envs(env.iter().copied())
             .stdout(Stdio::piped())
             .stderr(Stdio::from(log_file))
             .spawn()

@@ -1074,6 +1074,9 @@ pub(crate) struct Health {
     pub uptime_s: f64,
     pub scenes_queued: u64,
     pub scenes_baking: u64,
+    /// The distributed shape: the bake workers the database knows (seen in the last hour).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub workers: Option<Vec<super::pg::WorkerInfo>>,
 }
 
 /// Liveness and readiness (the database answers).
@@ -1098,6 +1101,7 @@ pub(crate) async fn healthz(State(st): State<Shared>) -> ApiResult<Json<Health>>
         uptime_s: st.started.elapsed().as_secs_f64(),
         scenes_queued: g.scenes_queued,
         scenes_baking: g.scenes_baking,
+        workers: g.cluster.map(|c| c.workers),
     }))
 }
 

@@ -19,9 +19,22 @@ pub struct ServeArgs {
     /// TOML configuration file (keys as the flags below, snake_case).
     #[arg(long, env = "BSPVT_CONFIG")]
     pub config: Option<PathBuf>,
-    /// Directory holding everything the service stores (database, scenes, chunks).
+    /// Directory holding everything the service stores (database, scenes, chunks): the short
+    /// form of `--database DIR/bspvt.sqlite --store DIR`.
     #[arg(long, env = "BSPVT_DATA_DIR")]
     pub data_dir: Option<PathBuf>,
+    /// The database: a SQLite file (the embedded default), or `postgres://USER@HOST/DB` for
+    /// the distributed shape (any number of API instances and `bspvt-server worker`s).
+    #[arg(long, env = "BSPVT_DATABASE", hide_env_values = true)]
+    pub database: Option<String>,
+    /// Where scenes and chunks are stored: a folder, or `s3://BUCKET/PREFIX` (credentials,
+    /// region and endpoint from AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY, AWS_REGION,
+    /// AWS_ENDPOINT_URL, AWS_ALLOW_HTTP); with a postgres:// database only.
+    #[arg(long, env = "BSPVT_STORE")]
+    pub store: Option<String>,
+    /// Seconds a worker's chunk lease lasts without a heartbeat (distributed shape).
+    #[arg(long, env = "BSPVT_LEASE_S")]
+    pub lease_s: Option<u64>,
     /// Address to listen on (`HOST:PORT`; port 0 picks a free port, printed on stdout).
     #[arg(long, env = "BSPVT_ADDR")]
     pub addr: Option<String>,
@@ -120,6 +133,9 @@ pub struct ServeArgs {
 #[serde(deny_unknown_fields)]
 struct FileConfig {
     data_dir: Option<PathBuf>,
+    database: Option<String>,
+    store: Option<String>,
+    lease_s: Option<u64>,
     addr: Option<String>,
     api_key: Option<String>,
     api_key_file: Option<PathBuf>,
@@ -164,6 +180,14 @@ pub enum LogFormat {
 pub struct Config {
     /// Directory holding everything the service stores (database, scenes, chunks).
     pub data_dir: PathBuf,
+    /// The database, when not `data_dir`'s: a SQLite file or a `postgres://` URL.
+    pub database: Option<String>,
+    /// The store, when not `data_dir`: a folder or `s3://BUCKET/PREFIX`.
+    pub store: Option<String>,
+    /// Seconds a worker's chunk lease lasts without a heartbeat (distributed shape).
+    pub lease_s: u64,
+    /// Different workers a chunk may fail on before its scene fails (distributed shape).
+    pub max_chunk_failures: u32,
     /// Address to listen on (port 0 picks a free port).
     pub addr: SocketAddr,
     /// When set, `Authorization: Bearer KEY` is required for writes.
@@ -227,6 +251,10 @@ impl Config {
     pub fn with_data_dir(data_dir: impl Into<PathBuf>) -> Config {
         Config {
             data_dir: data_dir.into(),
+            database: None,
+            store: None,
+            lease_s: 30,
+            max_chunk_failures: 3,
             addr: SocketAddr::from(([127, 0, 0, 1], 8080)),
             api_key: None,
             workers: 2,
@@ -264,10 +292,22 @@ impl Config {
             Some(p) => read_file(p)?,
             None => FileConfig::default(),
         };
-        let data_dir = args.data_dir.clone().or(file.data_dir).context(
-            "no data directory: give --data-dir, BSPVT_DATA_DIR or data_dir in the config file",
-        )?;
+        let database = args.database.clone().or(file.database);
+        let store = args.store.clone().or(file.store);
+        let data_dir = match args.data_dir.clone().or(file.data_dir) {
+            Some(d) => d,
+            None if database.is_some() && store.is_some() => PathBuf::new(),
+            None => bail!(
+                "no data directory: give --data-dir, BSPVT_DATA_DIR or data_dir in the config \
+                 file (or both --database and --store)"
+            ),
+        };
         let mut c = Config::with_data_dir(data_dir);
+        c.database = database;
+        c.store = store;
+        if let Some(l) = args.lease_s.or(file.lease_s) {
+            c.lease_s = l;
+        }
         if let Some(a) = args.addr.clone().or(file.addr) {
             c.addr = a
                 .parse()
@@ -334,8 +374,32 @@ impl Config {
         if matches!(&self.api_key, Some(k) if k.is_empty()) {
             bail!("the API key is empty");
         }
+        if self.distributed() {
+            if self.store.is_none() {
+                bail!(
+                    "a postgres:// database needs --store (s3://BUCKET/PREFIX, or a folder every \
+                     machine shares)"
+                );
+            }
+            if !(2..=3600).contains(&self.lease_s) {
+                bail!("lease_s = {} is outside 2..=3600", self.lease_s);
+            }
+        } else if self
+            .store
+            .as_deref()
+            .is_some_and(|s| s.starts_with("s3://"))
+        {
+            bail!(
+                "an s3:// store needs a postgres:// database (the embedded SQLite database is \
+                 one machine's; give --database postgres://…)"
+            );
+        }
+        // `--workers 0`: an API-only instance, for the distributed shape only.
+        let min_workers = u64::from(!self.distributed());
+        if (self.workers as u64) < min_workers {
+            bail!("workers must be at least 1 (0 only with a postgres:// database: API only)");
+        }
         let positive = [
-            ("workers", self.workers as u64),
             ("max_body_bytes", self.max_body_bytes),
             ("max_mesh_bytes", self.max_mesh_bytes),
             ("max_mesh_vertices", self.max_mesh_vertices),
@@ -395,10 +459,31 @@ impl Config {
         Ok(())
     }
 
-    /// The database file.
+    /// The embedded database's file.
     pub(crate) fn db_path(&self) -> PathBuf {
-        self.data_dir.join("bspvt.sqlite")
+        match &self.database {
+            Some(d) if !self.distributed() => PathBuf::from(d),
+            _ => self.data_dir.join("bspvt.sqlite"),
+        }
     }
+
+    /// The embedded store's folder.
+    pub(crate) fn store_dir(&self) -> PathBuf {
+        match &self.store {
+            Some(s) if !self.distributed() => PathBuf::from(s),
+            _ => self.data_dir.clone(),
+        }
+    }
+
+    /// Whether the database is PostgreSQL (the distributed shape).
+    pub fn distributed(&self) -> bool {
+        self.database.as_deref().is_some_and(is_postgres_url)
+    }
+}
+
+/// `postgres://…` or `postgresql://…`.
+pub(crate) fn is_postgres_url(s: &str) -> bool {
+    s.starts_with("postgres://") || s.starts_with("postgresql://")
 }
 
 /// A CORS origin as browsers send it: `*`, or `scheme://host[:port]` with `http` or `https`,

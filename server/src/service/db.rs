@@ -139,8 +139,138 @@ const SCENE_COLUMNS: &str = "id, seq, state, reason, created_ms, started_ms, fin
     vertex_count, triangle_count, chunk_count, chunk_vertices, settings, mesh_hash, header, \
     upload_bytes, source, chunks_baked, chunks_corrupt, warnings";
 
-/// The database: one connection behind a mutex (every statement is short).
-pub(crate) struct Db {
+/// The service's database: the embedded SQLite one, or PostgreSQL for the distributed shape
+/// (`pg`). Both keep the same scenes, chunks and idempotency keys with the same guarantees;
+/// chunk leases and workers exist only in PostgreSQL.
+pub(crate) enum Db {
+    Sqlite(Sqlite),
+    Pg(super::pg::PgDb),
+}
+
+/// Calls the same method on whichever database this is.
+macro_rules! dispatch {
+    ($self:ident.$m:ident($($a:expr),*)) => {
+        match $self {
+            Db::Sqlite(d) => d.$m($($a),*),
+            Db::Pg(d) => d.$m($($a),*),
+        }
+    };
+}
+
+impl Db {
+    /// Opens (creating if needed) the embedded database and starts a new generation.
+    pub(crate) fn open(path: &Path) -> Result<Db> {
+        Sqlite::open(path).map(Db::Sqlite)
+    }
+
+    /// This process's generation (bumped by every start against the database).
+    pub(crate) fn generation(&self) -> i64 {
+        match self {
+            Db::Sqlite(d) => d.generation,
+            Db::Pg(d) => d.generation,
+        }
+    }
+
+    /// The PostgreSQL database, in the distributed shape.
+    pub(crate) fn pg(&self) -> Option<&super::pg::PgDb> {
+        match self {
+            Db::Sqlite(_) => None,
+            Db::Pg(d) => Some(d),
+        }
+    }
+
+    pub(crate) fn ping(&self) -> Result<()> {
+        dispatch!(self.ping())
+    }
+
+    #[cfg(test)]
+    pub(crate) fn insert_scene(&self, r: &SceneRow) -> Result<i64> {
+        self.insert_scene_with_key(r, None)
+    }
+
+    pub(crate) fn insert_scene_with_key(
+        &self,
+        r: &SceneRow,
+        key: Option<(&str, &str)>,
+    ) -> Result<i64> {
+        dispatch!(self.insert_scene_with_key(r, key))
+    }
+
+    pub(crate) fn idempotent(
+        &self,
+        key: &str,
+        not_before_ms: i64,
+    ) -> Result<Option<IdempotentRecord>> {
+        dispatch!(self.idempotent(key, not_before_ms))
+    }
+
+    pub(crate) fn list_scenes(
+        &self,
+        before: Option<&str>,
+        states: Option<&[JobState]>,
+        limit: u32,
+    ) -> Result<Option<Vec<SceneSummary>>> {
+        dispatch!(self.list_scenes(before, states, limit))
+    }
+
+    pub(crate) fn scene(&self, id: &str) -> Result<Option<SceneRow>> {
+        dispatch!(self.scene(id))
+    }
+
+    pub(crate) fn unfinished_scenes(&self) -> Result<Vec<SceneRow>> {
+        dispatch!(self.unfinished_scenes())
+    }
+
+    /// Scenes recorded `done` with chunk rows missing (the embedded database only: in
+    /// PostgreSQL the last chunk's transaction is what makes a scene done).
+    pub(crate) fn done_scenes_missing_chunks(&self) -> Result<Vec<(String, u32, u32)>> {
+        match self {
+            Db::Sqlite(d) => d.done_scenes_missing_chunks(),
+            Db::Pg(_) => Ok(Vec::new()),
+        }
+    }
+
+    pub(crate) fn scene_ids_with_data(&self) -> Result<std::collections::HashSet<String>> {
+        match self {
+            Db::Sqlite(d) => d.scene_ids_with_data(),
+            Db::Pg(_) => anyhow::bail!("the distributed store is not swept for leftovers"),
+        }
+    }
+
+    pub(crate) fn chunks(&self, id: &str) -> Result<Vec<(u32, ChunkMeta)>> {
+        dispatch!(self.chunks(id))
+    }
+
+    /// Records a durable chunk baked by this process (the embedded scheduler; workers of the
+    /// distributed shape record theirs with a lease, `PgDb::complete`).
+    pub(crate) fn insert_chunk(&self, id: &str, idx: u32, m: ChunkMeta) -> Result<bool> {
+        match self {
+            Db::Sqlite(d) => d.insert_chunk(id, idx, m),
+            Db::Pg(_) => anyhow::bail!("a chunk is recorded with its lease in PostgreSQL"),
+        }
+    }
+
+    pub(crate) fn drop_chunk(
+        &self,
+        id: &str,
+        idx: u32,
+        seen: ChunkMeta,
+        corrupt: bool,
+    ) -> Result<bool> {
+        dispatch!(self.drop_chunk(id, idx, seen, corrupt))
+    }
+
+    pub(crate) fn set_state(&self, id: &str, state: JobState, reason: Option<&str>) -> Result<()> {
+        dispatch!(self.set_state(id, state, reason))
+    }
+
+    pub(crate) fn cancel(&self, id: &str) -> Result<Option<JobState>> {
+        dispatch!(self.cancel(id))
+    }
+}
+
+/// The embedded database: one connection behind a mutex (every statement is short).
+pub(crate) struct Sqlite {
     conn: Mutex<Connection>,
     /// This process's generation (1 for the first start of a data directory).
     pub generation: i64,
@@ -154,9 +284,9 @@ pub(crate) fn now_ms() -> i64 {
         .unwrap_or(0)
 }
 
-impl Db {
+impl Sqlite {
     /// Opens (creating if needed) the database and starts a new generation.
-    pub(crate) fn open(path: &Path) -> Result<Db> {
+    pub(crate) fn open(path: &Path) -> Result<Sqlite> {
         let conn = Connection::open(path)
             .with_context(|| format!("cannot open database {}", path.display()))?;
         // One process per data directory: the exclusive lock is taken by the first write below
@@ -212,7 +342,7 @@ impl Db {
             conn.query_row("SELECT value FROM meta WHERE key = 'generation'", [], |r| {
                 r.get(0)
             })?;
-        Ok(Db {
+        Ok(Sqlite {
             conn: Mutex::new(conn),
             generation,
         })
@@ -228,12 +358,6 @@ impl Db {
     pub(crate) fn ping(&self) -> Result<()> {
         self.conn().query_row("SELECT 1", [], |_| Ok(()))?;
         Ok(())
-    }
-
-    /// Records a newly accepted scene (state `queued`); returns its submission sequence number.
-    #[cfg(test)]
-    pub(crate) fn insert_scene(&self, r: &SceneRow) -> Result<i64> {
-        self.insert_scene_with_key(r, None)
     }
 
     /// [`Db::insert_scene`], recording in the same transaction the `Idempotency-Key` (and
@@ -407,10 +531,10 @@ impl Db {
             .query_row(
                 &format!("SELECT {SCENE_COLUMNS} FROM scenes WHERE id = ?1"),
                 [id],
-                Db::row,
+                Sqlite::row,
             )
             .optional()?;
-        r.map(Db::finish_row).transpose()
+        r.map(Sqlite::finish_row).transpose()
     }
 
     /// Scenes still to bake, those already baking first, then in submission order.
@@ -423,9 +547,9 @@ impl Db {
                  seq"
         ))?;
         let rows = st
-            .query_map([], Db::row)?
+            .query_map([], Sqlite::row)?
             .collect::<rusqlite::Result<Vec<_>>>()?;
-        rows.into_iter().map(Db::finish_row).collect()
+        rows.into_iter().map(Sqlite::finish_row).collect()
     }
 
     /// Scenes recorded `done` with fewer chunk rows than they have chunks: (id, recorded,
@@ -615,7 +739,7 @@ mod tests {
         let dir = tempfile::tempdir().expect("temp dir");
         let path = dir.path().join("db.sqlite");
         let db = Db::open(&path).expect("open");
-        assert_eq!(db.generation, 1);
+        assert_eq!(db.generation(), 1);
         db.insert_scene(&row("a")).expect("insert");
         let m = ChunkMeta {
             bytes: 10,
@@ -638,7 +762,7 @@ mod tests {
         assert!(!db.insert_chunk("a", 1, m).expect("chunk after cancel"));
         assert_eq!(db.cancel("zzz").expect("cancel unknown"), None);
         drop(db);
-        assert_eq!(Db::open(&path).expect("reopen").generation, 2);
+        assert_eq!(Db::open(&path).expect("reopen").generation(), 2);
     }
 
     /// Pages newest first with the last id as cursor; a state filter; an unknown cursor is

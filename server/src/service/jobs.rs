@@ -19,22 +19,29 @@
 //! - a corrupt stored chunk ([`Jobs::rebake`]) is forgotten and baked again, never served; a
 //!   failing scene (unreadable stored scene, storage error, panic) becomes `failed` with a
 //!   reason and does not stop the workers.
+//!
+//! In the distributed shape (a PostgreSQL database, [`Jobs::start_cluster`]) this process
+//! schedules nothing: `cluster` workers (here with `--workers N`, or other processes) lease
+//! the chunks from the database, and a mirror thread polls the database's changes into the
+//! same [`Live`] scenes, so that status, events and tree streams work unchanged on any API
+//! instance. The mirror also says why a scene stalls (no live worker; its chunks leased by
+//! silent workers).
 
 use std::collections::{BTreeSet, HashMap, VecDeque};
-use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use bspvt_proto::encoding::encode_header;
 use tokio::sync::watch;
 
+use super::cluster::Workers;
 use super::config::Config;
 use super::db::{ChunkMeta, Db, JobState, SceneRow, now_ms};
 use super::memory::{MemoryBudget, Refusal, Reservation};
 use super::metrics::{Gauges, Metrics};
+use super::pg::{ClusterGauges, PgDb};
 use super::store::Store;
 use bspvt_bake::Baker;
 
@@ -65,7 +72,24 @@ pub(crate) struct Jobs {
     memory: Arc<MemoryBudget>,
     /// Threads of the bake pool.
     threads: usize,
+    /// The distributed shape: what the mirror last read, and this process's own workers.
+    cluster: Option<Cluster>,
 }
+
+struct Cluster {
+    gauges: Mutex<ClusterGauges>,
+    workers: Option<Arc<Workers>>,
+}
+
+/// How often the mirror polls the database for changes (status, events and streams of an
+/// API instance lag the workers by about this much).
+const MIRROR_POLL: Duration = Duration::from_millis(100);
+/// How often it reads the queue gauges and the workers, and checks for stalls.
+const MIRROR_GAUGES: Duration = Duration::from_secs(1);
+
+/// Reasons the mirror shows, and clears when they no longer hold.
+const STALLED: &str = "stalled: ";
+const WAITING: &str = "waiting: ";
 
 /// The first wait after the disk filled up; it doubles up to [`SPACE_WAIT_MAX`].
 const SPACE_WAIT_MIN: Duration = Duration::from_millis(500);
@@ -206,6 +230,72 @@ impl Live {
         &self.row.id
     }
 
+    /// A chunk the database recorded (distributed shape: seen by the mirror).
+    fn apply_chunk(&self, c: u32, m: ChunkMeta) {
+        let len = chunk_len(&self.row, c);
+        {
+            let mut p = lock(&self.progress);
+            let Some(slot) = p.chunks.get(c as usize).copied() else {
+                return;
+            };
+            match slot {
+                Some(old) if old == m => return,
+                Some(old) => p.stored_bytes = p.stored_bytes - old.bytes as u64 + m.bytes as u64,
+                None => {
+                    p.chunks_done += 1;
+                    p.vertices_done += len;
+                    p.stored_bytes += m.bytes as u64;
+                    p.vertices_this_process += len;
+                    p.chunks_baked_total += 1;
+                    if p.first_start.is_none() {
+                        p.first_start = Some(Instant::now());
+                    }
+                }
+            }
+            p.chunks[c as usize] = Some(m);
+            p.pending.remove(&c);
+        }
+        self.bump();
+    }
+
+    /// A scene row the database changed (distributed shape).
+    fn apply_row(&self, r: &SceneRow) {
+        {
+            let mut p = lock(&self.progress);
+            p.state = r.state;
+            p.reason = r.reason.clone();
+            p.started_ms = r.started_ms;
+            p.finished_ms = r.finished_ms;
+            p.chunks_baked_total = r.chunks_baked;
+            p.chunks_corrupt = r.chunks_corrupt;
+            if r.state.is_terminal() {
+                p.pending.clear();
+            }
+        }
+        if r.state == JobState::Cancelled {
+            self.cancel.store(true, Ordering::Release);
+        }
+        self.bump();
+    }
+
+    /// Shows (or clears) why a scene of the distributed shape does not advance; a reason the
+    /// database recorded wins.
+    fn set_stall(&self, why: Option<String>) {
+        let mut p = lock(&self.progress);
+        if p.state.is_terminal() {
+            return;
+        }
+        let ours = p
+            .reason
+            .as_deref()
+            .is_none_or(|r| r.starts_with(STALLED) || r.starts_with(WAITING));
+        if ours && p.reason != why {
+            p.reason = why;
+            drop(p);
+            self.bump();
+        }
+    }
+
     /// A receiver that wakes on every change (subscribe before reading, to miss nothing).
     pub(crate) fn subscribe(&self) -> watch::Receiver<u64> {
         self.tx.subscribe()
@@ -300,6 +390,7 @@ impl Jobs {
             space_wait: Mutex::new(None),
             memory,
             threads: pool_threads,
+            cluster: None,
         });
         // Memory given back may let a waiting scene start.
         let weak = Arc::downgrade(&jobs);
@@ -325,6 +416,191 @@ impl Jobs {
         }
         drop(handles);
         Ok(jobs)
+    }
+
+    /// The distributed shape: loads the unfinished scenes (to answer for them), starts the
+    /// mirror of the database's changes and, with `workers > 0`, this process's own bake
+    /// workers (the same as `bspvt-server worker`'s).
+    pub(crate) fn start_cluster(
+        db: Arc<Db>,
+        store: Arc<Store>,
+        metrics: Arc<Metrics>,
+        memory: Arc<MemoryBudget>,
+        cfg: &Config,
+    ) -> Result<Arc<Jobs>> {
+        let (workers, threads) = (cfg.workers, cfg.threads);
+        let (max_queued, max_failures) = (cfg.max_queued_scenes, cfg.max_chunk_failures);
+        let pg = db.pg().context("the distributed shape needs PostgreSQL")?;
+        // Read the position first: nothing committed after it is missed by the mirror.
+        let since = pg.changes(i64::MAX)?.next;
+        let local = if workers > 0 {
+            let id = super::cluster::new_worker_id();
+            let (w, handles) = Workers::start(
+                db.clone(),
+                store.clone(),
+                metrics.clone(),
+                id,
+                workers,
+                threads,
+                max_failures,
+            )?;
+            Some((w, handles))
+        } else {
+            None
+        };
+        let jobs = Arc::new(Jobs {
+            db,
+            store,
+            metrics,
+            pool: rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .thread_name(|i| format!("api-pool-{i}"))
+                .build()
+                .context("cannot start a thread pool")?,
+            sched: Mutex::new(Sched::default()),
+            work: Condvar::new(),
+            workers,
+            max_active: 0,
+            max_queued,
+            handles: Mutex::new(Vec::new()),
+            baked_here: Mutex::new(HashMap::new()),
+            space_wait: Mutex::new(None),
+            memory,
+            threads,
+            cluster: Some(Cluster {
+                gauges: Mutex::new(ClusterGauges::default()),
+                workers: local.as_ref().map(|(w, _)| w.clone()),
+            }),
+        });
+        {
+            let mut s = lock(&jobs.sched);
+            let pg = jobs.pg()?;
+            for row in pg.unfinished_scenes()? {
+                let chunks = pg.chunks(&row.id)?;
+                s.live
+                    .insert(row.id.clone(), Arc::new(Live::new(row, chunks)));
+            }
+        }
+        let mut handles = lock(&jobs.handles);
+        if let Some((_, h)) = local {
+            handles.extend(h);
+        }
+        let j = jobs.clone();
+        handles.push(
+            std::thread::Builder::new()
+                .name("mirror".into())
+                .spawn(move || j.mirror(since))
+                .context("cannot start the database mirror")?,
+        );
+        drop(handles);
+        Ok(jobs)
+    }
+
+    fn pg(&self) -> Result<&PgDb> {
+        self.db.pg().context("not the distributed shape")
+    }
+
+    /// Polls the database's changes into the live scenes until shutdown (distributed shape).
+    fn mirror(&self, mut since: i64) {
+        let Ok(pg) = self.pg() else { return };
+        let mut last_gauges: Option<Instant> = None;
+        loop {
+            if lock(&self.sched).stop {
+                return;
+            }
+            match pg.changes(since) {
+                Ok(ch) => {
+                    since = ch.next;
+                    self.apply_changes(pg, ch);
+                }
+                Err(e) => {
+                    tracing::warn!(error = %format!("{e:#}"), "cannot read the database's changes");
+                }
+            }
+            if last_gauges.is_none_or(|t| t.elapsed() >= MIRROR_GAUGES) {
+                last_gauges = Some(Instant::now());
+                if let Err(e) = pg.sweep_finished() {
+                    tracing::warn!(error = %format!("{e:#}"), "cannot sweep finished scenes");
+                }
+                match pg.gauges() {
+                    Ok(g) => {
+                        self.check_stalls(pg, &g);
+                        if let Some(c) = &self.cluster {
+                            *lock(&c.gauges) = g;
+                        }
+                    }
+                    Err(e) => {
+                        tracing::warn!(error = %format!("{e:#}"), "cannot read the queue gauges");
+                    }
+                }
+            }
+            std::thread::sleep(MIRROR_POLL);
+        }
+    }
+
+    fn apply_changes(&self, pg: &PgDb, ch: super::pg::Changes) {
+        // Chunks first: a scene is `done` only once its chunks are visible.
+        for (id, c, m) in ch.chunks {
+            let live = lock(&self.sched).live.get(&id).cloned();
+            if let Some(l) = live {
+                l.apply_chunk(c, m);
+            }
+        }
+        for row in ch.scenes {
+            let live = lock(&self.sched).live.get(&row.id).cloned();
+            match live {
+                Some(l) => {
+                    l.apply_row(&row);
+                    if row.state.is_terminal() {
+                        lock(&self.sched).live.remove(&row.id);
+                        *lock(&l.baker) = None;
+                    }
+                }
+                None if !row.state.is_terminal() => {
+                    // Submitted through another API instance.
+                    match pg.chunks(&row.id) {
+                        Ok(chunks) => {
+                            let id = row.id.clone();
+                            lock(&self.sched)
+                                .live
+                                .insert(id, Arc::new(Live::new(row, chunks)));
+                        }
+                        Err(e) => {
+                            tracing::warn!(scene = %row.id, error = %format!("{e:#}"), "cannot load a scene's chunks");
+                        }
+                    }
+                }
+                None => {}
+            }
+        }
+    }
+
+    /// Tells each unfinished scene why it does not advance, if it cannot.
+    fn check_stalls(&self, pg: &PgDb, g: &ClusterGauges) {
+        let live: Vec<Arc<Live>> = lock(&self.sched).live.values().cloned().collect();
+        let workers = g.workers.iter().filter(|w| w.live).count();
+        for l in live {
+            if l.state().is_terminal() {
+                continue;
+            }
+            let why = if workers == 0 {
+                Some(format!(
+                    "{STALLED}no live bake worker (none sent a heartbeat in the last {} s); \
+                     start `bspvt-server worker` against this database and store",
+                    pg.lease_ttl.as_secs()
+                ))
+            } else {
+                match pg.held_by_silent(l.id()) {
+                    Ok(Some(s)) => Some(format!(
+                        "{WAITING}its remaining chunks are leased by workers that stopped \
+                         answering; the first lease expires in {s:.0} s"
+                    )),
+                    Ok(None) => None,
+                    Err(_) => continue,
+                }
+            };
+            l.set_stall(why);
+        }
     }
 
     /// Removes scene directories the database does not know (a crash between writing a new
@@ -435,13 +711,20 @@ impl Jobs {
             .map_err(SubmitError::Db)?;
         let live = Arc::new(Live::new(row, Vec::new()));
         s.live.insert(live.row.id.clone(), live.clone());
-        s.queue.push_back(live.clone());
+        if self.cluster.is_none() {
+            s.queue.push_back(live.clone());
+        }
         drop(s);
         self.metrics
             .scenes_submitted
             .fetch_add(1, Ordering::Relaxed);
         self.work.notify_one();
         Ok(live)
+    }
+
+    /// The budget uploads and bakes reserve from.
+    pub(crate) fn memory(&self) -> &Arc<MemoryBudget> {
+        &self.memory
     }
 
     /// The estimated peak memory of baking a scene of these counts on this server's pool.
@@ -478,7 +761,33 @@ impl Jobs {
             JobState::Cancelled => Vec::new(),
             _ => self.db.chunks(id)?,
         };
-        Ok(Some(Arc::new(Live::new(row, chunks))))
+        let live = Arc::new(Live::new(row, chunks));
+        if self.cluster.is_some() && !live.row.state.is_terminal() {
+            return self.adopt(live).map(Some);
+        }
+        Ok(Some(live))
+    }
+
+    /// A scene still baking that another API instance accepted (distributed shape): it joins
+    /// the live scenes, then its row and chunks are read again, so that nothing the mirror
+    /// applied before it joined is missed.
+    fn adopt(&self, live: Arc<Live>) -> Result<Arc<Live>> {
+        let id = live.id().to_string();
+        let live = lock(&self.sched)
+            .live
+            .entry(id.clone())
+            .or_insert(live)
+            .clone();
+        if let Some(row) = self.db.scene(&id)? {
+            for (c, m) in self.db.chunks(&id)? {
+                live.apply_chunk(c, m);
+            }
+            live.apply_row(&row);
+            if row.state.is_terminal() {
+                lock(&self.sched).live.remove(&id);
+            }
+        }
+        Ok(live)
     }
 
     /// Chunks of scene `id` baked by this process.
@@ -558,7 +867,7 @@ impl Jobs {
                 tracing::error!(scene = %id, chunk = c, %why, "stored chunk is corrupt; baking it again");
                 self.metrics.chunks_corrupt.fetch_add(1, Ordering::Relaxed);
                 self.db.drop_chunk(id, c, seen, true)?;
-                self.store.remove_chunk(id, c);
+                self.store.forget_chunk(id, c, seen);
                 p.chunks[c as usize] = None;
                 p.chunks_done -= 1;
                 p.vertices_done -= chunk_len(&live.row, c);
@@ -582,13 +891,15 @@ impl Jobs {
         tracing::error!(scene = %id, chunk = c, %why, "stored chunk is corrupt; baking it again");
         self.metrics.chunks_corrupt.fetch_add(1, Ordering::Relaxed);
         self.db.drop_chunk(id, c, seen, true)?;
-        self.store.remove_chunk(id, c);
+        self.store.forget_chunk(id, c, seen);
         let Some(row) = self.db.scene(id)? else {
             return Ok(None);
         };
         let live = Arc::new(Live::new(row, self.db.chunks(id)?));
         s.live.insert(id.to_string(), live.clone());
-        s.queue.push_front(live.clone());
+        if self.cluster.is_none() {
+            s.queue.push_front(live.clone());
+        }
         drop(s);
         self.work.notify_one();
         Ok(Some(live))
@@ -596,12 +907,25 @@ impl Jobs {
 
     /// Queue and bake gauges.
     pub(crate) fn gauges(&self) -> Gauges {
+        if let Some(c) = &self.cluster {
+            let g = lock(&c.gauges);
+            return Gauges {
+                scenes_queued: g.scenes_queued,
+                scenes_baking: g.scenes_baking,
+                chunks_pending: g.chunks_pending,
+                chunks_in_flight: g.chunks_leased,
+                workers: self.workers as u64,
+                generation: self.db.generation(),
+                cluster: Some(g.clone()),
+                ..Gauges::default()
+            };
+        }
         let s = lock(&self.sched);
         let mut g = Gauges {
             scenes_queued: s.queue.len() as u64,
             scenes_baking: s.active.len() as u64,
             workers: self.workers as u64,
-            generation: self.db.generation,
+            generation: self.db.generation(),
             ..Gauges::default()
         };
         for l in s.live.values() {
@@ -615,6 +939,10 @@ impl Jobs {
     /// Stops handing out work and waits (up to `wait`) for chunks being baked to be stored.
     pub(crate) fn shutdown(&self, wait: Duration) {
         lock(&self.sched).stop = true;
+        let local = self.cluster.as_ref().and_then(|c| c.workers.clone());
+        if let Some(w) = &local {
+            w.stop();
+        }
         self.work.notify_all();
         let deadline = Instant::now() + wait;
         let handles = std::mem::take(&mut *lock(&self.handles));
@@ -625,6 +953,9 @@ impl Jobs {
             if h.is_finished() {
                 let _ = h.join();
             }
+        }
+        if let Some(w) = local {
+            w.finish();
         }
     }
 
@@ -813,31 +1144,15 @@ impl Jobs {
             return;
         }
         let t0 = Instant::now();
-        let result = std::panic::catch_unwind(AssertUnwindSafe(|| {
-            self.pool.install(|| baker.bake_chunk(c))
-        }));
+        let result = super::chunk::bake(&baker, c, &self.pool);
         drop(baker);
-        let (frame, totals) = match result {
+        let (frame, meta, vertices) = match result {
             Ok(r) => r,
-            Err(panic) => {
-                let msg = panic
-                    .downcast_ref::<String>()
-                    .map(String::as_str)
-                    .or_else(|| panic.downcast_ref::<&str>().copied())
-                    .unwrap_or("unknown panic");
-                return self.fail(
-                    live,
-                    format!("internal error: baking chunk {c} panicked: {msg}"),
-                );
-            }
+            Err(reason) => return self.fail(live, reason),
         };
         if live.cancelled() {
             return;
         }
-        let meta = ChunkMeta {
-            bytes: frame.len() as u32,
-            crc32: crc32fast::hash(&frame),
-        };
         if let Err(e) = self.store.write_chunk(live.id(), c, &frame) {
             if live.cancelled() {
                 return;
@@ -870,7 +1185,7 @@ impl Jobs {
         self.space_is_back(live);
         let took = t0.elapsed();
         tracing::debug!(
-            vertices = totals.vertices,
+            vertices,
             bytes = meta.bytes,
             ms = took.as_secs_f64() * 1e3,
             "chunk durable"
@@ -905,17 +1220,7 @@ impl Jobs {
         if let Some(b) = slot.as_ref() {
             return Ok(b.clone());
         }
-        let bytes = self.store.read_scene(live.id())?;
-        let scene = super::input::decode_scene(&bytes)?;
-        if scene.mesh.content_hash() != live.row.mesh_hash {
-            return Err("the stored scene's mesh does not match its recorded hash".into());
-        }
-        let t0 = Instant::now();
-        let baker = Arc::new(self.pool.install(|| Baker::new(&scene)));
-        if encode_header(baker.header()) != live.row.header {
-            return Err("the stored scene does not match its recorded bake header".into());
-        }
-        tracing::debug!(ms = t0.elapsed().as_secs_f64() * 1e3, "baker ready");
+        let baker = Arc::new(super::chunk::baker(&self.store, &live.row, &self.pool)?);
         *slot = Some(baker.clone());
         Ok(baker)
     }

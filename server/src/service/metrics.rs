@@ -65,6 +65,60 @@ pub(crate) struct Gauges {
     pub generation: i64,
     pub memory_budget_bytes: u64,
     pub memory_reserved_bytes: u64,
+    /// The distributed shape: the queue and the workers, from the database.
+    pub cluster: Option<super::pg::ClusterGauges>,
+}
+
+/// The distributed shape's series: the workers the database knows (seen in the last hour).
+fn render_cluster(o: &mut String, cl: &super::pg::ClusterGauges) {
+    let live = cl.workers.iter().filter(|w| w.live).count();
+    let _ = writeln!(
+        o,
+        "# HELP bspvt_cluster_workers_live Bake workers with a heartbeat within the lease time.\n# TYPE bspvt_cluster_workers_live gauge\nbspvt_cluster_workers_live {live}"
+    );
+    let _ = writeln!(
+        o,
+        "# HELP bspvt_cluster_chunks_fenced_total Stale results refused (their lease had been taken over), all workers.\n# TYPE bspvt_cluster_chunks_fenced_total counter\nbspvt_cluster_chunks_fenced_total {}",
+        cl.chunks_fenced
+    );
+    let series: [(&str, &str, &str); 3] = [
+        (
+            "bspvt_worker_chunks_leased",
+            "gauge",
+            "Chunks a worker holds a lease on.",
+        ),
+        (
+            "bspvt_worker_chunks_done_total",
+            "counter",
+            "Chunks a worker recorded.",
+        ),
+        (
+            "bspvt_worker_last_seen_seconds",
+            "gauge",
+            "Seconds since a worker's last heartbeat.",
+        ),
+    ];
+    for (name, kind, help) in series {
+        let _ = writeln!(o, "# HELP {name} {help}\n# TYPE {name} {kind}");
+        for w in &cl.workers {
+            let id: String =
+                w.id.chars()
+                    .map(|c| {
+                        if c == '"' || c == '\\' || c.is_control() {
+                            '_'
+                        } else {
+                            c
+                        }
+                    })
+                    .collect();
+            let v = match name {
+                "bspvt_worker_chunks_leased" => w.chunks_leased.to_string(),
+                "bspvt_worker_chunks_done_total" => w.chunks_done.to_string(),
+                _ => format!("{:.3}", w.last_seen_s),
+            };
+            let _ = writeln!(o, "{name}{{worker=\"{id}\"}} {v}");
+        }
+    }
 }
 
 /// Window over which `bspvt_chunks_per_second` is averaged.
@@ -321,6 +375,9 @@ impl Metrics {
             self.client_aborts.load(Relaxed)
         );
         self.render_latency(&mut o);
+        if let Some(cl) = &g.cluster {
+            render_cluster(&mut o, cl);
+        }
         o
     }
 

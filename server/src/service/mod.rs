@@ -20,17 +20,23 @@
 //! nothing durable: see `jobs`).
 
 mod api;
+mod bench_cluster;
+mod chunk;
 mod clients;
+mod cluster;
 pub mod config;
 mod db;
 mod error;
 mod http;
 mod idle;
 mod input;
+mod io;
 mod jobs;
 mod memory;
 mod metrics;
+mod objstore;
 mod openapi;
+mod pg;
 mod sse;
 mod state;
 mod store;
@@ -52,6 +58,8 @@ use axum::routing::{MethodRouter, get};
 use tokio::sync::{Semaphore, watch};
 use tracing::Instrument;
 
+pub use bench_cluster::{ClusterBenchArgs, cluster_bench_command};
+pub use cluster::WorkerArgs;
 pub use config::{Config, ServeArgs};
 use db::Db;
 use error::ApiError;
@@ -237,12 +245,31 @@ impl Service {
     /// Opens the data directory (database, store), resumes unfinished bakes, starts the
     /// workers and binds the listener.
     pub(crate) async fn open(cfg: Config) -> Result<Service> {
+        if cfg.distributed() {
+            return Service::open_cluster(cfg).await;
+        }
+        let store_dir = cfg.store_dir();
+        if store_dir != cfg.data_dir {
+            // `--database FILE --store DIR`: the embedded shape with its two parts named.
+            let mut c = cfg.clone();
+            c.data_dir = store_dir;
+            if let Some(parent) = cfg.db_path().parent().filter(|p| !p.as_os_str().is_empty()) {
+                std::fs::create_dir_all(parent)
+                    .with_context(|| format!("cannot create {}", parent.display()))?;
+            }
+            return Service::open_embedded(c, cfg.db_path()).await;
+        }
+        let db_path = cfg.db_path();
+        Service::open_embedded(cfg, db_path).await
+    }
+
+    /// The embedded shape: a database file and a store folder (`data_dir`).
+    async fn open_embedded(cfg: Config, db_path: std::path::PathBuf) -> Result<Service> {
         std::fs::create_dir_all(&cfg.data_dir)
             .with_context(|| format!("cannot create data dir {}", cfg.data_dir.display()))?;
         check_writable(&cfg.data_dir)?;
         // Scene folders without their database: start-up garbage collection would take them
         // all for leftovers of crashed uploads. Stop before anything is created or deleted.
-        let db_path = cfg.db_path();
         if !db_path.exists() {
             let n = Store::scene_folders(&cfg.data_dir)
                 .with_context(|| format!("cannot read data dir {}", cfg.data_dir.display()))?;
@@ -266,10 +293,46 @@ impl Service {
         let memory = memory::MemoryBudget::new(cfg.memory_budget_mib.saturating_mul(memory::MIB));
         let jobs = {
             let (db, store, metrics, c) = (db.clone(), store.clone(), metrics.clone(), cfg.clone());
-            let memory = memory.clone();
             tokio::task::spawn_blocking(move || Jobs::start(db, store, metrics, memory, &c))
                 .await??
         };
+        Service::listen(cfg, db, store, jobs, metrics).await
+    }
+
+    /// The distributed shape: PostgreSQL and an object store; no local state.
+    async fn open_cluster(cfg: Config) -> Result<Service> {
+        let url = cfg.database.clone().unwrap_or_default();
+        let store_url = objstore::StoreUrl::parse(cfg.store.as_deref().unwrap_or_default())?;
+        let lease = Duration::from_secs(cfg.lease_s);
+        let c = cfg.clone();
+        let jobs_db_store = tokio::task::spawn_blocking(move || -> Result<_> {
+            let db = Arc::new(Db::Pg(pg::PgDb::open(&url, lease)?));
+            let objects = objstore::ObjStore::open(&store_url)?;
+            objects
+                .check()
+                .with_context(|| format!("cannot use the store {}", objects.url))?;
+            let store = Arc::new(Store::object(objects));
+            let metrics = Arc::new(Metrics::default());
+            let memory = memory::MemoryBudget::new(c.memory_budget_mib.saturating_mul(memory::MIB));
+            let jobs = Jobs::start_cluster(db.clone(), store.clone(), metrics.clone(), memory, &c)?;
+            Ok((db, store, jobs, metrics))
+        })
+        .await??;
+        let (db, store, jobs, metrics) = jobs_db_store;
+        tracing::info!(
+            workers = cfg.workers,
+            "distributed shape: PostgreSQL and object store"
+        );
+        Service::listen(cfg, db, store, jobs, metrics).await
+    }
+
+    async fn listen(
+        cfg: Config,
+        db: Arc<Db>,
+        store: Arc<Store>,
+        jobs: Arc<Jobs>,
+        metrics: Arc<Metrics>,
+    ) -> Result<Service> {
         let listener = tokio::net::TcpListener::bind(cfg.addr)
             .await
             .with_context(|| format!("cannot listen on {}", cfg.addr))?;
@@ -285,9 +348,9 @@ impl Service {
             cfg,
             db,
             store,
-            jobs,
             metrics,
-            memory,
+            memory: jobs.memory().clone(),
+            jobs,
             shutdown: stop_rx,
             started: Instant::now(),
             next_request: AtomicU64::new(0),
@@ -465,6 +528,61 @@ pub fn serve_command(args: &ServeArgs) -> Result<()> {
     // waited for: nothing of it was reported, and the deadline has passed.
     rt.shutdown_timeout(Duration::from_millis(200));
     result
+}
+
+/// `bspvt-server worker`: bakes chunks leased from a PostgreSQL database (the distributed
+/// shape) until SIGINT/SIGTERM, then finishes the chunks it holds and gives back its leases.
+pub fn worker_command(args: &WorkerArgs) -> Result<()> {
+    init_logging(match args.log_format.as_str() {
+        "json" => config::LogFormat::Json,
+        "text" => config::LogFormat::Text,
+        f => anyhow::bail!("log format {f:?} is neither `text` nor `json`"),
+    });
+    if !config::is_postgres_url(&args.database) {
+        anyhow::bail!("--database must be a postgres:// URL (workers share a PostgreSQL database)");
+    }
+    if !(2..=3600).contains(&args.lease_s) || args.chunks == 0 || args.max_chunk_failures == 0 {
+        anyhow::bail!(
+            "--lease-s must be in 2..=3600, --chunks and --max-chunk-failures at least 1"
+        );
+    }
+    let db = Arc::new(Db::Pg(pg::PgDb::open(
+        &args.database,
+        Duration::from_secs(args.lease_s),
+    )?));
+    let objects = objstore::ObjStore::open(&objstore::StoreUrl::parse(&args.store)?)?;
+    objects
+        .check()
+        .with_context(|| format!("cannot use the store {}", objects.url))?;
+    let store = Arc::new(Store::object(objects));
+    let id = args.id.clone().unwrap_or_else(cluster::new_worker_id);
+    let (workers, handles) = cluster::Workers::start(
+        db,
+        store,
+        Arc::new(Metrics::default()),
+        id.clone(),
+        args.chunks,
+        args.threads,
+        args.max_chunk_failures,
+    )?;
+    {
+        use std::io::Write;
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "worker {id} started")?;
+        out.flush()?;
+    }
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the signal handler")?;
+    rt.block_on(signal());
+    tracing::info!(worker = %id, "stopping: finishing the chunks held");
+    workers.stop();
+    for h in handles {
+        let _ = h.join();
+    }
+    workers.finish();
+    Ok(())
 }
 
 /// A service running on its own runtime thread (benchmarks, embedding).

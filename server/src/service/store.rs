@@ -8,6 +8,10 @@
 //! DIR/reserve                      ballast: 4 MiB given back when the disk fills up
 //! ```
 //!
+//! In the distributed shape (`--database postgres://…`) the same operations go to an object
+//! store instead (`objstore`: S3 or a shared folder); the ballast and free-space checks are
+//! the local disk's and do nothing there.
+//!
 //! Guarantees:
 //! - **durable before visible**: a file is written to a temporary name, synced, renamed into
 //!   place and its directory synced; only then does the caller record it in the database;
@@ -28,10 +32,12 @@ use std::path::{Path, PathBuf};
 use bspvt_proto::encoding::peek_chunk;
 
 use super::db::ChunkMeta;
+use super::objstore::ObjStore;
 
-/// The store rooted at the data directory.
+/// The store rooted at the data directory, or an object store.
 pub(crate) struct Store {
     root: PathBuf,
+    object: Option<ObjStore>,
 }
 
 /// Size of the ballast file kept in the data directory.
@@ -62,10 +68,19 @@ impl Store {
         fs::create_dir_all(root.join("trash"))?;
         let s = Store {
             root: root.to_path_buf(),
+            object: None,
         };
         s.empty_trash();
         s.restore_ballast();
         Ok(s)
+    }
+
+    /// A store of objects (the distributed shape).
+    pub(crate) fn object(o: ObjStore) -> Store {
+        Store {
+            root: PathBuf::new(),
+            object: Some(o),
+        }
     }
 
     fn ballast(&self) -> PathBuf {
@@ -74,6 +89,9 @@ impl Store {
 
     /// Bytes available to this process on the data disk (`None` where it cannot be read).
     pub(crate) fn free_bytes(&self) -> Option<u64> {
+        if self.object.is_some() {
+            return None;
+        }
         #[cfg(unix)]
         {
             let s = rustix::fs::statvfs(&self.root).ok()?;
@@ -88,6 +106,9 @@ impl Store {
     /// After the disk filled up: whether it has room again — for the ballast and as much again
     /// (so that the bake does not stop and start on the edge) — with the ballast put back.
     pub(crate) fn room_again(&self) -> bool {
+        if self.object.is_some() {
+            return true;
+        }
         let margin = 2 * BALLAST_BYTES as u64;
         let extra = if self.ballast().exists() {
             0
@@ -102,12 +123,18 @@ impl Store {
 
     /// Gives the ballast's space back (the disk is full). True if there was one.
     pub(crate) fn release_ballast(&self) -> bool {
+        if self.object.is_some() {
+            return false;
+        }
         fs::remove_file(self.ballast()).is_ok()
     }
 
     /// Writes the ballast if it is missing. False when the disk has no room for it (it is
     /// then left out): the bake waits rather than eat the database's reserve.
     pub(crate) fn restore_ballast(&self) -> bool {
+        if self.object.is_some() {
+            return true;
+        }
         let path = self.ballast();
         if path.exists() {
             return true;
@@ -134,6 +161,11 @@ impl Store {
     /// Writes a new scene's directory (its `scene.bin` and an empty `chunks/`) atomically:
     /// built under a temporary name, synced, then renamed into place.
     pub(crate) fn create_scene(&self, id: &str, scene_bin: &[u8]) -> io::Result<()> {
+        if let Some(o) = &self.object {
+            return o
+                .put(o.scene_object(id), frame_scene(scene_bin))
+                .map_err(io::Error::other);
+        }
         let scenes = self.root.join("scenes");
         let tmp = scenes.join(format!("{id}.tmp"));
         if tmp.exists() {
@@ -150,12 +182,7 @@ impl Store {
 
     fn write_scene_dir(&self, tmp: &Path, scene_bin: &[u8]) -> io::Result<()> {
         fs::create_dir_all(tmp.join("chunks"))?;
-        let mut body = Vec::with_capacity(scene_bin.len() + 12);
-        body.extend_from_slice(SCENE_MAGIC);
-        body.extend_from_slice(&(scene_bin.len() as u64).to_le_bytes());
-        body.extend_from_slice(scene_bin);
-        body.extend_from_slice(&crc32fast::hash(scene_bin).to_le_bytes());
-        write_synced(&tmp.join("scene.bin"), &body)?;
+        write_synced(&tmp.join("scene.bin"), &frame_scene(scene_bin))?;
         sync_dir(&tmp.join("chunks"))?;
         sync_dir(tmp)
     }
@@ -163,36 +190,43 @@ impl Store {
     /// Reads a scene's `scene.bin` payload, checking its frame and CRC. The error is public
     /// (a scene's `reason`): it names no server path; the log has the path.
     pub(crate) fn read_scene(&self, id: &str) -> Result<Vec<u8>, String> {
+        if let Some(o) = &self.object {
+            let data = match o.get(o.scene_object(id)) {
+                Ok(Some(d)) => d,
+                Ok(None) => return Err("the stored scene is missing".into()),
+                Err(e) => {
+                    tracing::error!(scene = %id, error = %format!("{e:#}"), "cannot read the stored scene");
+                    return Err("cannot read the stored scene from the object store".into());
+                }
+            };
+            return unframe_scene(&data).map(<[u8]>::to_vec).map_err(|what| {
+                tracing::error!(scene = %id, what, "the stored scene is corrupt");
+                format!("the stored scene is corrupt: {what}")
+            });
+        }
         let path = self.scene_dir(id).join("scene.bin");
         let data = fs::read(&path).map_err(|e| {
             tracing::error!(scene = %id, path = %path.display(), error = %e, "cannot read the stored scene");
             format!("cannot read the stored scene: {}", e.kind())
         })?;
-        let bad = |what: &str| {
+        unframe_scene(&data).map(<[u8]>::to_vec).map_err(|what| {
             tracing::error!(scene = %id, path = %path.display(), what, "the stored scene is corrupt");
             format!("the stored scene is corrupt: {what}")
-        };
-        if data.len() < 16 || &data[..4] != SCENE_MAGIC {
-            return Err(bad("bad header"));
-        }
-        let mut len = [0u8; 8];
-        len.copy_from_slice(&data[4..12]);
-        let len = u64::from_le_bytes(len);
-        if len != (data.len() - 16) as u64 {
-            return Err(bad("length mismatch"));
-        }
-        let body = &data[12..data.len() - 4];
-        let mut crc = [0u8; 4];
-        crc.copy_from_slice(&data[data.len() - 4..]);
-        if u32::from_le_bytes(crc) != crc32fast::hash(body) {
-            return Err(bad("checksum mismatch"));
-        }
-        Ok(body.to_vec())
+        })
     }
 
     /// Makes chunk `chunk`'s frame durable at its final path (temp file, fsync, rename, fsync
     /// of the directory). Fails, writing nothing, when the scene directory is gone (deleted).
     pub(crate) fn write_chunk(&self, id: &str, chunk: u32, frame: &[u8]) -> io::Result<()> {
+        if let Some(o) = &self.object {
+            let meta = ChunkMeta {
+                bytes: frame.len() as u32,
+                crc32: crc32fast::hash(frame),
+            };
+            return o
+                .put_chunk(id, chunk, meta, frame.to_vec())
+                .map_err(io::Error::other);
+        }
         let path = self.chunk_path(id, chunk);
         let dir = path
             .parent()
@@ -214,6 +248,16 @@ impl Store {
         meta: ChunkMeta,
         first_vertex: u32,
     ) -> ChunkRead {
+        if let Some(o) = &self.object {
+            return match o.get_async(o.chunk_key(id, chunk, meta)).await {
+                Ok(Some(data)) => match verify_chunk(&data, meta, first_vertex) {
+                    Ok(()) => ChunkRead::Ok(data),
+                    Err(why) => ChunkRead::Corrupt(why),
+                },
+                Ok(None) => ChunkRead::Missing,
+                Err(e) => ChunkRead::Corrupt(format!("{e:#}")),
+            };
+        }
         let path = self.chunk_path(id, chunk);
         match tokio::fs::read(&path).await {
             Ok(data) => match verify_chunk(&data, meta, first_vertex) {
@@ -228,6 +272,18 @@ impl Store {
     /// Removes a chunk file (after it was found corrupt); a missing file is fine.
     pub(crate) fn remove_chunk(&self, id: &str, chunk: u32) {
         let _ = fs::remove_file(self.chunk_path(id, chunk));
+    }
+
+    /// Removes the stored chunk that `meta` describes (found corrupt); a missing one is fine.
+    pub(crate) fn forget_chunk(&self, id: &str, chunk: u32, meta: ChunkMeta) {
+        match &self.object {
+            Some(o) => {
+                if let Err(e) = o.delete(o.chunk_key(id, chunk, meta)) {
+                    tracing::warn!(scene = %id, chunk, error = %format!("{e:#}"), "cannot delete a corrupt chunk object");
+                }
+            }
+            None => self.remove_chunk(id, chunk),
+        }
     }
 
     /// The chunk files present for a scene and stray files (temporary or unknown names) that
@@ -289,6 +345,9 @@ impl Store {
 
     /// Deletes a scene's directory: renamed into the trash (atomic), then removed.
     pub(crate) fn remove_scene(&self, id: &str) -> io::Result<()> {
+        if let Some(o) = &self.object {
+            return o.delete_scene(id).map_err(io::Error::other);
+        }
         let dir = self.scene_dir(id);
         if !dir.exists() {
             return Ok(());
@@ -309,6 +368,35 @@ impl Store {
             }
         }
     }
+}
+
+/// A scene's stored form: magic, length, the payload, its CRC-32.
+fn frame_scene(scene_bin: &[u8]) -> Vec<u8> {
+    let mut body = Vec::with_capacity(scene_bin.len() + 16);
+    body.extend_from_slice(SCENE_MAGIC);
+    body.extend_from_slice(&(scene_bin.len() as u64).to_le_bytes());
+    body.extend_from_slice(scene_bin);
+    body.extend_from_slice(&crc32fast::hash(scene_bin).to_le_bytes());
+    body
+}
+
+/// The payload of a stored scene, or what is wrong with it.
+fn unframe_scene(data: &[u8]) -> Result<&[u8], &'static str> {
+    if data.len() < 16 || &data[..4] != SCENE_MAGIC {
+        return Err("bad header");
+    }
+    let mut len = [0u8; 8];
+    len.copy_from_slice(&data[4..12]);
+    if u64::from_le_bytes(len) != (data.len() - 16) as u64 {
+        return Err("length mismatch");
+    }
+    let body = &data[12..data.len() - 4];
+    let mut crc = [0u8; 4];
+    crc.copy_from_slice(&data[data.len() - 4..]);
+    if u32::from_le_bytes(crc) != crc32fast::hash(body) {
+        return Err("checksum mismatch");
+    }
+    Ok(body)
 }
 
 /// Checks a chunk file against its database record and its own framing.

@@ -1,0 +1,352 @@
+//! The distributed shape's engines for tests, started on loopback by the test itself:
+//! PostgreSQL from the system's packages (`initdb`/`pg_ctl` in a temporary folder, as the
+//! `postgres` user when run as root) and an S3-compatible server (`moto_server`, PyPI's
+//! `moto[server]`). `.ci/run` installs both; where one is missing the test skips with a
+//! message. Also: `bspvt-server worker` processes and SQL through `psql`.
+
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader};
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use super::common::BIN;
+
+/// A free loopback port (bound then released).
+pub fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free port")
+}
+
+fn wait_port(port: u16, timeout: Duration) -> bool {
+    let t0 = Instant::now();
+    while t0.elapsed() < timeout {
+        if std::net::TcpStream::connect(("127.0.0.1", port)).is_ok() {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    false
+}
+
+fn is_root() -> bool {
+    Command::new("id")
+        .arg("-u")
+        .output()
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim() == "0")
+        .unwrap_or(false)
+}
+
+/// The PostgreSQL server binaries (`initdb`, `pg_ctl`), newest version first.
+fn pg_bin() -> Option<PathBuf> {
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir("/usr/lib/postgresql")
+        .ok()?
+        .flatten()
+        .map(|e| e.path().join("bin"))
+        .filter(|b| b.join("pg_ctl").exists() && b.join("initdb").exists())
+        .collect();
+    dirs.sort();
+    dirs.pop()
+}
+
+/// A PostgreSQL server in a temporary folder.
+pub struct Postgres {
+    bin: PathBuf,
+    data: PathBuf,
+    pub port: u16,
+    pub url: String,
+    as_postgres: bool,
+    log: PathBuf,
+}
+
+impl Postgres {
+    /// Starts one, or says why not (the test then skips).
+    pub fn start(dir: &Path) -> Result<Postgres, String> {
+        let bin = pg_bin().ok_or("PostgreSQL is not installed (/usr/lib/postgresql/*/bin)")?;
+        let as_postgres = is_root();
+        let data = dir.join("pgdata");
+        std::fs::create_dir_all(&data).map_err(|e| e.to_string())?;
+        if as_postgres {
+            // The server refuses to run as root: the folder and its parents must be the
+            // postgres user's to use.
+            let _ = Command::new("chown")
+                .args(["-R", "postgres"])
+                .arg(dir)
+                .status();
+            let _ = Command::new("chmod").args(["755"]).arg(dir).status();
+        }
+        let pg = Postgres {
+            port: free_port(),
+            url: String::new(),
+            log: dir.join("postgres.log"),
+            bin,
+            data,
+            as_postgres,
+        };
+        let out = pg
+            .cmd("initdb")
+            .args(["-A", "trust", "-U", "postgres", "-E", "UTF8", "-D"])
+            .arg(&pg.data)
+            .output()
+            .map_err(|e| format!("cannot run initdb: {e}"))?;
+        if !out.status.success() {
+            return Err(format!(
+                "initdb failed: {}",
+                String::from_utf8_lossy(&out.stderr)
+            ));
+        }
+        let mut pg = pg;
+        pg.url = format!("postgres://postgres@127.0.0.1:{}/postgres", pg.port);
+        pg.pg_ctl(&["start"])?;
+        Ok(pg)
+    }
+
+    fn cmd(&self, tool: &str) -> Command {
+        let path = self.bin.join(tool);
+        if self.as_postgres {
+            let mut c = Command::new("runuser");
+            c.args(["-u", "postgres", "--"]).arg(path);
+            c
+        } else {
+            Command::new(path)
+        }
+    }
+
+    fn pg_ctl(&self, what: &[&str]) -> Result<(), String> {
+        let opts = format!(
+            "-p {} -c listen_addresses=127.0.0.1 -k {} -c fsync=off -c max_connections=200",
+            self.port,
+            self.data.display()
+        );
+        let out = self
+            .cmd("pg_ctl")
+            .arg("-D")
+            .arg(&self.data)
+            .args(["-l"])
+            .arg(&self.log)
+            .args(["-o", &opts, "-w", "-t", "60"])
+            .args(what)
+            .output()
+            .map_err(|e| format!("cannot run pg_ctl: {e}"))?;
+        if !out.status.success() {
+            return Err(format!(
+                "pg_ctl {what:?} failed: {}{}",
+                String::from_utf8_lossy(&out.stderr),
+                std::fs::read_to_string(&self.log).unwrap_or_default()
+            ));
+        }
+        Ok(())
+    }
+
+    /// Stops the server at once (as a crash would: `-m immediate`) and starts it again.
+    pub fn restart(&self) {
+        self.pg_ctl(&["-m", "immediate", "stop"])
+            .expect("stop PostgreSQL");
+        self.pg_ctl(&["start"]).expect("start PostgreSQL again");
+    }
+
+    /// Runs one SQL query with `psql` and returns its unaligned output.
+    pub fn sql(&self, q: &str) -> String {
+        let psql = self.bin.join("psql");
+        let psql = if psql.exists() {
+            psql
+        } else {
+            PathBuf::from("psql")
+        };
+        let out = Command::new(psql)
+            .args(["-X", "-A", "-t", "-q", "-d", &self.url, "-c", q])
+            .output()
+            .expect("run psql");
+        assert!(
+            out.status.success(),
+            "psql {q:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).trim().to_string()
+    }
+
+    /// [`Postgres::sql`] as a number.
+    pub fn number(&self, q: &str) -> i64 {
+        let s = self.sql(q);
+        s.parse()
+            .unwrap_or_else(|_| panic!("{q:?} answered {s:?}, not a number"))
+    }
+}
+
+impl Drop for Postgres {
+    fn drop(&mut self) {
+        let _ = self.pg_ctl(&["-m", "immediate", "stop"]);
+    }
+}
+
+/// An S3-compatible server (`moto_server`) with one bucket.
+pub struct S3 {
+    child: Child,
+    pub port: u16,
+    pub bucket: String,
+}
+
+impl S3 {
+    pub fn start(dir: &Path) -> Result<S3, String> {
+        let port = free_port();
+        let log = std::fs::File::create(dir.join("s3.log")).map_err(|e| e.to_string())?;
+        let child = Command::new("moto_server")
+            .args(["-H", "127.0.0.1", "-p", &port.to_string()])
+            .stdout(Stdio::null())
+            .stderr(Stdio::from(log))
+            .spawn()
+            .map_err(|e| format!("cannot start moto_server (pip install 'moto[server]'): {e}"))?;
+        let mut s3 = S3 {
+            child,
+            port,
+            bucket: "bspvt-test".into(),
+        };
+        if !wait_port(port, Duration::from_secs(60)) {
+            return Err("moto_server did not listen within 60 s".into());
+        }
+        let a = super::common::agent();
+        let r = a
+            .put(format!("http://127.0.0.1:{port}/{}", s3.bucket))
+            .send_empty()
+            .map_err(|e| format!("cannot create the bucket: {e}"))?;
+        if !r.status().is_success() {
+            return Err(format!("creating the bucket answered {}", r.status()));
+        }
+        s3.bucket = s3.bucket.clone();
+        Ok(s3)
+    }
+
+    /// The AWS variables that point a client at this server.
+    pub fn env(&self) -> Vec<(String, String)> {
+        vec![
+            ("AWS_ACCESS_KEY_ID".into(), "test".into()),
+            ("AWS_SECRET_ACCESS_KEY".into(), "test".into()),
+            ("AWS_REGION".into(), "us-east-1".into()),
+            (
+                "AWS_ENDPOINT_URL".into(),
+                format!("http://127.0.0.1:{}", self.port),
+            ),
+            ("AWS_ALLOW_HTTP".into(), "true".into()),
+        ]
+    }
+
+    pub fn url(&self, prefix: &str) -> String {
+        format!("s3://{}/{prefix}", self.bucket)
+    }
+}
+
+impl Drop for S3 {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Both engines, or `None` after printing why the test is skipped.
+pub fn engines(dir: &Path, test: &str) -> Option<(Postgres, S3)> {
+    let pg = match Postgres::start(dir) {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("SKIPPED {test}: no PostgreSQL ({e}); .ci/run installs it");
+            return None;
+        }
+    };
+    match S3::start(dir) {
+        Ok(s3) => Some((pg, s3)),
+        Err(e) => {
+            eprintln!("SKIPPED {test}: no S3-compatible server ({e}); .ci/run installs it");
+            None
+        }
+    }
+}
+
+/// A `bspvt-server worker` process.
+pub struct Worker {
+    pub child: Child,
+    pub id: String,
+    pub log: PathBuf,
+}
+
+impl Worker {
+    pub fn start(
+        dir: &Path,
+        id: &str,
+        pg: &Postgres,
+        s3: &S3,
+        prefix: &str,
+        extra: &[&str],
+    ) -> Worker {
+        let log = dir.join(format!("{id}.log"));
+        let mut child = Command::new(BIN)
+            .args([
+                "worker",
+                "--database",
+                &pg.url,
+                "--store",
+                &s3.url(prefix),
+                "--id",
+                id,
+            ])
+            .args(extra)
+            .envs(s3.env())
+            .env("RUST_LOG", "info,bspvt_server::service::cluster=debug")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::from(
+                std::fs::File::create(&log).expect("worker log"),
+            ))
+            .spawn()
+            .expect("start a worker");
+        let mut line = String::new();
+        let stdout = child.stdout.take().expect("stdout");
+        let _ = BufReader::new(stdout).read_line(&mut line);
+        assert!(
+            line.starts_with("worker "),
+            "worker {id} did not start: {line:?}\n{}",
+            std::fs::read_to_string(&log).unwrap_or_default()
+        );
+        Worker {
+            child,
+            id: id.to_string(),
+            log,
+        }
+    }
+
+    pub fn log_text(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// SIGKILL, then reap.
+    pub fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
+    /// Sends a signal (`STOP`, `CONT`, `TERM`).
+    pub fn signal(&self, sig: &str) {
+        let st = Command::new("kill")
+            .args([&format!("-{sig}"), &self.child.id().to_string()])
+            .status()
+            .expect("run kill");
+        assert!(st.success(), "kill -{sig} failed");
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        self.signal_quiet();
+        self.kill();
+    }
+}
+
+impl Worker {
+    fn signal_quiet(&self) {
+        let _ = Command::new("kill")
+            .args(["-CONT", &self.child.id().to_string()])
+            .stderr(Stdio::null())
+            .status();
+    }
+}

@@ -1,0 +1,421 @@
+//! The distributed shape on real engines (PostgreSQL, an S3-compatible server; both started
+//! on loopback by the test, skipped with a message where they are not installed):
+//!
+//! - one API instance (`serve --workers 0`) and three `worker` processes bake a real mesh
+//!   byte-identical to the offline bake; a worker SIGKILLed mid-bake costs at most the chunks
+//!   it held leased (counted from the database); the API instance SIGKILLed and another
+//!   started on another port reports the progress and streams the trees;
+//! - a stale worker (stopped while it held a lease, which expired and was taken over) cannot
+//!   record or count its chunk again (fenced); PostgreSQL restarted mid-bake: workers and API
+//!   reconnect, every chunk is recorded exactly once, the result is the offline bake's.
+
+#![allow(clippy::unwrap_used)]
+
+#[path = "common/cluster.rs"]
+mod cluster;
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use cluster::*;
+use common::*;
+
+/// A scene file naming a real mesh (the Stanford bunny at its coarsest, 453 vertices, if the
+/// shared assets are there; else the built-in plate), and the upload that sends it. At 256²
+/// faces and 8 vertices per chunk the bunny is 57 chunks of about 0.2 s each on one thread:
+/// slow enough to kill things mid-bake, quick enough for CI.
+fn scene(dir: &Path, face_res: u32, chunk_vertices: u32) -> (String, Option<(String, Vec<u8>)>) {
+    let bunny =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/assets/meshes/bunny_res4.ply");
+    match std::fs::read(&bunny) {
+        Ok(bytes) => {
+            std::fs::write(dir.join("bunny_res4.ply"), &bytes).unwrap();
+            let json = format!(
+                r#"{{"meshes": [{{"path": "bunny_res4.ply"}}],
+  "bake": {{"face_res": {face_res}, "chunk_vertices": {chunk_vertices}}}}}"#
+            );
+            (json, Some(("bunny_res4.ply".into(), bytes)))
+        }
+        Err(_) => {
+            // As slow to bake as the bunny at 256² faces (service_restart's settings).
+            eprintln!("shared assets absent: baking the built-in plate-small instead of the bunny");
+            (plate_small_json(48, 32), None)
+        }
+    }
+}
+
+fn submit_scene(
+    a: &ureq::Agent,
+    srv: &Server,
+    json: &str,
+    mesh: &Option<(String, Vec<u8>)>,
+) -> String {
+    let mut parts: Vec<Part> = vec![("scene", None, json.as_bytes())];
+    if let Some((name, bytes)) = mesh {
+        parts.push(("mesh", Some(name.as_str()), bytes));
+    }
+    submit_ok(a, srv, &parts, None)
+}
+
+fn api(dir: &Path, name: &str, pg: &Postgres, s3: &S3, prefix: &str, extra: &[&str]) -> Server {
+    let env = s3.env();
+    let env: Vec<(&str, &str)> = env.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+    let store = s3.url(prefix);
+    let mut args = vec!["--database", &pg.url, "--store", &store];
+    args.extend_from_slice(extra);
+    Server::start_env(BIN, &dir.join(name), "127.0.0.1:0", &args, &env)
+}
+
+fn status(a: &ureq::Agent, srv: &Server, id: &str) -> serde_json::Value {
+    get(a, &srv.url(&format!("/v1/scenes/{id}"))).json()
+}
+
+fn tmp() -> (tempfile::TempDir, PathBuf) {
+    let t = tempfile::tempdir().expect("temp dir");
+    let p = t.path().to_path_buf();
+    (t, p)
+}
+
+#[test]
+fn three_workers_bake_like_offline_and_survive_a_killed_worker_and_api() {
+    let (_t, dir) = tmp();
+    let Some((pg, s3)) = engines(&dir, "three_workers_bake_like_offline…") else {
+        return;
+    };
+    let (json, mesh) = scene(&dir, 256, 8);
+    let offline = offline_bake(&dir, &json, "offline");
+    let a = agent();
+    let mut api1 = api(
+        &dir,
+        "api1",
+        &pg,
+        &s3,
+        "t1",
+        &["--workers", "0", "--lease-s", "4"],
+    );
+    let id = submit_scene(&a, &api1, &json, &mesh);
+    let total = status(&a, &api1, &id)["chunks_total"].as_u64().unwrap();
+    let w = ["--threads", "1", "--chunks", "1", "--lease-s", "4"];
+    let mut w1 = Worker::start(&dir, "w1", &pg, &s3, "t1", &w);
+    let _w2 = Worker::start(&dir, "w2", &pg, &s3, "t1", &w);
+    let _w3 = Worker::start(&dir, "w3", &pg, &s3, "t1", &w);
+
+    // The workers are listed with their heartbeats (status JSON and metrics).
+    let t0 = Instant::now();
+    loop {
+        let h = get(&a, &api1.url("/healthz")).json();
+        if h["workers"].as_array().is_some_and(|w| w.len() == 3) {
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "workers not listed: {h}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    wait_status(&a, &api1, &id, Duration::from_secs(120), |s| {
+        s["chunks_done"].as_u64() >= Some(total / 4)
+    });
+    // SIGKILL w1; what it held leased (unfinished) is what may be baked twice.
+    w1.kill();
+    let held = pg.number(&format!(
+        "SELECT count(*) FROM tasks WHERE scene_id = '{id}' AND worker = 'w1'"
+    ));
+    let done_at_kill = pg.number(&format!(
+        "SELECT count(*) FROM chunks WHERE scene_id = '{id}'"
+    ));
+    eprintln!("w1 killed holding {held} lease(s); {done_at_kill}/{total} chunks durable");
+    assert!(
+        (done_at_kill as u64) < total,
+        "the bake finished before the kill"
+    );
+    let m = get(&a, &api1.url("/metrics")).text();
+    assert!(
+        m.contains("bspvt_worker_chunks_done_total{worker=\"w2\"}"),
+        "{m}"
+    );
+
+    // SIGKILL the API instance too, and take over from another one on another port.
+    wait_status(&a, &api1, &id, Duration::from_secs(120), |s| {
+        s["chunks_done"].as_u64() >= Some(done_at_kill as u64 + 2)
+    });
+    let port1 = api1.addr.clone();
+    api1.kill();
+    let api2 = api(
+        &dir,
+        "api2",
+        &pg,
+        &s3,
+        "t1",
+        &["--workers", "0", "--lease-s", "4"],
+    );
+    assert_ne!(api2.addr, port1);
+    let s = status(&a, &api2, &id);
+    assert!(s["chunks_done"].as_u64() > Some(done_at_kill as u64), "{s}");
+    // It streams the trees while the bake runs (the stream waits for the missing chunks).
+    let served = get(&a, &api2.url(&format!("/v1/scenes/{id}/trees"))).body;
+    let s = wait_done(&a, &api2, &id);
+    assert!(
+        served == offline,
+        "the streamed trees differ from the offline bake"
+    );
+    let again = get(&a, &api2.url(&format!("/v1/scenes/{id}/trees"))).body;
+    assert!(
+        again == offline,
+        "the finished trees differ from the offline bake"
+    );
+
+    // Counted: every chunk recorded once; leased more than once only for w1's leases.
+    assert_eq!(s["chunks_baked_total"].as_u64(), Some(total), "{s}");
+    let leased = pg.number(&format!(
+        "SELECT sum(leases)::bigint FROM chunks WHERE scene_id = '{id}'"
+    ));
+    let twice = leased - total as i64;
+    eprintln!("chunks leased {leased} for {total} chunks: {twice} baked twice (w1 held {held})");
+    assert!(
+        twice <= held,
+        "{twice} chunks baked twice, w1 held only {held}"
+    );
+    let h = get(&a, &api2.url("/healthz")).json();
+    let live: Vec<&str> = h["workers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|w| w["live"] == true)
+        .map(|w| w["id"].as_str().unwrap())
+        .collect();
+    assert!(!live.contains(&"w1") && live.len() == 2, "{h}");
+}
+
+#[test]
+fn stale_worker_is_fenced_and_a_postgres_restart_loses_nothing() {
+    let (_t, dir) = tmp();
+    let Some((pg, s3)) = engines(&dir, "stale_worker_is_fenced…") else {
+        return;
+    };
+    let (json, mesh) = scene(&dir, 256, 8);
+    let offline = offline_bake(&dir, &json, "offline");
+    let a = agent();
+    let srv = api(
+        &dir,
+        "api",
+        &pg,
+        &s3,
+        "t2",
+        &["--workers", "0", "--lease-s", "2"],
+    );
+    let id = submit_scene(&a, &srv, &json, &mesh);
+    let total = status(&a, &srv, &id)["chunks_total"].as_u64().unwrap() as i64;
+    // No worker: the scene says why it does not advance.
+    let s = wait_status(&a, &srv, &id, Duration::from_secs(30), |s| {
+        s["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("no live bake worker"))
+    });
+    eprintln!("without workers: {}", s["reason"]);
+
+    let w = ["--threads", "1", "--chunks", "1", "--lease-s", "2"];
+    let wa = Worker::start(&dir, "stale", &pg, &s3, "t2", &w);
+    // Freeze it while it holds a lease.
+    let held_chunk = loop {
+        wa.signal("STOP");
+        let held = pg.sql(&format!(
+            "SELECT idx FROM tasks WHERE scene_id = '{id}' AND worker = 'stale' LIMIT 1"
+        ));
+        if !held.is_empty() {
+            break held.parse::<i64>().unwrap();
+        }
+        wa.signal("CONT");
+        std::thread::sleep(Duration::from_millis(30));
+    };
+    let wb = Worker::start(&dir, "fresh", &pg, &s3, "t2", &w);
+    // The frozen worker's lease expires and its chunk is baked and recorded by the other.
+    let t0 = Instant::now();
+    while pg.number(&format!(
+        "SELECT count(*) FROM chunks WHERE scene_id = '{id}' AND idx = {held_chunk}"
+    )) == 0
+    {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "chunk {held_chunk} never taken over"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let recorded_by = pg.sql(&format!(
+        "SELECT worker FROM chunks WHERE scene_id = '{id}' AND idx = {held_chunk}"
+    ));
+    assert_eq!(recorded_by, "fresh");
+    let done_now = pg.number(&format!(
+        "SELECT count(*) FROM chunks WHERE scene_id = '{id}'"
+    ));
+    assert!(
+        done_now < total,
+        "the bake finished before the stale worker came back"
+    );
+    // Back: it finishes its chunk and tries to record it; the database refuses (fenced).
+    wa.signal("CONT");
+    let t0 = Instant::now();
+    while pg.number("SELECT chunks_fenced FROM workers WHERE id = 'stale'") == 0 {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "the stale worker was not fenced; its log:\n{}",
+            wa.log_text()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_eq!(
+        recorded_by,
+        pg.sql(&format!(
+            "SELECT worker FROM chunks WHERE scene_id = '{id}' AND idx = {held_chunk}"
+        )),
+        "the stale worker overwrote the record"
+    );
+
+    // PostgreSQL restarted mid-bake (as after a crash): everyone reconnects.
+    let before = pg.number(&format!(
+        "SELECT count(*) FROM chunks WHERE scene_id = '{id}'"
+    ));
+    if before < total {
+        pg.restart();
+        eprintln!("PostgreSQL restarted with {before}/{total} chunks recorded");
+    }
+    let s = wait_done(&a, &srv, &id);
+    assert_eq!(s["chunks_baked_total"].as_i64(), Some(total), "{s}");
+    assert_eq!(
+        pg.number(&format!(
+            "SELECT count(*) FROM chunks WHERE scene_id = '{id}'"
+        )),
+        total
+    );
+    let served = get(&a, &srv.url(&format!("/v1/scenes/{id}/trees"))).body;
+    assert!(served == offline, "the trees differ from the offline bake");
+    let m = get(&a, &srv.url("/metrics")).text();
+    assert!(
+        metric(&m, "bspvt_cluster_chunks_fenced_total") >= 1.0,
+        "{m}"
+    );
+    drop(wb);
+    drop(wa);
+}
+
+#[test]
+fn a_chunk_failing_on_three_workers_fails_its_scene_with_the_reason() {
+    let (_t, dir) = tmp();
+    let Some((pg, s3)) = engines(&dir, "a_chunk_failing_on_three_workers…") else {
+        return;
+    };
+    let (json, mesh) = scene(&dir, 16, 64);
+    let a = agent();
+    let srv = api(&dir, "api", &pg, &s3, "t3", &["--workers", "0"]);
+    let id = submit_scene(&a, &srv, &json, &mesh);
+    // Workers pointed at another prefix of the bucket cannot read the stored scene.
+    let w = ["--threads", "1", "--chunks", "1"];
+    let _w: Vec<Worker> = (0..3)
+        .map(|i| Worker::start(&dir, &format!("lost{i}"), &pg, &s3, "elsewhere", &w))
+        .collect();
+    let t0 = Instant::now();
+    let s = loop {
+        let s = status(&a, &srv, &id);
+        if s["state"] == "failed" {
+            break s;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(60), "not failed: {s}");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let reason = s["reason"].as_str().unwrap();
+    assert!(
+        reason.contains("failed on 3 different workers") && reason.contains("stored scene"),
+        "{reason}"
+    );
+    assert_eq!(
+        pg.number("SELECT count(*) FROM tasks"),
+        0,
+        "a failed scene keeps no task"
+    );
+}
+
+/// Benchmark, not run by default:
+/// `cargo test --release -p bspvt-server --test service_cluster -- --ignored --nocapture`.
+/// The same scene baked by the embedded service (`--workers N --threads N`) and by one API
+/// instance with N `worker` processes of one thread each, N = 1, 2, 4; the wall time is the
+/// scene's own (`finished_ms - created_ms`, stamped by the processes), so it leaves out the
+/// test's polling. `BSPVT_BENCH_MESH` (a .ply, default the bunny at its coarsest),
+/// `BSPVT_BENCH_FACE_RES` (default 24), `BSPVT_BENCH_CHUNK` (vertices per chunk, default 32).
+#[test]
+#[ignore]
+fn bench_distributed_against_embedded() {
+    let (_t, dir) = tmp();
+    let Some((pg, s3)) = engines(&dir, "bench_distributed_against_embedded") else {
+        return;
+    };
+    let var = |k: &str, d: u32| {
+        std::env::var(k)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(d)
+    };
+    let (face_res, chunk) = (
+        var("BSPVT_BENCH_FACE_RES", 24),
+        var("BSPVT_BENCH_CHUNK", 32),
+    );
+    let (json, mesh) = match std::env::var("BSPVT_BENCH_MESH") {
+        Ok(p) => {
+            let name = Path::new(&p)
+                .file_name()
+                .unwrap()
+                .to_string_lossy()
+                .into_owned();
+            let json = format!(
+                r#"{{"meshes": [{{"path": "{name}"}}],
+  "bake": {{"face_res": {face_res}, "chunk_vertices": {chunk}}}}}"#
+            );
+            (json, Some((name, std::fs::read(&p).unwrap())))
+        }
+        Err(_) => scene(&dir, face_res, chunk),
+    };
+    let a = agent();
+    let wall = |srv: &Server, id: &str| {
+        let s = wait_status(&a, srv, id, Duration::from_secs(3600), |s| {
+            s["state"] == "done"
+        });
+        let ms = s["finished_ms"].as_i64().unwrap() - s["created_ms"].as_i64().unwrap();
+        (ms as f64 / 1e3, s)
+    };
+    println!("| processes × threads | embedded (s) | distributed (s) | overhead |");
+    println!("|---|---:|---:|---:|");
+    for n in [1usize, 2, 4] {
+        let ns = n.to_string();
+        let emb = start(
+            &dir.join(format!("emb{n}")),
+            &["--workers", &ns, "--threads", &ns],
+        );
+        let id = submit_scene(&a, &emb, &json, &mesh);
+        let (te, s) = wall(&emb, &id);
+        drop(emb);
+        let prefix = format!("bench{n}");
+        let srv = api(
+            &dir,
+            &format!("api{n}"),
+            &pg,
+            &s3,
+            &prefix,
+            &["--workers", "0"],
+        );
+        let workers: Vec<Worker> = (0..n)
+            .map(|i| {
+                let w = ["--threads", "1", "--chunks", "1"];
+                Worker::start(&dir, &format!("b{n}-{i}"), &pg, &s3, &prefix, &w)
+            })
+            .collect();
+        let id = submit_scene(&a, &srv, &json, &mesh);
+        let (td, _) = wall(&srv, &id);
+        drop(workers);
+        println!(
+            "| {n} × 1 | {te:.2} | {td:.2} | {:+.1} % |   ({} vertices, {} chunks)",
+            (td / te - 1.0) * 100.0,
+            s["vertices_total"],
+            s["chunks_total"]
+        );
+    }
+}

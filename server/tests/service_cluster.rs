@@ -436,3 +436,74 @@ fn bench_distributed_against_embedded() {
         );
     }
 }
+
+/// Benchmark, not run by default: how long after a worker records a chunk (its row's
+/// `baked_ms`) an API instance's SSE client hears of it (the event whose `chunks_done`
+/// first counts it). Same machine, same clock.
+/// `cargo test -p bspvt-server --test service_cluster bench_event -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn bench_event_latency() {
+    use std::io::BufRead;
+    let (_t, dir) = tmp();
+    let Some((pg, s3)) = engines(&dir, "bench_event_latency") else {
+        return;
+    };
+    let (json, mesh) = scene(&dir, 256, 8);
+    let a = agent();
+    let srv = api(&dir, "api", &pg, &s3, "ev", &["--workers", "0"]);
+    let id = submit_scene(&a, &srv, &json, &mesh);
+    let url = srv.url(&format!("/v1/scenes/{id}/events"));
+    let reader = std::thread::spawn(move || {
+        let a = agent();
+        let r = a.get(&url).call().unwrap();
+        let mut seen: Vec<(u64, i64)> = Vec::new();
+        let body = std::io::BufReader::new(r.into_body().into_reader());
+        for line in body.lines() {
+            let Ok(line) = line else { break };
+            let Some(data) = line.strip_prefix("data:") else {
+                continue;
+            };
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap()
+                .as_millis() as i64;
+            let s: serde_json::Value = serde_json::from_str(data.trim()).unwrap();
+            let done = s["chunks_done"].as_u64().unwrap();
+            if seen.last().is_none_or(|&(d, _)| d < done) {
+                seen.push((done, now));
+            }
+            if s["state"] == "done" {
+                break;
+            }
+        }
+        seen
+    });
+    let w = ["--threads", "1", "--chunks", "1"];
+    let _w: Vec<Worker> = (0..2)
+        .map(|i| Worker::start(&dir, &format!("ev{i}"), &pg, &s3, "ev", &w))
+        .collect();
+    let seen = reader.join().unwrap();
+    let baked: Vec<i64> = pg
+        .sql(&format!(
+            "SELECT baked_ms FROM chunks WHERE scene_id = '{id}' ORDER BY baked_ms"
+        ))
+        .lines()
+        .map(|l| l.parse().unwrap())
+        .collect();
+    let mut lat: Vec<i64> = seen
+        .iter()
+        .filter(|&&(d, _)| d > 0)
+        .map(|&(d, t)| t - baked[d as usize - 1])
+        .collect();
+    lat.sort();
+    let pct = |p: f64| lat[((lat.len() - 1) as f64 * p).round() as usize];
+    println!(
+        "SSE latency after a chunk's record, {} events for {} chunks: median {} ms, p90 {} ms, max {} ms",
+        lat.len(),
+        baked.len(),
+        pct(0.5),
+        pct(0.9),
+        pct(1.0)
+    );
+}

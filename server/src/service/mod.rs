@@ -34,6 +34,7 @@ mod metrics;
 mod objstore;
 mod openapi;
 mod pg;
+mod rows;
 mod sse;
 mod state;
 mod store;

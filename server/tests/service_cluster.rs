@@ -335,6 +335,72 @@ fn a_chunk_failing_on_three_workers_fails_its_scene_with_the_reason() {
     );
 }
 
+#[test]
+fn deleting_a_scene_reaches_the_worker_baking_it() {
+    let (_t, dir) = tmp();
+    let Some((pg, s3)) = engines(&dir, "deleting_a_scene_reaches_the_worker…") else {
+        return;
+    };
+    let (json, mesh) = scene(&dir, 256, 8);
+    let a = agent();
+    let srv = api(
+        &dir,
+        "api",
+        &pg,
+        &s3,
+        "t4",
+        &["--workers", "0", "--lease-s", "3"],
+    );
+    let id = submit_scene(&a, &srv, &json, &mesh);
+    let w = Worker::start(
+        &dir,
+        "w",
+        &pg,
+        &s3,
+        "t4",
+        &["--threads", "1", "--chunks", "1"],
+    );
+    wait_status(&a, &srv, &id, Duration::from_secs(60), |s| {
+        s["chunks_done"].as_u64() >= Some(3)
+    });
+    // Delete while it holds a lease (frozen for a moment, so that the deletion cannot fall
+    // between two of its chunks).
+    loop {
+        w.signal("STOP");
+        let held = pg.number(&format!(
+            "SELECT count(*) FROM tasks WHERE scene_id = '{id}' AND worker = 'w'"
+        ));
+        if held > 0 {
+            break;
+        }
+        w.signal("CONT");
+        std::thread::sleep(Duration::from_millis(30));
+    }
+    let r = delete(&a, &srv.url(&format!("/v1/scenes/{id}")), None);
+    w.signal("CONT");
+    assert_eq!(r.status, 200, "{}", r.text());
+    // The chunk it was baking is dropped (refused at record time, its object deleted), and
+    // it takes no other chunk of the scene.
+    let t0 = Instant::now();
+    while !w.log_text().contains("scene deleted or failed") {
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "worker not told:\n{}",
+            w.log_text()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let done = pg.number("SELECT chunks_done FROM workers WHERE id = 'w'");
+    std::thread::sleep(Duration::from_secs(2));
+    assert_eq!(
+        pg.number("SELECT chunks_done FROM workers WHERE id = 'w'"),
+        done
+    );
+    assert_eq!(pg.number("SELECT count(*) FROM tasks"), 0);
+    assert_eq!(pg.number("SELECT count(*) FROM chunks"), 0);
+    assert_eq!(status(&a, &srv, &id)["state"], "cancelled");
+}
+
 /// Benchmark, not run by default:
 /// `cargo test --release -p bspvt-server --test service_cluster -- --ignored --nocapture`.
 /// The same scene baked by the embedded service (`--workers N --threads N`) and by one API

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Checks docker/compose.yaml without a Docker engine: the YAML parses, the services and
+"""Checks docker/compose.distributed.yaml without a Docker engine: the YAML parses, the services and
 their dependencies are there, and every flag and BSPVT_* variable the API and worker
 services use is one that `bspvt-server` accepts (from its --help).
 
@@ -14,7 +14,7 @@ import yaml
 
 here = Path(__file__).resolve().parent
 binary = sys.argv[1] if len(sys.argv) > 1 else str(here.parent / "target/debug/bspvt-server")
-doc = yaml.safe_load((here / "compose.yaml").read_text())
+doc = yaml.safe_load((here / "compose.distributed.yaml").read_text())
 services = doc["services"]
 for name in ["postgres", "minio", "bucket", "api", "worker"]:
     assert name in services, f"service {name} missing"
@@ -39,4 +39,4 @@ for name in ["api", "worker"]:
     assert f"local/{bucket}" in " ".join(services["bucket"]["entrypoint"]), "bucket name"
     assert env["AWS_ENDPOINT_URL"].startswith("http://minio:"), "endpoint"
     assert env["AWS_SECRET_ACCESS_KEY"] == services["minio"]["environment"]["MINIO_ROOT_PASSWORD"]
-print("docker/compose.yaml: ok")
+print("docker/compose.distributed.yaml: ok")

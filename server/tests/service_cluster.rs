@@ -335,6 +335,72 @@ fn a_chunk_failing_on_three_workers_fails_its_scene_with_the_reason() {
     );
 }
 
+#[test]
+fn deleting_a_scene_reaches_the_worker_baking_it() {
+    let (_t, dir) = tmp();
+    let Some((pg, s3)) = engines(&dir, "deleting_a_scene_reaches_the_worker…") else {
+        return;
+    };
+    let (json, mesh) = scene(&dir, 256, 8);
+    let a = agent();
+    let srv = api(
+        &dir,
+        "api",
+        &pg,
+        &s3,
+        "t4",
+        &["--workers", "0", "--lease-s", "3"],
+    );
+    let id = submit_scene(&a, &srv, &json, &mesh);
+    let w = Worker::start(
+        &dir,
+        "w",
+        &pg,
+        &s3,
+        "t4",
+        &["--threads", "1", "--chunks", "1"],
+    );
+    wait_status(&a, &srv, &id, Duration::from_secs(60), |s| {
+        s["chunks_done"].as_u64() >= Some(3)
+    });
+    // Delete while it holds a lease (frozen for a moment, so that the deletion cannot fall
+    // between two of its chunks).
+    loop {
+        w.signal("STOP");
+        let held = pg.number(&format!(
+            "SELECT count(*) FROM tasks WHERE scene_id = '{id}' AND worker = 'w'"
+        ));
+        if held > 0 {
+            break;
+        }
+        w.signal("CONT");
+        std::thread::sleep(Duration::from_millis(30));
+    }
+    let r = delete(&a, &srv.url(&format!("/v1/scenes/{id}")), None);
+    w.signal("CONT");
+    assert_eq!(r.status, 200, "{}", r.text());
+    // The chunk it was baking is dropped (refused at record time, its object deleted), and
+    // it takes no other chunk of the scene.
+    let t0 = Instant::now();
+    while !w.log_text().contains("scene deleted or failed") {
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "worker not told:\n{}",
+            w.log_text()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let done = pg.number("SELECT chunks_done FROM workers WHERE id = 'w'");
+    std::thread::sleep(Duration::from_secs(2));
+    assert_eq!(
+        pg.number("SELECT chunks_done FROM workers WHERE id = 'w'"),
+        done
+    );
+    assert_eq!(pg.number("SELECT count(*) FROM tasks"), 0);
+    assert_eq!(pg.number("SELECT count(*) FROM chunks"), 0);
+    assert_eq!(status(&a, &srv, &id)["state"], "cancelled");
+}
+
 /// Benchmark, not run by default:
 /// `cargo test --release -p bspvt-server --test service_cluster -- --ignored --nocapture`.
 /// The same scene baked by the embedded service (`--workers N --threads N`) and by one API
@@ -342,13 +408,19 @@ fn a_chunk_failing_on_three_workers_fails_its_scene_with_the_reason() {
 /// scene's own (`finished_ms - created_ms`, stamped by the processes), so it leaves out the
 /// test's polling. `BSPVT_BENCH_MESH` (a .ply, default the bunny at its coarsest),
 /// `BSPVT_BENCH_FACE_RES` (default 24), `BSPVT_BENCH_CHUNK` (vertices per chunk, default 32).
+/// PostgreSQL runs with `fsync = on` here; the S3 server (moto) keeps objects in memory.
 #[test]
 #[ignore]
 fn bench_distributed_against_embedded() {
     let (_t, dir) = tmp();
-    let Some((pg, s3)) = engines(&dir, "bench_distributed_against_embedded") else {
+    let Some((mut pg, s3)) = engines(&dir, "bench_distributed_against_embedded") else {
         return;
     };
+    // The test engines run with fsync off; the embedded service syncs every chunk, so the
+    // comparison needs PostgreSQL's fsync back on (the S3 server keeps objects in memory).
+    pg.fsync = true;
+    pg.restart();
+    assert_eq!(pg.sql("SHOW fsync"), "on");
     let var = |k: &str, d: u32| {
         std::env::var(k)
             .ok()
@@ -382,18 +454,23 @@ fn bench_distributed_against_embedded() {
         let ms = s["finished_ms"].as_i64().unwrap() - s["created_ms"].as_i64().unwrap();
         (ms as f64 / 1e3, s)
     };
-    println!("| processes × threads | embedded (s) | distributed (s) | overhead |");
-    println!("|---|---:|---:|---:|");
+    println!(
+        "| N | embedded: wall s, CPU s | distributed: wall s | API + workers CPU s | PostgreSQL CPU s | S3 (moto) CPU s | wall overhead | CPU overhead (API + workers + PostgreSQL) |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|");
     for n in [1usize, 2, 4] {
         let ns = n.to_string();
         let emb = start(
             &dir.join(format!("emb{n}")),
             &["--workers", &ns, "--threads", &ns],
         );
+        let c0 = cpu_s(emb.child.id());
         let id = submit_scene(&a, &emb, &json, &mesh);
         let (te, s) = wall(&emb, &id);
+        let ce = cpu_s(emb.child.id()) - c0;
         drop(emb);
         let prefix = format!("bench{n}");
+        let (pg0, s30) = (pg.cpu_s(), cpu_s(s3.child.id()));
         let srv = api(
             &dir,
             &format!("api{n}"),
@@ -410,12 +487,89 @@ fn bench_distributed_against_embedded() {
             .collect();
         let id = submit_scene(&a, &srv, &json, &mesh);
         let (td, _) = wall(&srv, &id);
+        let cd = cpu_s(srv.child.id()) + workers.iter().map(|w| cpu_s(w.child.id())).sum::<f64>();
         drop(workers);
+        drop(srv);
+        // Their connections closed: the backends exit and are counted in the postmaster's.
+        std::thread::sleep(Duration::from_secs(1));
+        let (cpg, cs3) = (pg.cpu_s() - pg0, cpu_s(s3.child.id()) - s30);
         println!(
-            "| {n} × 1 | {te:.2} | {td:.2} | {:+.1} % |   ({} vertices, {} chunks)",
+            "| {n} | {te:.2}, {ce:.2} | {td:.2} | {cd:.2} | {cpg:.2} | {cs3:.2} | {:+.1} % | {:+.1} % |   ({} vertices, {} chunks)",
             (td / te - 1.0) * 100.0,
+            ((cd + cpg) / ce - 1.0) * 100.0,
             s["vertices_total"],
             s["chunks_total"]
         );
     }
+}
+
+/// Benchmark, not run by default: how long after a worker records a chunk (its row's
+/// `baked_ms`) an API instance's SSE client hears of it (the event whose `chunks_done`
+/// first counts it). Same machine, same clock.
+/// `cargo test -p bspvt-server --test service_cluster bench_event -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn bench_event_latency() {
+    use std::io::BufRead;
+    let (_t, dir) = tmp();
+    let Some((pg, s3)) = engines(&dir, "bench_event_latency") else {
+        return;
+    };
+    let (json, mesh) = scene(&dir, 256, 8);
+    let a = agent();
+    let srv = api(&dir, "api", &pg, &s3, "ev", &["--workers", "0"]);
+    let id = submit_scene(&a, &srv, &json, &mesh);
+    let url = srv.url(&format!("/v1/scenes/{id}/events"));
+    let reader = std::thread::spawn(move || {
+        let a = agent();
+        let r = a.get(&url).call().unwrap();
+        let mut seen: Vec<(u64, i64)> = Vec::new();
+        let body = std::io::BufReader::new(r.into_body().into_reader());
+        for line in body.lines() {
+            let Ok(line) = line else { break };
+            let Some(data) = line.strip_prefix("data:") else {
+                continue;
+            };
+            let now = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap()
+                .as_millis() as i64;
+            let s: serde_json::Value = serde_json::from_str(data.trim()).unwrap();
+            let done = s["chunks_done"].as_u64().unwrap();
+            if seen.last().is_none_or(|&(d, _)| d < done) {
+                seen.push((done, now));
+            }
+            if s["state"] == "done" {
+                break;
+            }
+        }
+        seen
+    });
+    let w = ["--threads", "1", "--chunks", "1"];
+    let _w: Vec<Worker> = (0..2)
+        .map(|i| Worker::start(&dir, &format!("ev{i}"), &pg, &s3, "ev", &w))
+        .collect();
+    let seen = reader.join().unwrap();
+    let baked: Vec<i64> = pg
+        .sql(&format!(
+            "SELECT baked_ms FROM chunks WHERE scene_id = '{id}' ORDER BY baked_ms"
+        ))
+        .lines()
+        .map(|l| l.parse().unwrap())
+        .collect();
+    let mut lat: Vec<i64> = seen
+        .iter()
+        .filter(|&&(d, _)| d > 0)
+        .map(|&(d, t)| t - baked[d as usize - 1])
+        .collect();
+    lat.sort();
+    let pct = |p: f64| lat[((lat.len() - 1) as f64 * p).round() as usize];
+    println!(
+        "SSE latency after a chunk's record, {} events for {} chunks: median {} ms, p90 {} ms, max {} ms",
+        lat.len(),
+        baked.len(),
+        pct(0.5),
+        pct(0.9),
+        pct(1.0)
+    );
 }

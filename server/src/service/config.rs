@@ -29,7 +29,7 @@ pub struct ServeArgs {
     pub database: Option<String>,
     /// Where scenes and chunks are stored: a folder, or `s3://BUCKET/PREFIX` (credentials,
     /// region and endpoint from AWS_ACCESS_KEY_ID, AWS_SECRET_ACCESS_KEY, AWS_REGION,
-    /// AWS_ENDPOINT_URL, AWS_ALLOW_HTTP); with a postgres:// database only.
+    /// AWS_ENDPOINT_URL, AWS_ALLOW_HTTP; an s3:// store needs a postgres:// database).
     #[arg(long, env = "BSPVT_STORE")]
     pub store: Option<String>,
     /// Seconds a worker's chunk lease lasts without a heartbeat (distributed shape).

@@ -37,6 +37,7 @@ mod metrics;
 mod objstore;
 mod openapi;
 mod pg;
+mod rows;
 mod sse;
 mod state;
 mod store;

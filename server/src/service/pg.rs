@@ -34,8 +34,8 @@ use deadpool_postgres::{Manager, ManagerConfig, Object, Pool, RecyclingMethod};
 use tokio_postgres::NoTls;
 use tokio_postgres::error::SqlState;
 
-use super::db::{ChunkMeta, IdempotentRecord, JobState, SceneRow, SceneSummary, now_ms};
 use super::io;
+use super::rows::{ChunkMeta, IdempotentRecord, JobState, SceneRow, SceneSummary, now_ms};
 
 /// How long an operation is retried while the database cannot be reached.
 pub(crate) const RETRY_FOR: Duration = Duration::from_secs(90);

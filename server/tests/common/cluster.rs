@@ -14,6 +14,20 @@ use std::time::{Duration, Instant};
 
 use super::common::BIN;
 
+/// CPU seconds (user + system) of process `pid`, and of its children it has reaped.
+pub fn cpu_s(pid: u32) -> f64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    // Fields after the command name (which is in parentheses and may hold spaces).
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<f64> = rest
+        .split_whitespace()
+        .map(|x| x.parse().unwrap_or(0.0))
+        .collect();
+    // utime, stime, cutime, cstime are fields 14..=17, i.e. 11..=14 after the name.
+    let ticks: f64 = f.get(11..15).map_or(0.0, |v| v.iter().sum());
+    ticks / 100.0
+}
+
 /// A free loopback port (bound then released).
 pub fn free_port() -> u16 {
     TcpListener::bind("127.0.0.1:0")
@@ -61,6 +75,9 @@ pub struct Postgres {
     pub url: String,
     as_postgres: bool,
     log: PathBuf,
+    /// `fsync` (off for tests: faster, and no test cuts the power); takes effect at the next
+    /// (re)start.
+    pub fsync: bool,
 }
 
 impl Postgres {
@@ -86,6 +103,7 @@ impl Postgres {
             bin,
             data,
             as_postgres,
+            fsync: false,
         };
         let out = pg
             .cmd("initdb")
@@ -118,9 +136,10 @@ impl Postgres {
 
     fn pg_ctl(&self, what: &[&str]) -> Result<(), String> {
         let opts = format!(
-            "-p {} -c listen_addresses=127.0.0.1 -k {} -c fsync=off -c max_connections=200",
+            "-p {} -c listen_addresses=127.0.0.1 -k {} -c fsync={} -c max_connections=200",
             self.port,
-            self.data.display()
+            self.data.display(),
+            if self.fsync { "on" } else { "off" }
         );
         let out = self
             .cmd("pg_ctl")
@@ -147,6 +166,16 @@ impl Postgres {
         self.pg_ctl(&["-m", "immediate", "stop"])
             .expect("stop PostgreSQL");
         self.pg_ctl(&["start"]).expect("start PostgreSQL again");
+    }
+
+    /// CPU seconds of the server: the postmaster and the backends it has reaped (a backend
+    /// is reaped when its connection closes).
+    pub fn cpu_s(&self) -> f64 {
+        let pid = std::fs::read_to_string(self.data.join("postmaster.pid"))
+            .ok()
+            .and_then(|s| s.lines().next().and_then(|l| l.trim().parse().ok()))
+            .unwrap_or(0);
+        cpu_s(pid)
     }
 
     /// Runs one SQL query with `psql` and returns its unaligned output.
@@ -185,7 +214,7 @@ impl Drop for Postgres {
 
 /// An S3-compatible server (`moto_server`) with one bucket.
 pub struct S3 {
-    child: Child,
+    pub child: Child,
     pub port: u16,
     pub bucket: String,
 }

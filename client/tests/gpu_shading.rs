@@ -16,11 +16,16 @@ use bspvt_proto::bspvt::{FaceTree, LineCodec, Node, QLine, VertexTrees};
 use bspvt_proto::scene::Material;
 use glam::DVec3;
 
-fn gpu() -> Option<&'static Gpu> {
-    match Gpu::shared() {
-        Ok(g) => {
+/// One GPU test at a time in this binary (concurrent submissions from several threads stall
+/// lavapipe for a minute).
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn gpu() -> Option<(&'static Gpu, std::sync::MutexGuard<'static, ()>)> {
+    let guard = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    match Gpu::shared().map(|g| (g, guard)) {
+        Ok((g, guard)) => {
             eprintln!("adapter: {}", g.adapter);
-            Some(g)
+            Some((g, guard))
         }
         Err(e) => {
             eprintln!(
@@ -226,7 +231,7 @@ const ABSOLUTE: f64 = 1e-5;
 
 #[test]
 fn gpu_matches_the_f64_kernels_on_the_stability_cases() {
-    let Some(gpu) = gpu() else { return };
+    let Some((gpu, _one)) = gpu() else { return };
     let mut rng = Rng(1);
     let mut families: Vec<(&str, Worst)> = Vec::new();
     let mut run =
@@ -341,7 +346,7 @@ fn gpu_matches_the_f64_kernels_on_the_stability_cases() {
 /// unshadowed light (plus the bound), and the error stated in docs/gpu.md.
 #[test]
 fn gpu_tiny_lights_stay_finite_and_bounded() {
-    let Some(gpu) = gpu() else { return };
+    let Some((gpu, _one)) = gpu() else { return };
     let mut w = Worst::default();
     let eye = DVec3::new(0.3, 1.0, 0.5);
     for k in 0..6 {

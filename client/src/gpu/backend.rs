@@ -8,7 +8,8 @@ use super::context::Gpu;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Backend {
-    /// The GPU when an adapter exists, else the CPU.
+    /// The GPU when a hardware adapter exists, else the CPU (a software adapter such as
+    /// lavapipe only with `gpu`: its frame shader takes minutes to compile, docs/gpu.md).
     #[default]
     Auto,
     /// The GPU; an error without an adapter.
@@ -39,6 +40,14 @@ impl Backend {
                 Ok((Some(gpu), format!("backend: GPU, {}", gpu.adapter)))
             }
             Backend::Auto => match Gpu::shared() {
+                Ok(gpu) if gpu.software => Ok((
+                    None,
+                    format!(
+                        "backend: CPU (the only adapter, {}, is a software rasteriser; \
+                         --backend gpu uses it)",
+                        gpu.adapter
+                    ),
+                )),
                 Ok(gpu) => Ok((Some(gpu), format!("backend: GPU, {}", gpu.adapter))),
                 Err(e) => Ok((None, format!("backend: CPU (no GPU: {e:#})"))),
             },

@@ -14,6 +14,8 @@ pub struct Gpu {
     pub(crate) queue: wgpu::Queue,
     /// The adapter, e.g. `llvmpipe (LLVM 19.1.7, 256 bits) (Vulkan, Cpu)`.
     pub adapter: String,
+    /// A software rasteriser (lavapipe, WARP, SwiftShader): `auto` does not pick it.
+    pub software: bool,
     /// The per-vertex shading pipeline, compiled once (`vertex.rs`).
     pub(crate) shade_pipeline: OnceLock<wgpu::ComputePipeline>,
     /// One user of the queue at a time: submissions waited for from several threads at once
@@ -64,6 +66,7 @@ impl Gpu {
             shade_pipeline: OnceLock::new(),
             busy: std::sync::Mutex::new(()),
             adapter: format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type),
+            software: info.device_type == wgpu::DeviceType::Cpu,
         })
     }
 

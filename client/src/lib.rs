@@ -10,8 +10,8 @@
 //! 1. kernels, free of I/O: [`ggx`], [`ltc`], [`shade`], [`sg`]'s lobes, [`texture`], [`light`];
 //! 2. [`frame`]: the image, camera, G-buffer, BRDF and shadow-ray types every method shares;
 //!    [`envmap`]: the environment map; [`sky`]: the map as textured quad lights at infinity;
-//! 3. [`render`] (per-vertex / per-pixel frames), [`groundtruth`], [`penumbra`], [`sg`],
-//!    [`ratio`];
+//! 3. [`render`] (per-vertex / per-pixel frames), [`gpu`] (the same on the GPU),
+//!    [`groundtruth`], [`penumbra`], [`sg`], [`ratio`];
 //! 4. [`method`]: the [`method::FrameMethod`] interface and its registry, one file per method;
 //! 5. [`stream`] (the service's client), [`session`] (what a viewer shows), [`viewer`].
 //!
@@ -24,6 +24,7 @@
 pub mod envmap;
 pub mod frame;
 pub mod ggx;
+pub mod gpu;
 pub mod groundtruth;
 pub mod light;
 pub mod ltc;

@@ -196,6 +196,7 @@ pub(crate) fn run(a: &AnimateArgs) -> Result<()> {
     session.method = method(&f.method)?;
     session.mode = f.mode.into();
     session.set_env(f.env.options(&connected.scene)?);
+    session.set_backend(f.backend.resolve()?);
     session.set_roughness(a.roughness);
     let mut report = AnimateReport::new(&connected, &session, a.frames);
     report.first_frame(&mut session, started, &a.out.join("first.png"), a.exposure)?;

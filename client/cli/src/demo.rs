@@ -37,6 +37,8 @@ pub(crate) struct DemoArgs {
     pub(crate) method: String,
     #[command(flatten)]
     pub(crate) env: EnvArgs,
+    #[command(flatten)]
+    pub(crate) backend: crate::frame_args::BackendArgs,
 }
 
 /// Whether a window can be opened (an X display; the viewer is X11).
@@ -76,6 +78,7 @@ pub(crate) fn run(a: &DemoArgs) -> Result<()> {
     let mut session = connected.session(&opts, a.size, height)?;
     session.method = method(&a.method)?;
     session.set_env(a.env.options(&connected.scene)?);
+    session.set_backend(a.backend.resolve()?);
     let mut report = AnimateReport::new(&connected, &session, a.frames);
     // The first frame right away, with whatever trees are here (unshadowed where none are).
     report.first_frame(&mut session, started, &a.out.join("first.png"), 1.0)?;

@@ -41,6 +41,32 @@ pub(crate) struct FrameArgs {
     pub(crate) mode: ModeArg,
     #[command(flatten)]
     pub(crate) env: EnvArgs,
+    #[command(flatten)]
+    pub(crate) backend: BackendArgs,
+}
+
+/// Who draws `bspvt` and `ltc` frames: `render`, `animate`, `demo`, `view`.
+#[derive(clap::Args, Clone, Debug)]
+pub(crate) struct BackendArgs {
+    /// `gpu` (wgpu: Vulkan, Metal, DX12; lavapipe on Linux without a GPU), `cpu` (the
+    /// reference), or `auto`: the GPU when an adapter exists (its name is printed), else the
+    /// CPU. Methods other than bspvt and ltc draw on the CPU whatever this says.
+    #[arg(long, default_value = "auto", value_parser = ["auto", "gpu", "cpu"])]
+    pub(crate) backend: String,
+}
+
+impl BackendArgs {
+    /// The backend to hand the methods (`auto` resolved), with a line saying which it is.
+    pub(crate) fn resolve(&self) -> Result<bspvt_client::gpu::Backend> {
+        let b: bspvt_client::gpu::Backend = self.backend.parse()?;
+        let (gpu, line) = b.resolve()?;
+        eprintln!("{line}");
+        Ok(if gpu.is_some() {
+            bspvt_client::gpu::Backend::Gpu
+        } else {
+            bspvt_client::gpu::Backend::Cpu
+        })
+    }
 }
 
 /// The environment light of the environment methods (`sg`, `mc-env`, `bspvt-env`).

@@ -61,6 +61,8 @@ enum Command {
     /// and exact SSDF, unshadowed) against the Monte Carlo environment reference, per image
     /// size and lobe count (results.json/.md and images in --out).
     BenchSg(bspvt_lab::sg_bench::BenchSgArgs),
+    /// BSPVT per vertex and frames on the GPU against the CPU, same run (adapter, µs, ms).
+    BenchGpu(bspvt_lab::gpu_bench::BenchGpuArgs),
     /// Speed and error of the environment through the baked trees (`bspvt-env`) for k pieces
     /// per cube face, against SG with the screen-space SSDF and the unshadowed sky, all
     /// against the Monte Carlo environment reference (results.json/.md and images in --out).
@@ -125,6 +127,9 @@ fn main() -> std::process::ExitCode {
                 r.seconds,
                 a.out.join("report.md").display()
             );
+        }),
+        Command::BenchGpu(a) => bspvt_lab::gpu_bench::run(&a).map(|r| {
+            eprintln!("bench-gpu: {} row(s) on {}", r.rows.len(), r.adapter);
         }),
         Command::BenchSg(a) => bspvt_lab::sg_bench::run(&a).map(|r| {
             eprintln!(

@@ -40,6 +40,8 @@ pub(crate) struct RenderArgs {
     method: String,
     #[arg(long, value_enum, default_value = "vertex")]
     mode: RenderMode,
+    #[command(flatten)]
+    backend: crate::frame_args::BackendArgs,
     /// Samples per pixel (mc, ltc-exact).
     #[arg(long, default_value_t = 64)]
     spp: u32,
@@ -86,6 +88,7 @@ pub(crate) fn run(a: RenderArgs) -> Result<()> {
     anyhow::ensure!(a.env_spin.is_finite(), "--env-spin must be finite");
     let scene = bspvt_client::scene::open(a.scene.as_deref(), a.mesh.as_deref())?;
     let method = method(&a.method)?;
+    let backend = a.backend.resolve()?;
     let label = a
         .scene
         .as_deref()
@@ -133,6 +136,7 @@ pub(crate) fn run(a: RenderArgs) -> Result<()> {
                 mode,
                 spp: a.spp,
                 env: a.env.options(&scene)?,
+                backend,
                 ..Settings::default()
             },
         };

@@ -32,6 +32,7 @@ pub(crate) fn run(a: &ViewArgs) -> Result<()> {
     session.method = method(&f.method)?;
     session.mode = f.mode.into();
     session.set_env(f.env.options(&connected.scene)?);
+    session.set_backend(f.backend.resolve()?);
     if a.moving {
         session.path_t = Some(0.0);
     }

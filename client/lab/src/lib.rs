@@ -13,6 +13,7 @@
 
 pub mod bench;
 pub mod compare;
+pub mod gpu_bench;
 pub mod ltc_fit;
 pub mod mitsuba;
 pub mod penumbra_bench;

@@ -493,6 +493,21 @@ impl LtcTable {
         &self.fit
     }
 
+    /// The per-node quantities [`Self::lookup`] interpolates, in f32 for the GPU's copy of
+    /// the lookup (`gpu/common.wgsl`): per node (δ, ln m11, ln m22, q), (m31, magnitude,
+    /// fresnel, 0), index i·size + j.
+    pub(crate) fn gpu_nodes(&self) -> Vec<[f32; 4]> {
+        self.nodes
+            .iter()
+            .flat_map(|n| {
+                [
+                    [n.delta, n.ln_m11, n.ln_m22, n.q].map(|x| x as f32),
+                    [n.m31, n.magnitude, n.fresnel, 0.0].map(|x| x as f32),
+                ]
+            })
+            .collect()
+    }
+
     /// Bilinear lookup (see the module documentation for what is interpolated). Clamps α to
     /// [α_min, 1] (NaN → 1) and cos θ to [cos θ_max, 1] (NaN → 1); never returns NaN or Inf,
     /// and M⁻¹ always has a positive determinant.

@@ -3,6 +3,7 @@
 
 use anyhow::Result;
 
+use super::gpu::GpuPath;
 use super::{Frame, FrameInput, FrameMethod, MethodState, Needs, SceneData, Settings};
 
 /// See the module doc.
@@ -25,16 +26,28 @@ impl FrameMethod for Bspvt {
             ..Needs::default()
         }
     }
-    fn prepare(&self, _: &SceneData, _: &Settings) -> Result<Box<dyn MethodState>> {
-        Ok(Box::new(State))
+    fn gpu(&self) -> bool {
+        true
+    }
+    fn prepare(&self, _: &SceneData, settings: &Settings) -> Result<Box<dyn MethodState>> {
+        Ok(Box::new(State {
+            gpu: GpuPath::new(settings)?,
+        }))
     }
 }
 
-struct State;
+struct State {
+    gpu: Option<GpuPath>,
+}
 
 impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
         let light = f.light()?;
+        if let Some(g) = self.gpu.as_mut()
+            && let Some(frame) = g.frame(f, light, f.trees)?
+        {
+            return Ok(frame);
+        }
         let (image, counts) = match f.trees {
             Some(trees) => f.renderer.bspvt(light, trees, f.mode),
             None => f.renderer.ltc(light, f.mode),

@@ -2,6 +2,7 @@
 
 use anyhow::Result;
 
+use super::gpu::GpuPath;
 use super::{Frame, FrameInput, FrameMethod, MethodState, Needs, SceneData, Settings};
 
 /// See the module doc.
@@ -23,15 +24,27 @@ impl FrameMethod for Ltc {
             ..Needs::default()
         }
     }
-    fn prepare(&self, _: &SceneData, _: &Settings) -> Result<Box<dyn MethodState>> {
-        Ok(Box::new(State))
+    fn gpu(&self) -> bool {
+        true
+    }
+    fn prepare(&self, _: &SceneData, settings: &Settings) -> Result<Box<dyn MethodState>> {
+        Ok(Box::new(State {
+            gpu: GpuPath::new(settings)?,
+        }))
     }
 }
 
-struct State;
+struct State {
+    gpu: Option<GpuPath>,
+}
 
 impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
+        if let Some(g) = self.gpu.as_mut()
+            && let Some(frame) = g.frame(f, f.light()?, None)?
+        {
+            return Ok(frame);
+        }
         let (image, counts) = f.renderer.ltc(f.light()?, f.mode);
         Ok(Frame::new(image, counts))
     }

@@ -13,6 +13,7 @@ pub mod trees;
 mod bspvt;
 mod bspvt_env;
 mod env_scene;
+mod gpu;
 mod ltc;
 mod ltc_exact;
 mod mc;
@@ -162,6 +163,9 @@ pub struct Settings {
     pub progressive: bool,
     /// The denoised ratio estimator's filter radius, in pixels.
     pub denoise_radius: f64,
+    /// Who draws the methods that have a GPU path ([`FrameMethod::gpu`]); the others always
+    /// draw on the CPU.
+    pub backend: crate::gpu::Backend,
 }
 
 impl Default for Settings {
@@ -173,6 +177,7 @@ impl Default for Settings {
             penumbra: crate::penumbra::Params::default(),
             progressive: false,
             denoise_radius: 4.0,
+            backend: crate::gpu::Backend::Cpu,
         }
     }
 }
@@ -283,6 +288,11 @@ pub trait FrameMethod: Sync {
     fn description(&self) -> &'static str;
     /// What it needs before it can draw.
     fn needs(&self) -> Needs;
+    /// Whether it can draw on the GPU ([`Settings::backend`]); the others draw on the CPU
+    /// whatever the backend.
+    fn gpu(&self) -> bool {
+        false
+    }
     /// The mode it shades in whatever was asked (`None`: the one asked for).
     fn fixed_mode(&self) -> Option<Mode> {
         None

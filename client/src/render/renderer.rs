@@ -54,6 +54,16 @@ impl<'a> Trees<'a> {
         }
     }
 
+    /// Trees streamed in part: vertex `v` has its trees where `present[v]` (the others are
+    /// shaded unshadowed).
+    pub fn partial(trees: &'a [VertexTrees], codec: LineCodec, present: &'a [bool]) -> Trees<'a> {
+        Trees {
+            trees,
+            codec,
+            present: Some(present),
+        }
+    }
+
     /// A key of which trees these are: the same slice with the same vertices present.
     pub(crate) fn key(&self) -> (usize, usize, usize) {
         let present = self
@@ -62,7 +72,8 @@ impl<'a> Trees<'a> {
         (self.trees.as_ptr() as usize, self.trees.len(), present)
     }
 
-    fn has(&self, v: u32) -> bool {
+    /// Whether vertex `v` has its trees.
+    pub(crate) fn has(&self, v: u32) -> bool {
         self.present
             .is_none_or(|p| p.get(v as usize).copied().unwrap_or(false))
             && (v as usize) < self.trees.len()
@@ -183,6 +194,11 @@ impl<'a> Renderer<'a> {
         h.finish()
     }
 
+    /// The scene's materials with the roughness override applied.
+    pub(crate) fn materials(&self) -> &[Material] {
+        &self.materials
+    }
+
     fn material(&self, id: u32) -> &Material {
         let m = &self.materials;
         &m[(id as usize).min(m.len().saturating_sub(1))]
@@ -203,16 +219,21 @@ impl<'a> Renderer<'a> {
         }
     }
 
-    fn vertex_lobes(&self, v: u32) -> (Lobes, DVec3, DVec3) {
+    /// Vertex `v`'s position, unit normal and material (per vertex, a textured material is
+    /// the texture at the vertex's own UV (docs/scene-format.md "Textures"), interpolated over
+    /// the triangle like the lighting).
+    pub(crate) fn vertex_surface(&self, v: u32) -> (DVec3, DVec3, std::borrow::Cow<'_, Material>) {
         let p = self.scene.mesh.positions[v as usize].as_dvec3();
         let n = self.scene.mesh.normals[v as usize]
             .as_dvec3()
             .normalize_or(DVec3::Y);
-        let wo = (self.view.eye - p).normalize_or(n);
-        // Per vertex, a textured material is the texture at the vertex's own UV (docs/
-        // scene-format.md "Textures"), interpolated over the triangle like the lighting.
         let uv = self.scene.mesh.uvs.get(v as usize).copied();
-        let m = self.material_at(self.vertex_material[v as usize], uv);
+        (p, n, self.material_at(self.vertex_material[v as usize], uv))
+    }
+
+    fn vertex_lobes(&self, v: u32) -> (Lobes, DVec3, DVec3) {
+        let (p, n, m) = self.vertex_surface(v);
+        let wo = (self.view.eye - p).normalize_or(n);
         (Lobes::new(self.table, &m, n, wo), p, n)
     }
 
@@ -249,9 +270,14 @@ impl<'a> Renderer<'a> {
         (colour, ratio, counts)
     }
 
+    /// Vertices of the triangles the camera sees.
+    pub fn visible_vertex_count(&self) -> usize {
+        self.visible_vertices.len()
+    }
+
     /// BSPVT per vertex: for every visible vertex, (shadowed radiance, shadow ratios).
     /// Vertices the camera does not see are left at zero.
-    pub(crate) fn shade_vertices(
+    pub fn shade_vertices(
         &self,
         light: &Light,
         trees: &Trees,

@@ -247,6 +247,14 @@ impl<'a> Session<'a> {
         self.invalidate();
     }
 
+    /// Who draws the methods that have a GPU path (resolve `auto` first:
+    /// [`crate::gpu::Backend::resolve`]); their states are prepared again.
+    pub fn set_backend(&mut self, backend: crate::gpu::Backend) {
+        self.settings.backend = backend;
+        self.states
+            .retain(|name, _| !registry::find(name).is_some_and(|m| m.gpu()));
+    }
+
     /// The environment light the methods use (before the first frame of a method that reads
     /// it; a method already prepared keeps the map it loaded).
     pub fn set_env(&mut self, env: crate::method::EnvOptions) {

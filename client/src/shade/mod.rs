@@ -84,7 +84,7 @@ pub const UNSHADOWED: ShadowRatio = [[1.0; 3]; 2];
 impl Shaded {
     /// Shadowed (`self`) / `unshadowed` per lobe and channel, clamped to \[0, 1\]; 1 where the
     /// unshadowed value is zero (the ratio then multiplies nothing).
-    pub(crate) fn ratio(&self, unshadowed: &Shaded) -> ShadowRatio {
+    pub fn ratio(&self, unshadowed: &Shaded) -> ShadowRatio {
         let r = |s: DVec3, u: DVec3| {
             let c = |s: f64, u: f64| {
                 if u > 0.0 {
@@ -174,7 +174,7 @@ impl Lobes {
 
     /// Outgoing radiance for light radiance `l`.
     #[inline]
-    pub(crate) fn radiance(&self, l: DVec3, s: &Shaded) -> DVec3 {
+    pub fn radiance(&self, l: DVec3, s: &Shaded) -> DVec3 {
         l * (self.albedo * s.diffuse_rgb + self.specular * s.specular_rgb)
     }
 

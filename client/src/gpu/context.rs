@@ -1,0 +1,152 @@
+//! The GPU: one wgpu adapter and device per process, found once ([`Gpu::shared`]). Without
+//! a GPU, Linux uses Mesa's lavapipe (Debian's `mesa-vulkan-drivers`) when installed; the
+//! usual wgpu variables (`WGPU_BACKEND`, `WGPU_ADAPTER_NAME`, and Vulkan's
+//! `VK_ICD_FILENAMES`) choose among adapters.
+
+use std::sync::OnceLock;
+use std::task::{Context, Poll, Wake, Waker};
+
+use anyhow::{Context as _, Result, anyhow};
+
+/// A device and its queue, with the adapter's name.
+pub struct Gpu {
+    pub(crate) device: wgpu::Device,
+    pub(crate) queue: wgpu::Queue,
+    /// The adapter, e.g. `llvmpipe (LLVM 19.1.7, 256 bits) (Vulkan, Cpu)`.
+    pub adapter: String,
+    /// A software rasteriser (lavapipe, WARP, SwiftShader): `auto` does not pick it.
+    pub software: bool,
+    /// The per-vertex shading pipeline, compiled once (`vertex.rs`).
+    pub(crate) shade_pipeline: OnceLock<wgpu::ComputePipeline>,
+    /// One user of the queue at a time: submissions waited for from several threads at once
+    /// stall for a minute on lavapipe (measured), so each frame or batch holds this.
+    busy: std::sync::Mutex<()>,
+}
+
+static SHARED: OnceLock<Result<Gpu, String>> = OnceLock::new();
+
+impl Gpu {
+    /// The process's GPU, found on first use; the error says why there is none.
+    pub fn shared() -> Result<&'static Gpu> {
+        SHARED
+            .get_or_init(|| Gpu::new().map_err(|e| format!("{e:#}")))
+            .as_ref()
+            .map_err(|e| anyhow!("{e}"))
+    }
+
+    /// Finds an adapter (high performance first) and opens a device on it with the
+    /// adapter's own buffer limits (the trees of a large mesh exceed wgpu's defaults).
+    pub fn new() -> Result<Gpu> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            ..Default::default()
+        }))
+        .context(
+            "no GPU adapter (install a Vulkan driver, e.g. Mesa's lavapipe: mesa-vulkan-drivers)",
+        )?;
+        let info = adapter.get_info();
+        let have = adapter.limits();
+        let limits = wgpu::Limits {
+            max_storage_buffer_binding_size: have.max_storage_buffer_binding_size,
+            max_buffer_size: have.max_buffer_size,
+            max_storage_buffers_per_shader_stage: have.max_storage_buffers_per_shader_stage.min(8),
+            ..wgpu::Limits::default().using_resolution(have.clone())
+        };
+        let (device, queue) = block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("bspvt"),
+            required_limits: limits,
+            ..Default::default()
+        }))
+        .with_context(|| format!("opening a device on {}", info.name))?;
+        Ok(Gpu {
+            device,
+            queue,
+            shade_pipeline: OnceLock::new(),
+            busy: std::sync::Mutex::new(()),
+            adapter: format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type),
+            software: info.device_type == wgpu::DeviceType::Cpu,
+        })
+    }
+
+    /// Holds the queue for one frame or batch (see `busy`).
+    pub(crate) fn exclusive(&self) -> std::sync::MutexGuard<'_, ()> {
+        self.busy.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Runs `f` (resource creation) with its validation and out-of-memory errors returned
+    /// instead of wgpu's default handler (which panics).
+    pub(crate) fn checked<T>(&self, what: &str, f: impl FnOnce() -> T) -> Result<T> {
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let invalid = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let out = f();
+        let e = block_on(invalid.pop()).or(block_on(oom.pop()));
+        match e {
+            None => Ok(out),
+            Some(e) => Err(anyhow!("{what}: {e}")),
+        }
+    }
+
+    /// Waits until the queue's work is done.
+    pub(crate) fn wait(&self) -> Result<()> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| anyhow!("waiting for the GPU: {e}"))
+    }
+
+    /// Copies `size` bytes of `src` (a COPY_SRC buffer) back to memory.
+    pub(crate) fn read_buffer(&self, src: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(src, 0, &staging, 0, size);
+        self.queue.submit([enc.finish()]);
+        self.map_read(&staging)
+    }
+
+    /// Maps a MAP_READ buffer after the queue's work and copies it out.
+    pub(crate) fn map_read(&self, staging: &wgpu::Buffer) -> Result<Vec<u8>> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        staging.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
+        self.wait()?;
+        rx.recv()
+            .map_err(|_| anyhow!("the GPU dropped a read-back"))?
+            .map_err(|e| anyhow!("mapping a read-back buffer: {e}"))?;
+        let bytes = staging
+            .get_mapped_range(..)
+            .map_err(|e| anyhow!("reading a mapped buffer: {e:?}"))?
+            .to_vec();
+        staging.unmap();
+        Ok(bytes)
+    }
+}
+
+/// Wakes the thread that waits in [`block_on`].
+struct Unpark(std::thread::Thread);
+
+impl Wake for Unpark {
+    fn wake(self: std::sync::Arc<Self>) {
+        self.0.unpark();
+    }
+}
+
+/// Runs a future to completion on this thread (wgpu's adapter and device requests).
+pub(crate) fn block_on<F: std::future::Future>(f: F) -> F::Output {
+    let mut f = std::pin::pin!(f);
+    let waker = Waker::from(std::sync::Arc::new(Unpark(std::thread::current())));
+    let mut cx = Context::from_waker(&waker);
+    loop {
+        match f.as_mut().poll(&mut cx) {
+            Poll::Ready(v) => return v,
+            Poll::Pending => std::thread::park(),
+        }
+    }
+}

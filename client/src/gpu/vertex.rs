@@ -1,0 +1,328 @@
+//! The compute pass of BSPVT per-vertex shading (`shade.wgsl`: eq. 2 of paper 000 per vertex,
+//! LTC GGX [Heitz16] per piece): buffers, pipeline, dispatch, read-back.
+
+use anyhow::{Result, bail};
+use bspvt_proto::bspvt::{LineCodec, VertexTrees};
+use bspvt_proto::scene::Material;
+use glam::{DVec3, Vec3};
+
+use super::context::Gpu;
+use super::trees::GpuTrees;
+use crate::light::Light;
+use crate::ltc::table::LtcTable;
+use crate::render::renderer::Trees;
+
+/// The per-vertex result, as the shader writes it (32 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuVertex {
+    /// Shadowed radiance L ⊙ (albedo·D + spec·S).
+    pub colour: [f32; 3],
+    /// Non-zero when the walk ran out of room (the result is then incomplete).
+    pub flags: f32,
+    /// Shadowed / unshadowed, diffuse and specular (1 where the unshadowed value is 0).
+    pub ratio: [f32; 2],
+    /// Pieces integrated (v̄ > 0).
+    pub pieces: u32,
+    /// Pieces dropped (v̄ = 0).
+    pub dropped: u32,
+}
+
+/// One point to shade: where, its unit normal and its material (textures already looked up).
+#[derive(Clone, Debug)]
+pub struct ShadePoint {
+    /// Position.
+    pub p: Vec3,
+    /// Unit normal.
+    pub n: Vec3,
+    /// The material at the point.
+    pub material: Material,
+}
+
+/// The vertex record of the shader: position, normal, (albedo, α), (F0, 0).
+pub(crate) fn vertex_record(p: &ShadePoint) -> [[f32; 4]; 4] {
+    let m = &p.material;
+    [
+        p.p.extend(1.0).to_array(),
+        p.n.extend(0.0).to_array(),
+        [m.albedo[0], m.albedo[1], m.albedo[2], m.roughness],
+        [m.specular[0], m.specular[1], m.specular[2], 0.0],
+    ]
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    eye: [f32; 4],
+    light_normal: [f32; 4],
+    radiance: [f32; 4],
+    light: [[f32; 4]; 8],
+    counts: [u32; 4],
+    codec: [f32; 4],
+}
+
+/// Whether the GPU shades this light: at most 8 vertices, untextured, finite.
+pub(crate) fn supports(light: &Light) -> Result<()> {
+    if light.texture.is_some() {
+        bail!("textured lights are shaded on the CPU");
+    }
+    if light.vertices.len() > 8 {
+        bail!("lights of more than 8 vertices are shaded on the CPU");
+    }
+    Ok(())
+}
+
+/// The LTC table as the shaders read it: two vec4 per node (ltc::table::LtcTable::gpu_nodes).
+pub(crate) fn ltc_buffer(gpu: &Gpu) -> wgpu::Buffer {
+    use wgpu::util::DeviceExt;
+    let nodes = LtcTable::builtin().gpu_nodes();
+    gpu.device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("ltc table"),
+            contents: bytemuck::cast_slice(&nodes),
+            usage: wgpu::BufferUsages::STORAGE,
+        })
+}
+
+/// The compute pipeline and its buffers for a mesh of `vertices` vertices.
+pub struct VertexShader {
+    pipeline: wgpu::ComputePipeline,
+    params: wgpu::Buffer,
+    ltc: wgpu::Buffer,
+    pub(crate) verts: wgpu::Buffer,
+    jobs: wgpu::Buffer,
+    jobs_len: u32,
+    /// The results, indexed by vertex (also the raster pass's per-vertex attributes).
+    pub(crate) out: wgpu::Buffer,
+    pub(crate) trees: GpuTrees,
+    vertices: usize,
+}
+
+/// The compute pipeline of `shade.wgsl`.
+fn pipeline(gpu: &Gpu) -> wgpu::ComputePipeline {
+    let src = [include_str!("common.wgsl"), include_str!("shade.wgsl")].concat();
+    let module = gpu
+        .device
+        .create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("shade.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(src.into()),
+        });
+    gpu.device
+        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("bspvt per vertex"),
+            layout: None,
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        })
+}
+
+fn buffer(gpu: &Gpu, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+    gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: size.max(16),
+        usage: usage | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+impl VertexShader {
+    /// The pipeline (the shader compiled) and empty buffers for `vertices` vertices.
+    pub fn new(gpu: &Gpu, vertices: usize) -> Result<VertexShader> {
+        let pipeline = match gpu.shade_pipeline.get() {
+            Some(p) => p.clone(),
+            None => {
+                let p = gpu.checked("the per-vertex shading pipeline", || pipeline(gpu))?;
+                gpu.shade_pipeline.get_or_init(|| p).clone()
+            }
+        };
+        let n = vertices as u64;
+        use wgpu::BufferUsages as U;
+        Ok(VertexShader {
+            pipeline,
+            params: buffer(
+                gpu,
+                "params",
+                std::mem::size_of::<Params>() as u64,
+                U::UNIFORM,
+            ),
+            ltc: ltc_buffer(gpu),
+            verts: buffer(gpu, "vertices", n * 64, U::STORAGE),
+            jobs: buffer(gpu, "jobs", n * 4, U::STORAGE),
+            jobs_len: 0,
+            out: buffer(
+                gpu,
+                "per-vertex shading",
+                n * 32,
+                U::STORAGE | U::VERTEX | U::COPY_SRC,
+            ),
+            trees: GpuTrees::new(gpu, vertices),
+            vertices,
+        })
+    }
+
+    /// Sets the vertex records (positions, normals, materials).
+    pub(crate) fn set_vertices(&mut self, gpu: &Gpu, records: &[[[f32; 4]; 4]]) {
+        let n = records.len().min(self.vertices);
+        gpu.queue
+            .write_buffer(&self.verts, 0, bytemuck::cast_slice(&records[..n]));
+    }
+
+    /// Sets the vertices to shade (the visible ones).
+    pub(crate) fn set_jobs(&mut self, gpu: &Gpu, jobs: &[u32]) {
+        let jobs: Vec<u32> = jobs
+            .iter()
+            .copied()
+            .filter(|&v| (v as usize) < self.vertices)
+            .collect();
+        gpu.queue
+            .write_buffer(&self.jobs, 0, bytemuck::cast_slice(&jobs));
+        self.jobs_len = jobs.len() as u32;
+    }
+
+    /// Uploads the trees that arrived since the last call ([`GpuTrees::sync`]).
+    pub(crate) fn sync_trees(&mut self, gpu: &Gpu, trees: Option<&Trees>) {
+        self.trees.sync(gpu, trees);
+    }
+
+    /// Records the pass for `light` seen from `eye` into `enc`.
+    pub(crate) fn encode(
+        &self,
+        gpu: &Gpu,
+        enc: &mut wgpu::CommandEncoder,
+        light: &Light,
+        eye: DVec3,
+    ) -> Result<()> {
+        supports(light)?;
+        let mut params = Params {
+            eye: eye.as_vec3().extend(1.0).to_array(),
+            light_normal: light
+                .normal
+                .as_vec3()
+                .extend(if light.two_sided { 1.0 } else { 0.0 })
+                .to_array(),
+            radiance: light.radiance.as_vec3().extend(0.0).to_array(),
+            light: [[0.0; 4]; 8],
+            counts: [
+                light.vertices.len() as u32,
+                self.jobs_len,
+                self.trees.codec.0,
+                LtcTable::builtin().size() as u32,
+            ],
+            codec: [self.trees.codec.1, 0.0, 0.0, 0.0],
+        };
+        let finite = light.vertices.iter().all(|v| v.is_finite())
+            && light.normal.is_finite()
+            && light.radiance.is_finite();
+        if !finite {
+            // A non-finite light sends nothing (shade::light_directions).
+            params.counts[0] = 0;
+        }
+        for (k, v) in light.vertices.iter().enumerate().take(8) {
+            params.light[k] = v.as_vec3().extend(1.0).to_array();
+        }
+        gpu.queue
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        let layout = self.pipeline.get_bind_group_layout(0);
+        let entries = [
+            &self.params,
+            &self.verts,
+            &self.jobs,
+            &self.trees.roots,
+            &self.trees.nodes,
+            &self.trees.line_normals,
+            &self.ltc,
+            &self.out,
+        ];
+        let entries: Vec<wgpu::BindGroupEntry> = entries
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("bspvt per vertex"),
+            layout: &layout,
+            entries: &entries,
+        });
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &group, &[]);
+        pass.dispatch_workgroups(self.jobs_len.div_ceil(64), 1, 1);
+        Ok(())
+    }
+
+    /// Shades the jobs and waits.
+    pub(crate) fn run(&self, gpu: &Gpu, light: &Light, eye: DVec3) -> Result<()> {
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        self.encode(gpu, &mut enc, light, eye)?;
+        gpu.queue.submit([enc.finish()]);
+        gpu.wait()
+    }
+
+    /// The results of every vertex (those not shaded: what was there before).
+    pub fn read(&self, gpu: &Gpu) -> Result<Vec<GpuVertex>> {
+        let bytes = gpu.read_buffer(&self.out, self.vertices.max(1) as u64 * 32)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+}
+
+/// Shades `points` with `light` seen from `eye`, point i with `trees[i]` (the GPU side of
+/// the CPU's [`crate::shade::bspvt::shade_vertex`], for tests and benchmarks).
+pub fn shade_points(
+    gpu: &Gpu,
+    light: &Light,
+    eye: DVec3,
+    points: &[ShadePoint],
+    trees: &[VertexTrees],
+    codec: &LineCodec,
+) -> Result<Vec<GpuVertex>> {
+    let _queue = gpu.exclusive();
+    let mut s = VertexShader::new(gpu, points.len())?;
+    let records: Vec<_> = points.iter().map(vertex_record).collect();
+    s.set_vertices(gpu, &records);
+    let jobs: Vec<u32> = (0..points.len() as u32).collect();
+    s.set_jobs(gpu, &jobs);
+    s.sync_trees(gpu, Some(&Trees::full(trees, codec.clone())));
+    s.run(gpu, light, eye)?;
+    let mut out = s.read(gpu)?;
+    out.truncate(points.len());
+    Ok(out)
+}
+
+impl VertexShader {
+    /// Shades the vertices `renderer` sees with `light` and `trees` (uploading the vertex
+    /// records when the camera or the materials changed — `key`, the renderer's shading key
+    /// of the last upload — and the trees that arrived since the last call).
+    pub(crate) fn shade_renderer(
+        &mut self,
+        gpu: &Gpu,
+        enc: &mut wgpu::CommandEncoder,
+        renderer: &crate::render::renderer::Renderer,
+        key: &mut Option<u64>,
+        light: &Light,
+        trees: Option<&Trees>,
+    ) -> Result<()> {
+        let k = renderer.shading_key();
+        if *key != Some(k) {
+            let records: Vec<_> = (0..self.vertices as u32)
+                .map(|v| {
+                    let (p, n, m) = renderer.vertex_surface(v);
+                    vertex_record(&ShadePoint {
+                        p: p.as_vec3(),
+                        n: n.as_vec3(),
+                        material: m.into_owned(),
+                    })
+                })
+                .collect();
+            self.set_vertices(gpu, &records);
+            self.set_jobs(gpu, &renderer.visible_vertices);
+            *key = Some(k);
+        }
+        self.sync_trees(gpu, trees);
+        self.encode(gpu, enc, light, renderer.view.eye)
+    }
+}

@@ -1,0 +1,71 @@
+//! The GPU path of the methods that have one (`bspvt`, `ltc`): frames drawn by
+//! [`crate::gpu::frame::GpuFrames`] when [`Settings::backend`] asks for the GPU, the CPU's
+//! frame where the GPU cannot draw this scene or light (textured materials or lights, more
+//! than 8 light vertices: said once).
+
+use anyhow::Result;
+
+use super::{Frame, FrameInput, Settings};
+use crate::gpu::frame::GpuFrames;
+use crate::gpu::{Backend, Gpu};
+use crate::light::Light;
+use crate::render::renderer::Trees;
+
+/// MSAA samples of the GPU's frames.
+pub(crate) const SAMPLES: u32 = 4;
+
+/// A method's GPU state: the device, and the scene's frames once built.
+pub(crate) struct GpuPath {
+    gpu: &'static Gpu,
+    frames: Option<GpuFrames>,
+    /// Why the GPU does not draw this scene (said once; its frames are the CPU's).
+    refused: Option<String>,
+}
+
+impl GpuPath {
+    /// The GPU path `settings` ask for (`None`: the CPU draws).
+    pub(crate) fn new(settings: &Settings) -> Result<Option<GpuPath>> {
+        if settings.backend == Backend::Cpu {
+            return Ok(None);
+        }
+        let (gpu, _) = settings.backend.resolve()?;
+        Ok(gpu.map(|gpu| GpuPath {
+            gpu,
+            frames: None,
+            refused: None,
+        }))
+    }
+
+    /// The GPU's frame of `light` with `trees` (`None`: unshadowed), or `None` where the
+    /// CPU must draw it.
+    pub(crate) fn frame(
+        &mut self,
+        f: &FrameInput,
+        light: &Light,
+        trees: Option<&Trees>,
+    ) -> Result<Option<Frame>> {
+        if self.refused.is_some() {
+            return Ok(None);
+        }
+        if self.frames.is_none() {
+            match GpuFrames::new(self.gpu, f.scene.scene, SAMPLES) {
+                Ok(fr) => self.frames = Some(fr),
+                Err(e) => return Ok(self.refuse(format!("{e:#}"))),
+            }
+        }
+        if let Err(e) = crate::gpu::vertex::supports(light) {
+            return Ok(self.refuse(format!("{e:#}")));
+        }
+        let Some(frames) = self.frames.as_mut() else {
+            return Ok(None);
+        };
+        let (image, counts) = frames.frame(self.gpu, f.renderer, light, trees, f.mode)?;
+        Ok(Some(Frame::new(image, counts)))
+    }
+
+    fn refuse(&mut self, why: String) -> Option<Frame> {
+        tracing::warn!("GPU backend: {why}; these frames are drawn on the CPU");
+        self.refused = Some(why);
+        None
+    }
+}

@@ -1,0 +1,46 @@
+//! `--backend`: without an adapter (Vulkan pointed at no driver, no other wgpu backend),
+//! `auto` falls back to the CPU and says why, and `gpu` fails with a clear error. The adapter
+//! is found once per process, so the checks run in a child process of this test binary.
+#![allow(clippy::unwrap_used)]
+
+use bspvt_client::gpu::Backend;
+
+const CHILD: &str = "BSPVT_TEST_NO_ADAPTER_CHILD";
+
+/// Run in the child only: the environment has no adapter.
+#[test]
+fn no_adapter_child() {
+    if std::env::var_os(CHILD).is_none() {
+        return;
+    }
+    let (gpu, line) = Backend::Auto.resolve().unwrap();
+    assert!(gpu.is_none(), "an adapter was found: {line}");
+    assert!(line.starts_with("backend: CPU (no GPU"), "{line}");
+    eprintln!("auto: {line}");
+    let e = Backend::Gpu.resolve().err().unwrap();
+    let msg = format!("{e:#}");
+    assert!(
+        msg.contains("--backend gpu") && msg.contains("no GPU adapter"),
+        "{msg}"
+    );
+    eprintln!("gpu: {msg}");
+    let (gpu, line) = Backend::Cpu.resolve().unwrap();
+    assert!(gpu.is_none() && line == "backend: CPU");
+}
+
+#[test]
+fn without_an_adapter_auto_falls_back_and_gpu_fails() {
+    let exe = std::env::current_exe().unwrap();
+    let out = std::process::Command::new(exe)
+        .args(["no_adapter_child", "--exact", "--nocapture"])
+        .env(CHILD, "1")
+        .env("WGPU_BACKEND", "vulkan")
+        .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+        .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stderr);
+    eprintln!("{text}");
+    assert!(out.status.success(), "child failed:\n{text}");
+    assert!(text.contains("auto: backend: CPU (no GPU"), "{text}");
+}

@@ -44,7 +44,7 @@ enum Command {
     BenchView(bench_view::BenchViewArgs),
     /// Run the baking service (the same as `bspvt-server serve`).
     #[cfg(feature = "service")]
-    Serve(bspvt_server::service::config::ServeArgs),
+    Serve(Box<bspvt_server::service::config::ServeArgs>),
     /// Render images of a scene with any method (`bspvt methods`): one frame, or a sequence
     /// while the light moves.
     Render(render::RenderArgs),

@@ -33,6 +33,7 @@ use tokio::sync::watch;
 
 use super::db::{ChunkMeta, Db, JobState, SceneRow, now_ms};
 use super::metrics::{Gauges, Metrics};
+use super::rays::Rays;
 use super::store::Store;
 use bspvt_bake::Baker;
 
@@ -48,6 +49,8 @@ pub(crate) struct Jobs {
     store: Arc<Store>,
     metrics: Arc<Metrics>,
     pool: rayon::ThreadPool,
+    /// Where rays are cast (`--bake-backend`).
+    rays: Rays,
     sched: Mutex<Sched>,
     work: Condvar,
     workers: usize,
@@ -265,6 +268,7 @@ impl Jobs {
         db: Arc<Db>,
         store: Arc<Store>,
         metrics: Arc<Metrics>,
+        rays: Rays,
         workers: usize,
         threads: usize,
         max_active: usize,
@@ -280,6 +284,7 @@ impl Jobs {
             store,
             metrics,
             pool,
+            rays,
             sched: Mutex::new(Sched::default()),
             work: Condvar::new(),
             workers,
@@ -753,11 +758,12 @@ impl Jobs {
         };
         let t0 = Instant::now();
         let result = std::panic::catch_unwind(AssertUnwindSafe(|| {
-            self.pool.install(|| baker.bake_chunk(c))
+            self.rays.bake_chunk(&self.pool, &baker, c)
         }));
         drop(baker);
         let (frame, totals) = match result {
-            Ok(r) => r,
+            Ok(Ok(r)) => r,
+            Ok(Err(reason)) => return self.fail(live, reason),
             Err(panic) => {
                 let msg = panic
                     .downcast_ref::<String>()

@@ -28,6 +28,7 @@ mod input;
 mod jobs;
 mod metrics;
 mod openapi;
+mod rays;
 mod sse;
 mod state;
 mod store;
@@ -54,6 +55,7 @@ use db::Db;
 use error::ApiError;
 use jobs::Jobs;
 use metrics::Metrics;
+use rays::Rays;
 use state::{AppState, Shared};
 use store::Store;
 
@@ -267,6 +269,7 @@ impl Service {
                     db,
                     store,
                     metrics,
+                    Rays::open(c.bake_backend)?,
                     c.workers,
                     c.threads,
                     c.max_active_scenes,

@@ -264,6 +264,10 @@ impl Live {
 
 impl Jobs {
     /// Resumes unfinished scenes from the database, cleans the store and starts the workers.
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "the service's parts and limits, each named at the one call"
+    )]
     pub(crate) fn start(
         db: Arc<Db>,
         store: Arc<Store>,

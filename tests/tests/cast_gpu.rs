@@ -226,3 +226,44 @@ fn gpu_equals_full_cpu_cast_on_the_room() {
         check_within(&seen, &label, MAX_ROOM_DIFFERING_PER_MILLION);
     }
 }
+
+/// The GPU bake reports every chunk in order and stops between chunks when cancelled (the
+/// CPU bake's contract), with the GPU thread still busy on the next chunk.
+#[test]
+fn gpu_bake_reports_progress_and_cancels() {
+    let Some(ctx) = gpu() else { return };
+    let mut scene = bspvt_proto::builtin::scene("plate-small").expect("built-in scene");
+    scene.bake.face_res = 8;
+    scene.bake.chunk_vertices = 512;
+    let b = Baker::new(&scene);
+    let caster = b.gpu_caster(ctx).expect("BVH on the GPU");
+    let seen = std::sync::Mutex::new(Vec::new());
+    let out = b
+        .bake_all_gpu(
+            &caster,
+            &|done, total| seen.lock().expect("lock").push((done, total)),
+            &AtomicBool::new(false),
+        )
+        .expect("not cancelled");
+    let seen = seen.into_inner().expect("lock");
+    let n = b.header().vertex_count as u64;
+    assert_eq!(seen.len() as u32, b.header().chunk_count());
+    assert_eq!(seen.last(), Some(&(n, n)));
+    assert!(seen.windows(2).all(|w| w[0].0 < w[1].0));
+    assert_eq!(out.totals.vertices, n);
+    assert_eq!(out.backend, bspvt_bake::Backend::Gpu);
+
+    let cancel = AtomicBool::new(false);
+    let err = b
+        .bake_all_gpu(
+            &caster,
+            &|_, _| cancel.store(true, std::sync::atomic::Ordering::Relaxed),
+            &cancel,
+        )
+        .err()
+        .expect("cancelled");
+    assert!(
+        matches!(&err, bspvt_bake::gpu_cast::GpuBakeError::Cancelled(c) if c.chunks_done == 1),
+        "{err}"
+    );
+}

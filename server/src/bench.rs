@@ -53,7 +53,8 @@ pub struct BenchArgs {
         reason = "a doc comment here would become new `--help` text"
     )]
     pub epsilon: Option<f32>,
-    /// Cast modes to compare (the first is the reference of the visibility error).
+    /// Cast modes to compare (the first is the reference of the visibility error); `gpu`:
+    /// the GPU backend's cast (every ray that matters, in a wgpu compute shader).
     #[arg(long, value_delimiter = ',', default_value = "full,adaptive")]
     pub casts: Vec<String>,
     /// Passes of each cast, interleaved; the fastest is reported (for a shared machine).
@@ -84,24 +85,93 @@ pub(crate) struct BenchRow {
     pub scene_vertices: usize,
     pub sampled: usize,
     pub method: SplitMethod,
-    pub cast: CastMode,
+    /// `full`, `adaptive` or `gpu`.
+    pub cast: String,
     pub stats: BakeStats,
     /// This cast's cube maps against the first cast's: pixels that differ, as a share of the
     /// pixels that matter, and mean |ΔV| over them.
     pub cast_pixels_differing: f64,
     pub cast_mean_abs_dv: f64,
-    /// This cast's ray time over the first cast's, same run.
+    /// This cast's ray time over the first cast's, same run (the GPU cast's: wall-clock
+    /// seconds, against the CPU casts' thread-seconds).
     pub ray_time_vs_first_cast: f64,
     /// This method's fit time over the Nelder–Mead baseline's, same run.
     pub fit_time_vs_nelder_mead: Option<f64>,
 }
 
-fn parse_cast(s: &str) -> Result<CastMode> {
-    match s {
-        "full" => Ok(CastMode::Full),
-        "adaptive" => Ok(CastMode::Adaptive),
-        _ => anyhow::bail!("unknown cast mode {s:?} (full, adaptive)"),
+/// A cast the bench compares: on the CPU threads, or on the GPU.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum BenchCast {
+    Cpu(CastMode),
+    Gpu,
+}
+
+impl BenchCast {
+    fn name(self) -> &'static str {
+        match self {
+            BenchCast::Cpu(CastMode::Full) => "full",
+            BenchCast::Cpu(CastMode::Adaptive) => "adaptive",
+            BenchCast::Gpu => "gpu",
+        }
     }
+}
+
+fn parse_cast(s: &str) -> Result<BenchCast> {
+    match s {
+        "full" => Ok(BenchCast::Cpu(CastMode::Full)),
+        "adaptive" => Ok(BenchCast::Cpu(CastMode::Adaptive)),
+        "gpu" => Ok(BenchCast::Gpu),
+        _ => anyhow::bail!("unknown cast mode {s:?} (full, adaptive, gpu)"),
+    }
+}
+
+/// Vertices per GPU dispatch in the bench's GPU cast (a chunk's worth).
+const GPU_BATCH: usize = 256;
+
+/// The GPU cast of `sample`, in batches of [`GPU_BATCH`] vertices on the current rayon pool
+/// (ray generation) and the GPU; each vertex is given its batch's wall-clock seconds / size.
+#[cfg(feature = "gpu")]
+fn gpu_pass(
+    baker: &Baker,
+    caster: &bspvt_bake::gpu_cast::GpuCaster,
+    sample: &[u32],
+) -> Result<Vec<(CubeMap, CastCounts, f64)>> {
+    let mut out = Vec::with_capacity(sample.len());
+    for batch in sample.chunks(GPU_BATCH) {
+        let t = Instant::now();
+        let (maps, counts) = baker.gpu_cube_maps(caster, batch)?;
+        let per_vertex = t.elapsed().as_secs_f64() / batch.len() as f64;
+        let (n, rays) = (batch.len() as u64, counts.rays);
+        for (i, m) in maps.into_iter().enumerate() {
+            // Rays are counted per batch: spread over its vertices, the sum kept (the
+            // per-vertex figures are means).
+            let r = rays / n + u64::from((i as u64) < rays % n);
+            let c = CastCounts {
+                rays: r,
+                traversals: r,
+            };
+            out.push((m, c, per_vertex));
+        }
+    }
+    Ok(out)
+}
+
+/// The GPU context of the bench, when a cast asks for it.
+#[cfg(feature = "gpu")]
+type Gpu = bspvt_bake::gpu_cast::GpuContext;
+#[cfg(not(feature = "gpu"))]
+enum Gpu {}
+
+#[cfg(feature = "gpu")]
+fn gpu_context() -> Result<std::sync::Arc<Gpu>> {
+    let ctx = Gpu::new()?;
+    eprintln!("GPU: {}", ctx.describe());
+    Ok(std::sync::Arc::new(ctx))
+}
+
+#[cfg(not(feature = "gpu"))]
+fn gpu_context() -> Result<std::sync::Arc<Gpu>> {
+    anyhow::bail!("this bspvt-server was built without the `gpu` feature: no `gpu` cast")
 }
 
 type CubeMap = [Option<FacePixels>; 6];
@@ -147,12 +217,16 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         .iter()
         .map(|m| parse_method(m))
         .collect::<Result<_>>()?;
-    let casts: Vec<CastMode> = a
+    let casts: Vec<BenchCast> = a
         .casts
         .iter()
         .map(|c| parse_cast(c))
         .collect::<Result<_>>()?;
     anyhow::ensure!(!casts.is_empty(), "--casts names no cast mode");
+    let gpu = match casts.contains(&BenchCast::Gpu) {
+        true => Some(gpu_context()?),
+        false => None,
+    };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))
         .build()?;
@@ -197,23 +271,42 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         // Each cast `--repeat` times, the casts interleaved; the fastest pass of each is kept
         // (the cube maps are the same every pass), so load from other processes on a shared
         // machine weighs on both casts alike.
-        let cast_pass = |cast: CastMode| -> Vec<(CubeMap, CastCounts, f64)> {
-            pool.install(|| {
-                sample
-                    .par_iter()
-                    .map(|&v| {
-                        let t = Instant::now();
-                        let (faces, counts) = baker.cube_map_with(v, cast);
-                        (faces, counts, t.elapsed().as_secs_f64())
-                    })
-                    .collect()
-            })
+        #[cfg(feature = "gpu")]
+        let caster = match &gpu {
+            Some(g) => Some(baker.gpu_caster(g.clone())?),
+            None => None,
+        };
+        #[cfg(not(feature = "gpu"))]
+        let caster: Option<()> = gpu.as_ref().map(|g| match **g {});
+        let cast_pass = |cast: BenchCast| -> Result<Vec<(CubeMap, CastCounts, f64)>> {
+            match cast {
+                BenchCast::Cpu(cast) => Ok(pool.install(|| {
+                    sample
+                        .par_iter()
+                        .map(|&v| {
+                            let t = Instant::now();
+                            let (faces, counts) = baker.cube_map_with(v, cast);
+                            (faces, counts, t.elapsed().as_secs_f64())
+                        })
+                        .collect()
+                })),
+                #[cfg(feature = "gpu")]
+                BenchCast::Gpu => {
+                    let caster = caster.as_ref().context("no GPU context")?;
+                    pool.install(|| gpu_pass(&baker, caster, &sample))
+                }
+                #[cfg(not(feature = "gpu"))]
+                BenchCast::Gpu => {
+                    let _ = &caster;
+                    anyhow::bail!("built without the `gpu` feature")
+                }
+            }
         };
         let pass_seconds = |m: &[(CubeMap, CastCounts, f64)]| m.iter().map(|x| x.2).sum::<f64>();
         let mut passes: Vec<Option<Vec<(CubeMap, CastCounts, f64)>>> = vec![None; casts.len()];
         for _ in 0..a.repeat.max(1) {
             for (slot, &cast) in passes.iter_mut().zip(&casts) {
-                let m = cast_pass(cast);
+                let m = cast_pass(cast)?;
                 if slot
                     .as_ref()
                     .is_none_or(|best| pass_seconds(&m) < pass_seconds(best))
@@ -265,7 +358,11 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                 stats.epsilon = scene.bake.epsilon;
                 stats.supersampling = scene.bake.supersampling;
                 stats.split = method;
-                stats.cast = cast;
+                if let BenchCast::Cpu(c) = cast {
+                    stats.cast = c;
+                } else {
+                    stats.backend = bspvt_bake::Backend::Gpu;
+                }
                 if method == SplitMethod::NelderMead {
                     nm_fit = Some(stats.fit_thread_seconds_per_vertex);
                 }
@@ -274,7 +371,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                     scene_vertices: n,
                     sampled: k,
                     method,
-                    cast,
+                    cast: cast.name().to_string(),
                     fit_time_vs_nelder_mead: nm_fit
                         .map(|b| stats.fit_thread_seconds_per_vertex / b),
                     stats,
@@ -317,7 +414,7 @@ fn print_table(rows: &[BenchRow], a: &BenchArgs, threads: usize) {
             "| {} | {} | {} | {} | {:.0} | {:.0} | {:.2} | {:.3} | {:.3}× | {:.3} | {:.3} | {} | {:.1} | {:.1} | {:.2e} | {:.2e} | {:.5} | {:.5} |",
             r.scene,
             r.scene_vertices,
-            name(serde_json::to_value(r.cast)),
+            r.cast,
             name(serde_json::to_value(r.method)),
             s.rays_per_vertex,
             s.traversals_per_vertex,
@@ -335,6 +432,14 @@ fn print_table(rows: &[BenchRow], a: &BenchArgs, threads: usize) {
             r.cast_mean_abs_dv,
             s.mean_abs_visibility_error,
             s.misclassified_pixel_fraction,
+        );
+    }
+    if rows.iter().any(|r| r.cast == "gpu") {
+        println!(
+            "\ngpu rows: rays are timed in wall-clock seconds of the GPU cast (ray generation on the \
+             threads, upload, cast, read-back), not thread-seconds; \"Mrays/s/thread\" is rays per \
+             wall-clock second, \"rays vs first cast\" compares those seconds with the first \
+             cast's thread-seconds."
         );
     }
 }

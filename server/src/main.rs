@@ -42,6 +42,14 @@ enum CastArg {
     Full,
 }
 
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum BackendArg {
+    /// Rays on the CPU threads (`--cast` says how).
+    Cpu,
+    /// Rays in a wgpu compute shader, trees fitted on the CPU threads meanwhile.
+    Gpu,
+}
+
 #[derive(Clone, Copy, ValueEnum)]
 enum SplitArg {
     Default,
@@ -70,6 +78,10 @@ struct BakeArgs {
     /// How rays are cast (the same cube maps and bytes either way; docs/bake.md).
     #[arg(long, value_enum, default_value = "adaptive")]
     cast: CastArg,
+    /// Where rays are cast: the CPU threads, or the GPU (docs/bake.md, "The GPU backend");
+    /// `gpu` fails when no GPU adapter is found.
+    #[arg(long, value_enum, default_value = "cpu")]
+    backend: BackendArg,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -88,6 +100,54 @@ fn main() -> std::process::ExitCode {
         Command::BenchCluster(a) => bspvt_server::service::cluster_bench_command(&a),
     };
     bspvt_proto::error::exit_code(result)
+}
+
+#[cfg(feature = "gpu")]
+use bspvt_bake::gpu_cast::GpuContext;
+
+/// The GPU context, or the "no adapter" error.
+#[cfg(feature = "gpu")]
+fn gpu_context() -> Result<std::sync::Arc<GpuContext>> {
+    Ok(std::sync::Arc::new(GpuContext::new()?))
+}
+
+#[cfg(feature = "gpu")]
+fn bake_gpu(
+    pool: &rayon::ThreadPool,
+    baker: &Baker,
+    ctx: &std::sync::Arc<GpuContext>,
+    progress: &(dyn Fn(u64, u64) + Sync),
+    cancel: &AtomicBool,
+) -> Result<bspvt_bake::BakeOutput> {
+    let caster = baker.gpu_caster(ctx.clone())?;
+    Ok(pool.install(|| baker.bake_all_gpu(&caster, progress, cancel))?)
+}
+
+/// Stands in for the GPU context in a build without the `gpu` feature.
+#[cfg(not(feature = "gpu"))]
+enum GpuContext {}
+
+#[cfg(not(feature = "gpu"))]
+impl GpuContext {
+    fn describe(&self) -> String {
+        match *self {}
+    }
+}
+
+#[cfg(not(feature = "gpu"))]
+fn gpu_context() -> Result<std::sync::Arc<GpuContext>> {
+    anyhow::bail!("this bspvt-server was built without the `gpu` feature: use --backend cpu")
+}
+
+#[cfg(not(feature = "gpu"))]
+fn bake_gpu(
+    _: &rayon::ThreadPool,
+    _: &Baker,
+    ctx: &std::sync::Arc<GpuContext>,
+    _: &(dyn Fn(u64, u64) + Sync),
+    _: &AtomicBool,
+) -> Result<bspvt_bake::BakeOutput> {
+    match **ctx {}
 }
 
 fn bake(a: BakeArgs) -> Result<()> {
@@ -137,13 +197,18 @@ fn bake(a: BakeArgs) -> Result<()> {
         CastArg::Adaptive => CastMode::Adaptive,
         CastArg::Full => CastMode::Full,
     });
+    let gpu = match a.backend {
+        BackendArg::Cpu => None,
+        BackendArg::Gpu => Some(gpu_context()?),
+    };
     let n = baker.header().vertex_count as u64;
     eprintln!(
-        "baking {n} vertices, {} triangles, {}² faces, ε = {}, {} thread(s)",
+        "baking {n} vertices, {} triangles, {}² faces, ε = {}, {} thread(s), rays on {}",
         scene.mesh.triangles.len(),
         scene.bake.face_res,
         scene.bake.epsilon,
-        threads
+        threads,
+        gpu.as_ref().map_or("the CPU".to_string(), |g| g.describe()),
     );
     let bar = ProgressBar::new(n).with_style(
         ProgressStyle::with_template(
@@ -152,7 +217,11 @@ fn bake(a: BakeArgs) -> Result<()> {
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let cancel = AtomicBool::new(false);
-    let out = pool.install(|| baker.bake_all(&|done, _| bar.set_position(done), &cancel))?;
+    let progress = |done, _| bar.set_position(done);
+    let out = match &gpu {
+        None => pool.install(|| baker.bake_all(&progress, &cancel))?,
+        Some(ctx) => bake_gpu(&pool, &baker, ctx, &progress, &cancel)?,
+    };
     bar.finish();
     if let Some(dir) = a.out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;

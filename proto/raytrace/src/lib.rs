@@ -8,6 +8,13 @@
 
 #![warn(unreachable_pub, missing_docs)]
 
+#[cfg(feature = "gpu")]
+pub mod gpu;
+#[cfg(feature = "gpu")]
+mod gpu_occluder;
+#[cfg(feature = "gpu")]
+pub use gpu_occluder::{GpuOccluder, GpuRay, RaySource};
+
 use std::time::Duration;
 
 use bspvt_proto::Mesh;

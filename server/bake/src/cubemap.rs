@@ -77,6 +77,9 @@ pub struct FacePixels {
     pub visible: Vec<u16>,
 }
 
+/// A vertex's cube map: per face, its pixels that matter (`None`: none).
+pub type CubeMap = [Option<FacePixels>; FACES];
+
 /// How a vertex's rays are cast. Both give the same cube map, bit for bit (tested against
 /// casting every ray on the shared meshes); `Adaptive` is cheaper.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
@@ -187,7 +190,7 @@ impl VertexRays<'_> {
     /// escaping without casting: the cosine term clips those directions at shading time, and
     /// casting them would shadow the pixel with the vertex's own surface.
     #[inline]
-    fn escapes_below_horizon(&self, d: Vec3) -> bool {
+    pub(crate) fn escapes_below_horizon(&self, d: Vec3) -> bool {
         d.dot(self.normal) <= 0.0
     }
 
@@ -201,7 +204,7 @@ impl VertexRays<'_> {
 
     /// How far a ray from `origin` along unit `d` is traced: to the first light it reaches.
     #[inline]
-    fn t_max(&self, origin: Vec3, d: Vec3) -> f32 {
+    pub(crate) fn t_max(&self, origin: Vec3, d: Vec3) -> f32 {
         self.stops
             .iter()
             .filter_map(|s| s.distance(origin, d))
@@ -210,7 +213,7 @@ impl VertexRays<'_> {
 
     /// Whether direction `d` can matter: above the horizon and toward a light region.
     #[inline]
-    fn matters(&self, origin: Vec3, d: Vec3) -> bool {
+    pub(crate) fn matters(&self, origin: Vec3, d: Vec3) -> bool {
         d.dot(self.normal) > 0.0
             && self
                 .regions

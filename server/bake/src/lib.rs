@@ -17,6 +17,8 @@
 pub mod cubemap;
 pub mod fit;
 mod frustum;
+#[cfg(feature = "gpu")]
+pub mod gpu_cast;
 mod origin;
 pub mod refine;
 pub mod stats;
@@ -141,6 +143,20 @@ pub struct BakeOutput {
     pub seconds: f64,
     /// How rays were cast.
     pub cast: CastMode,
+    /// Where rays were cast.
+    pub backend: Backend,
+}
+
+/// Where a bake's rays are cast.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Backend {
+    /// On the CPU threads, as [`CastMode`] says, each vertex's fit right after its rays.
+    #[default]
+    Cpu,
+    /// In a wgpu compute shader (feature `gpu`, [`gpu_cast`]), every ray of every pixel that
+    /// matters; the trees are fitted on the CPU threads meanwhile.
+    Gpu,
 }
 
 impl Baker {
@@ -335,6 +351,67 @@ impl Baker {
         (frame, totals)
     }
 
+    /// Fits the trees of chunk `c` from its vertices' cube maps (in parallel on the current
+    /// rayon pool) and encodes its frame; the totals count no rays.
+    pub(crate) fn fit_chunk(
+        &self,
+        c: u32,
+        maps: &[[Option<cubemap::FacePixels>; 6]],
+    ) -> (Vec<u8>, Totals) {
+        let results: Vec<(VertexTrees, FitStats, f64)> = maps
+            .par_iter()
+            .map(|faces| {
+                let t0 = Instant::now();
+                let (trees, fit) = self.fit_faces(faces, self.settings.split);
+                (trees, fit, t0.elapsed().as_secs_f64())
+            })
+            .collect();
+        let mut totals = Totals::default();
+        let trees: Vec<VertexTrees> = results
+            .into_iter()
+            .map(|(trees, fit, seconds)| {
+                totals += Totals {
+                    vertices: 1,
+                    fit_seconds: seconds,
+                    fit,
+                    ..Totals::default()
+                };
+                trees
+            })
+            .collect();
+        let frame = encode_chunk(self.chunk_range(c).start, &trees, &self.codec);
+        totals.bytes = frame.len() as u64;
+        (frame, totals)
+    }
+
+    /// A bake file's first bytes (the header frame) and their totals.
+    fn output_start(&self) -> (Vec<u8>, Totals) {
+        let bytes = encode_header(&self.header);
+        let totals = Totals {
+            bytes: bytes.len() as u64,
+            ..Totals::default()
+        };
+        (bytes, totals)
+    }
+
+    /// The finished bake from its header and chunk frames: a refined scene's file carries its
+    /// mesh (the scene file alone names the coarse one).
+    fn output_finish(&self, mut bytes: Vec<u8>, mut totals: Totals, start: Instant) -> BakeOutput {
+        if self.settings.refine.is_some() {
+            let frame = bspvt_proto::encoding::encode_mesh(&self.mesh);
+            totals.bytes += frame.len() as u64;
+            bytes.extend_from_slice(&frame);
+        }
+        BakeOutput {
+            header: self.header.clone(),
+            bytes,
+            totals,
+            seconds: start.elapsed().as_secs_f64(),
+            cast: self.cast,
+            backend: Backend::Cpu,
+        }
+    }
+
     /// Bakes every chunk in order, calling `progress(vertices_done, vertices_total)` after
     /// each; stops between chunks when `cancel` is set.
     pub fn bake_all(
@@ -343,11 +420,7 @@ impl Baker {
         cancel: &AtomicBool,
     ) -> Result<BakeOutput, Cancelled> {
         let start = Instant::now();
-        let mut bytes = encode_header(&self.header);
-        let mut totals = Totals {
-            bytes: bytes.len() as u64,
-            ..Totals::default()
-        };
+        let (mut bytes, mut totals) = self.output_start();
         let total = self.header.vertex_count as u64;
         for c in 0..self.header.chunk_count() {
             if cancel.load(Ordering::Relaxed) {
@@ -358,19 +431,7 @@ impl Baker {
             totals += t;
             progress(totals.vertices, total);
         }
-        // A refined scene's file carries its mesh (the scene file alone names the coarse one).
-        if self.settings.refine.is_some() {
-            let frame = bspvt_proto::encoding::encode_mesh(&self.mesh);
-            totals.bytes += frame.len() as u64;
-            bytes.extend_from_slice(&frame);
-        }
-        Ok(BakeOutput {
-            header: self.header.clone(),
-            bytes,
-            totals,
-            seconds: start.elapsed().as_secs_f64(),
-            cast: self.cast,
-        })
+        Ok(self.output_finish(bytes, totals, start))
     }
 }
 

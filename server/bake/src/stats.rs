@@ -15,7 +15,8 @@ pub struct BakeStats {
     pub threads: usize,
     /// (ray + fit) thread-seconds per vertex, measured per vertex on the worker threads.
     pub thread_seconds_per_vertex: f64,
-    /// Ray-casting thread-seconds per vertex.
+    /// Ray-casting thread-seconds per vertex (with the GPU backend: the caster's wall-clock
+    /// seconds per vertex, ray generation, upload and read-back included).
     pub ray_thread_seconds_per_vertex: f64,
     /// Fitting thread-seconds per vertex.
     pub fit_thread_seconds_per_vertex: f64,
@@ -28,6 +29,8 @@ pub struct BakeStats {
     pub rays_per_thread_second: f64,
     /// How rays were cast (`adaptive` or `full`: the same cube maps).
     pub cast: crate::CastMode,
+    /// Where rays were cast (`cpu` or `gpu`).
+    pub backend: crate::Backend,
     /// Encoded bytes (chunk frames, after zstd).
     pub bytes: u64,
     /// Encoded bytes per vertex.
@@ -60,6 +63,7 @@ impl BakeStats {
         s.supersampling = out.header.supersampling;
         s.split = out.header.split;
         s.cast = out.cast;
+        s.backend = out.backend;
         s
     }
 
@@ -83,6 +87,7 @@ impl BakeStats {
                 0.0
             },
             cast: Default::default(),
+            backend: Default::default(),
             bytes,
             bytes_per_vertex: bytes as f64 / v,
             leaves_per_vertex: t.fit.leaves as f64 / v,

@@ -33,22 +33,21 @@ pub(crate) fn baker(
     Ok(baker)
 }
 
-/// Chunk `c`'s frame and what the database records of it, or why it could not be baked.
+/// Chunk `c`'s frame and what the database records of it, or why it could not be baked;
+/// `cast` bakes it (on the pool, with the rays on the CPU or the GPU: `rays`).
 pub(crate) fn bake(
-    baker: &Baker,
     c: u32,
-    pool: &rayon::ThreadPool,
+    cast: impl FnOnce() -> Result<(Vec<u8>, bspvt_bake::Totals), String>,
 ) -> Result<(Vec<u8>, ChunkMeta, u64), String> {
-    let result =
-        std::panic::catch_unwind(AssertUnwindSafe(|| pool.install(|| baker.bake_chunk(c))));
-    match result {
-        Ok((frame, totals)) => {
+    match std::panic::catch_unwind(AssertUnwindSafe(cast)) {
+        Ok(Ok((frame, totals))) => {
             let meta = ChunkMeta {
                 bytes: frame.len() as u32,
                 crc32: crc32fast::hash(&frame),
             };
             Ok((frame, meta, totals.vertices))
         }
+        Ok(Err(reason)) => Err(reason),
         Err(panic) => {
             let msg = panic
                 .downcast_ref::<String>()

@@ -185,7 +185,9 @@ impl Workers {
             Ok(None) => return Ok(()), // deleted meanwhile
             Err(reason) => return self.failed(pg, lease, &reason),
         };
-        let (frame, meta, vertices) = match super::chunk::bake(&baker, lease.idx, &self.pool) {
+        let (frame, meta, vertices) = match super::chunk::bake(lease.idx, || {
+            Ok(self.pool.install(|| baker.bake_chunk(lease.idx)))
+        }) {
             Ok(r) => r,
             Err(reason) => return self.failed(pg, lease, &reason),
         };

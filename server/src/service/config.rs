@@ -51,6 +51,10 @@ pub struct ServeArgs {
     /// Threads of the shared bake pool (0 = one per core).
     #[arg(long, env = "BSPVT_THREADS")]
     pub threads: Option<usize>,
+    /// Where the workers cast rays: `cpu` (default) or `gpu` (the fit stays on the pool; the
+    /// service does not start without a GPU adapter). Same bakes, docs/bake.md.
+    #[arg(long, env = "BSPVT_BAKE_BACKEND")]
+    pub bake_backend: Option<String>,
     /// Largest request body in bytes (uploads).
     #[arg(long, env = "BSPVT_MAX_BODY_BYTES")]
     pub max_body_bytes: Option<u64>,
@@ -141,6 +145,7 @@ struct FileConfig {
     api_key_file: Option<PathBuf>,
     workers: Option<usize>,
     threads: Option<usize>,
+    bake_backend: Option<String>,
     max_body_bytes: Option<u64>,
     max_mesh_bytes: Option<u64>,
     max_mesh_vertices: Option<u64>,
@@ -196,6 +201,8 @@ pub struct Config {
     pub workers: usize,
     /// Threads of the shared bake pool (0 = one per core).
     pub threads: usize,
+    /// Where the workers cast rays.
+    pub bake_backend: bspvt_bake::Backend,
     /// Largest request body in bytes.
     pub max_body_bytes: u64,
     /// Largest mesh file in bytes, after zstd decompression.
@@ -259,6 +266,7 @@ impl Config {
             api_key: None,
             workers: 2,
             threads: 0,
+            bake_backend: bspvt_bake::Backend::Cpu,
             max_body_bytes: 256 << 20,
             max_mesh_bytes: 256 << 20,
             max_mesh_vertices: 5_000_000,
@@ -351,6 +359,13 @@ impl Config {
             max_connections,
             header_read_timeout_s
         );
+        if let Some(b) = args.bake_backend.clone().or(file.bake_backend) {
+            c.bake_backend = match b.as_str() {
+                "cpu" => bspvt_bake::Backend::Cpu,
+                "gpu" => bspvt_bake::Backend::Gpu,
+                _ => bail!("bake backend {b:?} is neither `cpu` nor `gpu`"),
+            };
+        }
         if let Some(f) = args.log_format.clone().or(file.log_format) {
             c.log_format = match f.as_str() {
                 "text" => LogFormat::Text,

@@ -42,6 +42,7 @@ use super::db::{ChunkMeta, Db, JobState, SceneRow, now_ms};
 use super::memory::{MemoryBudget, Refusal, Reservation};
 use super::metrics::{Gauges, Metrics};
 use super::pg::{ClusterGauges, PgDb};
+use super::rays::Rays;
 use super::store::Store;
 use bspvt_bake::Baker;
 
@@ -57,6 +58,8 @@ pub(crate) struct Jobs {
     store: Arc<Store>,
     metrics: Arc<Metrics>,
     pool: rayon::ThreadPool,
+    /// Where rays are cast (`--bake-backend`).
+    rays: Rays,
     sched: Mutex<Sched>,
     work: Condvar,
     workers: usize,
@@ -365,6 +368,7 @@ impl Jobs {
         store: Arc<Store>,
         metrics: Arc<Metrics>,
         memory: Arc<MemoryBudget>,
+        rays: Rays,
         cfg: &Config,
     ) -> Result<Arc<Jobs>> {
         let (workers, threads) = (cfg.workers, cfg.threads);
@@ -380,6 +384,7 @@ impl Jobs {
             store,
             metrics,
             pool,
+            rays,
             sched: Mutex::new(Sched::default()),
             work: Condvar::new(),
             workers,
@@ -467,6 +472,8 @@ impl Jobs {
             space_wait: Mutex::new(None),
             memory,
             threads,
+            // Its own workers (`cluster`) cast on the CPU.
+            rays: Rays::open(bspvt_bake::Backend::Cpu)?,
             cluster: Some(Cluster {
                 gauges: Mutex::new(ClusterGauges::default()),
                 workers: local.as_ref().map(|(w, _)| w.clone()),
@@ -1144,7 +1151,7 @@ impl Jobs {
             return;
         }
         let t0 = Instant::now();
-        let result = super::chunk::bake(&baker, c, &self.pool);
+        let result = super::chunk::bake(c, || self.rays.bake_chunk(&self.pool, &baker, c));
         drop(baker);
         let (frame, meta, vertices) = match result {
             Ok(r) => r,

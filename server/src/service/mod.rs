@@ -37,6 +37,7 @@ mod metrics;
 mod objstore;
 mod openapi;
 mod pg;
+mod rays;
 mod rows;
 mod sse;
 mod state;
@@ -66,6 +67,7 @@ use db::Db;
 use error::ApiError;
 use jobs::Jobs;
 use metrics::Metrics;
+use rays::Rays;
 use state::{AppState, Shared};
 use store::Store;
 
@@ -294,8 +296,10 @@ impl Service {
         let memory = memory::MemoryBudget::new(cfg.memory_budget_mib.saturating_mul(memory::MIB));
         let jobs = {
             let (db, store, metrics, c) = (db.clone(), store.clone(), metrics.clone(), cfg.clone());
-            tokio::task::spawn_blocking(move || Jobs::start(db, store, metrics, memory, &c))
-                .await??
+            tokio::task::spawn_blocking(move || {
+                Jobs::start(db, store, metrics, memory, Rays::open(c.bake_backend)?, &c)
+            })
+            .await??
         };
         Service::listen(cfg, db, store, jobs, metrics).await
     }

@@ -1,0 +1,109 @@
+//! The GPU context: one wgpu adapter, device and queue, chosen once and shared by whatever runs
+//! compute or render work on it (the bake's GPU ray casting, the client's renderer).
+//!
+//! The adapter is the highest-performance one wgpu finds on the backends `WGPU_BACKEND` names
+//! (all by default); `WGPU_ADAPTER_NAME` picks one by name (wgpu's own variables). A software
+//! Vulkan driver (Mesa's lavapipe) is an adapter like any other: CI runs the GPU tests on it.
+
+use std::sync::Arc;
+use std::task::{Context, Poll, Wake, Waker};
+
+/// Why no GPU context could be made.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum GpuError {
+    /// No adapter: no GPU, or no driver wgpu can use (on Linux, a Vulkan ICD such as Mesa's
+    /// lavapipe: `apt-get install mesa-vulkan-drivers`).
+    NoAdapter(String),
+    /// The adapter refused a device.
+    Device(String),
+    /// A GPU operation failed after the device was made.
+    Failed(String),
+}
+
+impl std::fmt::Display for GpuError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            GpuError::NoAdapter(why) => write!(
+                f,
+                "no GPU adapter found ({why}); install a GPU driver, or Mesa's software Vulkan \
+                 driver (apt-get install mesa-vulkan-drivers), or use the CPU backend"
+            ),
+            GpuError::Device(why) => write!(f, "the GPU adapter refused a device: {why}"),
+            GpuError::Failed(why) => write!(f, "GPU operation failed: {why}"),
+        }
+    }
+}
+
+impl std::error::Error for GpuError {}
+
+/// A wgpu device and queue on the chosen adapter.
+pub struct GpuContext {
+    /// The device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// The adapter's name, driver and type (for logs and benchmark records).
+    pub info: wgpu::AdapterInfo,
+}
+
+impl GpuContext {
+    /// The highest-performance adapter with its own limits (large storage buffers), or
+    /// [`GpuError::NoAdapter`].
+    pub fn new() -> Result<GpuContext, GpuError> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let info = adapter.get_info();
+        let (device, queue) = block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("bspvt"),
+            required_limits: adapter.limits(),
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::Device(e.to_string()))?;
+        Ok(GpuContext {
+            device,
+            queue,
+            info,
+        })
+    }
+
+    /// "name (backend, device type, driver)", for logs.
+    pub fn describe(&self) -> String {
+        let i = &self.info;
+        format!(
+            "{} ({:?}, {:?}, {} {})",
+            i.name, i.backend, i.device_type, i.driver, i.driver_info
+        )
+    }
+
+    /// Waits for all submitted work (and its map callbacks).
+    pub fn wait(&self) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| GpuError::Failed(e.to_string()))
+    }
+}
+
+/// Runs a future to completion on this thread (wgpu's native futures are ready or wake once).
+pub fn block_on<F: std::future::Future>(fut: F) -> F::Output {
+    struct Unpark(std::thread::Thread);
+    impl Wake for Unpark {
+        fn wake(self: Arc<Self>) {
+            self.0.unpark();
+        }
+    }
+    let waker = Waker::from(Arc::new(Unpark(std::thread::current())));
+    let mut cx = Context::from_waker(&waker);
+    let mut fut = std::pin::pin!(fut);
+    loop {
+        match fut.as_mut().poll(&mut cx) {
+            Poll::Ready(v) => return v,
+            Poll::Pending => std::thread::park(),
+        }
+    }
+}

@@ -4,9 +4,9 @@
 //! `VK_ICD_FILENAMES`) choose among adapters.
 
 use std::sync::OnceLock;
-use std::task::{Context, Poll, Wake, Waker};
 
-use anyhow::{Context as _, Result, anyhow};
+use anyhow::{Result, anyhow};
+use bspvt_raytrace::gpu::block_on;
 
 /// A device and its queue, with the adapter's name.
 pub struct Gpu {
@@ -34,39 +34,19 @@ impl Gpu {
             .map_err(|e| anyhow!("{e}"))
     }
 
-    /// Finds an adapter (high performance first) and opens a device on it with the
-    /// adapter's own buffer limits (the trees of a large mesh exceed wgpu's defaults).
+    /// The adapter and device of [`bspvt_raytrace::gpu::GpuContext`] (the one the bake's GPU
+    /// ray casting uses: high performance first, the adapter's own limits, since the trees of
+    /// a large mesh exceed wgpu's defaults).
     pub fn new() -> Result<Gpu> {
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let adapter = block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            ..Default::default()
-        }))
-        .context(
-            "no GPU adapter (install a Vulkan driver, e.g. Mesa's lavapipe: mesa-vulkan-drivers)",
-        )?;
-        let info = adapter.get_info();
-        let have = adapter.limits();
-        let limits = wgpu::Limits {
-            max_storage_buffer_binding_size: have.max_storage_buffer_binding_size,
-            max_buffer_size: have.max_buffer_size,
-            max_storage_buffers_per_shader_stage: have.max_storage_buffers_per_shader_stage.min(8),
-            ..wgpu::Limits::default().using_resolution(have.clone())
-        };
-        let (device, queue) = block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("bspvt"),
-            required_limits: limits,
-            ..Default::default()
-        }))
-        .with_context(|| format!("opening a device on {}", info.name))?;
+        let ctx = bspvt_raytrace::gpu::GpuContext::new().map_err(|e| anyhow!("{e}"))?;
+        let info = &ctx.info;
         Ok(Gpu {
-            device,
-            queue,
-            shade_pipeline: OnceLock::new(),
-            busy: std::sync::Mutex::new(()),
             adapter: format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type),
             software: info.device_type == wgpu::DeviceType::Cpu,
+            device: ctx.device,
+            queue: ctx.queue,
+            shade_pipeline: OnceLock::new(),
+            busy: std::sync::Mutex::new(()),
         })
     }
 
@@ -126,27 +106,5 @@ impl Gpu {
             .to_vec();
         staging.unmap();
         Ok(bytes)
-    }
-}
-
-/// Wakes the thread that waits in [`block_on`].
-struct Unpark(std::thread::Thread);
-
-impl Wake for Unpark {
-    fn wake(self: std::sync::Arc<Self>) {
-        self.0.unpark();
-    }
-}
-
-/// Runs a future to completion on this thread (wgpu's adapter and device requests).
-pub(crate) fn block_on<F: std::future::Future>(f: F) -> F::Output {
-    let mut f = std::pin::pin!(f);
-    let waker = Waker::from(std::sync::Arc::new(Unpark(std::thread::current())));
-    let mut cx = Context::from_waker(&waker);
-    loop {
-        match f.as_mut().poll(&mut cx) {
-            Poll::Ready(v) => return v,
-            Poll::Pending => std::thread::park(),
-        }
     }
 }

@@ -6,14 +6,17 @@
 //! adapter exists.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use bspvt_client::gpu::Gpu;
 use bspvt_client::gpu::vertex::{GpuVertex, ShadePoint, shade_points};
 use bspvt_client::light::Light;
 use bspvt_client::ltc::table::LtcTable;
 use bspvt_client::shade::Lobes;
 use bspvt_client::shade::bspvt::shade_vertex;
-use bspvt_proto::bspvt::{FaceTree, LineCodec, Node, QLine, VertexTrees};
+use bspvt_proto::bspvt::{LineCodec, VertexTrees};
 use bspvt_proto::scene::Material;
+use common::{Rng, random_trees};
 use glam::DVec3;
 
 /// One GPU test at a time in this binary (concurrent submissions from several threads stall
@@ -34,61 +37,6 @@ fn gpu() -> Option<(&'static Gpu, std::sync::MutexGuard<'static, ()>)> {
             None
         }
     }
-}
-
-/// The deterministic generator of shading_stability.rs.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        let x = self.0;
-        (x ^ (x >> 29)).wrapping_mul(0xbf58476d1ce4e5b9) ^ (x >> 32)
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
-fn random_tree(rng: &mut Rng, codec: &LineCodec, depth: u32, nodes: &mut Vec<Node>) {
-    if depth == 0 || rng.below(4) == 0 {
-        let value = match rng.below(4) {
-            0 => 0,
-            1 => 255,
-            _ => rng.below(256) as u8,
-        };
-        nodes.push(Node::Leaf { value });
-        return;
-    }
-    let at = nodes.len();
-    nodes.push(Node::Leaf { value: 0 });
-    let line = QLine {
-        angle: rng.below(u64::from(codec.angles())) as u16,
-        offset: rng.below(u64::from(codec.offsets())) as u16,
-    };
-    random_tree(rng, codec, depth - 1, nodes);
-    let right = nodes.len() as u32;
-    random_tree(rng, codec, depth - 1, nodes);
-    nodes[at] = Node::Split { line, right };
-}
-
-fn random_trees(seed: u64, codec: &LineCodec) -> VertexTrees {
-    let mut rng = Rng(seed);
-    let mut t = VertexTrees::default();
-    for f in &mut t.faces {
-        if rng.below(6) == 0 {
-            continue;
-        }
-        let mut nodes = Vec::new();
-        random_tree(&mut rng, codec, 7, &mut nodes);
-        *f = Some(FaceTree { nodes });
-    }
-    t
 }
 
 fn quad(c: DVec3, h: f64, spin: f64) -> Vec<DVec3> {

@@ -50,6 +50,28 @@ impl Gpu {
         })
     }
 
+    /// A bind group of `buffers`, bound whole at bindings 0, 1, 2, … of `layout`.
+    pub(crate) fn bind_buffers(
+        &self,
+        label: &str,
+        layout: &wgpu::BindGroupLayout,
+        buffers: &[&wgpu::Buffer],
+    ) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout,
+            entries: &entries,
+        })
+    }
+
     /// Holds the queue for one frame or batch (see `busy`).
     pub(crate) fn exclusive(&self) -> std::sync::MutexGuard<'_, ()> {
         self.busy.lock().unwrap_or_else(|e| e.into_inner())

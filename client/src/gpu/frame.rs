@@ -304,19 +304,7 @@ impl GpuFrames {
             &self.shader.out,
             &self.ltc,
         ];
-        let entries: Vec<wgpu::BindGroupEntry> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("bspvt frame"),
-            layout: &layout,
-            entries: &entries,
-        });
+        let group = gpu.bind_buffers("bspvt frame", &layout, &buffers);
         let triangles = self.triangles;
         let pipeline = self.pipeline.clone();
         let half = self.samples > 1;

@@ -235,19 +235,7 @@ impl VertexShader {
             &self.ltc,
             &self.out,
         ];
-        let entries: Vec<wgpu::BindGroupEntry> = entries
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("bspvt per vertex"),
-            layout: &layout,
-            entries: &entries,
-        });
+        let group = gpu.bind_buffers("bspvt per vertex", &layout, &entries);
         let mut pass = enc.begin_compute_pass(&Default::default());
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &group, &[]);

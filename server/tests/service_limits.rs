@@ -236,6 +236,7 @@ fn a_trickling_upload_is_cut_off_at_the_minimum_rate() {
         }
     }
     let waited = t0.elapsed();
+    eprintln!("cut off {waited:?} after the body began (grace 2 s)");
     let text = String::from_utf8_lossy(&reply);
     assert!(text.starts_with("HTTP/1.1 408"), "{text}");
     assert!(text.contains("body_too_slow"), "{text}");

@@ -3,9 +3,9 @@
 //! the rest incrementally), on the built-in plate-small and on a shared mesh. The tolerance
 //! is the one stated in docs/gpu.md. Skips (with a message) where no adapter exists.
 //!
-//! Ignored by default: on lavapipe (LLVM 15) the frame shader's compilation did not finish in
-//! ten minutes (LLVM's ScalarEvolution, seen in a backtrace), so these run with `--ignored`
-//! on a machine with a GPU.
+//! The frames are deferred (a visibility buffer, then a compute pass per pixel): the earlier
+//! forward fragment shader did not finish compiling in ten minutes on lavapipe; the compute
+//! pass compiles in ~25 s there, once per process.
 #![allow(clippy::unwrap_used)]
 
 use bspvt_client::frame::image::Image;
@@ -71,11 +71,12 @@ fn differences(cpu: &Image, gpu: &Image) -> (f64, f64) {
 }
 
 /// docs/gpu.md: a pixel differs by more than PIXEL of the frame's peak in at most OFF_SHARE of
-/// the pixels (edges the two rasterisers cover differently), and the mean difference is at
-/// most MEAN of the peak.
+/// the pixels (pixel centres on an edge shared by two triangles, which the two rasterisers may
+/// give to either), and the mean difference is at most MEAN of the peak. Measured: no pixel
+/// off, mean ≤ 8.7e-7 on lavapipe and ≤ 1.1e-7 on an H100 (f32 against f64).
 const PIXEL: f64 = 1e-2;
-const OFF_SHARE: f64 = 0.02;
-const MEAN: f64 = 2e-3;
+const OFF_SHARE: f64 = 2e-3;
+const MEAN: f64 = 1e-5;
 
 fn assert_close(what: &str, cpu: &Image, gpu: &Image) {
     let (off, mean) = differences(cpu, gpu);
@@ -127,7 +128,6 @@ fn check_scene(gpu: &Gpu, name: &str, scene: &Scene, w: u32, h: u32) {
 }
 
 #[test]
-#[ignore = "the frame shader does not compile in reasonable time on lavapipe (docs/gpu.md)"]
 fn gpu_frames_equal_cpu_frames_on_plate_small() {
     let Some((gpu, _one)) = gpu() else { return };
     let scene = bspvt_proto::builtin::scene("plate-small").unwrap();
@@ -135,7 +135,6 @@ fn gpu_frames_equal_cpu_frames_on_plate_small() {
 }
 
 #[test]
-#[ignore = "the frame shader does not compile in reasonable time on lavapipe (docs/gpu.md)"]
 fn gpu_frames_equal_cpu_frames_on_a_shared_mesh() {
     let Some((gpu, _one)) = gpu() else { return };
     let path = bspvt_proto::paths::meshes_dir().join("bunny_res4.ply");
@@ -153,7 +152,6 @@ fn gpu_frames_equal_cpu_frames_on_a_shared_mesh() {
 
 /// MSAA frames: finite, and the same image away from edges.
 #[test]
-#[ignore = "the frame shader does not compile in reasonable time on lavapipe (docs/gpu.md)"]
 fn msaa_frames_are_finite_and_close() {
     let Some((gpu, _one)) = gpu() else { return };
     let scene = bspvt_proto::builtin::scene("plate-small").unwrap();

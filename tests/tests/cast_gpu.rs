@@ -65,6 +65,8 @@ struct Seen {
     gpu_occluded: u64,
     /// Occluded pixels (some sub-ray blocked).
     occluded: u64,
+    /// (differing sub-rays, vertex, face) of the faces that differ most.
+    worst: Vec<(u64, u32, usize)>,
 }
 
 /// Compares the GPU cast of `count` vertices spread over the mesh with the full CPU cast.
@@ -97,9 +99,14 @@ fn compare(ctx: &Arc<GpuContext>, b: &Baker, label: &str, count: u32) -> Seen {
                 g.index, c.index,
                 "{label}: vertex {v} face {f}: pixels that matter"
             );
+            let mut face_differing = 0;
             for (&a, &b) in g.visible.iter().zip(&c.visible) {
-                seen.differing += a.abs_diff(b) as u64;
+                face_differing += a.abs_diff(b) as u64;
                 seen.gpu_occluded += b.saturating_sub(a) as u64;
+            }
+            seen.differing += face_differing;
+            if face_differing > 0 {
+                seen.worst.push((face_differing, v, f));
             }
             seen.occluded += c.visible.iter().filter(|&&x| x < s).count() as u64;
         }
@@ -114,8 +121,17 @@ fn compare(ctx: &Arc<GpuContext>, b: &Baker, label: &str, count: u32) -> Seen {
         let (one, _) = b.gpu_cube_maps(&caster, &[v]).expect("GPU cast");
         assert!(batch[k] == one[0], "{label}: vertex {v} batched vs alone");
     }
+    seen.worst.sort_unstable_by(|a, b| b.cmp(a));
+    let faces = seen.worst.len();
+    seen.worst.truncate(8);
+    let worst: Vec<String> = seen
+        .worst
+        .iter()
+        .map(|&(d, v, f)| format!("{d} at v{v} {:?} face {f}", b.mesh().positions[v as usize]))
+        .collect();
     eprintln!(
-        "{label}: {} sub-rays, {} differ ({} occluded on the GPU only), {} occluded pixels",
+        "{label}: {} sub-rays, {} differ ({} occluded on the GPU only) on {faces} faces, {} \
+         occluded pixels; most: {worst:?}",
         seen.rays, seen.differing, seen.gpu_occluded, seen.occluded
     );
     seen
@@ -124,9 +140,12 @@ fn compare(ctx: &Arc<GpuContext>, b: &Baker, label: &str, count: u32) -> Seen {
 /// Sub-rays that may differ from the CPU cast, per million cast, on the shared meshes and the
 /// plate (rays that graze an edge; measured on lavapipe: 0).
 const MAX_DIFFERING_PER_MILLION: u64 = 20;
-/// The same on the refined room, whose dyadic grid puts pixel rays exactly on triangle edges
-/// (measured on lavapipe: 89 per million at 8², every vertex; all occluded on the CPU only).
-const MAX_ROOM_DIFFERING_PER_MILLION: u64 = 200;
+/// The same on the refined room, whose dyadic grid puts pixel rays exactly on triangle edges,
+/// so that how a device rounds `a·b + c` (fused or not) decides the hit. Measured at 8², every
+/// third vertex: lavapipe 82 per million (50 faces, ≤ 5 sub-rays each, all occluded on the CPU
+/// only); an NVIDIA H100 1,798 per million (2,048 sub-rays on 1,205 faces, ≤ 12 each, both
+/// ways). Ties spread thin, not a traversal error, which would take whole faces.
+const MAX_ROOM_DIFFERING_PER_MILLION: u64 = 2500;
 
 fn check(total: &Seen, label: &str) {
     check_within(total, label, MAX_DIFFERING_PER_MILLION);

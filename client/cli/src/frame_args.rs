@@ -48,11 +48,11 @@ pub(crate) struct FrameArgs {
 /// Who draws `bspvt` and `ltc` frames: `render`, `animate`, `demo`, `view`.
 #[derive(clap::Args, Clone, Debug)]
 pub(crate) struct BackendArgs {
-    /// `cpu` (the reference), `gpu` (wgpu: Vulkan, Metal, DX12; lavapipe on Linux without a
-    /// GPU), or `auto`: a hardware GPU when there is one (its name is printed), else the CPU.
-    /// The default stays `cpu` until the GPU's frames have been checked against the CPU's
-    /// (docs/gpu.md). Methods other than bspvt and ltc draw on the CPU whatever this says.
-    #[arg(long, default_value = "cpu", value_parser = ["auto", "gpu", "cpu"])]
+    /// `auto`: a hardware GPU when there is one (its name is printed), else the CPU; `cpu` (the
+    /// reference); `gpu` (wgpu: Vulkan, Metal, DX12; lavapipe on Linux without a GPU). The GPU's
+    /// frames equal the CPU's within docs/gpu.md's tolerance. Methods other than bspvt and ltc
+    /// draw on the CPU whatever this says.
+    #[arg(long, default_value = "auto", value_parser = ["auto", "gpu", "cpu"])]
     pub(crate) backend: String,
 }
 

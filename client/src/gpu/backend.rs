@@ -9,7 +9,7 @@ use super::context::Gpu;
 #[serde(rename_all = "kebab-case")]
 pub enum Backend {
     /// The GPU when a hardware adapter exists, else the CPU (a software adapter such as
-    /// lavapipe only with `gpu`: its frame shader takes minutes to compile, docs/gpu.md).
+    /// lavapipe only with `gpu`: it draws 10–40× slower than the CPU path, docs/gpu.md).
     #[default]
     Auto,
     /// The GPU; an error without an adapter.

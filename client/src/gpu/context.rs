@@ -18,6 +18,10 @@ pub struct Gpu {
     pub software: bool,
     /// The per-vertex shading pipeline, compiled once (`vertex.rs`).
     pub(crate) shade_pipeline: OnceLock<wgpu::ComputePipeline>,
+    /// The frame pipelines (raster, resolve) by MSAA samples, compiled once each (`frame.rs`:
+    /// the resolve shader takes ~25 s to compile on lavapipe).
+    pub(crate) frame_pipelines:
+        std::sync::Mutex<Vec<(u32, wgpu::RenderPipeline, wgpu::ComputePipeline)>>,
     /// One user of the queue at a time: submissions waited for from several threads at once
     /// stall for a minute on lavapipe (measured), so each frame or batch holds this.
     busy: std::sync::Mutex<()>,
@@ -46,6 +50,7 @@ impl Gpu {
             device: ctx.device,
             queue: ctx.queue,
             shade_pipeline: OnceLock::new(),
+            frame_pipelines: std::sync::Mutex::new(Vec::new()),
             busy: std::sync::Mutex::new(()),
         })
     }

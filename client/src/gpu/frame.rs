@@ -1,7 +1,11 @@
-//! GPU frames: the mesh rasterised with MSAA into an offscreen target, per vertex (the
-//! compute pass's shading interpolated) or per pixel (LTC per pixel × the interpolated
-//! per-vertex shadow ratios), read back into an [`Image`] of linear radiance (tone mapping is
-//! the image's, as for the CPU's frames). `frame.wgsl`; the CPU twin is
+//! GPU frames, deferred: the mesh rasterised (MSAA or not) into a visibility buffer of
+//! triangle indices (`visibility.wgsl`), then a compute pass per pixel (`resolve.wgsl`) finds
+//! each sample's surface as the CPU's G-buffer does (the primary ray against the triangle's
+//! plane) and shades it per vertex (the compute pass's shading interpolated) or per pixel (LTC
+//! per pixel × the interpolated per-vertex shadow ratios), into a buffer of linear radiance
+//! read back as an [`Image`] (tone mapping is the image's, as for the CPU's frames). No
+//! fragment shader carries the LTC integral: on lavapipe one did not finish compiling in ten
+//! minutes, while the compute pass compiles in well under a second. The CPU twin is
 //! [`crate::render::renderer::Renderer::bspvt`].
 
 use anyhow::{Result, bail};
@@ -9,38 +13,52 @@ use bspvt_proto::Scene;
 use glam::DMat4;
 
 use super::context::Gpu;
-use super::vertex::{VertexShader, ltc_buffer, supports};
+use super::vertex::{LightRecord, VertexShader, light_record, ltc_buffer, supports};
 use crate::frame::image::Image;
 use crate::light::Light;
 use crate::render::renderer::{FrameCounts, Mode, Renderer, Trees};
 
+/// `visibility.wgsl`'s uniform.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct FrameParams {
+struct RasterParams {
     view_proj: [[f32; 4]; 4],
-    eye: [f32; 4],
-    light_normal: [f32; 4],
-    radiance: [f32; 4],
-    light: [[f32; 4]; 8],
-    counts: [u32; 4],
 }
 
-/// The render target of one size.
+/// `resolve.wgsl`'s uniform.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ResolveParams {
+    eye: [f32; 4],
+    forward: [f32; 4],
+    right: [f32; 4],
+    up: [f32; 4],
+    light: LightRecord,
+    counts: [u32; 4],
+    size: [u32; 4],
+}
+
+/// The visibility buffer's format: triangle index + 1 in two 16-bit halves (Rg16Uint is
+/// multisampled on every adapter; R32Uint is not).
+const VISIBILITY: wgpu::TextureFormat = wgpu::TextureFormat::Rg16Uint;
+
+/// The targets of one size.
 struct Target {
     size: (u32, u32),
-    colour: wgpu::Texture,
-    resolve: Option<wgpu::Texture>,
+    visibility: wgpu::Texture,
     depth: wgpu::Texture,
+    image: wgpu::Buffer,
     readback: wgpu::Buffer,
-    row_bytes: u32,
 }
 
 /// BSPVT (and unshadowed LTC) frames on the GPU for one scene.
 pub struct GpuFrames {
     shader: VertexShader,
     key: Option<u64>,
-    pipeline: wgpu::RenderPipeline,
-    params: wgpu::Buffer,
+    raster: wgpu::RenderPipeline,
+    resolve: wgpu::ComputePipeline,
+    raster_params: wgpu::Buffer,
+    resolve_params: wgpu::Buffer,
     indices: wgpu::Buffer,
     tri_material: wgpu::Buffer,
     materials: wgpu::Buffer,
@@ -51,13 +69,104 @@ pub struct GpuFrames {
     target: Option<Target>,
 }
 
-/// The colour target's format: RGBA16F resolves with MSAA everywhere; RGBA32F without it.
-fn colour_format(samples: u32) -> wgpu::TextureFormat {
+/// The visibility buffer's binding and reader, appended to `resolve.wgsl`.
+fn visibility_binding(samples: u32) -> &'static str {
     if samples > 1 {
-        wgpu::TextureFormat::Rgba16Float
+        "@group(0) @binding(7) var vis: texture_multisampled_2d<u32>;
+fn vis_id(px: vec2i, s: u32) -> u32 {
+    let v = textureLoad(vis, px, i32(s));
+    return v.x | (v.y << 16u);
+}
+"
     } else {
-        wgpu::TextureFormat::Rgba32Float
+        "@group(0) @binding(7) var vis: texture_2d<u32>;
+fn vis_id(px: vec2i, s: u32) -> u32 {
+    let v = textureLoad(vis, px, 0);
+    return v.x | (v.y << 16u);
+}
+"
     }
+}
+
+/// The raster and resolve pipelines for `samples` per pixel, compiled once per process.
+fn pipelines(gpu: &Gpu, samples: u32) -> Result<(wgpu::RenderPipeline, wgpu::ComputePipeline)> {
+    let mut cache = gpu
+        .frame_pipelines
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    if let Some((_, r, c)) = cache.iter().find(|(s, _, _)| *s == samples) {
+        return Ok((r.clone(), c.clone()));
+    }
+    let module = |label: &'static str, src: String| {
+        gpu.checked(label, || {
+            gpu.device
+                .create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some(label),
+                    source: wgpu::ShaderSource::Wgsl(src.into()),
+                })
+        })
+    };
+    let raster_module = module(
+        "visibility.wgsl",
+        include_str!("visibility.wgsl").to_string(),
+    )?;
+    let resolve_module = module(
+        "resolve.wgsl",
+        [
+            include_str!("common.wgsl"),
+            include_str!("resolve.wgsl"),
+            visibility_binding(samples),
+        ]
+        .concat(),
+    )?;
+    let raster = gpu.checked("the visibility pipeline", || {
+        gpu.device
+            .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("bspvt visibility"),
+                layout: None,
+                vertex: wgpu::VertexState {
+                    module: &raster_module,
+                    entry_point: Some("vs"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState::default(),
+                // Reversed Z (near → 1, infinity → 0): f32 depth keeps its precision
+                // far from the eye.
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: wgpu::TextureFormat::Depth32Float,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Greater),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: wgpu::MultisampleState {
+                    count: samples,
+                    ..Default::default()
+                },
+                fragment: Some(wgpu::FragmentState {
+                    module: &raster_module,
+                    entry_point: Some("fs"),
+                    compilation_options: Default::default(),
+                    targets: &[Some(VISIBILITY.into())],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+    })?;
+    let resolve = gpu.checked("the resolve pipeline", || {
+        gpu.device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("bspvt resolve"),
+                layout: None,
+                module: &resolve_module,
+                entry_point: Some("main"),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+    })?;
+    cache.push((samples, raster.clone(), resolve.clone()));
+    Ok((raster, resolve))
 }
 
 impl GpuFrames {
@@ -72,47 +181,7 @@ impl GpuFrames {
             bail!("MSAA samples must be 1 or 4, not {samples}");
         }
         let mesh = &scene.mesh;
-        let src = [include_str!("common.wgsl"), include_str!("frame.wgsl")].concat();
-        let module = gpu.checked("frame.wgsl", || {
-            gpu.device
-                .create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some("frame.wgsl"),
-                    source: wgpu::ShaderSource::Wgsl(src.into()),
-                })
-        })?;
-        let pipeline = gpu.checked("the frame pipeline", || {
-            gpu.device
-                .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                    label: Some("bspvt frame"),
-                    layout: None,
-                    vertex: wgpu::VertexState {
-                        module: &module,
-                        entry_point: Some("vs"),
-                        compilation_options: Default::default(),
-                        buffers: &[],
-                    },
-                    primitive: wgpu::PrimitiveState::default(),
-                    depth_stencil: Some(wgpu::DepthStencilState {
-                        format: wgpu::TextureFormat::Depth32Float,
-                        depth_write_enabled: Some(true),
-                        depth_compare: Some(wgpu::CompareFunction::Less),
-                        stencil: Default::default(),
-                        bias: Default::default(),
-                    }),
-                    multisample: wgpu::MultisampleState {
-                        count: samples,
-                        ..Default::default()
-                    },
-                    fragment: Some(wgpu::FragmentState {
-                        module: &module,
-                        entry_point: Some("fs"),
-                        compilation_options: Default::default(),
-                        targets: &[Some(colour_format(samples).into())],
-                    }),
-                    multiview_mask: None,
-                    cache: None,
-                })
-        })?;
+        let (raster, resolve) = pipelines(gpu, samples)?;
         let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
         let tri_material: Vec<u32> = (0..mesh.triangles.len())
             .map(|t| mesh.material_ids.get(t).copied().unwrap_or(0))
@@ -131,10 +200,16 @@ impl GpuFrames {
         Ok(GpuFrames {
             shader: VertexShader::new(gpu, mesh.vertex_count())?,
             key: None,
-            pipeline,
-            params: init(
-                "frame params",
-                bytemuck::bytes_of(&<FrameParams as bytemuck::Zeroable>::zeroed()),
+            raster,
+            resolve,
+            raster_params: init(
+                "raster params",
+                bytemuck::bytes_of(&<RasterParams as bytemuck::Zeroable>::zeroed()),
+                U::UNIFORM,
+            ),
+            resolve_params: init(
+                "resolve params",
+                bytemuck::bytes_of(&<ResolveParams as bytemuck::Zeroable>::zeroed()),
                 U::UNIFORM,
             ),
             indices: init("indices", bytemuck::cast_slice(&indices), U::STORAGE),
@@ -168,12 +243,12 @@ impl GpuFrames {
                 height: h,
                 depth_or_array_layers: 1,
             };
-            let tex = |label: &str, format, samples, usage| {
+            let tex = |label: &str, format, usage| {
                 gpu.device.create_texture(&wgpu::TextureDescriptor {
                     label: Some(label),
                     size,
                     mip_level_count: 1,
-                    sample_count: samples,
+                    sample_count: self.samples,
                     dimension: wgpu::TextureDimension::D2,
                     format,
                     usage,
@@ -181,37 +256,30 @@ impl GpuFrames {
                 })
             };
             use wgpu::TextureUsages as T;
-            let fmt = colour_format(self.samples);
-            let (colour, resolve) = if self.samples > 1 {
-                (
-                    tex("msaa colour", fmt, self.samples, T::RENDER_ATTACHMENT),
-                    Some(tex("colour", fmt, 1, T::RENDER_ATTACHMENT | T::COPY_SRC)),
-                )
-            } else {
-                (
-                    tex("colour", fmt, 1, T::RENDER_ATTACHMENT | T::COPY_SRC),
-                    None,
-                )
+            let bytes = u64::from(w) * u64::from(h) * 16;
+            let buffer = |label: &str, usage| {
+                gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size: bytes,
+                    usage,
+                    mapped_at_creation: false,
+                })
             };
-            let texel = if self.samples > 1 { 8 } else { 16 };
-            let row_bytes = (w * texel).div_ceil(256) * 256;
+            use wgpu::BufferUsages as U;
             self.target = Some(Target {
                 size: (w, h),
-                colour,
-                resolve,
+                visibility: tex(
+                    "visibility",
+                    VISIBILITY,
+                    T::RENDER_ATTACHMENT | T::TEXTURE_BINDING,
+                ),
                 depth: tex(
                     "depth",
                     wgpu::TextureFormat::Depth32Float,
-                    self.samples,
                     T::RENDER_ATTACHMENT,
                 ),
-                readback: gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("frame readback"),
-                    size: u64::from(row_bytes) * u64::from(h),
-                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                }),
-                row_bytes,
+                image: buffer("frame", U::STORAGE | U::COPY_SRC),
+                readback: buffer("frame readback", U::MAP_READ | U::COPY_DST),
             });
         }
         match &self.target {
@@ -269,113 +337,112 @@ impl GpuFrames {
                 .write_buffer(&self.materials, 0, bytemuck::cast_slice(&m));
             self.materials_key = Some(mkey);
         }
-        let mut params = FrameParams {
+        let raster = RasterParams {
             view_proj: view_proj(renderer).to_cols_array_2d(),
-            eye: view.eye.as_vec3().extend(1.0).to_array(),
-            light_normal: light
-                .normal
-                .as_vec3()
-                .extend(if light.two_sided { 1.0 } else { 0.0 })
-                .to_array(),
-            radiance: light.radiance.as_vec3().extend(0.0).to_array(),
-            light: [[0.0; 4]; 8],
+        };
+        gpu.queue
+            .write_buffer(&self.raster_params, 0, bytemuck::bytes_of(&raster));
+        let (record, count) = light_record(light);
+        let v3 = |v: glam::DVec3, w: f64| v.as_vec3().extend(w as f32).to_array();
+        let resolve = ResolveParams {
+            eye: v3(view.eye, view.tan_half_fov),
+            forward: v3(view.forward, f64::from(w) / f64::from(h)),
+            right: v3(view.right, 0.0),
+            up: v3(view.up, 0.0),
+            light: record,
             counts: [
-                light.vertices.len() as u32,
+                count,
                 u32::from(mode == Mode::Pixel),
                 crate::ltc::table::LtcTable::builtin().size() as u32,
                 renderer.materials().len() as u32,
             ],
+            size: [w, h, self.samples, 0],
         };
-        if !light.vertices.iter().all(|v| v.is_finite()) || !light.radiance.is_finite() {
-            params.counts[0] = 0;
-        }
-        for (k, v) in light.vertices.iter().enumerate().take(8) {
-            params.light[k] = v.as_vec3().extend(1.0).to_array();
-        }
         gpu.queue
-            .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-        let layout = self.pipeline.get_bind_group_layout(0);
+            .write_buffer(&self.resolve_params, 0, bytemuck::bytes_of(&resolve));
+        let raster_group = gpu.bind_buffers(
+            "bspvt visibility",
+            &self.raster.get_bind_group_layout(0),
+            &[&self.raster_params, &self.shader.verts, &self.indices],
+        );
+        let triangles = self.triangles;
+        let (raster, resolve) = (self.raster.clone(), self.resolve.clone());
         let buffers = [
-            &self.params,
+            &self.resolve_params,
             &self.shader.verts,
             &self.indices,
             &self.tri_material,
             &self.materials,
             &self.shader.out,
             &self.ltc,
-        ];
-        let group = gpu.bind_buffers("bspvt frame", &layout, &buffers);
-        let triangles = self.triangles;
-        let pipeline = self.pipeline.clone();
-        let half = self.samples > 1;
+        ]
+        .map(|b| b.clone());
         let t = self.target(gpu, w, h);
-        let colour_view = t.colour.create_view(&Default::default());
-        let resolve_view = t
-            .resolve
-            .as_ref()
-            .map(|r| r.create_view(&Default::default()));
+        let vis_view = t.visibility.create_view(&Default::default());
         let depth_view = t.depth.create_view(&Default::default());
         {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("bspvt frame"),
+                label: Some("bspvt visibility"),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &colour_view,
+                    view: &vis_view,
                     depth_slice: None,
-                    resolve_target: resolve_view.as_ref(),
+                    resolve_target: None,
                     ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
                         store: wgpu::StoreOp::Store,
                     },
                 })],
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                     view: &depth_view,
                     depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
+                        load: wgpu::LoadOp::Clear(0.0),
                         store: wgpu::StoreOp::Discard,
                     }),
                     stencil_ops: None,
                 }),
                 ..Default::default()
             });
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &group, &[]);
+            pass.set_pipeline(&raster);
+            pass.set_bind_group(0, &raster_group, &[]);
             pass.draw(0..triangles * 3, 0..1);
         }
-        let src = t.resolve.as_ref().unwrap_or(&t.colour);
-        enc.copy_texture_to_buffer(
-            src.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &t.readback,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(t.row_bytes),
-                    rows_per_image: None,
-                },
-            },
-            src.size(),
-        );
+        let layout = resolve.get_bind_group_layout(0);
+        let mut entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        entries.push(wgpu::BindGroupEntry {
+            binding: 7,
+            resource: wgpu::BindingResource::TextureView(&vis_view),
+        });
+        entries.push(wgpu::BindGroupEntry {
+            binding: 8,
+            resource: t.image.as_entire_binding(),
+        });
+        let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("bspvt resolve"),
+            layout: &layout,
+            entries: &entries,
+        });
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&resolve);
+            pass.set_bind_group(0, &group, &[]);
+            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        }
+        enc.copy_buffer_to_buffer(&t.image, 0, &t.readback, 0, t.image.size());
         gpu.queue.submit([enc.finish()]);
         let bytes = gpu.map_read(&t.readback)?;
         let mut img = Image::new(w, h);
-        for (y, row) in bytes
-            .chunks(t.row_bytes as usize)
-            .take(h as usize)
-            .enumerate()
-        {
-            for x in 0..w as usize {
-                let px = &mut img.pixels[y * w as usize + x];
-                *px = if half {
-                    std::array::from_fn(|c| {
-                        let o = x * 8 + c * 2;
-                        f16_to_f32(u16::from_le_bytes([row[o], row[o + 1]]))
-                    })
-                } else {
-                    std::array::from_fn(|c| {
-                        let o = x * 16 + c * 4;
-                        f32::from_le_bytes([row[o], row[o + 1], row[o + 2], row[o + 3]])
-                    })
-                };
-            }
+        for (px, texel) in img.pixels.iter_mut().zip(bytes.chunks_exact(16)) {
+            *px = std::array::from_fn(|c| {
+                let o = c * 4;
+                f32::from_le_bytes([texel[o], texel[o + 1], texel[o + 2], texel[o + 3]])
+            });
         }
         let counts = FrameCounts {
             vertices_shaded: renderer.visible_vertices.len(),
@@ -404,34 +471,15 @@ fn view_proj(r: &Renderer) -> glam::Mat4 {
     );
     let aspect = f64::from(v.width) / f64::from(v.height);
     let fy = 1.0 / v.tan_half_fov;
-    // Near and far from the scene's extent seen from the eye.
-    let mesh = &r.scene.mesh;
-    let far = mesh
-        .positions
-        .iter()
-        .map(|p| (p.as_dvec3() - v.eye).length())
-        .fold(0.0, f64::max)
-        .max(1e-3)
-        * 1.01;
-    let near = (far * 1e-5).max(1e-6);
-    // Camera → clip, depth in [0, 1].
+    // The near plane as the CPU's G-buffer clips (frame::gbuffer): 1e-4 of the mesh's
+    // diagonal.
+    let near = 1e-4 * f64::from(r.scene.mesh.bounds().diagonal()).max(1e-12);
+    // Camera → clip with reversed, infinite Z: depth = near / distance, in (0, 1].
     let proj = DMat4::from_cols(
         glam::DVec4::new(fy / aspect, 0.0, 0.0, 0.0),
         glam::DVec4::new(0.0, fy, 0.0, 0.0),
-        glam::DVec4::new(0.0, 0.0, far / (near - far), -1.0),
-        glam::DVec4::new(0.0, 0.0, near * far / (near - far), 0.0),
+        glam::DVec4::new(0.0, 0.0, 0.0, -1.0),
+        glam::DVec4::new(0.0, 0.0, near, 0.0),
     );
     (proj * look).as_mat4()
-}
-
-/// An IEEE half (the MSAA target's texels) as f32.
-fn f16_to_f32(h: u16) -> f32 {
-    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
-    let exp = i32::from((h >> 10) & 0x1f);
-    let frac = f32::from(h & 0x3ff);
-    match exp {
-        0 => sign * frac * 2f32.powi(-24),
-        31 => 0.0, // Inf / NaN: not radiance (the shader writes finite values)
-        e => sign * (1.0 + frac / 1024.0) * 2f32.powi(e - 15),
-    }
 }

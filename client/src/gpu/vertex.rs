@@ -50,13 +50,47 @@ pub(crate) fn vertex_record(p: &ShadePoint) -> [[f32; 4]; 4] {
     ]
 }
 
+/// The light as the shaders read it (`light_normal`, `radiance`, `light` of their uniforms):
+/// the emitting side's unit normal (w: 1 when two-sided), the radiance and up to 8 vertices.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct LightRecord {
+    normal: [f32; 4],
+    radiance: [f32; 4],
+    vertices: [[f32; 4]; 8],
+}
+
+/// `light`'s record and its vertex count for the shaders: 0 for a light that is not finite,
+/// which then sends nothing (shade::light_directions).
+pub(crate) fn light_record(light: &Light) -> (LightRecord, u32) {
+    let mut r = LightRecord {
+        normal: light
+            .normal
+            .as_vec3()
+            .extend(if light.two_sided { 1.0 } else { 0.0 })
+            .to_array(),
+        radiance: light.radiance.as_vec3().extend(0.0).to_array(),
+        vertices: [[0.0; 4]; 8],
+    };
+    for (k, v) in light.vertices.iter().enumerate().take(8) {
+        r.vertices[k] = v.as_vec3().extend(1.0).to_array();
+    }
+    let finite = light.vertices.iter().all(|v| v.is_finite())
+        && light.normal.is_finite()
+        && light.radiance.is_finite();
+    let count = if finite {
+        light.vertices.len() as u32
+    } else {
+        0
+    };
+    (r, count)
+}
+
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct Params {
     eye: [f32; 4],
-    light_normal: [f32; 4],
-    radiance: [f32; 4],
-    light: [[f32; 4]; 8],
+    light: LightRecord,
     counts: [u32; 4],
     codec: [f32; 4],
 }
@@ -195,33 +229,18 @@ impl VertexShader {
         eye: DVec3,
     ) -> Result<()> {
         supports(light)?;
-        let mut params = Params {
+        let (record, count) = light_record(light);
+        let params = Params {
             eye: eye.as_vec3().extend(1.0).to_array(),
-            light_normal: light
-                .normal
-                .as_vec3()
-                .extend(if light.two_sided { 1.0 } else { 0.0 })
-                .to_array(),
-            radiance: light.radiance.as_vec3().extend(0.0).to_array(),
-            light: [[0.0; 4]; 8],
+            light: record,
             counts: [
-                light.vertices.len() as u32,
+                count,
                 self.jobs_len,
                 self.trees.codec.0,
                 LtcTable::builtin().size() as u32,
             ],
             codec: [self.trees.codec.1, 0.0, 0.0, 0.0],
         };
-        let finite = light.vertices.iter().all(|v| v.is_finite())
-            && light.normal.is_finite()
-            && light.radiance.is_finite();
-        if !finite {
-            // A non-finite light sends nothing (shade::light_directions).
-            params.counts[0] = 0;
-        }
-        for (k, v) in light.vertices.iter().enumerate().take(8) {
-            params.light[k] = v.as_vec3().extend(1.0).to_array();
-        }
         gpu.queue
             .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         let layout = self.pipeline.get_bind_group_layout(0);

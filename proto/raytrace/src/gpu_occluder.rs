@@ -203,6 +203,7 @@ impl GpuOccluder {
             return Ok(Vec::new());
         }
         let device = &ctx.device;
+        let t0 = std::time::Instant::now();
         let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let input = |label: &str, contents: &[u8]| {
@@ -274,6 +275,7 @@ impl GpuOccluder {
             pass.dispatch_workgroups(gx, gy, 1);
         }
         enc.copy_buffer_to_buffer(&result, 0, &readback, 0, bytes);
+        let t_upload = t0.elapsed();
         ctx.queue.submit([enc.finish()]);
         scope_error(validation)?;
         scope_error(memory)?;
@@ -282,6 +284,7 @@ impl GpuOccluder {
             let _ = tx.send(r);
         });
         ctx.wait()?;
+        let t_cast = t0.elapsed();
         rx.recv()
             .map_err(|e| GpuError::Failed(e.to_string()))?
             .map_err(|e| GpuError::Failed(e.to_string()))?;
@@ -291,6 +294,16 @@ impl GpuOccluder {
         let flags = bytemuck::cast_slice::<u8, u32>(&view).to_vec();
         drop(view);
         readback.unmap();
+        if std::env::var_os("BSPVT_GPU_TIMING").is_some() {
+            // Where a dispatch's wall-clock time goes (docs/benchmarks.md, the GPU bake).
+            let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+            eprintln!(
+                "gpu cast: {n} rays: buffers+upload {:.2} ms, submit..done {:.2} ms, read-back {:.2} ms",
+                ms(t_upload),
+                ms(t_cast - t_upload),
+                ms(t0.elapsed() - t_cast)
+            );
+        }
         Ok(flags)
     }
 }

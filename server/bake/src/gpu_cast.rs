@@ -194,10 +194,19 @@ impl Baker {
         let chunks = self.header.chunk_count();
         let (mut bytes, mut totals) = self.output_start();
         let total = self.header.vertex_count as u64;
+        let timing = std::env::var_os("BSPVT_GPU_TIMING").is_some();
         let generate = |c: u32| {
             let t0 = Instant::now();
             let batch = self.gpu_batch(&self.chunk_range(c).collect::<Vec<_>>());
-            (batch, t0.elapsed().as_secs_f64())
+            let s = t0.elapsed().as_secs_f64();
+            if timing {
+                eprintln!(
+                    "gpu chunk {c}: {} rays generated in {:.2} ms",
+                    batch.rays.len(),
+                    s * 1e3
+                );
+            }
+            (batch, s)
         };
         std::thread::scope(|scope| -> Result<(), GpuBakeError> {
             type Cast = (GpuBatch, f64, Result<Vec<u32>, GpuError>);
@@ -238,7 +247,15 @@ impl Baker {
                 let counts = batch.counts();
                 let maps = Self::gpu_assemble(batch, &occluded?);
                 let seconds = seconds + t0.elapsed().as_secs_f64();
+                let t1 = Instant::now();
                 let (frame, mut t) = self.fit_chunk(c, &maps);
+                if timing {
+                    eprintln!(
+                        "gpu chunk {c}: assembled in {:.2} ms, fitted in {:.2} ms",
+                        (t1 - t0).as_secs_f64() * 1e3,
+                        t1.elapsed().as_secs_f64() * 1e3
+                    );
+                }
                 t.rays = counts.rays;
                 t.traversals = counts.traversals;
                 t.ray_seconds = seconds;

@@ -1,0 +1,208 @@
+// The shading pass of GPU frames (render::renderer's per-vertex and per-pixel modes), one
+// invocation per pixel over the visibility buffer of visibility.wgsl. Each sample's surface is
+// found as the CPU's G-buffer finds it (frame::gbuffer): the primary ray through the sample
+// meets the plane of the triangle drawn there (Möller–Trumbore, barycentrics clamped into the
+// triangle), so positions do not depend on the rasteriser's interpolation. Then:
+// - per vertex (mode 0): the per-vertex shading of shade.wgsl, interpolated;
+// - per pixel (mode 1): unshadowed LTC GGX [Heitz16] at the surface, times the per-vertex
+//   shadow ratios (diffuse, specular) interpolated; black where the viewer is below the
+//   shading hemisphere (shade::sees_viewer).
+// With MSAA, each distinct triangle of a pixel is shaded once, at its first sample, and
+// weighted by its share of the samples.
+// Prepended: common.wgsl; appended: the visibility buffer's binding and `vis_id` (frame.rs).
+
+struct ResolveParams {
+    // xyz: the eye; w: tan(fov_y / 2).
+    eye: vec4f,
+    // xyz: the unit forward, right and up vectors of frame::camera::View; forward.w: aspect.
+    forward: vec4f,
+    right: vec4f,
+    up: vec4f,
+    // xyz: the emitting side's unit normal; w: 1 when two-sided.
+    light_normal: vec4f,
+    radiance: vec4f,
+    light: array<vec4f, 8>,
+    // light vertices, mode (0 per vertex, 1 per pixel), LTC table size, materials.
+    counts: vec4u,
+    // width, height, samples per pixel.
+    size: vec4u,
+}
+
+struct VertexOut {
+    colour: vec4f,
+    ratio: vec2f,
+    pieces: u32,
+    dropped: u32,
+}
+
+@group(0) @binding(0) var<uniform> fp: ResolveParams;
+// Four per vertex: position, normal, (albedo, α), (F0, 0) — the compute pass's records.
+@group(0) @binding(1) var<storage, read> verts: array<vec4f>;
+// Three per triangle.
+@group(0) @binding(2) var<storage, read> indices: array<u32>;
+// The material of each triangle.
+@group(0) @binding(3) var<storage, read> tri_material: array<u32>;
+// Two per material: (albedo, α), (F0, 0).
+@group(0) @binding(4) var<storage, read> materials: array<vec4f>;
+@group(0) @binding(5) var<storage, read> shading: array<VertexOut>;
+@group(0) @binding(6) var<storage, read> ltc: array<vec4f>;
+// Linear radiance per pixel, row-major.
+@group(0) @binding(8) var<storage, read_write> image: array<vec4f>;
+
+fn light_count() -> u32 {
+    return fp.counts.x;
+}
+fn light_vertex(i: u32) -> vec3f {
+    return fp.light[i].xyz;
+}
+fn light_normal() -> vec4f {
+    return fp.light_normal;
+}
+fn ltc_size() -> u32 {
+    return fp.counts.z;
+}
+fn ltc_a(k: u32) -> vec4f {
+    return ltc[2u * k];
+}
+fn ltc_b(k: u32) -> vec4f {
+    return ltc[2u * k + 1u];
+}
+
+// The sample positions within a pixel: the centre, or the standard 4× pattern of Vulkan,
+// Direct3D and Metal.
+fn sample_offset(s: u32) -> vec2f {
+    if fp.size.z == 1u {
+        return vec2f(0.5, 0.5);
+    }
+    switch s {
+        case 0u: { return vec2f(0.375, 0.125); }
+        case 1u: { return vec2f(0.875, 0.375); }
+        case 2u: { return vec2f(0.125, 0.625); }
+        default: { return vec2f(0.625, 0.875); }
+    }
+}
+
+// View::ray_dir: the unit direction of the primary ray through image point (x, y) in pixels.
+fn ray_dir(x: f32, y: f32) -> vec3f {
+    let w = f32(fp.size.x);
+    let h = f32(fp.size.y);
+    let sx = (2.0 * x / w - 1.0) * fp.eye.w * fp.forward.w;
+    let sy = (1.0 - 2.0 * y / h) * fp.eye.w;
+    return normalize(fp.forward.xyz + sx * fp.right.xyz + sy * fp.up.xyz);
+}
+
+// gbuffer::ray_plane_barycentrics: the barycentric weights of the ray's hit on the plane of
+// (p0, p1, p2), clamped into the triangle.
+fn weights(d: vec3f, p0: vec3f, p1: vec3f, p2: vec3f) -> vec3f {
+    let e1 = p1 - p0;
+    let e2 = p2 - p0;
+    let pv = cross(d, e2);
+    let det = dot(e1, pv);
+    if !(abs(det) > 0.0) || !finite(det) {
+        return vec3f(1.0 / 3.0);
+    }
+    let inv = 1.0 / det;
+    let tv = fp.eye.xyz - p0;
+    var u = clamp(dot(tv, pv) * inv, 0.0, 1.0);
+    var v = clamp(dot(d, cross(tv, e1)) * inv, 0.0, 1.0);
+    let s = u + v;
+    if s > 1.0 {
+        u /= s;
+        v /= s;
+    }
+    return vec3f(1.0 - u - v, u, v);
+}
+
+// The radiance of triangle t seen along the ray through image point (x, y).
+fn shade(t: u32, x: f32, y: f32) -> vec3f {
+    let i0 = indices[3u * t];
+    let i1 = indices[3u * t + 1u];
+    let i2 = indices[3u * t + 2u];
+    let p0 = verts[4u * i0].xyz;
+    let p1 = verts[4u * i1].xyz;
+    let p2 = verts[4u * i2].xyz;
+    let w = weights(ray_dir(x, y), p0, p1, p2);
+    if fp.counts.y == 0u {
+        return w.x * shading[i0].colour.xyz + w.y * shading[i1].colour.xyz
+            + w.z * shading[i2].colour.xyz;
+    }
+    // GBuffer::surface: the interpolated normal on the side of the geometric normal that
+    // faces the eye.
+    let pos = w.x * p0 + w.y * p1 + w.z * p2;
+    let to_eye = fp.eye.xyz - pos;
+    var g = cross(p1 - p0, p2 - p0);
+    let gl = length(g);
+    g = select(vec3f(0.0, 0.0, 1.0), g / gl, gl > 0.0 && finite(gl));
+    if dot(g, to_eye) < 0.0 {
+        g = -g;
+    }
+    let ni = w.x * verts[4u * i0 + 1u].xyz + w.y * verts[4u * i1 + 1u].xyz
+        + w.z * verts[4u * i2 + 1u].xyz;
+    let nl = length(ni);
+    var n = select(g, ni / nl, nl > 0.0 && finite(nl));
+    if dot(n, g) < 0.0 {
+        n = -n;
+    }
+    let el = length(to_eye);
+    let wo = select(n, to_eye / el, el > 0.0 && finite(el));
+    if !(dot(n, wo) > 0.0) {
+        return vec3f(0.0);
+    }
+    let m = min(tri_material[t], max(fp.counts.w, 1u) - 1u);
+    let albedo = materials[2u * m];
+    let f0 = materials[2u * m + 1u].xyz;
+    let frame = to_local(n, wo);
+    let lt = ltc_lookup(albedo.w, atan2(length(cross(n, wo)), dot(n, wo)));
+    let spec = f0 * lt.magnitude + (vec3f(1.0) - f0) * lt.fresnel;
+    let nd = light_directions(pos, n);
+    if nd < 3u {
+        return vec3f(0.0);
+    }
+    for (var i = 0u; i < nd; i++) {
+        ig_src[i] = dirs[i];
+    }
+    let d = integrate_poly(frame, nd);
+    for (var i = 0u; i < nd; i++) {
+        ig_src[i] = dirs[i];
+    }
+    let s = integrate_poly(lt.m_inv * frame, nd);
+    let r = clamp(w.x * shading[i0].ratio + w.y * shading[i1].ratio + w.z * shading[i2].ratio,
+        vec2f(0.0), vec2f(1.0));
+    let c = fp.radiance.xyz * (albedo.xyz * d * r.x + spec * s * r.y);
+    return select(vec3f(0.0), c, finite3(c));
+}
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3u) {
+    if id.x >= fp.size.x || id.y >= fp.size.y {
+        return;
+    }
+    let px = vec2i(id.xy);
+    let samples = fp.size.z;
+    var sum = vec3f(0.0);
+    // The triangles shaded so far in this pixel and their radiance.
+    var seen = array<u32, 4>(0u, 0u, 0u, 0u);
+    var value = array<vec3f, 4>(vec3f(0.0), vec3f(0.0), vec3f(0.0), vec3f(0.0));
+    for (var s = 0u; s < samples; s++) {
+        let tri = vis_id(px, s);
+        if tri == 0u {
+            continue;
+        }
+        var c = vec3f(0.0);
+        var found = false;
+        for (var k = 0u; k < s; k++) {
+            if seen[k] == tri {
+                c = value[k];
+                found = true;
+            }
+        }
+        if !found {
+            let o = sample_offset(s);
+            c = shade(tri - 1u, f32(id.x) + o.x, f32(id.y) + o.y);
+        }
+        seen[s] = tri;
+        value[s] = c;
+        sum += c;
+    }
+    image[id.y * fp.size.x + id.x] = vec4f(sum / f32(samples), 1.0);
+}

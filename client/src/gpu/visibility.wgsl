@@ -1,0 +1,35 @@
+// The raster pass of GPU frames: a visibility buffer (triangle index + 1 per sample, 0 where
+// nothing is drawn, split in two 16-bit halves: Rg16Uint is multisampled on every adapter,
+// R32Uint is not), with a reversed-Z depth test. Everything else happens in resolve.wgsl, a
+// compute pass, so that no fragment shader carries the LTC integral (on lavapipe such a
+// fragment shader did not finish compiling in ten minutes; the same code compiles in a
+// compute shader in well under a second). Drawn without an index buffer: vertex i is corner
+// i % 3 of triangle i / 3.
+
+struct Raster {
+    view_proj: mat4x4f,
+}
+
+@group(0) @binding(0) var<uniform> rp: Raster;
+// Four per vertex: position, normal, (albedo, α), (F0, 0) — the compute pass's records.
+@group(0) @binding(1) var<storage, read> verts: array<vec4f>;
+// Three per triangle.
+@group(0) @binding(2) var<storage, read> indices: array<u32>;
+
+struct Varyings {
+    @builtin(position) clip: vec4f,
+    @location(0) @interpolate(flat) id: u32,
+}
+
+@vertex
+fn vs(@builtin(vertex_index) i: u32) -> Varyings {
+    var out: Varyings;
+    out.clip = rp.view_proj * vec4f(verts[4u * indices[i]].xyz, 1.0);
+    out.id = i / 3u + 1u;
+    return out;
+}
+
+@fragment
+fn fs(in: Varyings) -> @location(0) vec2u {
+    return vec2u(in.id & 0xffffu, in.id >> 16u);
+}

@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Fills .dev/ (ignored; carried to the device machine) for tools/device/gpu-check.sh: the
+# stripped release binaries, the GPU test binaries and the shared meshes, gzipped; and .gl/
+# with the Vulkan loader's Debian packages (the device image has no Vulkan loader).
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+grep -qx '/.dev/' .git/info/exclude 2>/dev/null || echo /.dev/ >> .git/info/exclude
+grep -qx '/.gl/' .git/info/exclude 2>/dev/null || echo /.gl/ >> .git/info/exclude
+rm -rf .dev && mkdir -p .dev/assets/meshes .gl
+cargo build --release --locked -p bspvt -p bspvt-server
+for b in bspvt bspvt-server; do strip -o .dev/$b target/release/$b; gzip -9 .dev/$b; done
+test_bin() { # package test → path of its test binary
+  cargo test --locked -p "$1" --test "$2" --no-run --message-format=json 2>/dev/null \
+    | python3 -c "import json,sys
+for l in sys.stdin:
+    m=json.loads(l)
+    if m.get('reason')=='compiler-artifact' and m['target']['name']=='$2' and m.get('executable'): print(m['executable'])"
+}
+for t in "bspvt-client gpu_shading" "bspvt-client gpu_frames" "bspvt-tests cast_gpu"; do
+  set -- $t
+  strip -o ".dev/t_$2" "$(test_bin "$1" "$2")"
+  gzip -9 ".dev/t_$2"
+done
+S=${BSPVT_ASSETS:-../shared/assets}
+for m in bunny.ply bunny_res2.ply bunny_res4.ply dragon_res4.ply teapot.obj; do
+  cp "$S/meshes/$m" .dev/assets/meshes/
+done
+o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64'
+mkdir -p /tmp/amd64/partial
+if ! ls .gl/libvulkan1_*.deb >/dev/null 2>&1; then
+  apt-get $o update >/dev/null
+  (cd .gl && apt-get $o download libvulkan1 libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2)
+fi
+du -sh .dev .gl

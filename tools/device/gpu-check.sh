@@ -4,21 +4,9 @@
 # release binaries, the GPU test binaries and the shared meshes, and .gl/ with the Vulkan
 # loader; then, with both carried: `bash tools/device/gpu-check.sh`. Logs and JSON go to $OUT.
 set -u
-OUT=${OUT:-/tmp/out}
-mkdir -p "$OUT"
-ROOT=$PWD
-D=$ROOT/.dev
-for f in .gl/*.deb; do dpkg -x "$f" /; done
-ldconfig
-ICD=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
-[ -f "$ICD" ] && export VK_DRIVER_FILES=$ICD
-for f in "$D"/*.gz; do gunzip -f "$f"; done
-chmod +x "$D"/bspvt "$D"/bspvt-server "$D"/t_* 2>/dev/null
-export BSPVT_ASSETS=$D/assets
-M=$BSPVT_ASSETS/meshes
+. tools/device/setup.sh
 nvidia-smi -L | tee "$OUT/gpu.txt"
 nproc | tee -a "$OUT/gpu.txt"
-python3 tools/device/subdivide.py "$M/bunny.ply" /tmp/bunny_x4.ply 2 | tee -a "$OUT/gpu.txt"
 
 step() { # name timeout command...
   local name=$1 t=$2; shift 2

@@ -12,7 +12,7 @@ use anyhow::{Result, bail};
 use bspvt_proto::Scene;
 use glam::DMat4;
 
-use super::context::Gpu;
+use super::context::{Gpu, buffer_entries};
 use super::vertex::{LightRecord, VertexShader, light_record, ltc_buffer, supports};
 use crate::frame::image::Image;
 use crate::light::Light;
@@ -72,14 +72,14 @@ pub struct GpuFrames {
 /// The visibility buffer's binding and reader, appended to `resolve.wgsl`.
 fn visibility_binding(samples: u32) -> &'static str {
     if samples > 1 {
-        "@group(0) @binding(7) var vis: texture_multisampled_2d<u32>;
+        "@group(0) @binding(8) var vis: texture_multisampled_2d<u32>;
 fn vis_id(px: vec2i, s: u32) -> u32 {
     let v = textureLoad(vis, px, i32(s));
     return v.x | (v.y << 16u);
 }
 "
     } else {
-        "@group(0) @binding(7) var vis: texture_2d<u32>;
+        "@group(0) @binding(8) var vis: texture_2d<u32>;
 fn vis_id(px: vec2i, s: u32) -> u32 {
     let v = textureLoad(vis, px, 0);
     return v.x | (v.y << 16u);
@@ -407,21 +407,11 @@ impl GpuFrames {
             pass.draw(0..triangles * 3, 0..1);
         }
         let layout = resolve.get_bind_group_layout(0);
-        let mut entries: Vec<wgpu::BindGroupEntry> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        entries.push(wgpu::BindGroupEntry {
-            binding: 7,
-            resource: wgpu::BindingResource::TextureView(&vis_view),
-        });
+        let buffers: Vec<&wgpu::Buffer> = buffers.iter().chain([&t.image]).collect();
+        let mut entries = buffer_entries(&buffers);
         entries.push(wgpu::BindGroupEntry {
             binding: 8,
-            resource: t.image.as_entire_binding(),
+            resource: wgpu::BindingResource::TextureView(&vis_view),
         });
         let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("bspvt resolve"),

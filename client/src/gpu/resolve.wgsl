@@ -47,7 +47,7 @@ struct VertexOut {
 @group(0) @binding(5) var<storage, read> shading: array<VertexOut>;
 @group(0) @binding(6) var<storage, read> ltc: array<vec4f>;
 // Linear radiance per pixel, row-major.
-@group(0) @binding(8) var<storage, read_write> image: array<vec4f>;
+@group(0) @binding(7) var<storage, read_write> image: array<vec4f>;
 
 fn light_count() -> u32 {
     return fp.counts.x;

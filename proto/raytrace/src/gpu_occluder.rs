@@ -1,6 +1,11 @@
-//! [`Occluder`]'s any-hit queries in a wgpu compute shader (`occlusion.wgsl`): the CPU-built
-//! CWBVH, its triangles and their vertex indices are uploaded once; batches of rays are cast and
-//! answered as one occlusion flag each.
+//! [`Occluder`]'s any-hit queries in a wgpu compute shader (`occlusion.wgsl`), shaped as the
+//! bake needs them: visibility cube maps. The CPU-built CWBVH, its triangles and their vertex
+//! indices are uploaded once ([`GpuOccluder::new`]), then the cube map's sub-ray directions and
+//! the rays' stops once per bake ([`GpuCubeTable`]); per batch of vertices only each vertex's
+//! origin and its mask of pixels that matter go up, and each pixel's counts (escaping and cast
+//! sub-rays) come back ([`GpuOccluder::cube_counts`]). The rays are made on the GPU: the CPU
+//! made and uploaded 24 bytes per ray before, which took most of a GPU bake's time
+//! (docs/benchmarks.md).
 
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
@@ -8,39 +13,64 @@ use wgpu::util::DeviceExt;
 use crate::Occluder;
 use crate::gpu::{GpuContext, GpuError};
 
-/// Where a group of rays starts: shared by many rays (a vertex's cube map).
+/// One vertex of a cube-map batch: where its rays start, the nearest hit that counts, its
+/// normal (sub-rays below its horizon escape uncast) and its index (its own triangles are
+/// skipped).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
-pub struct RaySource {
-    /// The rays' origin.
-    pub origin: [f32; 3],
-    /// Hits nearer than this are not counted.
-    pub t_min: f32,
-    /// Triangles using this vertex are skipped (`u32::MAX`: none).
-    pub skip: u32,
-    _pad: [u32; 3],
+pub struct CubeSource {
+    origin: [f32; 3],
+    t_min: f32,
+    normal: [f32; 3],
+    skip: u32,
 }
 
-impl RaySource {
-    /// Rays from `origin`, counting hits from `t_min` on, ignoring triangles that use `skip`.
-    pub fn new(origin: glam::Vec3, t_min: f32, skip: u32) -> RaySource {
-        RaySource {
+impl CubeSource {
+    /// A vertex's rays from `origin`, hits nearer than `t_min` ignored, horizon `normal`,
+    /// triangles using vertex `skip` ignored.
+    pub fn new(origin: glam::Vec3, t_min: f32, normal: glam::Vec3, skip: u32) -> CubeSource {
+        CubeSource {
             origin: origin.to_array(),
             t_min,
+            normal: normal.to_array(),
             skip,
-            _pad: [0; 3],
         }
     }
 }
 
-/// One ray: a direction (unit) and the distance it ends at, from its source.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-#[repr(C)]
-pub struct GpuRay {
-    /// Unit direction.
-    pub dir: [f32; 3],
-    /// Hits at this distance or beyond are not counted.
-    pub t_max: f32,
+/// Where a ray ends (the bake's light stops), for [`GpuOccluder::cube_table`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GpuStop {
+    /// Where the ray enters the box (`Aabb::ray_entry`; a ray starting inside is unbounded).
+    Region {
+        /// The box's low corner.
+        min: glam::Vec3,
+        /// The box's high corner.
+        max: glam::Vec3,
+    },
+    /// Where the ray crosses the plane (forward, finite).
+    Plane {
+        /// A point of the plane.
+        point: glam::Vec3,
+        /// The plane's unit normal.
+        normal: glam::Vec3,
+    },
+}
+
+/// A cube map's sub-ray directions and the rays' stops, on the GPU for a whole bake.
+pub struct GpuCubeTable {
+    dirs: wgpu::Buffer,
+    stops: wgpu::Buffer,
+    stop_count: u32,
+    pixels: u32,
+    samples: u32,
+}
+
+impl GpuCubeTable {
+    /// Pixels per cube map (6 · res²).
+    pub fn pixels(&self) -> u32 {
+        self.pixels
+    }
 }
 
 const WORKGROUP: u32 = 64;
@@ -53,15 +83,15 @@ fn scope_error(scope: wgpu::ErrorScopeGuard) -> Result<(), GpuError> {
     }
 }
 
-/// An occluder on the GPU: [`Occluder::occluded_between`] for batches of rays.
+/// An occluder on the GPU: visibility cube maps of batches of vertices.
 pub struct GpuOccluder {
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
     nodes: wgpu::Buffer,
     tris: wgpu::Buffer,
     prim_verts: wgpu::Buffer,
-    /// Rays per dispatch (buffer and dispatch-size limits).
-    max_rays: usize,
+    /// Invocations (vertex × pixel) per dispatch: buffer and dispatch-size limits.
+    max_items: usize,
 }
 
 impl GpuOccluder {
@@ -120,8 +150,9 @@ impl GpuOccluder {
                 entry(3, read),
                 entry(4, read),
                 entry(5, read),
-                entry(6, wgpu::BufferBindingType::Storage { read_only: false }),
-                entry(7, wgpu::BufferBindingType::Uniform),
+                entry(6, read),
+                entry(7, wgpu::BufferBindingType::Storage { read_only: false }),
+                entry(8, wgpu::BufferBindingType::Uniform),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -138,14 +169,13 @@ impl GpuOccluder {
             cache: None,
         });
         let limits = device.limits();
-        let by_binding = limits.max_storage_buffer_binding_size as usize / 16;
         let by_dispatch = limits.max_compute_workgroups_per_dimension as usize
             * limits.max_compute_workgroups_per_dimension as usize
             * WORKGROUP as usize;
-        let max_rays = by_binding
-            .min(limits.max_buffer_size as usize / 16)
+        let max_items = (limits.max_storage_buffer_binding_size as usize / 4)
+            .min(limits.max_buffer_size as usize / 4)
             .min(by_dispatch)
-            .min(1 << 22);
+            .min(1 << 24);
         scope_error(validation)?;
         scope_error(memory)?;
         Ok(GpuOccluder {
@@ -154,39 +184,105 @@ impl GpuOccluder {
             nodes,
             tris,
             prim_verts,
-            max_rays,
+            max_items,
         })
     }
 
-    /// Whether each ray is occluded (1) or not (0): ray `i` leaves `sources[ray_source[i]]`.
-    /// The answer of [`Occluder::occluded_between`] for the same ray, up to rays that graze a
-    /// triangle's edge (the two machines may round such a hit either way).
-    pub fn occluded(
+    /// Uploads a cube map's sub-ray directions (`dirs`, face-major, then pixel, then
+    /// sub-sample: `pixels` × `samples` unit vectors) and the rays' `stops`, for a whole bake.
+    /// A table larger than the adapter binds is an error that says so.
+    pub fn cube_table(
         &self,
         ctx: &GpuContext,
-        sources: &[RaySource],
-        rays: &[GpuRay],
-        ray_source: &[u32],
-    ) -> Result<Vec<u32>, GpuError> {
-        if rays.len() != ray_source.len() {
+        dirs: &[glam::Vec3],
+        pixels: u32,
+        samples: u32,
+        stops: &[GpuStop],
+    ) -> Result<GpuCubeTable, GpuError> {
+        if dirs.len() != pixels as usize * samples as usize || samples == 0 || samples > 0xffff {
             return Err(GpuError::Failed(format!(
-                "{} rays but {} source indices",
-                rays.len(),
-                ray_source.len()
+                "{} directions for {pixels} pixels of {samples} sub-rays",
+                dirs.len()
             )));
         }
-        if let Some(&bad) = ray_source.iter().find(|&&s| s as usize >= sources.len()) {
+        let limits = ctx.device.limits();
+        let bytes = dirs.len() as u64 * 16;
+        let most = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        if bytes > most {
             return Err(GpuError::Failed(format!(
-                "source {bad} of {} sources",
+                "the cube map's {} sub-ray directions take {bytes} bytes, more than this \
+                 adapter binds ({most}): lower the face resolution or the supersampling, or \
+                 bake on the CPU",
+                dirs.len()
+            )));
+        }
+        let device = &ctx.device;
+        let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let dir_words: Vec<[f32; 4]> = dirs.iter().map(|d| d.extend(0.0).to_array()).collect();
+        let mut stop_words: Vec<[f32; 4]> = stops
+            .iter()
+            .flat_map(|s| match *s {
+                GpuStop::Region { min, max } => [min.extend(0.0), max.extend(0.0)],
+                GpuStop::Plane { point, normal } => [point.extend(1.0), normal.extend(0.0)],
+            })
+            .map(|v| v.to_array())
+            .collect();
+        // wgpu refuses empty buffers.
+        if stop_words.is_empty() {
+            stop_words.push([0.0; 4]);
+        }
+        let storage = |label: &str, contents: &[u8]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let table = GpuCubeTable {
+            dirs: storage("cube map directions", bytemuck::cast_slice(&dir_words)),
+            stops: storage("ray stops", bytemuck::cast_slice(&stop_words)),
+            stop_count: stops.len() as u32,
+            pixels,
+            samples,
+        };
+        scope_error(validation)?;
+        scope_error(memory)?;
+        Ok(table)
+    }
+
+    /// For each of `sources` and each of `table`'s pixels whose bit is set in the source's
+    /// mask (`masks`: ⌈pixels / 32⌉ words per source, bit p of word p / 32): its escaping
+    /// sub-rays | its cast sub-rays << 16, at `source · pixels + pixel` (other entries are 0).
+    /// A sub-ray below the source's horizon escapes uncast; the others are cast from its origin
+    /// to their first stop, and escape when no triangle (but the source's own) is hit in
+    /// [t_min, stop): the answer of [`Occluder::occluded_between`] for the same ray, up to
+    /// rays that graze a triangle's edge (the two machines may round such a hit either way).
+    pub fn cube_counts(
+        &self,
+        ctx: &GpuContext,
+        table: &GpuCubeTable,
+        sources: &[CubeSource],
+        masks: &[u32],
+    ) -> Result<Vec<u32>, GpuError> {
+        let pixels = table.pixels as usize;
+        let words = pixels.div_ceil(32);
+        if masks.len() != sources.len() * words {
+            return Err(GpuError::Failed(format!(
+                "{} mask words for {} sources of {words}",
+                masks.len(),
                 sources.len()
             )));
         }
-        let mut out = Vec::with_capacity(rays.len());
-        for (r, s) in rays
-            .chunks(self.max_rays)
-            .zip(ray_source.chunks(self.max_rays))
+        let per_dispatch = (self.max_items / pixels.max(1)).max(1);
+        let mut out = Vec::with_capacity(sources.len() * pixels);
+        for (s, m) in sources
+            .chunks(per_dispatch)
+            .zip(masks.chunks(per_dispatch * words))
         {
-            out.extend(self.dispatch(ctx, sources, r, s)?);
+            out.extend(self.dispatch(ctx, table, s, m)?);
         }
         Ok(out)
     }
@@ -194,11 +290,11 @@ impl GpuOccluder {
     fn dispatch(
         &self,
         ctx: &GpuContext,
-        sources: &[RaySource],
-        rays: &[GpuRay],
-        ray_source: &[u32],
+        table: &GpuCubeTable,
+        sources: &[CubeSource],
+        masks: &[u32],
     ) -> Result<Vec<u32>, GpuError> {
-        let n = rays.len();
+        let n = sources.len() * table.pixels as usize;
         if n == 0 {
             return Ok(Vec::new());
         }
@@ -213,18 +309,19 @@ impl GpuOccluder {
                 usage: wgpu::BufferUsages::STORAGE,
             })
         };
-        let src = input("ray sources", bytemuck::cast_slice(sources));
-        let ray_buf = input("rays", bytemuck::cast_slice(rays));
-        let ray_src = input("ray source", bytemuck::cast_slice(ray_source));
+        let src = input("cube sources", bytemuck::cast_slice(sources));
+        let mask = input("cube masks", bytemuck::cast_slice(masks));
         let bytes = (n * 4) as u64;
         let result = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("occluded"),
+            label: Some("cube counts"),
             size: bytes,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("occluded readback"),
+            label: Some("cube counts readback"),
             size: bytes,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
@@ -236,35 +333,50 @@ impl GpuOccluder {
         } else {
             (max_x, groups.div_ceil(max_x))
         };
-        let params = [n as u32, gx * WORKGROUP, 0, 0];
+        let params = [
+            sources.len() as u32,
+            table.pixels,
+            table.samples,
+            table.stop_count,
+            gx * WORKGROUP,
+            table.pixels.div_ceil(32),
+            0,
+            0,
+        ];
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("occlusion params"),
+            label: Some("cube params"),
             contents: bytemuck::cast_slice(&params),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        fn bind(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
-            wgpu::BindGroupEntry {
-                binding,
-                resource: buffer.as_entire_binding(),
-            }
-        }
+        let buffers = [
+            &self.nodes,
+            &self.tris,
+            &self.prim_verts,
+            &src,
+            &table.dirs,
+            &mask,
+            &table.stops,
+            &result,
+            &uniform,
+        ];
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("occlusion"),
             layout: &self.layout,
-            entries: &[
-                bind(0, &self.nodes),
-                bind(1, &self.tris),
-                bind(2, &self.prim_verts),
-                bind(3, &src),
-                bind(4, &ray_buf),
-                bind(5, &ray_src),
-                bind(6, &result),
-                bind(7, &uniform),
-            ],
+            entries: &entries,
         });
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("occlusion"),
         });
+        // The counts of pixels that do not matter stay 0.
+        enc.clear_buffer(&result, 0, None);
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("occlusion"),
@@ -291,19 +403,21 @@ impl GpuOccluder {
         let view = readback
             .get_mapped_range(..)
             .map_err(|e| GpuError::Failed(e.to_string()))?;
-        let flags = bytemuck::cast_slice::<u8, u32>(&view).to_vec();
+        let counts = bytemuck::cast_slice::<u8, u32>(&view).to_vec();
         drop(view);
         readback.unmap();
         if std::env::var_os("BSPVT_GPU_TIMING").is_some() {
             // Where a dispatch's wall-clock time goes (docs/benchmarks.md, the GPU bake).
             let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
             eprintln!(
-                "gpu cast: {n} rays: buffers+upload {:.2} ms, submit..done {:.2} ms, read-back {:.2} ms",
+                "gpu cast: {} vertices × {} pixels: buffers+upload {:.2} ms, submit..done {:.2} ms, read-back {:.2} ms",
+                sources.len(),
+                table.pixels,
                 ms(t_upload),
                 ms(t_cast - t_upload),
                 ms(t0.elapsed() - t_cast)
             );
         }
-        Ok(flags)
+        Ok(counts)
     }
 }

@@ -13,7 +13,7 @@ pub mod gpu;
 #[cfg(feature = "gpu")]
 mod gpu_occluder;
 #[cfg(feature = "gpu")]
-pub use gpu_occluder::{GpuOccluder, GpuRay, RaySource};
+pub use gpu_occluder::{CubeSource, GpuCubeTable, GpuOccluder, GpuStop};
 
 use std::time::Duration;
 

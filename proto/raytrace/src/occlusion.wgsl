@@ -1,5 +1,6 @@
-// Any-hit occlusion rays over obvhs's compressed wide BVH (CWBVH, Ylitie et al. 2017), the GPU
-// twin of `Occluder::occluded_between` (proto/raytrace/src/lib.rs): the same nodes, the same
+// Visibility cube maps (the bake's, one invocation per vertex and pixel) from any-hit occlusion
+// rays over obvhs's compressed wide BVH (CWBVH, Ylitie et al. 2017), the GPU twin of
+// `Occluder::occluded_between` (proto/raytrace/src/lib.rs): the same nodes, the same
 // triangles in BVH primitive order, the same traversal order (obvhs's `traverse!` macro) and the
 // same Möller–Trumbore test (obvhs's `RtTriangle::intersect`). A ray is occluded when a triangle
 // not using its `skip` vertex is hit at a distance in [t_min, t_max).
@@ -11,17 +12,27 @@
 @group(0) @binding(1) var<storage, read> tris: array<f32>;
 // The three mesh vertex indices of each primitive.
 @group(0) @binding(2) var<storage, read> prim_verts: array<u32>;
-// Per ray source: origin.xyz and t_min (as f32 bits), then skip (a vertex index) and 3 unused
-// words.
+// Per vertex of the dispatch, two vec4: origin.xyz and t_min (f32 bits); normal.xyz (f32 bits)
+// and the vertex's index (triangles using it are skipped).
 @group(0) @binding(3) var<storage, read> sources: array<vec4<u32>>;
-// Per ray: direction.xyz, t_max.
-@group(0) @binding(4) var<storage, read> rays: array<vec4<f32>>;
-// Per ray: the index of its source.
-@group(0) @binding(5) var<storage, read> ray_source: array<u32>;
-// Per ray: 1 when occluded, else 0.
-@group(0) @binding(6) var<storage, read_write> occluded: array<u32>;
-// x: the number of rays; y: rays per row of the dispatch grid.
-@group(0) @binding(7) var<uniform> params: vec4<u32>;
+// The sub-ray directions of every pixel of the cube map, face-major, then pixel (j·res + i),
+// then sub-sample: xyz (unit), w unused (RayTable::sub, as the CPU casts them).
+@group(0) @binding(4) var<storage, read> dirs: array<vec4<f32>>;
+// Per vertex, one bit per pixel (face·res² + pixel): the pixels that matter, chosen on the CPU
+// (VertexRays::matters) so that the sets are the CPU's exactly.
+@group(0) @binding(5) var<storage, read> mask: array<u32>;
+// Where rays end (cubemap::LightStop), two vec4 per stop: a region box (min.xyz, 0),
+// (max.xyz, 0), or a plane (point.xyz, 1), (normal.xyz, 0).
+@group(0) @binding(6) var<storage, read> stops: array<vec4<f32>>;
+// Per vertex and pixel that matters: escaping sub-rays | cast sub-rays << 16.
+@group(0) @binding(7) var<storage, read_write> counts: array<u32>;
+struct CubeParams {
+    // vertices in this dispatch, pixels per vertex, sub-rays per pixel, stops.
+    shape: vec4<u32>,
+    // invocations per row of the dispatch grid, mask words per vertex.
+    grid: vec4<u32>,
+}
+@group(0) @binding(8) var<uniform> cp: CubeParams;
 
 // obvhs's cwbvh::node::EPSILON: a child box is entered no nearer than this.
 const BOX_T_MIN: f32 = 0.0001;
@@ -162,15 +173,94 @@ fn is_occluded(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, skip: u32) ->
     return false;
 }
 
+const F32_MAX: f32 = 3.40282347e38;
+
+fn is_nan(x: f32) -> bool {
+    return (bitcast<u32>(x) & 0x7fffffffu) > 0x7f800000u;
+}
+
+// f32::min and f32::max (glam's Vec3 min/max per component): a NaN operand loses.
+fn fmin(a: f32, b: f32) -> f32 {
+    if is_nan(a) {
+        return b;
+    }
+    if is_nan(b) {
+        return a;
+    }
+    return min(a, b);
+}
+
+fn fmax(a: f32, b: f32) -> f32 {
+    if is_nan(a) {
+        return b;
+    }
+    if is_nan(b) {
+        return a;
+    }
+    return max(a, b);
+}
+
+// VertexRays::t_max: the distance at which the ray from o along unit d reaches its first stop
+// (LightStop::distance: Aabb::ray_entry for a region, the plane crossing otherwise); f32::MAX
+// when it reaches none.
+fn ray_end(o: vec3<f32>, d: vec3<f32>) -> f32 {
+    var t = F32_MAX;
+    for (var k = 0u; k < cp.shape.w; k++) {
+        let a = stops[2u * k];
+        let b = stops[2u * k + 1u];
+        if a.w == 0.0 {
+            let inv = vec3<f32>(1.0) / d;
+            let t0 = (a.xyz - o) * inv;
+            let t1 = (b.xyz - o) * inv;
+            let enter = fmax(fmax(fmin(t0.x, t1.x), fmin(t0.y, t1.y)), fmin(t0.z, t1.z));
+            let exit = fmin(fmin(fmax(t0.x, t1.x), fmax(t0.y, t1.y)), fmax(t0.z, t1.z));
+            if enter > 0.0 && enter <= exit {
+                t = min(t, enter);
+            }
+        } else {
+            let den = dot(d, b.xyz);
+            let tp = dot(a.xyz - o, b.xyz) / den;
+            if den != 0.0 && tp > 0.0 && tp <= F32_MAX {
+                t = min(t, tp);
+            }
+        }
+    }
+    return t;
+}
+
+// One pixel that matters of one vertex's cube map (VertexRays::cast_brute_force): each sub-ray
+// below the vertex's horizon escapes uncast; the others are cast to their stop.
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let i = gid.y * params.y + gid.x;
-    if i >= params.x {
+    let i = gid.y * cp.grid.x + gid.x;
+    let pixels = cp.shape.y;
+    if i >= cp.shape.x * pixels {
         return;
     }
-    let d = rays[i];
-    let s = ray_source[i];
-    let src = bitcast<vec4<f32>>(sources[2u * s]);
-    let skip = sources[2u * s + 1u].x;
-    occluded[i] = select(0u, 1u, is_occluded(src.xyz, d.xyz, src.w, d.w, skip));
+    let k = i / pixels;
+    let p = i % pixels;
+    if (mask[k * cp.grid.y + p / 32u] & (1u << (p % 32u))) == 0u {
+        return;
+    }
+    let a = sources[2u * k];
+    let b = sources[2u * k + 1u];
+    let o = bitcast<vec3<f32>>(a.xyz);
+    let t_min = bitcast<f32>(a.w);
+    let n = bitcast<vec3<f32>>(b.xyz);
+    let skip = b.w;
+    let s = cp.shape.z;
+    var escaping = 0u;
+    var casts = 0u;
+    for (var j = 0u; j < s; j++) {
+        let d = dirs[p * s + j].xyz;
+        if dot(d, n) <= 0.0 {
+            escaping++;
+            continue;
+        }
+        casts++;
+        if !is_occluded(o, d, t_min, ray_end(o, d), skip) {
+            escaping++;
+        }
+    }
+    counts[i] = escaping | (casts << 16u);
 }

@@ -1,29 +1,34 @@
-//! The bake's GPU backend: each chunk's visibility rays are cast in a wgpu compute shader over
-//! the CPU-built BVH ([`bspvt_raytrace::GpuOccluder`]) while CPU threads fit the previous
+//! The bake's GPU backend: each chunk's visibility cube maps are cast in a wgpu compute shader
+//! over the CPU-built BVH ([`bspvt_raytrace::GpuOccluder`]) while CPU threads fit the previous
 //! chunk's trees ([`Baker::bake_all_gpu`]).
 //!
 //! The rays are those of [`VertexRays::cast_brute_force`]: every sub-ray above the horizon of
 //! every pixel that matters, to the light; so the cube maps equal the CPU casts' up to rays
 //! that graze a triangle's edge, where the two machines may round a hit either way (counted by
-//! `tests/tests/cast_gpu.rs`).
+//! `tests/tests/cast_gpu.rs`). Which pixels matter is decided here, on the CPU (so the sets
+//! are the CPU's exactly); the sub-ray directions are uploaded once per bake and the rays made
+//! on the GPU, which returns each pixel's counts.
+//!
+//! [`VertexRays::cast_brute_force`]: crate::cubemap::VertexRays
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, mpsc};
 use std::time::Instant;
 
 use bspvt_proto::cubemap::FACES;
-use bspvt_raytrace::{GpuOccluder, GpuRay, RaySource};
+use bspvt_raytrace::{CubeSource, GpuCubeTable, GpuOccluder, GpuStop};
 use rayon::prelude::*;
 
 pub use bspvt_raytrace::gpu::{GpuContext, GpuError};
 
-use crate::cubemap::{CastCounts, CubeMap, FacePixels};
+use crate::cubemap::{CastCounts, CubeMap, FacePixels, LightStop};
 use crate::{BakeOutput, Baker, Cancelled, Totals};
 
-/// A baker's occluder uploaded to a GPU.
+/// A baker's occluder and cube-map table uploaded to a GPU.
 pub struct GpuCaster {
     ctx: Arc<GpuContext>,
     occ: GpuOccluder,
+    table: GpuCubeTable,
 }
 
 /// Why a GPU bake stopped.
@@ -37,118 +42,115 @@ pub enum GpuBakeError {
     Gpu(#[from] GpuError),
 }
 
-/// One vertex's pixels that matter on one face, in the order their rays are cast.
-#[derive(Default)]
-struct FaceRays {
-    index: Vec<u32>,
-    /// Sub-rays below the horizon (escaping without a cast).
-    below: Vec<u16>,
-    /// Sub-rays cast.
-    cast: Vec<u16>,
-}
-
-/// A vertex's rays and where their answers go.
-struct VertexBatch {
-    source: RaySource,
-    rays: Vec<GpuRay>,
-    faces: [Option<FaceRays>; FACES],
+/// The vertices of one dispatch: where their rays start, and per vertex its mask of pixels
+/// that matter (the GPU's input) and, per face, those pixels in order (for the assembly).
+struct GpuBatch {
+    sources: Vec<CubeSource>,
+    masks: Vec<u32>,
+    faces: Vec<[Vec<u32>; FACES]>,
 }
 
 impl Baker {
-    /// Uploads this bake's BVH to the GPU of `ctx`.
+    /// Uploads this bake's BVH, its cube map's sub-ray directions and its lights' stops to the
+    /// GPU of `ctx`.
     pub fn gpu_caster(&self, ctx: Arc<GpuContext>) -> Result<GpuCaster, GpuError> {
-        Ok(GpuCaster {
-            occ: GpuOccluder::new(&ctx, &self.occluder)?,
-            ctx,
-        })
-    }
-
-    /// Vertex `v`'s rays: [`crate::cubemap::VertexRays::cast_brute_force`]'s, not cast.
-    fn vertex_batch(&self, v: u32) -> VertexBatch {
-        let r = self.vertex_rays(v);
-        let table = &self.table;
-        let s = table.samples as usize;
-        let mut rays = Vec::new();
-        let faces = std::array::from_fn(|f| {
-            let mut fr = FaceRays::default();
-            for (p, &d) in table.centre[f].iter().enumerate() {
-                if !r.matters(r.origin, d) {
-                    continue;
-                }
-                let (mut below, mut cast) = (0u16, 0u16);
-                for &d in &table.sub[f][p * s..(p + 1) * s] {
-                    if r.escapes_below_horizon(d) {
-                        below += 1;
-                    } else {
-                        cast += 1;
-                        // f32::MAX for "no light reached": the same hits as ∞ (t < t_max).
-                        let t_max = r.t_max(r.origin, d).min(f32::MAX);
-                        rays.push(GpuRay {
-                            dir: d.to_array(),
-                            t_max,
-                        });
-                    }
-                }
-                fr.index.push(p as u32);
-                fr.below.push(below);
-                fr.cast.push(cast);
-            }
-            (!fr.index.is_empty()).then_some(fr)
-        });
-        VertexBatch {
-            source: RaySource::new(r.origin, r.t_min, v),
-            rays,
-            faces,
-        }
-    }
-
-    /// The rays of `vertices` (generated in parallel on the current rayon pool), flattened
-    /// for one dispatch.
-    fn gpu_batch(&self, vertices: &[u32]) -> GpuBatch {
-        let mut per_vertex: Vec<VertexBatch> =
-            vertices.par_iter().map(|&v| self.vertex_batch(v)).collect();
-        let n: usize = per_vertex.iter().map(|b| b.rays.len()).sum();
-        let mut rays = Vec::with_capacity(n);
-        let mut ray_source = Vec::with_capacity(n);
-        let sources = per_vertex.iter().map(|b| b.source).collect();
-        for (i, b) in per_vertex.iter_mut().enumerate() {
-            ray_source.extend(std::iter::repeat_n(i as u32, b.rays.len()));
-            rays.append(&mut b.rays);
-        }
-        GpuBatch {
-            sources,
-            rays,
-            ray_source,
-            vertices: per_vertex,
-        }
-    }
-
-    /// Each vertex's cube map from its batch and the GPU's answers (in the batch's ray order).
-    fn gpu_assemble(batch: GpuBatch, occluded: &[u32]) -> Vec<CubeMap> {
-        let mut next = occluded.iter();
-        batch
-            .vertices
-            .into_iter()
-            .map(|b| {
-                b.faces.map(|f| {
-                    f.map(|fr| {
-                        let visible = fr
-                            .below
-                            .iter()
-                            .zip(&fr.cast)
-                            .map(|(&below, &cast)| {
-                                let hit = next.by_ref().take(cast as usize).filter(|&&o| o != 0);
-                                below + cast - hit.count() as u16
-                            })
-                            .collect();
-                        FacePixels {
-                            index: fr.index,
-                            visible,
-                        }
-                    })
-                })
+        let occ = GpuOccluder::new(&ctx, &self.occluder)?;
+        let t = &self.table;
+        let dirs: Vec<glam::Vec3> = t.sub.iter().flatten().copied().collect();
+        let stops: Vec<GpuStop> = self
+            .stops
+            .iter()
+            .map(|s| match *s {
+                LightStop::Region(b) => GpuStop::Region {
+                    min: b.min,
+                    max: b.max,
+                },
+                LightStop::Plane { point, normal } => GpuStop::Plane { point, normal },
             })
-            .collect()
+            .collect();
+        let pixels = (FACES as u32) * t.res * t.res;
+        let table = occ.cube_table(&ctx, &dirs, pixels, t.samples, &stops)?;
+        Ok(GpuCaster { ctx, occ, table })
+    }
+
+    /// The GPU's input for `vertices` (the pixels that matter found in parallel on the current
+    /// rayon pool).
+    fn gpu_batch(&self, vertices: &[u32]) -> GpuBatch {
+        let t = &self.table;
+        let res2 = (t.res * t.res) as usize;
+        let words = (FACES * res2).div_ceil(32);
+        let per_vertex: Vec<(CubeSource, Vec<u32>, [Vec<u32>; FACES])> = vertices
+            .par_iter()
+            .map(|&v| {
+                let r = self.vertex_rays(v);
+                let mut mask = vec![0u32; words];
+                let faces = std::array::from_fn(|f| {
+                    let mut index = Vec::new();
+                    for (p, &d) in t.centre[f].iter().enumerate() {
+                        if r.matters(r.origin, d) {
+                            let bit = f * res2 + p;
+                            mask[bit / 32] |= 1 << (bit % 32);
+                            index.push(p as u32);
+                        }
+                    }
+                    index
+                });
+                (CubeSource::new(r.origin, r.t_min, r.normal, v), mask, faces)
+            })
+            .collect();
+        let mut batch = GpuBatch {
+            sources: Vec::with_capacity(vertices.len()),
+            masks: Vec::with_capacity(vertices.len() * words),
+            faces: Vec::with_capacity(vertices.len()),
+        };
+        for (source, mask, faces) in per_vertex {
+            batch.sources.push(source);
+            batch.masks.extend(mask);
+            batch.faces.push(faces);
+        }
+        batch
+    }
+
+    /// Each vertex's cube map from its batch and the GPU's per-pixel counts, and what casting
+    /// them cost (every sub-ray cast traverses the BVH).
+    fn gpu_assemble(&self, batch: GpuBatch, counts: &[u32]) -> (Vec<CubeMap>, CastCounts) {
+        let res2 = (self.table.res * self.table.res) as usize;
+        let pixels = FACES * res2;
+        let per_vertex: Vec<(CubeMap, u64)> = batch
+            .faces
+            .into_par_iter()
+            .zip(counts.par_chunks(pixels))
+            .map(|(faces, c)| {
+                let mut cast = 0u64;
+                let mut f = 0;
+                let map = faces.map(|index| {
+                    let face = &c[f * res2..(f + 1) * res2];
+                    f += 1;
+                    if index.is_empty() {
+                        return None;
+                    }
+                    let visible = index
+                        .iter()
+                        .map(|&p| {
+                            let w = face[p as usize];
+                            cast += u64::from(w >> 16);
+                            (w & 0xffff) as u16
+                        })
+                        .collect();
+                    Some(FacePixels { index, visible })
+                });
+                (map, cast)
+            })
+            .collect();
+        let rays = per_vertex.iter().map(|(_, c)| c).sum();
+        let maps = per_vertex.into_iter().map(|(m, _)| m).collect();
+        (
+            maps,
+            CastCounts {
+                rays,
+                traversals: rays,
+            },
+        )
     }
 
     /// The cube maps of `vertices`, cast on the GPU, and what casting them cost (every ray
@@ -159,9 +161,8 @@ impl Baker {
         vertices: &[u32],
     ) -> Result<(Vec<CubeMap>, CastCounts), GpuError> {
         let batch = self.gpu_batch(vertices);
-        let counts = batch.counts();
-        let occluded = batch.cast(gpu)?;
-        Ok((Self::gpu_assemble(batch, &occluded), counts))
+        let counts = batch.cast(gpu)?;
+        Ok(self.gpu_assemble(batch, &counts))
     }
 
     /// [`Baker::bake_chunk`] with the rays cast on the GPU (the service's GPU workers: several
@@ -178,12 +179,13 @@ impl Baker {
     }
 
     /// [`Baker::bake_all`] with the rays cast on the GPU, pipelined: while the GPU casts chunk
-    /// c, the current rayon pool generates chunk c + 1's rays, then fits chunk c's trees while
-    /// the GPU casts chunk c + 1. A GPU thread only uploads, dispatches and reads back; all CPU
-    /// work stays on the caller's pool (so `--threads` holds). The same chunk frames as the
-    /// CPU bake where the cube maps are the same. `Totals::ray_seconds` sums the wall-clock
-    /// seconds of ray generation, the GPU thread's upload–cast–read-back and the assembly of
-    /// the cube maps (overlapping the fit), not thread-seconds.
+    /// c, the current rayon pool finds chunk c + 1's pixels that matter, then assembles and
+    /// fits chunk c's trees while the GPU casts chunk c + 1. A GPU thread only uploads,
+    /// dispatches and reads back; all CPU work stays on the caller's pool (so `--threads`
+    /// holds). The same chunk frames as the CPU bake where the cube maps are the same.
+    /// `Totals::ray_seconds` sums the wall-clock seconds of finding the pixels, the GPU
+    /// thread's upload–cast–read-back and the assembly of the cube maps (overlapping the fit),
+    /// not thread-seconds.
     pub fn bake_all_gpu(
         &self,
         gpu: &GpuCaster,
@@ -201,8 +203,8 @@ impl Baker {
             let s = t0.elapsed().as_secs_f64();
             if timing {
                 eprintln!(
-                    "gpu chunk {c}: {} rays generated in {:.2} ms",
-                    batch.rays.len(),
+                    "gpu chunk {c}: {} vertices' pixels that matter in {:.2} ms",
+                    batch.sources.len(),
                     s * 1e3
                 );
             }
@@ -244,8 +246,7 @@ impl Baker {
                     return Err(GpuError::Failed("the GPU thread stopped".into()).into());
                 };
                 let t0 = Instant::now();
-                let counts = batch.counts();
-                let maps = Self::gpu_assemble(batch, &occluded?);
+                let (maps, counts) = self.gpu_assemble(batch, &occluded?);
                 let seconds = seconds + t0.elapsed().as_secs_f64();
                 let t1 = Instant::now();
                 let (frame, mut t) = self.fit_chunk(c, &maps);
@@ -272,25 +273,9 @@ impl Baker {
     }
 }
 
-/// Rays of many vertices, flattened for one dispatch.
-struct GpuBatch {
-    sources: Vec<RaySource>,
-    rays: Vec<GpuRay>,
-    ray_source: Vec<u32>,
-    /// Per vertex, where its answers go (its `rays` moved into the flat list).
-    vertices: Vec<VertexBatch>,
-}
-
 impl GpuBatch {
     fn cast(&self, gpu: &GpuCaster) -> Result<Vec<u32>, GpuError> {
         gpu.occ
-            .occluded(&gpu.ctx, &self.sources, &self.rays, &self.ray_source)
-    }
-
-    fn counts(&self) -> CastCounts {
-        CastCounts {
-            rays: self.rays.len() as u64,
-            traversals: self.rays.len() as u64,
-        }
+            .cube_counts(&gpu.ctx, &gpu.table, &self.sources, &self.masks)
     }
 }

@@ -199,7 +199,8 @@ impl GpuOccluder {
         samples: u32,
         stops: &[GpuStop],
     ) -> Result<GpuCubeTable, GpuError> {
-        if dirs.len() != pixels as usize * samples as usize || samples == 0 || samples > 0xffff {
+        // Counts travel in 8 bits each (`cube_counts`).
+        if dirs.len() != pixels as usize * samples as usize || samples == 0 || samples > 0xff {
             return Err(GpuError::Failed(format!(
                 "{} directions for {pixels} pixels of {samples} sub-rays",
                 dirs.len()
@@ -254,19 +255,20 @@ impl GpuOccluder {
     }
 
     /// For each of `sources` and each of `table`'s pixels whose bit is set in the source's
-    /// mask (`masks`: ⌈pixels / 32⌉ words per source, bit p of word p / 32): its escaping
-    /// sub-rays | its cast sub-rays << 16, at `source · pixels + pixel` (other entries are 0).
-    /// A sub-ray below the source's horizon escapes uncast; the others are cast from its origin
-    /// to their first stop, and escape when no triangle (but the source's own) is hit in
-    /// [t_min, stop): the answer of [`Occluder::occluded_between`] for the same ray, up to
-    /// rays that graze a triangle's edge (the two machines may round such a hit either way).
+    /// mask (`masks`: ⌈pixels / 32⌉ words per source, bit p of word p / 32), in that order
+    /// (source, then pixel): its escaping sub-rays | its cast sub-rays << 8. A sub-ray below
+    /// the source's horizon escapes uncast; the others are cast from its origin to their first
+    /// stop, and escape when no triangle (but the source's own) is hit in [t_min, stop): the
+    /// answer of [`Occluder::occluded_between`] for the same ray, up to rays that graze a
+    /// triangle's edge (the two machines may round such a hit either way). Only the pixels
+    /// that matter come back, 2 bytes each.
     pub fn cube_counts(
         &self,
         ctx: &GpuContext,
         table: &GpuCubeTable,
         sources: &[CubeSource],
         masks: &[u32],
-    ) -> Result<Vec<u32>, GpuError> {
+    ) -> Result<Vec<u16>, GpuError> {
         let pixels = table.pixels as usize;
         let words = pixels.div_ceil(32);
         if masks.len() != sources.len() * words {
@@ -277,7 +279,7 @@ impl GpuOccluder {
             )));
         }
         let per_dispatch = (self.max_items / pixels.max(1)).max(1);
-        let mut out = Vec::with_capacity(sources.len() * pixels);
+        let mut out = Vec::new();
         for (s, m) in sources
             .chunks(per_dispatch)
             .zip(masks.chunks(per_dispatch * words))
@@ -293,9 +295,24 @@ impl GpuOccluder {
         table: &GpuCubeTable,
         sources: &[CubeSource],
         masks: &[u32],
-    ) -> Result<Vec<u32>, GpuError> {
+    ) -> Result<Vec<u16>, GpuError> {
         let n = sources.len() * table.pixels as usize;
         if n == 0 {
+            return Ok(Vec::new());
+        }
+        // Each mask word with the number of pixels that matter before it: where its pixels'
+        // counts go.
+        let mut slots = 0u32;
+        let mask_words: Vec<[u32; 2]> = masks
+            .iter()
+            .map(|&m| {
+                let w = [m, slots];
+                slots += m.count_ones();
+                w
+            })
+            .collect();
+        let wanted = slots as usize;
+        if wanted == 0 {
             return Ok(Vec::new());
         }
         let device = &ctx.device;
@@ -310,8 +327,9 @@ impl GpuOccluder {
             })
         };
         let src = input("cube sources", bytemuck::cast_slice(sources));
-        let mask = input("cube masks", bytemuck::cast_slice(masks));
-        let bytes = (n * 4) as u64;
+        let mask = input("cube masks", bytemuck::cast_slice(&mask_words));
+        // Two 16-bit counts per word.
+        let bytes = (wanted.div_ceil(2) * 4) as u64;
         let result = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("cube counts"),
             size: bytes,
@@ -375,7 +393,7 @@ impl GpuOccluder {
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("occlusion"),
         });
-        // The counts of pixels that do not matter stay 0.
+        // The counts are OR-ed into it, two per word.
         enc.clear_buffer(&result, 0, None);
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -403,14 +421,22 @@ impl GpuOccluder {
         let view = readback
             .get_mapped_range(..)
             .map_err(|e| GpuError::Failed(e.to_string()))?;
-        let counts = bytemuck::cast_slice::<u8, u32>(&view).to_vec();
+        // Slot 2i in the low half of word i, slot 2i + 1 in the high half.
+        let mut counts: Vec<u16> = view
+            .chunks_exact(4)
+            .flat_map(|w| {
+                let w = u32::from_le_bytes([w[0], w[1], w[2], w[3]]);
+                [w as u16, (w >> 16) as u16]
+            })
+            .collect();
         drop(view);
+        counts.truncate(wanted);
         readback.unmap();
         if std::env::var_os("BSPVT_GPU_TIMING").is_some() {
             // Where a dispatch's wall-clock time goes (docs/benchmarks.md, the GPU bake).
             let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
             eprintln!(
-                "gpu cast: {} vertices × {} pixels: buffers+upload {:.2} ms, submit..done {:.2} ms, read-back {:.2} ms",
+                "gpu cast: {} vertices × {} pixels ({wanted} matter): buffers+upload {:.2} ms, submit..done {:.2} ms, read-back {:.2} ms",
                 sources.len(),
                 table.pixels,
                 ms(t_upload),

@@ -18,14 +18,16 @@
 // The sub-ray directions of every pixel of the cube map, face-major, then pixel (j·res + i),
 // then sub-sample: xyz (unit), w unused (RayTable::sub, as the CPU casts them).
 @group(0) @binding(4) var<storage, read> dirs: array<vec4<f32>>;
-// Per vertex, one bit per pixel (face·res² + pixel): the pixels that matter, chosen on the CPU
-// (VertexRays::matters) so that the sets are the CPU's exactly.
-@group(0) @binding(5) var<storage, read> mask: array<u32>;
+// Per vertex, per 32 pixels (face·res² + pixel): a bitmask of the pixels that matter, chosen on
+// the CPU (VertexRays::matters) so that the sets are the CPU's exactly, and the number of
+// pixels that matter before them in the dispatch (where their counts go).
+@group(0) @binding(5) var<storage, read> mask: array<vec2<u32>>;
 // Where rays end (cubemap::LightStop), two vec4 per stop: a region box (min.xyz, 0),
 // (max.xyz, 0), or a plane (point.xyz, 1), (normal.xyz, 0).
 @group(0) @binding(6) var<storage, read> stops: array<vec4<f32>>;
-// Per vertex and pixel that matters: escaping sub-rays | cast sub-rays << 16.
-@group(0) @binding(7) var<storage, read_write> counts: array<u32>;
+// Per pixel that matters, in order, 16 bits (two per word): escaping sub-rays | cast sub-rays
+// << 8 (at most 64 each: supersampling ≤ 8).
+@group(0) @binding(7) var<storage, read_write> counts: array<atomic<u32>>;
 struct CubeParams {
     // vertices in this dispatch, pixels per vertex, sub-rays per pixel, stops.
     shape: vec4<u32>,
@@ -239,9 +241,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let k = i / pixels;
     let p = i % pixels;
-    if (mask[k * cp.grid.y + p / 32u] & (1u << (p % 32u))) == 0u {
+    let m = mask[k * cp.grid.y + p / 32u];
+    let bit = 1u << (p % 32u);
+    if (m.x & bit) == 0u {
         return;
     }
+    let slot = m.y + countOneBits(m.x & (bit - 1u));
     let a = sources[2u * k];
     let b = sources[2u * k + 1u];
     let o = bitcast<vec3<f32>>(a.xyz);
@@ -262,5 +267,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             escaping++;
         }
     }
-    counts[i] = escaping | (casts << 16u);
+    atomicOr(&counts[slot / 2u], (escaping | (casts << 8u)) << (16u * (slot % 2u)));
 }

@@ -111,30 +111,38 @@ impl Baker {
         batch
     }
 
-    /// Each vertex's cube map from its batch and the GPU's per-pixel counts, and what casting
-    /// them cost (every sub-ray cast traverses the BVH).
-    fn gpu_assemble(&self, batch: GpuBatch, counts: &[u32]) -> (Vec<CubeMap>, CastCounts) {
-        let res2 = (self.table.res * self.table.res) as usize;
-        let pixels = FACES * res2;
+    /// Each vertex's cube map from its batch and the GPU's counts (one per pixel that
+    /// matters, in the batch's order), and what casting them cost (every sub-ray cast
+    /// traverses the BVH).
+    fn gpu_assemble(batch: GpuBatch, counts: &[u16]) -> (Vec<CubeMap>, CastCounts) {
+        // Where each vertex's counts start.
+        let mut start = 0;
+        let starts: Vec<usize> = batch
+            .faces
+            .iter()
+            .map(|faces| {
+                let s = start;
+                start += faces.iter().map(Vec::len).sum::<usize>();
+                s
+            })
+            .collect();
         let per_vertex: Vec<(CubeMap, u64)> = batch
             .faces
             .into_par_iter()
-            .zip(counts.par_chunks(pixels))
-            .map(|(faces, c)| {
+            .zip(starts)
+            .map(|(faces, s)| {
+                let mut next = counts.get(s..).unwrap_or_default().iter();
                 let mut cast = 0u64;
-                let mut f = 0;
                 let map = faces.map(|index| {
-                    let face = &c[f * res2..(f + 1) * res2];
-                    f += 1;
                     if index.is_empty() {
                         return None;
                     }
-                    let visible = index
-                        .iter()
-                        .map(|&p| {
-                            let w = face[p as usize];
-                            cast += u64::from(w >> 16);
-                            (w & 0xffff) as u16
+                    let visible = next
+                        .by_ref()
+                        .take(index.len())
+                        .map(|&w| {
+                            cast += u64::from(w >> 8);
+                            w & 0xff
                         })
                         .collect();
                     Some(FacePixels { index, visible })
@@ -162,7 +170,7 @@ impl Baker {
     ) -> Result<(Vec<CubeMap>, CastCounts), GpuError> {
         let batch = self.gpu_batch(vertices);
         let counts = batch.cast(gpu)?;
-        Ok(self.gpu_assemble(batch, &counts))
+        Ok(Self::gpu_assemble(batch, &counts))
     }
 
     /// [`Baker::bake_chunk`] with the rays cast on the GPU (the service's GPU workers: several
@@ -211,7 +219,7 @@ impl Baker {
             (batch, s)
         };
         std::thread::scope(|scope| -> Result<(), GpuBakeError> {
-            type Cast = (GpuBatch, f64, Result<Vec<u32>, GpuError>);
+            type Cast = (GpuBatch, f64, Result<Vec<u16>, GpuError>);
             let (to_gpu, gpu_in) = mpsc::sync_channel::<(GpuBatch, f64)>(1);
             let (gpu_out, from_gpu) = mpsc::sync_channel::<Cast>(1);
             scope.spawn(move || {
@@ -246,7 +254,7 @@ impl Baker {
                     return Err(GpuError::Failed("the GPU thread stopped".into()).into());
                 };
                 let t0 = Instant::now();
-                let (maps, counts) = self.gpu_assemble(batch, &occluded?);
+                let (maps, counts) = Self::gpu_assemble(batch, &occluded?);
                 let seconds = seconds + t0.elapsed().as_secs_f64();
                 let t1 = Instant::now();
                 let (frame, mut t) = self.fit_chunk(c, &maps);
@@ -274,8 +282,18 @@ impl Baker {
 }
 
 impl GpuBatch {
-    fn cast(&self, gpu: &GpuCaster) -> Result<Vec<u32>, GpuError> {
-        gpu.occ
-            .cube_counts(&gpu.ctx, &gpu.table, &self.sources, &self.masks)
+    /// One count per pixel that matters, in order (checked: the assembly relies on it).
+    fn cast(&self, gpu: &GpuCaster) -> Result<Vec<u16>, GpuError> {
+        let counts = gpu
+            .occ
+            .cube_counts(&gpu.ctx, &gpu.table, &self.sources, &self.masks)?;
+        let wanted: usize = self.faces.iter().flatten().map(Vec::len).sum();
+        if counts.len() != wanted {
+            return Err(GpuError::Failed(format!(
+                "the GPU returned {} counts for {wanted} pixels",
+                counts.len()
+            )));
+        }
+        Ok(counts)
     }
 }

@@ -7,7 +7,8 @@
 // - per pixel (mode 1): unshadowed LTC GGX [Heitz16] at the surface, times the per-vertex
 //   shadow ratios (diffuse, specular) interpolated; black where the viewer is below the
 //   shading hemisphere (shade::sees_viewer).
-// With MSAA, each distinct triangle of a pixel is shaded once, at its first sample, and
+// With MSAA, a pixel inside one triangle is shaded once at its centre (as the CPU shades it);
+// at an edge, each distinct triangle of the pixel is shaded once, at its first sample, and
 // weighted by its share of the samples.
 // Prepended: common.wgsl; appended: the visibility buffer's binding and `vis_id` (frame.rs).
 
@@ -179,6 +180,20 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     }
     let px = vec2i(id.xy);
     let samples = fp.size.z;
+    // A pixel inside one triangle is shaded once, at its centre, as the CPU shades it.
+    let first = vis_id(px, 0u);
+    var uniform = true;
+    for (var s = 1u; s < samples; s++) {
+        uniform = uniform && vis_id(px, s) == first;
+    }
+    if uniform {
+        var c = vec3f(0.0);
+        if first != 0u {
+            c = shade(first - 1u, f32(id.x) + 0.5, f32(id.y) + 0.5);
+        }
+        image[id.y * fp.size.x + id.x] = vec4f(c, 1.0);
+        return;
+    }
     var sum = vec3f(0.0);
     // The triangles shaded so far in this pixel and their radiance.
     var seen = array<u32, 4>(0u, 0u, 0u, 0u);

@@ -69,6 +69,11 @@ fn streamed_frames_equal_offline_frames_and_a_second_start_fetches_nothing() {
     assert_eq!(c2.served.id, c1.served.id);
     assert_eq!(c2.scene_bytes_fetched, 0, "the scene was fetched again");
     let mut s2 = c2.session(&args, SIZE, SIZE).expect("session");
+    // The cached trees are there before the first frame, not after a poll of the stream.
+    assert!(
+        s2.streamed.complete(),
+        "a complete cache did not reach the first frame"
+    );
     s2.wait_complete();
     assert!(s2.streamed.complete());
     let k2 = s2.counters.clone().expect("counters");

@@ -99,6 +99,9 @@ fn local_environment(src: &Source) -> Option<bspvt_proto::scene::Environment> {
     Some(env)
 }
 
+/// The longest a new session waits for the disk cache before its first frame.
+const CACHE_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
+
 impl Connected {
     /// A session on the scene, its trees streaming in (camera's vertices first).
     pub fn session(&self, a: &ConnectOptions, width: u32, height: u32) -> Result<Session<'_>> {
@@ -124,7 +127,20 @@ impl Connected {
                 ..FetchOptions::default()
             },
         );
-        session.attach(rx, counters);
+        session.attach(rx, counters.clone());
+        // What the disk cache holds is drawn from the first frame: wait (bounded) for the
+        // fetcher to have sent it, then take it, so a scene whose trees are all cached opens
+        // shadowed.
+        let t0 = std::time::Instant::now();
+        while !counters
+            .cache_read
+            .load(std::sync::atomic::Ordering::Acquire)
+            && !counters.finished.load(std::sync::atomic::Ordering::Relaxed)
+            && t0.elapsed() < CACHE_WAIT
+        {
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        session.poll();
         if let Some(c) = &a.cache_dir {
             session.sky_cache = c.join("bakes");
         }

@@ -61,6 +61,8 @@ pub struct Counters {
     pub(crate) stop: AtomicBool,
     /// Set by the fetcher when it has sent its last update (`Done` or `Failed`).
     pub(crate) finished: AtomicBool,
+    /// Set by the fetcher once what the disk cache holds has been sent (before any request).
+    pub(crate) cache_read: AtomicBool,
 }
 
 /// How the fetcher works.
@@ -222,7 +224,9 @@ impl Fetcher {
     }
 
     fn run(&mut self) -> Result<()> {
-        self.load_cache()?;
+        let loaded = self.load_cache();
+        self.counters.cache_read.store(true, Ordering::Release);
+        loaded?;
         // A complete cache: one conditional request validates it.
         if self.complete()
             && let Some(etag) = self.opts.cache.as_ref().and_then(Cache::etag)

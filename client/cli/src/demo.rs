@@ -174,6 +174,13 @@ pub(crate) fn run(a: &DemoArgs) -> Result<()> {
                 title: format!("bspvt demo — {}", a.scene),
                 max_frames: None,
                 note: None,
+                guides: true,
+                screenshot_dir: a.out.join("screenshots"),
+                source: viewer::SceneSource {
+                    scene: Some(a.scene.clone()),
+                    mesh: None,
+                },
+                save_view: None,
             },
             started,
         )?;

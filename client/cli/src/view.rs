@@ -9,6 +9,7 @@ use bspvt_client::session::connect::connect;
 use bspvt_client::viewer::{self, ViewerOptions};
 
 #[derive(clap::Args, Debug)]
+#[command(after_help = format!("Keys and mouse in the window (H shows them there too):\n{}", viewer::KEYS_HELP))]
 pub(crate) struct ViewArgs {
     #[command(flatten)]
     pub(crate) connect: ConnectArgs,
@@ -20,6 +21,20 @@ pub(crate) struct ViewArgs {
     /// Close the window after this many frames (scripted runs).
     #[arg(long)]
     pub(crate) max_frames: Option<u64>,
+    /// Start without the grid, the axes and the light's gizmo (Tab toggles them).
+    #[arg(long)]
+    pub(crate) no_guides: bool,
+    /// Where F12 writes screenshots (PNG).
+    #[arg(long, default_value = "out/screenshots")]
+    pub(crate) screenshot_dir: std::path::PathBuf,
+    /// Where V writes the view (the scene file with the current camera and light)
+    /// [default: SCENE.view.json beside a scene file, out/views/NAME.view.json otherwise].
+    #[arg(long)]
+    pub(crate) save_view: Option<std::path::PathBuf>,
+    /// Print where things stood when the window closed (method, mode, roughness, light pose,
+    /// camera, window size, key presses) as one JSON line.
+    #[arg(long)]
+    pub(crate) print_state: bool,
 }
 
 pub(crate) fn run(a: &ViewArgs) -> Result<()> {
@@ -46,6 +61,13 @@ pub(crate) fn run(a: &ViewArgs) -> Result<()> {
                 .embedded
                 .as_ref()
                 .map(|b| format!("embedded service on {}", b.addr)),
+            guides: !a.no_guides,
+            screenshot_dir: a.screenshot_dir.clone(),
+            source: viewer::SceneSource {
+                scene: a.connect.source.clone(),
+                mesh: a.connect.mesh.clone(),
+            },
+            save_view: a.save_view.clone(),
         },
         started,
     )?;
@@ -61,5 +83,8 @@ pub(crate) fn run(a: &ViewArgs) -> Result<()> {
             ))
             .unwrap_or_default()
     );
+    if a.print_state {
+        println!("state: {}", report.state);
+    }
     Ok(())
 }

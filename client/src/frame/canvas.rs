@@ -1,7 +1,28 @@
-//! Text and widgets drawn into the window's 0RGB framebuffer (8×8 bitmap font, public-domain
-//! glyphs from `font8x8`).
+//! Text, lines and widgets drawn into the window's 0RGB framebuffer (8×8 bitmap font,
+//! public-domain glyphs from `font8x8`: Basic Latin, Latin-1 (², °, ×, µ), Greek (α, ε, σ),
+//! box drawing and a few symbols).
 
-use font8x8::{BASIC_FONTS, UnicodeFonts};
+use font8x8::{BASIC_FONTS, BOX_FONTS, GREEK_FONTS, LATIN_FONTS, MISC_FONTS, UnicodeFonts};
+
+/// The 8×8 glyph of `ch`, `?` where the font has none.
+fn glyph(ch: char) -> Option<[u8; 8]> {
+    BASIC_FONTS
+        .get(ch)
+        .or_else(|| LATIN_FONTS.get(ch))
+        .or_else(|| GREEK_FONTS.get(ch))
+        .or_else(|| BOX_FONTS.get(ch))
+        .or_else(|| MISC_FONTS.get(ch))
+        .or_else(|| BASIC_FONTS.get('?'))
+}
+
+/// Whether the font draws `ch` (and does not fall back to `?`).
+pub fn has_glyph(ch: char) -> bool {
+    BASIC_FONTS.get(ch).is_some()
+        || LATIN_FONTS.get(ch).is_some()
+        || GREEK_FONTS.get(ch).is_some()
+        || BOX_FONTS.get(ch).is_some()
+        || MISC_FONTS.get(ch).is_some()
+}
 
 /// A 0RGB framebuffer to draw text and widgets into.
 pub struct Canvas<'a> {
@@ -35,7 +56,7 @@ impl Canvas<'_> {
     /// One line of text at (x, y) (top-left), 8 pixels per character.
     pub fn text(&mut self, x: usize, y: usize, s: &str, rgb: u32) {
         for (i, ch) in s.chars().enumerate() {
-            let Some(glyph) = BASIC_FONTS.get(ch).or_else(|| BASIC_FONTS.get('?')) else {
+            let Some(glyph) = glyph(ch) else {
                 continue;
             };
             for (row, bits) in glyph.iter().enumerate() {
@@ -62,11 +83,103 @@ impl Canvas<'_> {
         h
     }
 
+    /// A line from `a` to `b` (pixels), `rgb` blended by `alpha`. With `depth` (camera depth
+    /// per pixel, `f32::INFINITY` where nothing is hit) and `za`, `zb` (the ends' depths), only
+    /// the parts in front of the surface are drawn (depth interpolated in 1/z, as perspective
+    /// projection maps it).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn line(
+        &mut self,
+        a: (f64, f64),
+        b: (f64, f64),
+        za: f64,
+        zb: f64,
+        depth: Option<&[f32]>,
+        rgb: u32,
+        alpha: f32,
+    ) {
+        let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+        let n = dx.abs().max(dy.abs()).ceil();
+        if !n.is_finite() || n > 16_384.0 {
+            return; // off-screen ends far away: callers clip to the view first
+        }
+        let steps = n.max(1.0) as usize;
+        let (ia, ib) = (1.0 / za.max(1e-9), 1.0 / zb.max(1e-9));
+        for i in 0..=steps {
+            let t = i as f64 / steps as f64;
+            let (x, y) = (a.0 + dx * t, a.1 + dy * t);
+            if x < 0.0 || y < 0.0 || x >= self.width as f64 || y >= self.height as f64 {
+                continue;
+            }
+            let k = y as usize * self.width + x as usize;
+            if let Some(d) = depth {
+                let z = 1.0 / (ia + (ib - ia) * t);
+                // A small bias keeps lines lying on a surface (the grid on the ground) visible.
+                if f64::from(d[k]) < z * (1.0 - 1e-3) {
+                    continue;
+                }
+            }
+            self.buf[k] = blend(self.buf[k], rgb, alpha);
+        }
+    }
+
     /// A horizontal slider: track, filled part, label. `t` in [0, 1].
     pub(crate) fn slider(&mut self, x: usize, y: usize, w: usize, t: f64, label: &str) {
         self.shade(x, y, w, 14);
         let filled = ((w as f64) * t.clamp(0.0, 1.0)) as usize;
         self.fill(x, y + 10, filled, 4, 0x00f0_b040);
         self.text(x + 4, y + 1, label, 0x00ff_ffff);
+    }
+}
+
+/// `over` on `under` (0RGB), `alpha` in [0, 1].
+fn blend(under: u32, over: u32, alpha: f32) -> u32 {
+    let a = alpha.clamp(0.0, 1.0);
+    let mut out = 0;
+    for shift in [16, 8, 0] {
+        let u = ((under >> shift) & 0xff) as f32;
+        let o = ((over >> shift) & 0xff) as f32;
+        out |= ((u + (o - u) * a).round() as u32 & 0xff) << shift;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_overlay_font_has_the_symbols_it_prints() {
+        for ch in "²°×÷µ·αεσ".chars() {
+            assert!(has_glyph(ch), "no glyph for {ch}");
+        }
+        // A glyph that draws something differs from the fallback '?'.
+        assert_ne!(glyph('ε'), glyph('?'));
+        assert_ne!(glyph('²'), glyph('?'));
+    }
+
+    #[test]
+    fn lines_behind_the_surface_are_hidden() {
+        let mut buf = vec![0u32; 16 * 4];
+        let depth = vec![1.0f32; 16 * 4];
+        let mut c = Canvas {
+            buf: &mut buf,
+            width: 16,
+            height: 4,
+        };
+        // Depth 0.5 → 2.0 along the line, 1/z linear in t: in front of depth 1 for t < 2/3,
+        // pixels 0–9 of 15.
+        c.line(
+            (0.0, 1.0),
+            (15.0, 1.0),
+            0.5,
+            2.0,
+            Some(&depth),
+            0x00ff_ffff,
+            1.0,
+        );
+        let row: Vec<bool> = (0..16).map(|x| buf[16 + x] != 0).collect();
+        assert!(row[..10].iter().all(|&r| r), "{row:?}");
+        assert!(row[11..].iter().all(|&r| !r), "{row:?}");
     }
 }

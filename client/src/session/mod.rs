@@ -240,6 +240,96 @@ impl<'a> Session<'a> {
         self.invalidate();
     }
 
+    /// Draws at `width`×`height` from now on (a resized window): the G-buffer is drawn again
+    /// and the methods' states, sized to the old image, are prepared again on the next frame.
+    pub fn resize(&mut self, width: u32, height: u32) {
+        let (width, height) = (width.max(1), height.max(1));
+        if (width, height) == (self.renderer.gbuffer.width, self.renderer.gbuffer.height) {
+            return;
+        }
+        self.renderer = Renderer::with_camera(self.scene, &self.orbit.camera(), width, height);
+        self.renderer.set_roughness(self.roughness);
+        self.states.clear();
+    }
+
+    /// The camera back to the scene's.
+    pub fn reset_camera(&mut self) {
+        self.set_camera(Orbit::from_camera(&self.scene.camera));
+    }
+
+    /// The light back to its rest pose (off its path, radiance as in the scene).
+    pub fn reset_light(&mut self) {
+        self.pose = LightPose::default();
+        self.path_t = None;
+        self.invalidate();
+    }
+
+    /// Moves the user's light back inside the first light's region, if it has one (the bake
+    /// treats directions that cannot reach the region as "don't care": a light outside it
+    /// would be shadowed wrongly). The light's box is shifted, axis by axis, the least that
+    /// puts it inside; a light wider than the region is centred on it.
+    pub fn keep_light_in_region(&mut self) {
+        let Some(region) = self.scene.lights.first().and_then(|l| l.region) else {
+            return;
+        };
+        let Some(light) = self.light() else {
+            return;
+        };
+        let (rmin, rmax) = (
+            DVec3::from(region.min.map(f64::from)),
+            DVec3::from(region.max.map(f64::from)),
+        );
+        let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        for v in &light.vertices {
+            lo = lo.min(*v);
+            hi = hi.max(*v);
+        }
+        let mut shift = DVec3::ZERO;
+        for k in 0..3 {
+            shift[k] = if hi[k] - lo[k] > rmax[k] - rmin[k] {
+                0.5 * ((rmin[k] + rmax[k]) - (lo[k] + hi[k]))
+            } else if lo[k] < rmin[k] {
+                rmin[k] - lo[k]
+            } else if hi[k] > rmax[k] {
+                rmax[k] - hi[k]
+            } else {
+                0.0
+            };
+        }
+        if shift != DVec3::ZERO && shift.is_finite() {
+            self.pose.offset += shift;
+            self.invalidate();
+        }
+    }
+
+    /// The camera the frames are drawn from.
+    pub fn camera(&self) -> Camera {
+        self.orbit.camera()
+    }
+
+    /// The scene being viewed.
+    pub fn scene(&self) -> &Scene {
+        self.scene
+    }
+
+    /// Camera depth (along the view direction) of the surface seen through each pixel,
+    /// `f32::INFINITY` where the ray hits nothing: what the viewer's guides are hidden behind.
+    pub fn depth(&self) -> Vec<f32> {
+        use rayon::prelude::*;
+        let (g, view, mesh) = (
+            &self.renderer.gbuffer,
+            &self.renderer.view,
+            &self.scene.mesh,
+        );
+        (0..g.tri.len())
+            .into_par_iter()
+            .map(|i| match g.surface(mesh, view, i) {
+                Some(s) => view.to_camera(s.position).z as f32,
+                None => f32::INFINITY,
+            })
+            .collect()
+    }
+
     /// Overrides every material's GGX α (`None`: the materials' own).
     pub fn set_roughness(&mut self, alpha: Option<f32>) {
         self.roughness = alpha.map(|a| a.clamp(1e-3, 1.0));

@@ -1,24 +1,40 @@
-//! The interactive viewer: a real window (X11, software framebuffer via `minifb`) showing a
-//! [`Session`]'s frames while its trees stream in.
+//! The interactive viewer: a resizable winit window showing a [`Session`]'s frames while its
+//! trees stream in, with the light drawn over them (its outline, emitting side and region),
+//! a ground grid and axes, and an overlay.
 //!
-//! Mouse: left-drag orbits, wheel zooms, right-drag moves the light; dragging on the bottom bar
-//! sets the roughness. Keys: W/A/S/D and Q/E move the light, R/F turn it, T/G tilt it, P runs it
-//! along its path, -/= change its radiance, 1–9 pick the first nine methods of the registry
-//! (BSPVT, LTC, Monte Carlo, RT penumbra, PCSS, PCF, VSM, SG, MC environment), M switches
-//! per-vertex / per-pixel, [ and ] change the roughness (O: the scene's), H hides the overlay,
-//! Esc quits. Frames are drawn on this thread; the trees arrive on the fetcher's thread, so the
-//! window stays responsive while data streams.
+//! Every key and mouse event is taken from winit's event loop as it comes and applied at the
+//! next frame ([`input`]): a short press is never lost and a held key acts for as long as it
+//! was held, at any frame rate. The key map is [`KEYS_HELP`] (the `H` overlay, `bspvt view
+//! --help`). Frames are drawn on this thread by the session's backend (CPU or GPU) and
+//! presented through softbuffer; the trees arrive on the fetcher's thread.
 
+mod guides;
+mod input;
+mod save;
+
+pub use input::KEYS_HELP;
+pub use save::SceneSource;
+
+use std::num::NonZeroU32;
+use std::path::PathBuf;
+use std::rc::Rc;
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, anyhow};
 use glam::DVec3;
-use minifb::{Key, KeyRepeat, MouseButton, MouseMode, Window, WindowOptions};
+use winit::application::ApplicationHandler;
+use winit::dpi::PhysicalSize;
+use winit::event::{ElementState, WindowEvent};
+use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
+use winit::keyboard::{KeyCode, PhysicalKey};
+use winit::platform::x11::EventLoopBuilderExtX11;
+use winit::window::{Window, WindowId};
 
 use crate::frame::canvas::Canvas;
 use crate::method::METHODS;
 use crate::render::renderer::Mode;
 use crate::session::Session;
+use input::Input;
 
 /// How the window runs.
 pub struct ViewerOptions {
@@ -28,6 +44,14 @@ pub struct ViewerOptions {
     pub max_frames: Option<u64>,
     /// Bake still running on an embedded service, etc.: shown in the overlay.
     pub note: Option<String>,
+    /// Draw the grid, the axes and the light's gizmo (Tab toggles them with the overlay).
+    pub guides: bool,
+    /// Where F12 writes screenshots.
+    pub screenshot_dir: PathBuf,
+    /// Where the scene came from (V writes it back with the current camera and light).
+    pub source: SceneSource,
+    /// Where V writes the view [default: beside the scene file, see [`save`]].
+    pub save_view: Option<PathBuf>,
 }
 
 /// What a viewer run measured.
@@ -40,222 +64,511 @@ pub struct ViewerReport {
     pub first_full_frame: Option<Duration>,
     /// Mean frames per second over the run.
     pub mean_fps: f64,
+    /// Key presses applied (auto-repeats not counted).
+    pub key_presses: u64,
+    /// The screenshots written.
+    pub screenshots: Vec<PathBuf>,
+    /// The view files written.
+    pub views: Vec<PathBuf>,
+    /// Where things stood at the end (method, mode, roughness, light pose, camera, window
+    /// size), as JSON.
+    pub state: serde_json::Value,
 }
 
+/// Height of the roughness bar at the bottom of the window.
 const SLIDER_H: usize = 18;
+/// Light path speed: cycles per second.
+const PATH_SPEED: f64 = 0.05;
+/// How long a message (a screenshot written, an error) stays on screen.
+const MESSAGE_FOR: Duration = Duration::from_secs(4);
 
 /// Runs the window until it is closed (or `max_frames`). `started`: when the user started
 /// the viewer (for the time to the first frame).
 pub fn run(session: &mut Session, opts: &ViewerOptions, started: Instant) -> Result<ViewerReport> {
-    let (w, h) = (
-        session.renderer.gbuffer.width as usize,
-        session.renderer.gbuffer.height as usize,
-    );
-    let mut window = Window::new(&opts.title, w, h, WindowOptions::default())
+    let event_loop = EventLoop::builder()
+        .with_any_thread(true)
+        .build()
         .context("cannot open a window (is DISPLAY set? use the headless commands otherwise)")?;
-    window.set_target_fps(0);
-    let mut buf = vec![0u32; w * h];
-    let mut report = ViewerReport {
-        frames: 0,
-        first_frame: None,
-        first_full_frame: None,
-        mean_fps: 0.0,
+    event_loop.set_control_flow(ControlFlow::Poll);
+    let size = (
+        session.renderer.gbuffer.width,
+        session.renderer.gbuffer.height,
+    );
+    let mut app = App {
+        session,
+        opts,
+        started,
+        window: None,
+        surface: None,
+        input: Input::default(),
+        buf: Vec::new(),
+        depth: None,
+        size,
+        pending_size: None,
+        show_overlay: true,
+        show_help: false,
+        fps: 0.0,
+        t_last: Instant::now(),
+        t_loop: Instant::now(),
+        message: None,
+        want_screenshot: false,
+        report: ViewerReport {
+            frames: 0,
+            first_frame: None,
+            first_full_frame: None,
+            mean_fps: 0.0,
+            key_presses: 0,
+            screenshots: Vec::new(),
+            views: Vec::new(),
+            state: serde_json::Value::Null,
+        },
+        error: None,
     };
-    let mut last_mouse: Option<(f32, f32)> = None;
-    let mut show_overlay = true;
-    let mut fps = 0.0f64;
-    let mut t_last = Instant::now();
-    let t_loop = Instant::now();
-    let path_speed = 0.05; // path cycles per second
-    while window.is_open() && !window.is_key_down(Key::Escape) {
-        session.poll();
-        let dt = t_last.elapsed().as_secs_f64();
-        t_last = Instant::now();
-        // --- input ---
-        let mut moved_light = false;
-        let step = 1.5 * dt * scene_scale(session);
-        let pose = &mut session.pose;
-        for (k, d) in [
-            (Key::A, DVec3::NEG_X),
-            (Key::D, DVec3::X),
-            (Key::W, DVec3::NEG_Z),
-            (Key::S, DVec3::Z),
-            (Key::Q, DVec3::NEG_Y),
-            (Key::E, DVec3::Y),
-        ] {
-            if window.is_key_down(k) {
-                pose.offset += d * step;
-                moved_light = true;
-            }
+    event_loop
+        .run_app(&mut app)
+        .context("the window's event loop failed")?;
+    if let Some(e) = app.error.take() {
+        return Err(e);
+    }
+    app.report.mean_fps = app.report.frames as f64 / app.t_loop.elapsed().as_secs_f64().max(1e-9);
+    app.report.state = app.state();
+    Ok(app.report)
+}
+
+type Surface = softbuffer::Surface<Rc<Window>, Rc<Window>>;
+
+struct App<'s, 'a> {
+    session: &'s mut Session<'a>,
+    opts: &'s ViewerOptions,
+    started: Instant,
+    window: Option<Rc<Window>>,
+    surface: Option<Surface>,
+    input: Input,
+    /// The window's pixels, 0RGB.
+    buf: Vec<u32>,
+    /// The frame's depth for the guides (`None`: the camera or the size changed).
+    depth: Option<Vec<f32>>,
+    size: (u32, u32),
+    pending_size: Option<(u32, u32)>,
+    show_overlay: bool,
+    show_help: bool,
+    fps: f64,
+    t_last: Instant,
+    t_loop: Instant,
+    message: Option<(String, Instant)>,
+    want_screenshot: bool,
+    report: ViewerReport,
+    error: Option<anyhow::Error>,
+}
+
+impl ApplicationHandler for App<'_, '_> {
+    fn resumed(&mut self, event_loop: &ActiveEventLoop) {
+        if self.window.is_some() {
+            return;
         }
-        for (k, which, s) in [
-            (Key::R, 0, 1.0),
-            (Key::F, 0, -1.0),
-            (Key::T, 1, 1.0),
-            (Key::G, 1, -1.0),
-        ] {
-            if window.is_key_down(k) {
-                if which == 0 {
-                    pose.yaw += s * dt;
-                } else {
-                    pose.tilt = (pose.tilt + s * dt).clamp(-1.4, 1.4);
+        if let Err(e) = self.open(event_loop) {
+            self.error = Some(e);
+            event_loop.exit();
+        }
+    }
+
+    fn window_event(&mut self, event_loop: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        let now = Instant::now();
+        let h = self.size.1 as f64;
+        let on_slider = move |y: f64| y >= h - SLIDER_H as f64;
+        match event {
+            WindowEvent::CloseRequested => event_loop.exit(),
+            WindowEvent::Resized(s) => self.pending_size = Some((s.width, s.height)),
+            WindowEvent::KeyboardInput { event, .. } => {
+                if let PhysicalKey::Code(code) = event.physical_key {
+                    if code == KeyCode::Escape {
+                        if event.state == ElementState::Pressed {
+                            event_loop.exit();
+                        }
+                        return;
+                    }
+                    self.input.key(code, event.state, event.repeat, now);
                 }
-                moved_light = true;
+            }
+            WindowEvent::ModifiersChanged(m) => self.input.shift(m.state().shift_key()),
+            WindowEvent::CursorMoved { position, .. } => {
+                self.input.cursor_moved(position.x, position.y);
+            }
+            WindowEvent::MouseInput { state, button, .. } => {
+                self.input.button(button, state, on_slider);
+            }
+            WindowEvent::MouseWheel { delta, .. } => self.input.wheel(delta),
+            WindowEvent::Focused(false) => self.input.release_all(now),
+            WindowEvent::RedrawRequested => {
+                if let Err(e) = self.frame() {
+                    self.error = Some(e);
+                    event_loop.exit();
+                } else if self
+                    .opts
+                    .max_frames
+                    .is_some_and(|m| self.report.frames >= m)
+                {
+                    event_loop.exit();
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn about_to_wait(&mut self, _event_loop: &ActiveEventLoop) {
+        if let Some(w) = &self.window {
+            w.request_redraw();
+        }
+    }
+}
+
+impl App<'_, '_> {
+    fn open(&mut self, event_loop: &ActiveEventLoop) -> Result<()> {
+        let attrs = Window::default_attributes()
+            .with_title(self.opts.title.clone())
+            .with_inner_size(PhysicalSize::new(self.size.0, self.size.1))
+            .with_min_inner_size(PhysicalSize::new(64, 64));
+        let window = Rc::new(
+            event_loop
+                .create_window(attrs)
+                .context("cannot open a window")?,
+        );
+        let context = softbuffer::Context::new(window.clone())
+            .map_err(|e| anyhow!("cannot draw into the window: {e}"))?;
+        let surface = softbuffer::Surface::new(&context, window.clone())
+            .map_err(|e| anyhow!("cannot draw into the window: {e}"))?;
+        self.window = Some(window);
+        self.surface = Some(surface);
+        Ok(())
+    }
+
+    /// One frame: apply the input, shade, draw the guides and the overlay, present.
+    fn frame(&mut self) -> Result<()> {
+        let now = Instant::now();
+        let dt = now.saturating_duration_since(self.t_last).as_secs_f64();
+        self.t_last = now;
+        self.session.poll();
+        if let Some((w, h)) = self.pending_size.take() {
+            let (w, h) = (w.max(16), h.max(16));
+            if (w, h) != self.size {
+                self.size = (w, h);
+                self.session.resize(w, h);
+                self.depth = None;
             }
         }
-        if window.is_key_down(Key::Minus) {
-            pose.radiance_scale = (pose.radiance_scale * (1.0 - dt)).max(1e-3);
-            moved_light = true;
+        let f = self.input.take(now);
+        self.apply(f, dt);
+
+        let (w, h) = (self.size.0 as usize, self.size.1 as usize);
+        let img = self.session.frame();
+        let rgb = img.to_srgb8(1.0);
+        self.buf.clear();
+        self.buf.extend(
+            rgb.pixels()
+                .map(|p| (u32::from(p.0[0]) << 16) | (u32::from(p.0[1]) << 8) | u32::from(p.0[2])),
+        );
+        self.buf.resize(w * h, 0);
+        let frame_dt = self.t_last.elapsed().as_secs_f64().max(1e-6);
+        self.fps = if self.fps == 0.0 {
+            1.0 / frame_dt
+        } else {
+            0.9 * self.fps + 0.1 / frame_dt
+        };
+        if self.show_overlay {
+            self.draw_overlay(w, h);
         }
-        if window.is_key_down(Key::Equal) {
-            pose.radiance_scale = (pose.radiance_scale * (1.0 + dt)).min(1e3);
-            moved_light = true;
-        }
-        // The environment turns about +y (bspvt-env: the trees stay, the sky's pieces move).
-        for (k, s) in [(Key::Y, -1.0), (Key::U, 1.0)] {
-            if window.is_key_down(k) {
-                session.env_rotation_deg = (session.env_rotation_deg + s * 45.0 * dt) % 360.0;
-                moved_light = true;
+        if std::mem::take(&mut self.want_screenshot) {
+            let n = self.report.screenshots.len() as u64;
+            match save::screenshot(&self.opts.screenshot_dir, &self.buf, w, h, n) {
+                Ok(p) => {
+                    println!("screenshot: {}", p.display());
+                    self.say(format!("screenshot: {}", p.display()));
+                    self.report.screenshots.push(p);
+                }
+                Err(e) => self.say(format!("screenshot failed: {e:#}")),
             }
         }
-        if let Some(t) = &mut session.path_t {
-            *t = (*t + dt * path_speed).fract();
-            moved_light = true;
+        self.present(w, h)?;
+        self.report.frames += 1;
+        if self.report.first_frame.is_none() {
+            self.report.first_frame = Some(self.started.elapsed());
+            println!(
+                "first frame on screen after {:.0} ms ({:.0} % of the trees)",
+                self.started.elapsed().as_secs_f64() * 1e3,
+                self.session.streamed.fraction() * 100.0
+            );
         }
-        let mut roughness = session.roughness;
-        for key in window.get_keys_pressed(KeyRepeat::No) {
+        if self.report.first_full_frame.is_none() && self.session.streamed.complete() {
+            self.report.first_full_frame = Some(self.started.elapsed());
+        }
+        Ok(())
+    }
+
+    fn present(&mut self, w: usize, h: usize) -> Result<()> {
+        let (Some(surface), Some(nw), Some(nh)) = (
+            self.surface.as_mut(),
+            NonZeroU32::new(w as u32),
+            NonZeroU32::new(h as u32),
+        ) else {
+            return Ok(());
+        };
+        surface
+            .resize(nw, nh)
+            .map_err(|e| anyhow!("cannot draw into the window: {e}"))?;
+        let mut out = surface
+            .buffer_mut()
+            .map_err(|e| anyhow!("cannot draw into the window: {e}"))?;
+        out.copy_from_slice(&self.buf);
+        out.present()
+            .map_err(|e| anyhow!("cannot draw into the window: {e}"))?;
+        Ok(())
+    }
+
+    fn say(&mut self, m: String) {
+        self.message = Some((m, Instant::now()));
+    }
+
+    /// Applies one frame's input to the session.
+    fn apply(&mut self, f: input::Frame, dt: f64) {
+        let scale = scene_scale(self.session);
+        let mut moved_light = false;
+        let s = &mut *self.session;
+        for (key, secs) in f.held {
+            let step = 1.5 * secs * scale;
+            let pose = &mut s.pose;
             match key {
-                Key::Key1
-                | Key::Key2
-                | Key::Key3
-                | Key::Key4
-                | Key::Key5
-                | Key::Key6
-                | Key::Key7
-                | Key::Key8
-                | Key::Key9
-                | Key::Key0 => {
-                    // 1–9 pick the first nine methods, 0 the tenth.
+                KeyCode::KeyA => pose.offset.x -= step,
+                KeyCode::KeyD => pose.offset.x += step,
+                KeyCode::KeyW => pose.offset.z -= step,
+                KeyCode::KeyS => pose.offset.z += step,
+                KeyCode::KeyQ => pose.offset.y -= step,
+                KeyCode::KeyE => pose.offset.y += step,
+                KeyCode::KeyR => pose.yaw += secs,
+                KeyCode::KeyF => pose.yaw -= secs,
+                KeyCode::KeyT => pose.tilt = (pose.tilt + secs).clamp(-1.4, 1.4),
+                KeyCode::KeyG => pose.tilt = (pose.tilt - secs).clamp(-1.4, 1.4),
+                KeyCode::Minus => {
+                    pose.radiance_scale = (pose.radiance_scale * (-secs).exp()).max(1e-3)
+                }
+                KeyCode::Equal => pose.radiance_scale = (pose.radiance_scale * secs.exp()).min(1e3),
+                // The environment turns about +y (bspvt-env: the trees stay, the sky's pieces
+                // move).
+                KeyCode::KeyY => s.env_rotation_deg = (s.env_rotation_deg - 45.0 * secs) % 360.0,
+                KeyCode::KeyU => s.env_rotation_deg = (s.env_rotation_deg + 45.0 * secs) % 360.0,
+                _ => continue,
+            }
+            moved_light = true;
+        }
+        if let Some(t) = &mut s.path_t {
+            *t = (*t + dt * PATH_SPEED).fract();
+            moved_light = true;
+        }
+        let mut roughness = s.roughness;
+        for key in f.pressed {
+            self.report.key_presses += 1;
+            let s = &mut *self.session;
+            match key {
+                KeyCode::Digit1
+                | KeyCode::Digit2
+                | KeyCode::Digit3
+                | KeyCode::Digit4
+                | KeyCode::Digit5
+                | KeyCode::Digit6
+                | KeyCode::Digit7
+                | KeyCode::Digit8
+                | KeyCode::Digit9
+                | KeyCode::Digit0 => {
                     let i = match key {
-                        Key::Key0 => 9,
-                        _ => key as usize - Key::Key1 as usize,
+                        KeyCode::Digit0 => 9,
+                        _ => key as usize - KeyCode::Digit1 as usize,
                     };
                     if let Some(m) = METHODS.get(i) {
-                        session.method = *m;
+                        s.method = *m;
                     }
                 }
-                Key::M => {
-                    session.mode = match session.mode {
+                KeyCode::KeyM => {
+                    s.mode = match s.mode {
                         Mode::Vertex => Mode::Pixel,
                         Mode::Pixel => Mode::Vertex,
                     }
                 }
-                Key::P => {
-                    session.path_t = match session.path_t {
+                KeyCode::KeyP => {
+                    s.path_t = match s.path_t {
                         Some(_) => None,
                         None => Some(0.0),
                     }
                 }
-                Key::H => show_overlay = !show_overlay,
-                Key::O => roughness = None,
-                Key::LeftBracket => roughness = Some(roughness.unwrap_or(0.3) * 0.8),
-                Key::RightBracket => roughness = Some(roughness.unwrap_or(0.3) * 1.25),
-                _ => {}
-            }
-            session.invalidate();
-        }
-        let mouse = window.get_mouse_pos(MouseMode::Clamp);
-        let left = window.get_mouse_down(MouseButton::Left);
-        let right = window.get_mouse_down(MouseButton::Right);
-        if let Some((mx, my)) = mouse {
-            let on_slider = my as usize >= h - SLIDER_H;
-            if left && on_slider {
-                // Roughness on a log scale from 1e-3 to 1.
-                let t = f64::from(mx) / w as f64;
-                roughness = Some(10f64.powf(-3.0 + 3.0 * t.clamp(0.0, 1.0)) as f32);
-            } else if let Some((px, py)) = last_mouse {
-                let (dx, dy) = (f64::from(mx - px), f64::from(my - py));
-                if left && (dx != 0.0 || dy != 0.0) {
-                    let mut o = session.orbit;
-                    o.yaw -= dx * 0.01;
-                    o.pitch = (o.pitch + dy * 0.01).clamp(-1.5, 1.5);
-                    session.set_camera(o);
+                KeyCode::KeyL => s.reset_light(),
+                KeyCode::KeyC => {
+                    s.reset_camera();
+                    self.depth = None;
                 }
-                if right && (dx != 0.0 || dy != 0.0) {
-                    let s = session.orbit.distance * 0.002;
-                    let (sy, cy) = session.orbit.yaw.sin_cos();
-                    // Screen right and screen "forward" projected on the ground.
-                    let right_v = DVec3::new(cy, 0.0, -sy);
-                    let fwd = DVec3::new(-sy, 0.0, -cy);
-                    session.pose.offset += right_v * dx * s - fwd * dy * s;
-                    moved_light = true;
-                }
+                KeyCode::KeyH => self.show_help = !self.show_help,
+                KeyCode::Tab => self.show_overlay = !self.show_overlay,
+                KeyCode::KeyO => roughness = None,
+                KeyCode::BracketLeft => roughness = Some(roughness.unwrap_or(0.3) * 0.8),
+                KeyCode::BracketRight => roughness = Some(roughness.unwrap_or(0.3) * 1.25),
+                KeyCode::F12 | KeyCode::PrintScreen => self.want_screenshot = true,
+                KeyCode::KeyV => self.save_view(),
+                _ => continue,
             }
-            last_mouse = (left || right).then_some((mx, my));
+            self.session.invalidate();
         }
-        if let Some((_, sy)) = window.get_scroll_wheel()
-            && sy != 0.0
-        {
-            let mut o = session.orbit;
-            o.distance *= 0.9f64.powf(f64::from(sy));
-            session.set_camera(o);
+        let s = &mut *self.session;
+        let (w, h) = (f64::from(self.size.0), f64::from(self.size.1));
+        if let Some(x) = f.slider_x {
+            // Roughness on a log scale from 1e-3 to 1.
+            let t = (x / w).clamp(0.0, 1.0);
+            roughness = Some(10f64.powf(-3.0 + 3.0 * t) as f32);
         }
-        if roughness != session.roughness {
-            session.set_roughness(roughness);
+        let mut orbit = s.orbit;
+        let (ox, oy) = f.drag.orbit;
+        if (ox, oy) != (0.0, 0.0) {
+            orbit.yaw -= ox * 0.01;
+            orbit.pitch = (orbit.pitch + oy * 0.01).clamp(-1.5, 1.5);
+        }
+        let (px, py) = f.drag.pan;
+        if (px, py) != (0.0, 0.0) {
+            // The target follows the cursor: world units per pixel at the target's depth.
+            let per_px =
+                2.0 * orbit.distance * (0.5 * f64::from(orbit.fov_y_deg)).to_radians().tan() / h;
+            let v = &s.renderer.view;
+            orbit.target += (-px * v.right + py * v.up) * per_px;
+        }
+        if f.wheel != 0.0 {
+            orbit.distance = (orbit.distance * 0.9f64.powf(f.wheel)).max(1e-6 * scale);
+        }
+        if (ox, oy, px, py, f.wheel) != (0.0, 0.0, 0.0, 0.0, 0.0) {
+            s.set_camera(orbit);
+            self.depth = None;
+        }
+        let (lx, ly) = f.drag.light;
+        if (lx, ly) != (0.0, 0.0) {
+            let k = s.orbit.distance * 0.002;
+            let (sy, cy) = s.orbit.yaw.sin_cos();
+            // Screen right and screen "forward", projected on the ground.
+            let right = DVec3::new(cy, 0.0, -sy);
+            let fwd = DVec3::new(-sy, 0.0, -cy);
+            s.pose.offset += right * lx * k - fwd * ly * k;
+            moved_light = true;
+        }
+        if roughness != s.roughness {
+            s.set_roughness(roughness);
         }
         if moved_light {
-            session.invalidate();
+            s.keep_light_in_region();
+            s.invalidate();
         }
-        // --- draw ---
-        let img = session.frame();
-        let rgb = img.to_srgb8(1.0);
-        for (o, p) in buf.iter_mut().zip(rgb.pixels()) {
-            *o = (u32::from(p.0[0]) << 16) | (u32::from(p.0[1]) << 8) | u32::from(p.0[2]);
+    }
+
+    /// V: the current camera and light into a scene file.
+    fn save_view(&mut self) {
+        let s = &*self.session;
+        let added_ground = s
+            .scene()
+            .warnings
+            .iter()
+            .any(|w| w.contains("ground plane under it were added"));
+        let r = save::view_file(
+            &self.opts.source,
+            self.opts.save_view.as_deref(),
+            &s.scene().lights,
+            added_ground,
+            s.camera(),
+            s.light().as_ref(),
+        )
+        .and_then(|(file, out)| save::write_view(&file, &out).map(|()| out));
+        match r {
+            Ok(p) => {
+                println!("view saved: {}", p.display());
+                self.say(format!("view saved: {}", p.display()));
+                self.report.views.push(p);
+            }
+            Err(e) => {
+                eprintln!("save view: {e:#}");
+                self.say(format!("save view: {e:#}"));
+            }
         }
-        let frame_dt = t_last.elapsed().as_secs_f64().max(1e-6);
-        fps = if fps == 0.0 {
-            1.0 / frame_dt
-        } else {
-            0.9 * fps + 0.1 / frame_dt
-        };
-        if show_overlay {
+    }
+
+    fn draw_overlay(&mut self, w: usize, h: usize) {
+        if self.opts.guides {
+            if self.depth.as_ref().is_none_or(|d| d.len() != w * h) {
+                self.depth = Some(self.session.depth());
+            }
+            let light = self.session.light();
             let mut c = Canvas {
-                buf: &mut buf,
+                buf: &mut self.buf,
                 width: w,
                 height: h,
             };
-            c.panel(4, 4, &overlay_lines(session, fps, opts));
-            let a = f64::from(session.roughness.unwrap_or(0.3));
-            let t = (a.log10() + 3.0) / 3.0;
-            let label = match session.roughness {
-                Some(a) => format!("roughness a = {a:.3} (drag; [ ] keys; O = scene's)"),
-                None => "roughness: the scene's (drag here or [ ] to override)".to_string(),
-            };
-            c.slider(0, h - SLIDER_H + 2, w, t, &label);
-        }
-        window
-            .update_with_buffer(&buf, w, h)
-            .context("cannot draw into the window")?;
-        report.frames += 1;
-        if report.first_frame.is_none() {
-            report.first_frame = Some(started.elapsed());
-            println!(
-                "first frame on screen after {:.0} ms ({:.0} % of the trees)",
-                started.elapsed().as_secs_f64() * 1e3,
-                session.streamed.fraction() * 100.0
+            guides::draw(
+                &mut c,
+                &self.session.renderer.view,
+                self.depth.as_deref().unwrap_or(&[]),
+                self.session.scene(),
+                light.as_ref(),
             );
         }
-        if report.first_full_frame.is_none() && session.streamed.complete() {
-            report.first_full_frame = Some(started.elapsed());
+        let mut lines = overlay_lines(self.session, self.fps, self.opts);
+        if let Some((m, at)) = &self.message {
+            if at.elapsed() < MESSAGE_FOR {
+                lines.push(m.chars().take(w / 8).collect());
+            } else {
+                self.message = None;
+            }
         }
-        if opts.max_frames.is_some_and(|m| report.frames >= m) {
-            break;
+        let s = &*self.session;
+        let a = f64::from(s.roughness.unwrap_or(0.3));
+        let t = (a.log10() + 3.0) / 3.0;
+        let label = match s.roughness {
+            Some(a) => format!("roughness α = {a:.3} (drag; [ ] keys; O = scene's)"),
+            None => "roughness α: the scene's (drag here or [ ] to override)".to_string(),
+        };
+        let mut c = Canvas {
+            buf: &mut self.buf,
+            width: w,
+            height: h,
+        };
+        c.panel(4, 4, &lines);
+        if self.show_help {
+            let help: Vec<String> = KEYS_HELP.lines().map(str::to_string).collect();
+            let y = (4 + lines.len() * 10 + 12).min(h.saturating_sub(help.len() * 10 + 8));
+            c.panel(4, y, &help);
         }
+        c.slider(0, h.saturating_sub(SLIDER_H - 2), w, t, &label);
     }
-    report.mean_fps = report.frames as f64 / t_loop.elapsed().as_secs_f64().max(1e-9);
-    Ok(report)
+
+    /// Where things stand, for the report.
+    fn state(&self) -> serde_json::Value {
+        let s = &*self.session;
+        let mode = match s.effective_mode() {
+            Mode::Vertex => "vertex",
+            Mode::Pixel => "pixel",
+        };
+        serde_json::json!({
+            "method": s.method.name(),
+            "mode": mode,
+            "roughness": s.roughness,
+            "light_offset": s.pose.offset.to_array(),
+            "light_yaw": s.pose.yaw,
+            "light_tilt": s.pose.tilt,
+            "radiance_scale": s.pose.radiance_scale,
+            "path": s.path_t.is_some(),
+            "camera_distance": s.orbit.distance,
+            "camera_yaw": s.orbit.yaw,
+            "camera_pitch": s.orbit.pitch,
+            "camera_target": s.orbit.target.to_array(),
+            "window": [self.size.0, self.size.1],
+            "frames": self.report.frames,
+            "key_presses": self.report.key_presses,
+            "overlay": self.show_overlay,
+            "help": self.show_help,
+        })
+    }
 }
 
+/// A quarter of the scene's diagonal: how far the light moves per second of a held key.
 fn scene_scale(s: &Session) -> f64 {
     let b = s.scene.mesh.bounds();
     (b.max.as_dvec3() - b.min.as_dvec3()).length().max(1e-6) * 0.25
@@ -266,36 +579,14 @@ fn overlay_lines(s: &Session, fps: f64, opts: &ViewerOptions) -> Vec<String> {
         Mode::Vertex => "per vertex",
         Mode::Pixel => "per pixel",
     };
-    let mut lines = vec![
-        format!("{:.1} fps   {} - {mode}", fps, s.method.label()),
-        format!(
-            "trees: {:.1} % of {} vertices{}",
-            s.streamed.fraction() * 100.0,
-            s.streamed.vertex_count(),
-            if s.streamed.complete() {
-                ""
-            } else {
-                " (streaming)"
-            }
-        ),
-    ];
-    if let Some(st) = &s.streamed.status {
-        let eta = st
-            .eta_s
-            .map(|e| format!(", eta {e:.0} s"))
-            .unwrap_or_default();
-        lines.push(format!(
-            "bake: {:?} {:.1} %{eta}",
-            st.state,
-            st.progress * 100.0
-        ));
-    }
-    if let Some(e) = &s.streamed.failed {
-        lines.push(format!(
-            "stream: {}",
-            e.chars().take(60).collect::<String>()
-        ));
-    }
+    let mut lines = vec![format!(
+        "{:.1} fps   {} - {mode}   {}×{}",
+        fps,
+        s.method.label(),
+        s.renderer.gbuffer.width,
+        s.renderer.gbuffer.height
+    )];
+    lines.extend(bake_lines(&s.streamed));
     if s.passes() > 0 {
         lines.push(format!("{} samples per pixel", s.passes()));
     }
@@ -304,7 +595,7 @@ fn overlay_lines(s: &Session, fps: f64, opts: &ViewerOptions) -> Vec<String> {
     }
     if s.method.needs().sky_trees {
         lines.push(format!(
-            "sky: {} ({:.0} deg, Y/U turn)",
+            "sky: {} ({:.0}°, Y/U turn)",
             if s.sky_ready() {
                 "through its trees"
             } else if s.sky_baking() {
@@ -315,6 +606,47 @@ fn overlay_lines(s: &Session, fps: f64, opts: &ViewerOptions) -> Vec<String> {
             s.env_rotation_deg
         ));
     }
-    lines.push("1-9,0 method  M mode  WASDQE RF TG light  Y/U sky  P path  H hide".into());
+    lines.push("H keys   1-9,0 method   M mode   F12 screenshot   V save view".into());
+    lines
+}
+
+/// The trees here and the service's bake, in words that cannot disagree: once every tree is
+/// here the bake is done, whatever the last status said (the status relay stops when the
+/// fetcher finishes, and its last report can be older than the last chunk); before that, the
+/// service's count of durable vertices and this client's count are both shown, named.
+pub(crate) fn bake_lines(t: &crate::stream::trees::StreamedTrees) -> Vec<String> {
+    let n = t.vertex_count();
+    if t.complete() {
+        return vec![format!("trees: all {n} vertices here (bake done)")];
+    }
+    let mut lines = vec![format!(
+        "trees here: {} of {n} vertices ({:.1} %){}",
+        t.vertices_present,
+        t.fraction() * 100.0,
+        if t.failed.is_none() {
+            ", streaming"
+        } else {
+            ""
+        }
+    )];
+    if let Some(st) = &t.status {
+        let eta = st
+            .eta_s
+            .map(|e| format!(", eta {e:.0} s"))
+            .unwrap_or_default();
+        lines.push(format!(
+            "service: {:?}, {} of {} vertices baked ({:.1} %){eta}",
+            st.state,
+            st.vertices_done,
+            st.vertices_total,
+            st.progress * 100.0
+        ));
+    }
+    if let Some(e) = &t.failed {
+        lines.push(format!(
+            "stream: {}",
+            e.chars().take(60).collect::<String>()
+        ));
+    }
     lines
 }

@@ -150,7 +150,7 @@ fn window_shows_the_headless_frame(backend: &str) {
             .args(["--backend", backend])
             .env("DISPLAY", &display)
             .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
+            .stderr(Stdio::inherit()) // never read: a pipe could fill and block the viewer
             .spawn()
             .expect("start bspvt view"),
     );

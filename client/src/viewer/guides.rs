@@ -74,20 +74,14 @@ fn grid(segs: &mut Vec<Segment>, lo: DVec3, hi: DVec3, size: f64) {
         return;
     }
     let y = lo.y;
-    let f = |i: i64| i as f64 * step;
-    for i in x0..=x1 {
+    let at = |x: i64, z: i64| DVec3::new(x as f64 * step, y, z as f64 * step);
+    let lines = (x0..=x1)
+        .map(|i| (at(i, z0), at(i, z1)))
+        .chain((z0..=z1).map(|k| (at(x0, k), at(x1, k))));
+    for (a, b) in lines {
         segs.push(Segment {
-            a: DVec3::new(f(i), y, f(z0)),
-            b: DVec3::new(f(i), y, f(z1)),
-            rgb: GRID,
-            alpha: 0.25,
-            occluded: true,
-        });
-    }
-    for k in z0..=z1 {
-        segs.push(Segment {
-            a: DVec3::new(f(x0), y, f(k)),
-            b: DVec3::new(f(x1), y, f(k)),
+            a,
+            b,
             rgb: GRID,
             alpha: 0.25,
             occluded: true,

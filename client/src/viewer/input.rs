@@ -10,22 +10,25 @@ use winit::keyboard::KeyCode;
 
 /// The key map, one line each: the `H` overlay and `bspvt view --help` print this text.
 pub const KEYS_HELP: &str = "\
-Mouse    left-drag orbit · middle- or Shift+left-drag pan · wheel zoom
-         right-drag moves the light · drag the bottom bar: roughness α
-W A S D  move the light (-z, -x, +z, +x); Q/E down/up
-R/F T/G  turn / tilt the light
-- =      light radiance ÷/× (held)
-P        light along its path (on/off);  L  light back to rest
-Y U      turn the environment (sky methods)
-1-9, 0   method, in the registry's order
-M        per vertex / per pixel
-[ ]  O   roughness α ×0.8 / ×1.25;  O: the scene's own
-C        camera back to the scene's
-F12      screenshot (PNG)
-V        save view: the camera and the light into a scene file
-Tab      hide/show the overlay and the guides (grid, axes, light)
-H        this help
-Esc      quit";
+Left-drag      orbit
+Middle-drag    pan (or Shift+left-drag)
+Wheel          zoom
+Right-drag     move the light
+Bottom bar     drag: roughness α
+W A S D  Q E   move the light (-z -x +z +x, down, up)
+R F  T G       turn / tilt the light
+- =            light radiance ÷ / × (held)
+P   L          light along its path / back to rest
+Y U            turn the environment (sky methods)
+1-9, 0         method, in the registry's order
+M              per vertex / per pixel
+[ ]  O         roughness α ×0.8 / ×1.25 / the scene's
+C              camera back to the scene's
+F12            screenshot (PNG)
+V              save view (camera, light) to a scene file
+Tab            hide/show overlay and guides
+H              this help
+Esc            quit";
 
 /// Keys whose effect lasts while they are held.
 pub(crate) const HELD: [KeyCode; 14] = [
@@ -198,6 +201,13 @@ impl Input {
 mod tests {
     use super::*;
     use std::time::Duration;
+
+    #[test]
+    fn the_key_map_fits_a_small_window() {
+        // 8 pixels a character: 480 pixels hold 58 with the panel's margins.
+        let widest = KEYS_HELP.lines().map(|l| l.chars().count()).max();
+        assert!(widest <= Some(58), "{widest:?}");
+    }
 
     #[test]
     fn the_overlay_font_draws_every_character_of_the_key_map() {

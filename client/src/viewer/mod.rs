@@ -606,7 +606,7 @@ fn overlay_lines(s: &Session, fps: f64, opts: &ViewerOptions) -> Vec<String> {
             s.env_rotation_deg
         ));
     }
-    lines.push("H keys   1-9,0 method   M mode   F12 screenshot   V save view".into());
+    lines.push("H keys  1-9,0 method  M mode  F12 shot  V save view".into());
     lines
 }
 

@@ -3,7 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
-use bspvt_proto::import::{Format, Limits, load_mesh, load_mesh_bytes};
+use bspvt_proto::import::{
+    Format, Limits, load_asset_bytes, load_asset_uploaded, load_mesh, load_mesh_bytes,
+};
 use bspvt_proto::{Mesh, MeshError};
 use glam::Vec3;
 use proptest::prelude::*;
@@ -475,8 +477,17 @@ fn gltf_external_buffer_from_path_but_not_from_bytes() {
     let json = test_json(r#"{"byteLength": 128, "uri": "my%20data.bin"}"#, "", 3);
     let p = write(&dir, "scene.gltf", json.as_bytes());
     check_test_scene(&ok(load_mesh(&p)));
-    let e = err_containing(load(json.as_bytes(), Format::Gltf), "external file");
+    let e = err_containing(load(json.as_bytes(), Format::Gltf), "not uploaded");
     assert!(matches!(e, MeshError::Malformed { .. }));
+    // Uploaded with the file it names (under its decoded name): the same mesh, and the file
+    // is logged as read.
+    let files = std::collections::BTreeMap::from([("my data.bin".to_string(), test_bin())]);
+    let up = load_asset_uploaded(json.as_bytes(), Format::Gltf, &Limits::default(), &files)
+        .expect("uploaded with its buffer");
+    check_test_scene(&up.mesh);
+    assert_eq!(up.files, ["my data.bin"]);
+    let disk = bspvt_proto::import::load_asset(&p).expect("from disk");
+    assert_eq!(disk.files, ["my data.bin"]);
 }
 
 #[test]
@@ -950,16 +961,29 @@ fn malformed_gltf() {
     let ext = test_json(r#"{"byteLength": 128, "uri": "buffers/data.bin"}"#, "", 3);
     err_containing(
         load(ext.as_bytes(), Format::Gltf),
-        "refers to the external file \"buffers/data.bin\"",
+        "cannot read the external file \"buffers/data.bin\": it was not uploaded",
     );
+    // An external image no material uses is never read.
     let img = test_json(r#"{"byteLength": 128}"#, "", 3).replace(
         r#""scene": 0,"#,
         r#""scene": 0, "images": [{"uri": "tex.png"}],"#,
     );
-    err_containing(
-        load(&glb(&img, &test_bin()), Format::Glb),
-        "image 0 refers to the external file",
-    );
+    let a = load_asset_bytes(&glb(&img, &test_bin()), Format::Glb, &Limits::default())
+        .expect("an unused image is not read");
+    assert!(a.files.is_empty());
+    // Paths out of the asset's folder are refused, on disk as from an upload.
+    for uri in [
+        "../data.bin",
+        "/etc/passwd",
+        "C:/data.bin",
+        "http://x/data.bin",
+    ] {
+        let j = test_json(&format!(r#"{{"byteLength": 128, "uri": "{uri}"}}"#), "", 3);
+        err_containing(
+            load(j.as_bytes(), Format::Gltf),
+            "only files beside the asset",
+        );
+    }
     // ...and an undecodable percent-encoding from disk (gltf's importer panics on this one).
     let dir = TempDir::new("gltf-bad-uri");
     let p = write(

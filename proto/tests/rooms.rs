@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use bspvt_proto::Scene;
-use bspvt_proto::import::{Format, Limits, load_asset, load_asset_bytes};
+use bspvt_proto::import::{Format, Limits, load_asset, load_asset_bytes, load_asset_uploaded};
 use glam::Vec3;
 
 fn rooms() -> PathBuf {
@@ -65,17 +65,29 @@ fn cornell_box_obj_mtl_lamp_materials_and_no_added_ground() {
     let f = (Vec3::from(c.target) - Vec3::from(c.position)).normalize();
     let to_centre = (Vec3::new(0.278, 0.274, 0.2796) - Vec3::from(c.position)).normalize();
     assert!(f.dot(to_centre) > 0.99);
-    // The same file read from memory (an upload) cannot read its MTL: defaults and a warning.
+    // The same file read from memory (an upload) without its MTL: defaults and a warning
+    // that names the missing file.
     let bytes = std::fs::read(rooms().join("cornell-box.obj")).expect("read");
     let a = load_asset_bytes(&bytes, Format::Obj, &Limits::default()).expect("from memory");
     assert!(a.lights.is_empty());
     assert!(
-        a.warnings
-            .iter()
-            .any(|w| w.contains("mtllib") && w.contains("not read")),
+        a.warnings.iter().any(|w| w.contains("mtllib")
+            && w.contains("not uploaded")
+            && w.contains("\"cornell-box.mtl\"")),
         "{:?}",
         a.warnings
     );
+    // With the files the disk load read, uploaded beside it: the same asset, lamp and all.
+    let disk = load_asset(&rooms().join("cornell-box.obj")).expect("disk");
+    assert_eq!(disk.files, ["cornell-box.mtl"]);
+    let files: std::collections::BTreeMap<String, Vec<u8>> = disk
+        .files
+        .iter()
+        .map(|f| (f.clone(), std::fs::read(rooms().join(f)).expect("sidecar")))
+        .collect();
+    let up = load_asset_uploaded(&bytes, Format::Obj, &Limits::default(), &files).expect("upload");
+    assert_eq!(up, disk);
+    assert_eq!(up.lights.len(), 1);
 }
 
 #[test]

@@ -215,6 +215,37 @@ fn corpus(done_id: &str) -> Vec<Case> {
             form(vec![("mesh", None, tri.clone())], key_ok),
         ),
         c(
+            "a mesh's file named out of its folder",
+            400,
+            Some("invalid_file_name"),
+            form(
+                vec![
+                    ("mesh", Some("t.obj"), tri.clone()),
+                    ("file", Some("../t.mtl"), b"newmtl a".to_vec()),
+                ],
+                key_ok,
+            ),
+        ),
+        c(
+            "a mesh's file named twice",
+            400,
+            Some("duplicate_field"),
+            form(
+                vec![
+                    ("mesh", Some("t.obj"), tri.clone()),
+                    ("file", Some("t.mtl"), b"newmtl a".to_vec()),
+                    ("file", Some("t.mtl"), b"newmtl b".to_vec()),
+                ],
+                key_ok,
+            ),
+        ),
+        c(
+            "files without a mesh",
+            400,
+            Some("missing_field"),
+            form(vec![("file", Some("t.mtl"), b"newmtl a".to_vec())], key_ok),
+        ),
+        c(
             "unsupported mesh format",
             415,
             Some("unsupported_mesh_format"),

@@ -1006,8 +1006,24 @@ fn textures_from_buffer_views_files_and_jpeg() {
         "{:?}",
         from_file.materials[0]
     );
-    let e = load_asset_bytes(&bytes, Format::Gltf, &Limits::default()).expect_err("upload");
-    assert!(e.to_string().contains("self-contained"), "{e}");
+    assert_eq!(from_file.files, ["checker.png"]);
+    // Uploaded alone: the factor, and a warning naming the file to upload with it.
+    let alone = load_asset_bytes(&bytes, Format::Gltf, &Limits::default()).expect("upload");
+    assert!(alone.materials[0].maps.is_none());
+    assert!(
+        alone
+            .warnings
+            .iter()
+            .any(|w| w.contains("`file` field named \"checker.png\"")),
+        "{:?}",
+        alone.warnings
+    );
+    // Uploaded with it: the same asset as from the disk.
+    let files = std::collections::BTreeMap::from([("checker.png".to_string(), png_bytes.clone())]);
+    let up =
+        bspvt_proto::import::load_asset_uploaded(&bytes, Format::Gltf, &Limits::default(), &files)
+            .expect("upload with its image");
+    assert_eq!(up, from_file);
     // A missing file: a warning, not a failure.
     std::fs::remove_file(dir.path().join("checker.png")).expect("rm");
     let missing = load_asset(&dir.path().join("a.gltf")).expect("loads without it");

@@ -10,6 +10,7 @@
 pub mod cache;
 pub mod error;
 pub mod fetch;
+mod form;
 pub mod frames;
 pub mod remote;
 pub mod source;

@@ -5,14 +5,15 @@ use std::io::Read;
 use std::path::Path;
 use std::time::Duration;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use bspvt_proto::Scene;
 use bspvt_proto::api::SceneStatus;
 use bspvt_proto::api::decode_scene;
-use bspvt_proto::scene::{MeshRef, SceneFile};
+use bspvt_proto::scene::SceneFile;
 
 use super::cache::Cache;
 use super::error::StreamError;
+use super::form::Form;
 
 /// A bspvt service, e.g. `http://127.0.0.1:8080`.
 #[derive(Clone)]
@@ -173,73 +174,16 @@ impl Remote {
         Ok((r.status() == 200).then(|| header(&r, "etag")).flatten())
     }
 
-    /// Submits a scene: `builtin:NAME`, a scene file (its one mesh file is uploaded with it), or
-    /// a bare mesh. Returns the new scene's id.
+    /// Submits a scene: `builtin:NAME`, a scene file (its one mesh file is uploaded with it),
+    /// or a bare mesh, each mesh with the other files it reads ([`Form::local`]). Returns the
+    /// new scene's id.
     pub fn submit(&self, scene: Option<&str>, mesh: Option<&Path>) -> Result<String> {
-        let mut parts: Vec<(&str, Option<String>, Vec<u8>)> = Vec::new();
-        match (scene, mesh) {
-            (Some(s), None) => {
-                let file = match s.strip_prefix("builtin:") {
-                    Some(name) => builtin_scene_file(name)?,
-                    None => {
-                        let path = Path::new(s);
-                        let text = std::fs::read_to_string(path)
-                            .with_context(|| format!("cannot read {s}"))?;
-                        let mut file: SceneFile = serde_json::from_str(&text)
-                            .with_context(|| format!("{s} is not a valid scene file"))?;
-                        let files: Vec<&mut MeshRef> = file
-                            .meshes
-                            .iter_mut()
-                            .filter(|m| !m.path.starts_with("builtin:"))
-                            .collect();
-                        if files.len() > 1 {
-                            bail!(
-                                "{s} names {} mesh files; the service takes one upload per scene",
-                                files.len()
-                            );
-                        }
-                        if let Some(m) = files.into_iter().next() {
-                            let mesh_path = path.parent().unwrap_or(Path::new(".")).join(&m.path);
-                            let name = mesh_path
-                                .file_name()
-                                .and_then(|n| n.to_str())
-                                .context("mesh file name")?
-                                .to_string();
-                            let bytes = std::fs::read(&mesh_path)
-                                .with_context(|| format!("cannot read {}", mesh_path.display()))?;
-                            m.path = name.clone();
-                            parts.push(("mesh", Some(name), bytes));
-                        }
-                        file
-                    }
-                };
-                parts.push(("scene", None, serde_json::to_vec(&file)?));
-            }
-            (None, Some(m)) => {
-                let name = m
-                    .file_name()
-                    .and_then(|n| n.to_str())
-                    .with_context(|| format!("{} has no file name", m.display()))?;
-                let bytes =
-                    std::fs::read(m).with_context(|| format!("cannot read {}", m.display()))?;
-                parts.push(("mesh", Some(name.to_string()), bytes));
-            }
-            _ => bail!("give a scene (file or builtin:NAME) or --mesh PATH"),
-        }
-        let mut body = Vec::new();
-        for (name, file, data) in &parts {
-            body.extend_from_slice(format!("--{BOUNDARY}\r\n").as_bytes());
-            let disposition = match file {
-                Some(f) => format!(
-                    "Content-Disposition: form-data; name=\"{name}\"; filename=\"{f}\"\r\nContent-Type: application/octet-stream\r\n\r\n"
-                ),
-                None => format!("Content-Disposition: form-data; name=\"{name}\"\r\n\r\n"),
-            };
-            body.extend_from_slice(disposition.as_bytes());
-            body.extend_from_slice(data);
-            body.extend_from_slice(b"\r\n");
-        }
-        body.extend_from_slice(format!("--{BOUNDARY}--\r\n").as_bytes());
+        self.submit_form(&Form::local(scene, mesh)?)
+    }
+
+    /// Submits a form. Returns the new scene's id.
+    pub(crate) fn submit_form(&self, form: &Form) -> Result<String> {
+        let body = form.body(BOUNDARY);
         let mut req = self.agent.post(self.url("/v1/scenes")).header(
             "Content-Type",
             format!("multipart/form-data; boundary={BOUNDARY}"),

@@ -11,6 +11,7 @@ use anyhow::{Context, Result, bail};
 use bspvt_proto::api::JobState;
 use bspvt_proto::hash::Fnv1a;
 
+use super::form::Form;
 use super::remote::Remote;
 
 /// What the user asked to view.
@@ -149,7 +150,8 @@ pub(crate) fn open(src: &Source, places: &Places) -> Result<Served> {
                     (Remote::new(&format!("http://{}", bg.addr), None), Some(bg))
                 }
             };
-            let key = content_key(scene.as_deref(), mesh.as_deref())?;
+            let form = Form::local(scene.as_deref(), mesh.as_deref())?;
+            let key = content_key(&form);
             let known_path = places.data_dir.join("client-submissions.json");
             let mut known: BTreeMap<String, BTreeMap<String, String>> = std::fs::read(&known_path)
                 .ok()
@@ -172,7 +174,7 @@ pub(crate) fn open(src: &Source, places: &Places) -> Result<Served> {
                     submitted: false,
                 });
             }
-            let id = remote.submit(scene.as_deref(), mesh.as_deref())?;
+            let id = remote.submit_form(&form)?;
             known.entry(server_key).or_default().insert(key, id.clone());
             if let Some(parent) = known_path.parent() {
                 std::fs::create_dir_all(parent)?;
@@ -189,35 +191,12 @@ pub(crate) fn open(src: &Source, places: &Places) -> Result<Served> {
     }
 }
 
-/// Identity of a local scene's content: the bake's algorithm version, the scene file's bytes
-/// (or the built-in's name), and the mesh file's bytes.
-fn content_key(scene: Option<&str>, mesh: Option<&Path>) -> Result<String> {
+/// Identity of a local scene's content: the bake's algorithm version and the form it is
+/// submitted as (scene JSON, mesh file and the mesh's other files, bytes and names).
+fn content_key(form: &Form) -> String {
     let mut h = Fnv1a::default();
     // A scene submitted by an older bake is submitted again (new trees) after an upgrade.
     h.write(&bspvt_bake::ALGORITHM_VERSION.to_le_bytes());
-    if let Some(s) = scene {
-        h.write(s.as_bytes());
-        if !s.starts_with("builtin:") {
-            let path = Path::new(s);
-            let text = std::fs::read(path).with_context(|| format!("cannot read {s}"))?;
-            h.write(&text);
-            // The mesh files it names are part of its content.
-            if let Ok(file) = serde_json::from_slice::<bspvt_proto::scene::SceneFile>(&text) {
-                for m in file
-                    .meshes
-                    .iter()
-                    .filter(|m| !m.path.starts_with("builtin:"))
-                {
-                    let p = path.parent().unwrap_or(Path::new(".")).join(&m.path);
-                    if let Ok(b) = std::fs::read(&p) {
-                        h.write(&b);
-                    }
-                }
-            }
-        }
-    }
-    if let Some(m) = mesh {
-        h.write(&std::fs::read(m).with_context(|| format!("cannot read {}", m.display()))?);
-    }
-    Ok(format!("{:016x}", h.finish()))
+    form.content_hash(&mut h);
+    format!("{:016x}", h.finish())
 }

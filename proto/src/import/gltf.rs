@@ -14,7 +14,7 @@
 //!   matches the type they read (a `VEC2` `POSITION` is read past its element).
 //!
 //! So this module splits GLB containers itself, resolves buffers itself (`data:` base64 URIs,
-//! the BIN chunk, and, when loading from a path, relative files next to the glTF), and reads
+//! the BIN chunk, and relative files beside the glTF through `sidecar.rs`), and reads
 //! accessors with checked arithmetic against their buffer views, after checking the element
 //! type and that `count` cannot exceed what the file's bytes could hold.
 //!
@@ -34,7 +34,7 @@
 //! sRGB; `metallicRoughnessTexture` B = metallic, G = roughness) through `TEXCOORD_0`, which
 //! is read only for primitives whose material is textured; a primitive without a material
 //! gets the specification's default material. Images are decoded once each, when a material
-//! first uses them (buffer view, `data:` URI, or a file next to the glTF), bounded by
+//! first uses them (buffer view, `data:` URI, or a file beside the glTF), bounded by
 //! `texture::MAX_*`; one that cannot be read is a warning and the factor is used alone. A
 //! material whose `emissiveFactor` × `KHR_materials_emissive_strength` is non-zero makes its
 //! triangles lamps (`lamps.rs`), two-sided when the material is `doubleSided`; its
@@ -47,9 +47,9 @@
 //! document's JSON, not through the `gltf` crate's accessors that `unwrap` (an image with a
 //! buffer view but no MIME type would panic there).
 
+use super::sidecar::{SidecarError, Sidecars};
 use std::borrow::Cow;
 use std::collections::HashMap;
-use std::path::Path;
 use std::rc::Rc;
 use std::sync::Arc;
 
@@ -78,7 +78,7 @@ fn malformed(message: impl Into<String>) -> MeshError {
 
 pub(super) fn parse(
     bytes: &[u8],
-    base_dir: Option<&Path>,
+    sidecars: &Sidecars<'_>,
     limits: &Limits,
 ) -> Result<Raw, MeshError> {
     let (json, bin) = if bytes.starts_with(b"glTF") {
@@ -87,20 +87,7 @@ pub(super) fn parse(
         (bytes, None)
     };
     let doc = parse_document(json)?;
-    let (buffers, total_bytes) = load_buffers(&doc, bin, base_dir, limits, bytes.len() as u64)?;
-    if base_dir.is_none() {
-        for (i, image) in doc.as_json().images.iter().enumerate() {
-            if let (None, Some(uri)) = (&image.buffer_view, &image.uri)
-                && !uri.starts_with("data:")
-            {
-                return Err(malformed(format!(
-                    "image {i} refers to the external file {:?}; an uploaded glTF must be \
-                     self-contained (use a .glb, or data: URIs)",
-                    short(uri)
-                )));
-            }
-        }
-    }
+    let (buffers, total_bytes) = load_buffers(&doc, bin, sidecars, limits, bytes.len() as u64)?;
     let mut reader = Builder {
         buffers,
         file_bytes: total_bytes,
@@ -120,7 +107,7 @@ pub(super) fn parse(
         camera: None,
         punctual: Vec::new(),
         warnings: Vec::new(),
-        base_dir,
+        sidecars,
         images: HashMap::new(),
         texels: 0,
     };
@@ -371,7 +358,7 @@ type Buffers<'a> = Vec<Cow<'a, [u8]>>;
 fn load_buffers<'a>(
     doc: &Document,
     mut bin: Option<&'a [u8]>,
-    base_dir: Option<&Path>,
+    sidecars: &Sidecars<'_>,
     limits: &Limits,
     file_bytes: u64,
 ) -> Result<(Buffers<'a>, u64), MeshError> {
@@ -390,21 +377,16 @@ fn load_buffers<'a>(
                     Cow::Owned(
                         decode_data_uri(rest).map_err(|m| malformed(format!("buffer {i}: {m}")))?,
                     )
-                } else if let Some(base) = base_dir {
-                    let bytes = read_external(base, uri, limits, total).map_err(|e| match e {
-                        MeshError::Malformed { message, .. } => {
-                            malformed(format!("buffer {i}: {message}"))
-                        }
-                        e => e,
-                    })?;
+                } else {
+                    let bytes =
+                        read_external(sidecars, uri, limits, total).map_err(|e| match e {
+                            MeshError::Malformed { message, .. } => {
+                                malformed(format!("buffer {i}: {message}"))
+                            }
+                            e => e,
+                        })?;
                     total += bytes.len() as u64;
                     Cow::Owned(bytes)
-                } else {
-                    return Err(malformed(format!(
-                        "buffer {i} refers to the external file {:?}; an uploaded glTF must \
-                         be self-contained (use a .glb, or data: URIs)",
-                        short(uri)
-                    )));
                 }
             }
         };
@@ -420,31 +402,27 @@ fn load_buffers<'a>(
     Ok((out, total))
 }
 
-/// Reads a relative URI next to the glTF file, refusing what would exceed the byte limit.
+/// Reads a relative URI beside the glTF file, refusing what would exceed the byte limit.
 fn read_external(
-    base: &Path,
+    sidecars: &Sidecars<'_>,
     uri: &str,
     limits: &Limits,
     read_so_far: u64,
 ) -> Result<Vec<u8>, MeshError> {
-    if uri.contains(':') {
-        return Err(malformed(format!(
-            "unsupported URI {:?} (only data: URIs and relative file paths are read)",
-            short(uri)
-        )));
-    }
     let decoded = percent_decode(uri)
         .ok_or_else(|| malformed(format!("bad percent-encoding in URI {:?}", short(uri))))?;
-    let path = base.join(decoded);
-    let io = |source| MeshError::Io {
-        path: path.display().to_string(),
-        source,
-    };
-    let len = std::fs::metadata(&path).map_err(io)?.len();
-    limits.check_bytes(read_so_far.saturating_add(len))?;
-    let bytes = std::fs::read(&path).map_err(io)?;
-    limits.check_bytes(read_so_far.saturating_add(bytes.len() as u64))?;
-    Ok(bytes)
+    match sidecars.read(&decoded, limits.max_bytes.saturating_sub(read_so_far)) {
+        Ok(bytes) => Ok(bytes),
+        Err(SidecarError::TooLarge(len)) => {
+            limits.check_bytes(read_so_far.saturating_add(len))?;
+            Err(malformed(format!("{:?} is too large", short(uri))))
+        }
+        Err(SidecarError::Io(path, source)) => Err(MeshError::Io { path, source }),
+        Err(e) => Err(malformed(format!(
+            "cannot read the external file {:?}: {e}",
+            short(uri)
+        ))),
+    }
 }
 
 fn percent_decode(s: &str) -> Option<String> {
@@ -536,8 +514,8 @@ struct Builder<'a> {
     /// `KHR_lights_punctual` point and spot lights of the instanced nodes.
     punctual: Vec<PunctualLight>,
     warnings: Vec<String>,
-    /// Where external image files are looked for (`None`: an upload, none are read).
-    base_dir: Option<&'a Path>,
+    /// Where external image files are read from.
+    sidecars: &'a Sidecars<'a>,
     /// Images decoded so far (`None`: could not be read; warned once), by image index.
     images: HashMap<usize, Option<Arc<Texture>>>,
     /// Texels decoded so far, against [`MAX_ASSET_TEXELS`].
@@ -1176,11 +1154,8 @@ impl Builder<'_> {
         if let Some(rest) = uri.strip_prefix("data:") {
             return decode_data_uri(rest);
         }
-        let base = self
-            .base_dir
-            .ok_or("an uploaded glTF cannot name other files")?;
-        let bytes =
-            read_external(base, uri, self.limits, self.file_bytes).map_err(|e| e.to_string())?;
+        let bytes = read_external(self.sidecars, uri, self.limits, self.file_bytes)
+            .map_err(|e| e.to_string())?;
         self.file_bytes += bytes.len() as u64;
         Ok(bytes)
     }

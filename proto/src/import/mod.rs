@@ -25,6 +25,7 @@
 //! `obj.rs`, `ply.rs`): glTF uses the `gltf` crate for JSON parsing and validation only and reads
 //! the binary data itself; OBJ and PLY are read by small careful parsers.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use glam::Vec3;
@@ -41,6 +42,10 @@ mod lamps;
 mod mtl;
 mod obj;
 mod ply;
+mod sidecar;
+
+use sidecar::Sidecars;
+pub use sidecar::sidecar_name;
 
 /// An imported file: its geometry and what it says about materials, lamps and the camera.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -58,6 +63,9 @@ pub struct Asset {
     /// What the file holds that was not used (textures, extensions, punctual lights, …), one
     /// sentence each.
     pub warnings: Vec<String>,
+    /// The other files read (material libraries, textures, external buffers), relative to the
+    /// asset, in the order first read: what an upload of the asset must carry with it.
+    pub files: Vec<String>,
 }
 
 /// A material as read from a file, before the emitters are split out.
@@ -204,8 +212,9 @@ pub fn load_mesh(path: &Path) -> Result<Mesh, MeshError> {
     load_asset(path).map(|a| a.mesh)
 }
 
-/// Loads an asset file with the default [`Limits`], choosing the format by extension. Relative
-/// external glTF buffers and OBJ material libraries are resolved next to the file.
+/// Loads an asset file with the default [`Limits`], choosing the format by extension. Its other
+/// files (OBJ material libraries and textures, external glTF buffers and images) are read
+/// from beside it.
 pub fn load_asset(path: &Path) -> Result<Asset, MeshError> {
     load_asset_with_limits(path, &Limits::default())
 }
@@ -226,26 +235,36 @@ pub(crate) fn load_asset_with_limits(path: &Path, limits: &Limits) -> Result<Ass
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => std::path::PathBuf::from("."),
     };
-    load(&bytes, format, limits, Some(&base_dir))
+    load(&bytes, format, limits, Sidecars::dir(&base_dir))
 }
 
 /// A mesh's geometry from memory ([`load_asset_bytes`]'s mesh).
 pub fn load_mesh_bytes(bytes: &[u8], format: Format, limits: &Limits) -> Result<Mesh, MeshError> {
-    load(bytes, format, limits, None).map(|a| a.mesh)
+    load_asset_bytes(bytes, format, limits).map(|a| a.mesh)
 }
 
-/// Loads an asset from memory (an HTTP upload). glTF files must be self-contained: external
-/// buffer and image URIs are rejected; only `data:` URIs and a GLB's BIN chunk are read. An
-/// OBJ's `mtllib` cannot be read from memory (a warning says so).
+/// Loads an asset from memory, alone: an external glTF buffer or image is an error, an OBJ's
+/// material library a warning ([`load_asset_uploaded`] with no files).
 pub fn load_asset_bytes(bytes: &[u8], format: Format, limits: &Limits) -> Result<Asset, MeshError> {
-    load(bytes, format, limits, None)
+    load_asset_uploaded(bytes, format, limits, &BTreeMap::new())
+}
+
+/// Loads an asset from memory (an HTTP upload) with the other files uploaded with it, keyed by
+/// [`sidecar_name`]; only those are read, never a file on this machine.
+pub fn load_asset_uploaded(
+    bytes: &[u8],
+    format: Format,
+    limits: &Limits,
+    files: &BTreeMap<String, Vec<u8>>,
+) -> Result<Asset, MeshError> {
+    load(bytes, format, limits, Sidecars::uploaded(files))
 }
 
 fn load(
     bytes: &[u8],
     format: Format,
     limits: &Limits,
-    base_dir: Option<&Path>,
+    sidecars: Sidecars<'_>,
 ) -> Result<Asset, MeshError> {
     limits.check_bytes(bytes.len() as u64)?;
     if bytes.is_empty() {
@@ -255,13 +274,14 @@ fn load(
         });
     }
     let mut asset = match format {
-        Format::Gltf | Format::Glb => finish_asset(gltf::parse(bytes, base_dir, limits)?)?,
-        Format::Obj => finish_asset(obj::parse(bytes, base_dir, limits)?)?,
+        Format::Gltf | Format::Glb => finish_asset(gltf::parse(bytes, &sidecars, limits)?)?,
+        Format::Obj => finish_asset(obj::parse(bytes, &sidecars, limits)?)?,
         Format::Ply => Asset {
             mesh: ply::parse(bytes, limits)?,
             ..Asset::default()
         },
     };
+    asset.files = sidecars.into_read();
     let left_out = asset.mesh.triangles.len() - asset.mesh.unique_triangles().len();
     if left_out > 0 {
         asset.warnings.push(format!(
@@ -385,6 +405,7 @@ pub(crate) fn finish_asset(raw: Raw) -> Result<Asset, MeshError> {
         punctual,
         camera,
         warnings,
+        files: Vec::new(),
     })
 }
 

@@ -15,7 +15,7 @@
 //! OBJ is a simple line format, so this module reads it directly: `v` (x y z, any further
 //! numbers ignored), `vn`, and `f` with corners `v`, `v/vt`, `v//vn` or `v/vt/vn`, 1-based or
 //! negative (relative to the elements defined so far). Polygons are fan-triangulated. `usemtl`
-//! gives the faces after it their material, read from the `mtllib` files next to the OBJ
+//! gives the faces after it their material, read from the `mtllib` files beside the OBJ
 //! (`mtl.rs`; a material with `Ke` makes its faces lamps; `map_Kd` textures it). Groups,
 //! objects, smoothing groups, lines and points are ignored, so every group lands in one mesh.
 //! `vt` (u v, flipped to glTF's convention: v' = 1 − v) is read when a material has a
@@ -31,9 +31,9 @@
 use glam::{Vec2, Vec3};
 
 use std::collections::HashMap;
-use std::path::Path;
 
 use super::mtl::Library;
+use super::sidecar::Sidecars;
 use super::{FileMaterial, Limits, Raw, is_degenerate};
 use crate::error::MeshError;
 use crate::material::Material;
@@ -51,7 +51,7 @@ const NONE: u32 = u32::MAX;
 
 pub(super) fn parse(
     bytes: &[u8],
-    base_dir: Option<&Path>,
+    sidecars: &Sidecars<'_>,
     limits: &Limits,
 ) -> Result<Raw, MeshError> {
     let mut positions: Vec<Vec3> = Vec::new();
@@ -242,7 +242,7 @@ pub(super) fn parse(
     let mut materials = if material_names.is_empty() {
         Vec::new()
     } else {
-        resolve_materials(&material_names, &libraries, base_dir, &mut warnings)
+        resolve_materials(&material_names, &libraries, sidecars, &mut warnings)
     };
     if material_names.is_empty() && !libraries.is_empty() {
         warnings.push(format!(
@@ -349,38 +349,23 @@ pub(super) fn parse(
 fn resolve_materials(
     names: &[String],
     libraries: &[String],
-    base_dir: Option<&Path>,
+    sidecars: &Sidecars<'_>,
     warnings: &mut Vec<String>,
 ) -> Vec<FileMaterial> {
     let mut libs: Vec<Library> = Vec::new();
     for name in libraries {
-        // Only a file next to the OBJ (or below it) is read: never an absolute path or `..`.
-        let safe = !name.is_empty()
-            && Path::new(name)
-                .components()
-                .all(|c| matches!(c, std::path::Component::Normal(_)));
-        match base_dir {
-            None => warnings.push(format!(
-                "mtllib {name:?} was not read (an uploaded OBJ cannot name other files); its                  materials get default values"
-            )),
-            Some(_) if !safe => warnings.push(format!(
-                "mtllib {name:?} was not read (only files next to the OBJ are read)"
-            )),
-            Some(dir) => match std::fs::read(dir.join(name)) {
-                // A material library is small; a huge one is refused rather than read.
-                Ok(bytes) if bytes.len() <= 16 << 20 => {
-                    let lib = Library::parse(&bytes);
-                    for what in &lib.ignored {
-                        warnings.push(format!("{name}: {what} ignored"));
-                    }
-                    libs.push(lib);
+        // A material library is small; a huge one is refused rather than read.
+        match sidecars.read(name, 16 << 20) {
+            Ok(bytes) => {
+                let lib = Library::parse(&bytes);
+                for what in &lib.ignored {
+                    warnings.push(format!("{name}: {what} ignored"));
                 }
-                Ok(bytes) => warnings.push(format!(
-                    "mtllib {name:?} was not read: {} bytes is over 16 MiB",
-                    bytes.len()
-                )),
-                Err(e) => warnings.push(format!("mtllib {name:?} could not be read: {e}")),
-            },
+                libs.push(lib);
+            }
+            Err(e) => warnings.push(format!(
+                "mtllib {name:?} could not be read: {e}; its materials get default values"
+            )),
         }
     }
     let mut textures: HashMap<String, Option<std::sync::Arc<crate::texture::Texture>>> =
@@ -390,37 +375,23 @@ fn resolve_materials(
         if let Some(t) = textures.get(file) {
             return t.clone();
         }
-        let safe = !file.is_empty()
-            && Path::new(file)
-                .components()
-                .all(|c| matches!(c, std::path::Component::Normal(_)));
-        let read = match base_dir {
-            _ if !safe => Err("only files next to the OBJ are read".to_string()),
-            None => Err("an uploaded OBJ cannot name other files".to_string()),
-            Some(dir) => std::fs::metadata(dir.join(file))
-                .map_err(|e| e.to_string())
-                .and_then(|m| {
-                    // A PNG or JPEG of the largest texture allowed is far below 256 MiB.
-                    if m.len() > 256 << 20 {
-                        Err(format!("{} bytes is over 256 MiB", m.len()))
-                    } else {
-                        std::fs::read(dir.join(file)).map_err(|e| e.to_string())
-                    }
-                })
-                .and_then(|b| crate::texture::Texture::decode(&b, file))
-                .and_then(|t| {
-                    let n = u64::from(t.width) * u64::from(t.height);
-                    texels = texels.saturating_add(n);
-                    if texels > crate::texture::MAX_ASSET_TEXELS {
-                        Err(format!(
-                            "the asset's textures would exceed {} texels in all",
-                            crate::texture::MAX_ASSET_TEXELS
-                        ))
-                    } else {
-                        Ok(std::sync::Arc::new(t))
-                    }
-                }),
-        };
+        // A PNG or JPEG of the largest texture allowed is far below 256 MiB.
+        let read = sidecars
+            .read(file, 256 << 20)
+            .map_err(|e| e.to_string())
+            .and_then(|b| crate::texture::Texture::decode(&b, file))
+            .and_then(|t| {
+                let n = u64::from(t.width) * u64::from(t.height);
+                texels = texels.saturating_add(n);
+                if texels > crate::texture::MAX_ASSET_TEXELS {
+                    Err(format!(
+                        "the asset's textures would exceed {} texels in all",
+                        crate::texture::MAX_ASSET_TEXELS
+                    ))
+                } else {
+                    Ok(std::sync::Arc::new(t))
+                }
+            });
         let t = match read {
             Ok(t) => Some(t),
             Err(e) => {

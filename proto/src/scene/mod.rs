@@ -444,6 +444,7 @@ impl Scene {
                 punctual: points,
                 camera,
                 warnings: w,
+                files: _,
             } = asset;
             warnings.extend(w.into_iter().map(|w| format!("{}: {w}", m.path)));
             let affine = match &m.transform {
@@ -630,6 +631,7 @@ impl Scene {
             punctual,
             camera,
             mut warnings,
+            files: _,
         } = asset;
         mesh.validate()?;
         let bounds = mesh.bounds();

@@ -8,6 +8,7 @@
 //! progress or its declared length is over the limit; blocking work (mesh parsing, file and
 //! database I/O) runs on tokio's blocking pool, never on the executor; ids are 128 random bits.
 
+use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
@@ -36,6 +37,8 @@ use super::state::{Shared, blocking, check_id, lookup, status_of};
 
 /// Largest `scene` field (scene JSON).
 pub(crate) const MAX_SCENE_JSON_BYTES: u64 = 1 << 20;
+/// Most `file` fields (a mesh's material libraries, textures and buffers) in one submission.
+pub(crate) const MAX_UPLOADED_FILES: usize = 256;
 /// Largest `settings` field.
 pub(crate) const MAX_SETTINGS_JSON_BYTES: u64 = 64 << 10;
 
@@ -236,9 +239,12 @@ async fn drain(mut mp: Multipart, max: u64, mut pace: Pace) {
 async fn read_upload(mut mp: Multipart, max_mesh: u64, mut pace: Pace) -> ApiResult<Upload> {
     let mut up = Upload {
         mesh: None,
+        files: BTreeMap::new(),
         scene: None,
         settings: None,
     };
+    // The mesh and its other files together stay within the mesh limit.
+    let mut file_bytes = 0u64;
     let text = |b: Vec<u8>, what: &str| {
         String::from_utf8(b).map_err(|_| {
             ApiError::bad_request("invalid_field", format!("the `{what}` field is not UTF-8"))
@@ -269,8 +275,34 @@ async fn read_upload(mut mp: Multipart, max_mesh: u64, mut pace: Pace) -> ApiRes
                     ));
                 }
                 // The compressed size is bounded too: no upload is larger than the mesh limit.
-                let bytes = read_field(field, max_mesh, "mesh", &mut pace).await?;
+                let bytes = read_field(field, max_mesh - file_bytes, "mesh", &mut pace).await?;
+                file_bytes += bytes.len() as u64;
                 up.mesh = Some((file_name, bytes));
+            }
+            "file" => {
+                let given = field.file_name().unwrap_or_default().to_string();
+                let Some(name) = bspvt_proto::import::sidecar_name(&given) else {
+                    return Err(ApiError::bad_request(
+                        "invalid_file_name",
+                        format!(
+                            "a `file` field is named {:?}: it must be the path the mesh names it by, \
+                             relative and below the mesh (such as model.mtl or textures/wood.png)",
+                            super::error::truncate(&given, 200)
+                        ),
+                    ));
+                };
+                if up.files.contains_key(&name) {
+                    return Err(duplicate(&format!("file {name:?}")));
+                }
+                if up.files.len() >= MAX_UPLOADED_FILES {
+                    return Err(ApiError::bad_request(
+                        "too_many_files",
+                        format!("more than {MAX_UPLOADED_FILES} `file` fields"),
+                    ));
+                }
+                let bytes = read_field(field, max_mesh - file_bytes, "file", &mut pace).await?;
+                file_bytes += bytes.len() as u64;
+                up.files.insert(name, bytes);
             }
             "scene" => {
                 if up.scene.is_some() {
@@ -294,7 +326,7 @@ async fn read_upload(mut mp: Multipart, max_mesh: u64, mut pace: Pace) -> ApiRes
                 return Err(ApiError::bad_request(
                     "unknown_field",
                     format!(
-                        "unknown form field {:?} (expected mesh, scene, settings)",
+                        "unknown form field {:?} (expected mesh, file, scene, settings)",
                         super::error::truncate(other, 100)
                     ),
                 ));
@@ -532,6 +564,13 @@ pub(crate) struct SubmitForm {
     /// Required unless the scene names only `builtin:` meshes.
     #[schema(value_type = Option<String>, format = Binary)]
     mesh: Option<Vec<u8>>,
+    /// The mesh's other files, any number of fields named `file`, each with the file name the
+    /// mesh refers to it by (relative, below the mesh: `room.mtl`, `textures/wood.png`,
+    /// `scene.bin`): an OBJ's material libraries and their textures, a `.gltf`'s external
+    /// buffers and images. Only these are read; a file the mesh names but that is not uploaded
+    /// is a warning (material, texture) or an error (glTF buffer). Counted in the mesh limit.
+    #[schema(value_type = Option<Vec<String>>, format = Binary)]
+    file: Option<Vec<Vec<u8>>>,
     /// Scene JSON (docs/scene-format.md). Each non-builtin mesh path must end in the uploaded
     /// file's name (`../meshes/bunny.ply` names an upload `bunny.ply`): the server never reads
     /// a path. Without it the mesh gets the default scene (ground plane, quad light).

@@ -3,7 +3,9 @@
 //!
 //! Guarantees:
 //! - the mesh is parsed from memory by `bspvt_proto::import` under the service's [`Limits`]
-//!   (no panic, no allocation from an unchecked count, glTF external URIs refused); a `.zst`
+//!   (no panic, no allocation from an unchecked count); the files it refers to (an OBJ's
+//!   material libraries and textures, a glTF's external buffers and images) are read only from
+//!   the `file` fields uploaded with it, never from this machine's disk; a `.zst`
 //!   mesh is decompressed to at most `max_mesh_bytes` with a bounded zstd window, so a
 //!   decompression bomb is refused after reading at most that many bytes;
 //! - a scene JSON may only name `builtin:` meshes and the uploaded file: a mesh path names the
@@ -14,9 +16,10 @@
 //!   (tested below), so the service bakes what the offline `bspvt-server bake` bakes;
 //! - the stored form ([`encode_scene`]) round-trips every bit (postcard, no JSON floats).
 
+use std::collections::BTreeMap;
 use std::io::Read;
 
-use bspvt_proto::import::{Asset, Format, Limits, load_asset_bytes};
+use bspvt_proto::import::{Asset, Format, Limits, load_asset_uploaded};
 use bspvt_proto::scene::SceneFile;
 use bspvt_proto::{BakeSettings, Scene, SceneError};
 
@@ -27,6 +30,9 @@ use super::memory::{Reservation, parse_bytes};
 pub(crate) struct Upload {
     /// The `mesh` field: its file name and bytes as received.
     pub mesh: Option<(String, Vec<u8>)>,
+    /// The `file` fields: the mesh's other files, by their
+    /// [`bspvt_proto::import::sidecar_name`].
+    pub files: BTreeMap<String, Vec<u8>>,
     /// The `scene` field (scene JSON).
     pub scene: Option<String>,
     /// The `settings` field (bake settings JSON, replaces the scene's `bake`).
@@ -77,6 +83,11 @@ pub(crate) fn fingerprint(up: &Upload) -> String {
         }
         None => put(b"no mesh"),
     }
+    for (name, bytes) in &up.files {
+        put(b"file");
+        put(name.as_bytes());
+        put(bytes);
+    }
     for (field, v) in [("scene", &up.scene), ("settings", &up.settings)] {
         put(field.as_bytes());
         match v {
@@ -101,10 +112,17 @@ fn file_name(path: &str) -> &str {
 /// allocated.
 pub(crate) fn prepare(up: Upload, lim: &InputLimits, mem: &mut Reservation) -> ApiResult<Prepared> {
     let upload_bytes = up.mesh.as_ref().map_or(0, |m| m.1.len() as u64)
+        + up.files.values().map(|f| f.len() as u64).sum::<u64>()
         + up.scene.as_ref().map_or(0, |s| s.len() as u64)
         + up.settings.as_ref().map_or(0, |s| s.len() as u64);
     let mesh = match up.mesh {
-        Some((name, bytes)) => Some(load_upload(&name, bytes, &lim.mesh, mem)?),
+        Some((name, bytes)) => Some(load_upload(&name, bytes, &up.files, &lim.mesh, mem)?),
+        None if !up.files.is_empty() => {
+            return Err(ApiError::bad_request(
+                "missing_field",
+                "the form has `file` fields but no `mesh` file they belong to",
+            ));
+        }
         None => None,
     };
     let (mut scene, mut source) = match (up.scene, mesh) {
@@ -168,6 +186,7 @@ pub(crate) fn prepare(up: Upload, lim: &InputLimits, mem: &mut Reservation) -> A
 fn load_upload(
     name: &str,
     bytes: Vec<u8>,
+    files: &BTreeMap<String, Vec<u8>>,
     lim: &Limits,
     mem: &mut Reservation,
 ) -> ApiResult<(String, Asset)> {
@@ -190,7 +209,12 @@ fn load_upload(
     let format = Format::from_name(&inner)?;
     mem.grow_to(mem.bytes() + parse_bytes(bytes.len() as u64))
         .map_err(|r| ApiError::memory("parsing this mesh", r))?;
-    let asset = load_asset_bytes(&bytes, format, lim)?;
+    let mut asset = load_asset_uploaded(&bytes, format, lim, files)?;
+    for unused in files.keys().filter(|f| !asset.files.contains(f)) {
+        asset.warnings.push(format!(
+            "the uploaded file {unused:?} was not used: {inner} does not refer to it"
+        ));
+    }
     Ok((inner, asset))
 }
 
@@ -380,6 +404,7 @@ mod tests {
         let up = prepare(
             Upload {
                 mesh: Some(("some/dir/tri.obj".into(), OBJ.as_bytes().to_vec())),
+                files: BTreeMap::new(),
                 scene: Some(json.into()),
                 settings: None,
             },
@@ -401,6 +426,7 @@ mod tests {
         let up = prepare(
             Upload {
                 mesh: None,
+                files: BTreeMap::new(),
                 scene: Some(bspvt_proto::builtin::DYNAMIC_JSON.into()),
                 settings: None,
             },
@@ -426,6 +452,7 @@ mod tests {
         let up = prepare(
             Upload {
                 mesh: Some(("tri.OBJ.zst".into(), z)),
+                files: BTreeMap::new(),
                 scene: None,
                 settings: Some(r#"{"face_res": 8}"#.into()),
             },
@@ -450,6 +477,7 @@ mod tests {
             prepare(
                 Upload {
                     mesh: Some(("tri.obj".into(), OBJ.as_bytes().to_vec())),
+                    files: BTreeMap::new(),
                     scene: Some(format!(
                         r#"{{"meshes": {meshes}, "lights": [{{"vertices": [[-1,3,-1],[1,3,-1],[1,3,1],[-1,3,1]],
                             "radiance": [1,1,1], "region": {{"min": [-2,2,-2], "max": [2,4,2]}}}}]}}"#
@@ -477,11 +505,30 @@ mod tests {
         assert_eq!(
             fingerprint(&Upload {
                 mesh: None,
+                files: BTreeMap::new(),
                 scene: Some("a".into()),
                 settings: None,
             }),
             fingerprint(&Upload {
                 mesh: None,
+                files: BTreeMap::new(),
+                scene: Some("a".into()),
+                settings: None,
+            })
+        );
+        // A mesh's other files are part of the submission.
+        let with = |name: &str| Upload {
+            mesh: None,
+            files: BTreeMap::from([(name.to_string(), b"x".to_vec())]),
+            scene: Some("a".into()),
+            settings: None,
+        };
+        assert_ne!(fingerprint(&with("a.mtl")), fingerprint(&with("b.mtl")));
+        assert_ne!(
+            fingerprint(&with("a.mtl")),
+            fingerprint(&Upload {
+                mesh: None,
+                files: BTreeMap::new(),
                 scene: Some("a".into()),
                 settings: None,
             })
@@ -489,11 +536,13 @@ mod tests {
         assert_ne!(
             fingerprint(&Upload {
                 mesh: None,
+                files: BTreeMap::new(),
                 scene: Some("ab".into()),
                 settings: None,
             }),
             fingerprint(&Upload {
                 mesh: None,
+                files: BTreeMap::new(),
                 scene: Some("a".into()),
                 settings: Some("b".into()),
             })
@@ -505,6 +554,7 @@ mod tests {
         let err = prepare(
             Upload {
                 mesh: None,
+                files: BTreeMap::new(),
                 scene: Some(r#"{"meshes": [{"path": "/etc/passwd.obj"}], "lights": []}"#.into()),
                 settings: None,
             },
@@ -525,6 +575,7 @@ mod tests {
         let err = prepare(
             Upload {
                 mesh: Some(("x.obj.zst".into(), bomb)),
+                files: BTreeMap::new(),
                 scene: None,
                 settings: None,
             },

@@ -36,9 +36,8 @@ impl Light {
         }
     }
 
-    /// [`Self::from_scene`] with the light's texture loaded: the asset's own image (a glTF
-    /// lamp's emissive texture) when it has one, else the file it names (paths are resolved
-    /// by the scene loader).
+    /// [`Self::from_scene`] with the light's texture prefiltered from its image (the file its
+    /// `texture` names, or a glTF lamp's emissive texture, decoded by the scene loader).
     pub fn load(l: &PolygonLight) -> Result<Light> {
         let mut light = Light::from_scene(l);
         if let Some(image) = &l.image {
@@ -48,7 +47,10 @@ impl Light {
                 &image.texels,
             )?));
         } else if let Some(t) = &l.texture {
-            light.texture = Some(Arc::new(load_texture(std::path::Path::new(t))?));
+            anyhow::bail!(
+                "the light's texture {t:?} was not decoded (scenes opened by the scene loader \
+                 or served by a service carry it)"
+            );
         }
         Ok(light)
     }
@@ -101,17 +103,4 @@ impl Light {
         }
         0.5 * a.length()
     }
-}
-
-/// Reads a light texture: a PNG (sRGB-decoded), EXR or HDR image, prefiltered
-/// ([`LightTexture::from_texels`]). The file reading lives here, not in the kernel.
-fn load_texture(path: &std::path::Path) -> anyhow::Result<LightTexture> {
-    use anyhow::Context;
-    let img = image::open(path)
-        .with_context(|| format!("cannot read light texture {}", path.display()))?
-        .into_rgb32f();
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    let texels: Vec<[f32; 3]> = img.pixels().map(|p| p.0).collect();
-    LightTexture::from_texels(w, h, &texels)
-        .with_context(|| format!("light texture {}", path.display()))
 }

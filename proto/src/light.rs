@@ -28,9 +28,10 @@ pub struct PolygonLight {
     /// reach this box can never see the light, so the bake treats them as "don't care".
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub region: Option<Region>,
-    /// The texture itself, when it comes from an asset rather than a file (a glTF lamp's
-    /// emissive texture, resampled onto the polygon's parametrisation); wins over `texture`.
-    /// Not written in scene files; the stored scene carries it (`api`, version 5).
+    /// The texture's texels: the file `texture` names, decoded by the scene loader
+    /// (`SceneFile::load_light_textures`), or a glTF lamp's emissive texture resampled onto the
+    /// polygon's parametrisation. Not written in scene files; the stored scene carries it
+    /// (`api`, version 5), so a client never reads `texture`'s path.
     #[serde(skip)]
     pub image: Option<Arc<LightImage>>,
 }

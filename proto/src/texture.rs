@@ -233,6 +233,70 @@ impl std::fmt::Debug for LightImage {
 }
 
 impl LightImage {
+    /// A light texture file as the light's image: PNG or JPEG (sRGB → linear, IEC 61966-2-1,
+    /// as every colour texture here), or OpenEXR or Radiance HDR (linear as stored), within the
+    /// texture limits. A NaN or infinite texel is refused; a negative one (an EXR's filter
+    /// ringing) is clamped to 0.
+    pub fn decode(bytes: &[u8]) -> Result<LightImage, String> {
+        let format = image::guess_format(bytes)
+            .map_err(|_| "not a PNG, JPEG, OpenEXR or Radiance HDR image".to_string())?;
+        if matches!(format, image::ImageFormat::Png | image::ImageFormat::Jpeg) {
+            let t = Texture::decode(bytes, "")?;
+            let lut = srgb_table();
+            return Ok(LightImage {
+                width: t.width,
+                height: t.height,
+                texels: t
+                    .rgba
+                    .chunks_exact(4)
+                    .map(|c| [lut[c[0] as usize], lut[c[1] as usize], lut[c[2] as usize]])
+                    .collect(),
+            });
+        }
+        if !matches!(
+            format,
+            image::ImageFormat::OpenExr | image::ImageFormat::Hdr
+        ) {
+            return Err(format!(
+                "{format:?} images are not read (PNG, JPEG, OpenEXR or Radiance HDR)"
+            ));
+        }
+        let mut reader = image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(MAX_TEXTURE_SIDE);
+        limits.max_image_height = Some(MAX_TEXTURE_SIDE);
+        limits.max_alloc = Some(MAX_TEXTURE_TEXELS * 16);
+        reader.limits(limits);
+        let img = reader.decode().map_err(|e| match e {
+            image::ImageError::Limits(_) => format!(
+                "over the limit ({MAX_TEXTURE_SIDE} texels per side, {MAX_TEXTURE_TEXELS} in all)"
+            ),
+            e => e.to_string(),
+        })?;
+        let (width, height) = (img.width(), img.height());
+        if width == 0 || height == 0 || u64::from(width) * u64::from(height) > MAX_TEXTURE_TEXELS {
+            return Err(format!(
+                "{width}×{height} texels is empty or over the limit"
+            ));
+        }
+        let mut texels = Vec::with_capacity(width as usize * height as usize);
+        for (i, p) in img.into_rgb32f().pixels().enumerate() {
+            if !p.0.iter().all(|c| c.is_finite()) {
+                return Err(format!(
+                    "texel ({}, {}) is NaN or infinite",
+                    i % width as usize,
+                    i / width as usize
+                ));
+            }
+            texels.push(p.0.map(|c| c.max(0.0)));
+        }
+        Ok(LightImage {
+            width,
+            height,
+            texels,
+        })
+    }
+
     /// Whether the size matches the data and every texel is finite and ≥ 0.
     pub fn is_valid(&self) -> bool {
         self.width > 0

@@ -240,7 +240,7 @@ fn corpus(done_id: &str) -> Vec<Case> {
             ),
         ),
         c(
-            "files without a mesh",
+            "a file but neither mesh nor scene",
             400,
             Some("missing_field"),
             form(vec![("file", Some("t.mtl"), b"newmtl a".to_vec())], key_ok),

@@ -1,6 +1,7 @@
 //! The form a local scene is submitted as (`POST /v1/scenes`, multipart): the scene JSON, its
-//! one mesh file, and the mesh's other files — an OBJ's material libraries and textures, a
-//! `.gltf`'s external buffers and images — which the service reads only from the upload.
+//! one mesh file, the mesh's other files — an OBJ's material libraries and textures, a
+//! `.gltf`'s external buffers and images — and its lights' texture files, which the service
+//! reads only from the upload.
 //! Which other files a mesh needs is learnt by loading it here, with the same importer the
 //! service runs, so exactly the files it reads are sent.
 
@@ -49,9 +50,32 @@ impl Form {
                                 files.len()
                             );
                         }
+                        let dir = path.parent().unwrap_or(Path::new("."));
                         if let Some(m) = files.into_iter().next() {
-                            let mesh_path = path.parent().unwrap_or(Path::new(".")).join(&m.path);
-                            m.path = push_mesh(&mut parts, &mesh_path)?;
+                            m.path = push_mesh(&mut parts, &dir.join(&m.path))?;
+                        }
+                        // Light textures go by their file name, as the service matches them.
+                        for t in file.lights.iter().filter_map(|l| l.texture.as_deref()) {
+                            let name = Path::new(t)
+                                .file_name()
+                                .and_then(|n| n.to_str())
+                                .with_context(|| format!("light texture {t:?} has no file name"))?
+                                .to_string();
+                            check_name(&name)?;
+                            let data = std::fs::read(dir.join(t))
+                                .with_context(|| format!("cannot read light texture {t}"))?;
+                            match parts.iter().find(|p| p.file_name.as_deref() == Some(&name)) {
+                                Some(p) if p.data == data => {}
+                                Some(_) => bail!(
+                                    "{s}: two different files are named {name:?} (light \
+                                     textures and the mesh's files go up by file name)"
+                                ),
+                                None => parts.push(Part {
+                                    name: "file",
+                                    file_name: Some(name),
+                                    data,
+                                }),
+                            }
                         }
                         file
                     }

@@ -12,6 +12,7 @@ use crate::error::SceneError;
 use crate::import::Asset;
 use crate::mesh::{Aabb, Mesh};
 use crate::motion::{Motion, MovingPart, Transform};
+use crate::texture::LightImage;
 
 pub mod builtin;
 
@@ -409,6 +410,14 @@ impl Scene {
         if let Some(e) = &mut file.environment {
             e.path = base_dir.join(&e.path).to_string_lossy().into_owned();
         }
+        file.load_light_textures(|path| {
+            let path = base_dir.join(path);
+            let len = std::fs::metadata(&path).map_err(|e| e.to_string())?.len();
+            if len > MAX_LIGHT_TEXTURE_FILE_BYTES {
+                return Err(format!("{len} bytes is over the limit"));
+            }
+            std::fs::read(&path).map_err(|e| e.to_string())
+        })?;
         Scene::assemble(file, parts)
     }
 
@@ -700,6 +709,33 @@ impl Scene {
     /// Loads `path` as an asset given alone ([`Scene::from_asset`]).
     pub fn from_mesh_path(path: &Path) -> Result<Scene, SceneError> {
         Scene::from_asset(crate::import::load_asset(path)?)
+    }
+}
+
+/// Largest light texture file read (an 8-bit PNG of the largest allowed texture is far below).
+pub const MAX_LIGHT_TEXTURE_FILE_BYTES: u64 = 256 << 20;
+
+impl SceneFile {
+    /// Decodes the `texture` of each light that names one into its `image`, reading the file
+    /// through `read` (a path relative to the scene file: from disk beside it, or from an
+    /// upload's files), so the scene carries the texels wherever it goes (a service's stored
+    /// scene, every client). A texture that cannot be read or decoded is an error naming the
+    /// light.
+    pub fn load_light_textures(
+        &mut self,
+        read: impl Fn(&str) -> Result<Vec<u8>, String>,
+    ) -> Result<(), SceneError> {
+        for (i, l) in self.lights.iter_mut().enumerate() {
+            if let (Some(path), None) = (&l.texture, &l.image) {
+                let image = read(path)
+                    .and_then(|bytes| LightImage::decode(&bytes))
+                    .map_err(|e| {
+                        SceneError::Invalid(format!("light {i}: texture {path:?}: {e}"))
+                    })?;
+                l.image = Some(std::sync::Arc::new(image));
+            }
+        }
+        Ok(())
     }
 }
 

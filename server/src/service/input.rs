@@ -117,17 +117,19 @@ pub(crate) fn prepare(up: Upload, lim: &InputLimits, mem: &mut Reservation) -> A
         + up.settings.as_ref().map_or(0, |s| s.len() as u64);
     let mesh = match up.mesh {
         Some((name, bytes)) => Some(load_upload(&name, bytes, &up.files, &lim.mesh, mem)?),
-        None if !up.files.is_empty() => {
-            return Err(ApiError::bad_request(
-                "missing_field",
-                "the form has `file` fields but no `mesh` file they belong to",
-            ));
-        }
         None => None,
     };
+    // The uploaded files something reads: the mesh's, and the scene's light textures.
+    let mut used: Vec<String> = mesh.as_ref().map_or(Vec::new(), |m| m.1.files.clone());
     let (mut scene, mut source) = match (up.scene, mesh) {
         (Some(json), mesh) => {
             let file: SceneFile = serde_json::from_str(&json).map_err(SceneError::from)?;
+            used.extend(
+                file.lights
+                    .iter()
+                    .filter_map(|l| l.texture.as_deref())
+                    .map(|t| file_name(t).to_string()),
+            );
             let source = match &mesh {
                 Some((name, m)) => format!(
                     "scene JSON with mesh {name} ({} vertices)",
@@ -135,7 +137,7 @@ pub(crate) fn prepare(up: Upload, lim: &InputLimits, mem: &mut Reservation) -> A
                 ),
                 None => "scene JSON".to_string(),
             };
-            (compose(file, mesh.as_ref())?, source)
+            (compose(file, mesh.as_ref(), &up.files)?, source)
         }
         (None, Some((name, m))) => {
             let source = format!(
@@ -156,6 +158,11 @@ pub(crate) fn prepare(up: Upload, lim: &InputLimits, mem: &mut Reservation) -> A
             ));
         }
     };
+    for unused in up.files.keys().filter(|f| !used.contains(f)) {
+        scene.warnings.push(format!(
+            "the uploaded file {unused:?} was not used: neither the mesh nor a light refers to it"
+        ));
+    }
     if let Some(json) = up.settings {
         scene.bake = serde_json::from_str::<BakeSettings>(&json).map_err(|e| {
             ApiError::unprocessable("invalid_settings", format!("`settings` field: {e}"))
@@ -209,12 +216,7 @@ fn load_upload(
     let format = Format::from_name(&inner)?;
     mem.grow_to(mem.bytes() + parse_bytes(bytes.len() as u64))
         .map_err(|r| ApiError::memory("parsing this mesh", r))?;
-    let mut asset = load_asset_uploaded(&bytes, format, lim, files)?;
-    for unused in files.keys().filter(|f| !asset.files.contains(f)) {
-        asset.warnings.push(format!(
-            "the uploaded file {unused:?} was not used: {inner} does not refer to it"
-        ));
-    }
+    let asset = load_asset_uploaded(&bytes, format, lim, files)?;
     Ok((inner, asset))
 }
 
@@ -255,8 +257,22 @@ fn decompress(data: &[u8], max: u64, mem: &mut Reservation) -> ApiResult<Vec<u8>
     Ok(out)
 }
 
-/// [`Scene::from_file`] for an upload: `builtin:` meshes and the uploaded mesh only.
-fn compose(file: SceneFile, upload: Option<&(String, Asset)>) -> ApiResult<Scene> {
+/// [`Scene::from_file`] for an upload: `builtin:` meshes and the uploaded mesh only, light
+/// textures from the uploaded files (by the last component of their path, as meshes).
+fn compose(
+    mut file: SceneFile,
+    upload: Option<&(String, Asset)>,
+    files: &BTreeMap<String, Vec<u8>>,
+) -> ApiResult<Scene> {
+    file.load_light_textures(|path| {
+        let name = file_name(path);
+        files.get(name).cloned().ok_or_else(|| {
+            format!(
+                "it was not uploaded (send it as a `file` field named {:?})",
+                super::error::truncate(name, 200)
+            )
+        })
+    })?;
     let mut parts = Vec::with_capacity(file.meshes.len());
     // The scene path that named the upload first.
     let mut named: Option<String> = None;

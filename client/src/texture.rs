@@ -90,6 +90,23 @@ impl LightTexture {
         Ok(LightTexture { levels })
     }
 
+    /// The pyramid as the GPU shaders read it (`common.wgsl`, `tex_*`), one vec4 each: [0] =
+    /// (levels, size) and [1 + l] = (width, height, offset) of level l, as u32 bits; then the
+    /// texels of every level, row-major (f32: the f64 pyramid rounded once).
+    pub(crate) fn gpu_words(&self) -> Vec<[f32; 4]> {
+        let bits = |x: usize| f32::from_bits(x as u32);
+        let mut out = vec![[bits(self.levels.len()), bits(self.size()), 0.0, 0.0]];
+        let mut offset = 1 + self.levels.len();
+        for l in &self.levels {
+            out.push([bits(l.w), bits(l.h), bits(offset), 0.0]);
+            offset += l.texels.len();
+        }
+        for l in &self.levels {
+            out.extend(l.texels.iter().map(|t| t.as_vec3().extend(0.0).to_array()));
+        }
+        out
+    }
+
     /// Resolution of the finest level (the larger side).
     pub(crate) fn size(&self) -> usize {
         self.levels[0].w.max(self.levels[0].h)

@@ -1,6 +1,6 @@
 //! GPU frames (any wgpu adapter; lavapipe in CI) against the CPU's frames of the same camera:
 //! per vertex and per pixel, unshadowed LTC, a streamed partial bake (uploaded in part, then
-//! the rest incrementally), on the built-in plate-small and on a shared mesh. The tolerance
+//! the rest incrementally), a textured light, on the built-in plate-small and on a shared mesh. The tolerance
 //! is the one stated in docs/gpu.md. Skips (with a message) where no adapter exists.
 //!
 //! The frames are deferred (a visibility buffer, then a compute pass per pixel): the earlier
@@ -94,7 +94,7 @@ fn check_scene(gpu: &Gpu, name: &str, scene: &Scene, w: u32, h: u32) {
     let b = bake(scene);
     let codec = b.header.codec();
     let r = Renderer::new(scene, w, h);
-    let light = Light::from_scene(&scene.lights[0]);
+    let light = Light::load(&scene.lights[0]).unwrap();
     let mut frames = GpuFrames::new(gpu, scene, 1).unwrap();
     // A streamed partial bake first: every other chunk of 64 vertices present.
     let present: Vec<bool> = (0..b.trees.len()).map(|v| (v / 64) % 2 == 0).collect();
@@ -132,6 +132,32 @@ fn gpu_frames_equal_cpu_frames_on_plate_small() {
     let Some((gpu, _one)) = gpu() else { return };
     let scene = bspvt_proto::builtin::scene("plate-small").unwrap();
     check_scene(gpu, "plate-small", &scene, 128, 96);
+}
+
+/// A textured light [Heitz16 §5.3] (a coloured gradient with a bright band, prefiltered): the
+/// GPU fetches it per piece and per pixel as the CPU does.
+#[test]
+fn gpu_frames_equal_cpu_frames_with_a_textured_light() {
+    let Some((gpu, _one)) = gpu() else { return };
+    let mut scene = bspvt_proto::builtin::scene("plate-small").unwrap();
+    let n = 32u32;
+    let texels = (0..n * n)
+        .map(|i| {
+            let (x, y) = ((i % n) as f32 / 31.0, (i / n) as f32 / 31.0);
+            let band = if (10..14).contains(&(i % n)) {
+                3.0
+            } else {
+                0.5
+            };
+            [band * x, 0.1 + y, band * (1.0 - x)]
+        })
+        .collect();
+    scene.lights[0].image = Some(std::sync::Arc::new(bspvt_proto::texture::LightImage {
+        width: n,
+        height: n,
+        texels,
+    }));
+    check_scene(gpu, "plate-small, textured light", &scene, 128, 96);
 }
 
 #[test]

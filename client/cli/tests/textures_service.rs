@@ -141,11 +141,14 @@ fn a_mesh_is_submitted_with_the_files_it_reads() {
     // (sRGB → linear), the form uploads it by file name, and the served scene carries it.
     let mut grey = Vec::new();
     image::RgbImage::from_fn(2, 1, |x, _| image::Rgb([if x == 0 { 128 } else { 255 }; 3]))
-        .write_to(&mut std::io::Cursor::new(&mut grey), image::ImageFormat::Png)
+        .write_to(
+            &mut std::io::Cursor::new(&mut grey),
+            image::ImageFormat::Png,
+        )
         .expect("png");
     std::fs::write(split.join("tex/light.png"), &grey).expect("png");
-    let mut file: serde_json::Value = serde_json::from_str(bspvt_proto::builtin::DYNAMIC_JSON)
-        .expect("a built-in scene file");
+    let mut file: serde_json::Value =
+        serde_json::from_str(bspvt_proto::builtin::DYNAMIC_JSON).expect("a built-in scene file");
     file["lights"][0]["texture"] = "tex/light.png".into();
     let scene_path = split.join("lit.json");
     std::fs::write(&scene_path, serde_json::to_vec(&file).expect("json")).expect("scene");
@@ -154,11 +157,21 @@ fn a_mesh_is_submitted_with_the_files_it_reads() {
     let stored = get(&a, &srv.url(&format!("/v1/scenes/{id}/scene")));
     let served = bspvt_proto::api::decode_scene(&stored.body).expect("decodes");
     let offline = bspvt_client::scene::open(Some(&scene_arg), None).expect("offline");
-    let image = offline.lights[0].image.as_ref().expect("the texture, decoded");
+    let image = offline.lights[0]
+        .image
+        .as_ref()
+        .expect("the texture, decoded");
     // IEC 61966-2-1: 128/255 → 0.2158605.
-    assert!((image.texels[0][0] - 0.215_860_5).abs() < 1e-6, "{:?}", image.texels);
+    assert!(
+        (image.texels[0][0] - 0.215_860_5).abs() < 1e-6,
+        "{:?}",
+        image.texels
+    );
     assert_eq!(image.texels[1], [1.0; 3]);
-    assert_eq!(served.lights, offline.lights, "the served light carries its texture");
+    assert_eq!(
+        served.lights, offline.lights,
+        "the served light carries its texture"
+    );
     Light::load(&served.lights[0]).expect("the served light loads anywhere");
     bspvt_tests::service::delete(&a, &srv.url(&format!("/v1/scenes/{id}")), None);
 }

@@ -1,7 +1,7 @@
 // Shared by the compute and the raster shaders: the LTC table lookup [Heitz16], the stable
-// polygon integral of client/src/ltc/polygon.rs and the light's directions, in f32. Each
-// shader defines the accessors ltc_size, ltc_a, ltc_b, light_count, light_vertex and
-// light_normal over its own bindings.
+// polygon integral of client/src/ltc/polygon.rs, the light's directions and its texture, in
+// f32. Each shader defines the accessors ltc_size, ltc_a, ltc_b, light_count, light_vertex,
+// light_normal, light_textured and light_tex over its own bindings.
 //
 // Stability as on the CPU: θ = atan2(|p × q|, p·q), p × q computed as p × (q − p), and each
 // polygon scaled by a power of two (exact) before the edge sum. Non-finite values are tested on
@@ -27,6 +27,10 @@ fn finite3(v: vec3f) -> bool {
 // One LTC: world → cosine space (M⁻¹ · to_local) and the BRDF integrals.
 struct Ltc {
     m_inv: mat3x3f,
+    // local ← cosine space up to a scale (the inverse of m_inv, formed without inverting:
+    // rows (m11, 0, m13), (0, m22, 0), (m31, 0, 1) in the basis X, Y, Z), its determinant.
+    m: mat3x3f,
+    det: f32,
     magnitude: f32,
     fresnel: f32,
 }
@@ -68,6 +72,10 @@ fn ltc_lookup(alpha_in: f32, theta_in: f32) -> Ltc {
     let r2 = k * (m11 * z - m31 * x);
     var out: Ltc;
     out.m_inv = transpose(mat3x3f(r0, vec3f(0.0, 1.0, 0.0), r2));
+    let fwd = transpose(mat3x3f(vec3f(m11, 0.0, m13), vec3f(0.0, m22, 0.0),
+        vec3f(m31, 0.0, 1.0)));
+    out.m = mat3x3f(x, vec3f(0.0, 1.0, 0.0), z) * fwd;
+    out.det = m22 * det;
     out.magnitude = max(b.y, 0.0);
     out.fresnel = clamp(b.z, 0.0, out.magnitude);
     return out;
@@ -104,9 +112,23 @@ fn edge(p: vec3f, q: vec3f) -> f32 {
     return atan2(s, dot(p, q)) * c.z / s;
 }
 
+// θ (p × q) / |p × q| for one edge: a term of the vector form factor (ltc::polygon::
+// vector_form_factor).
+fn edge_vec(p: vec3f, q: vec3f) -> vec3f {
+    let c = cross(p, q - p);
+    let s = length(c);
+    if !(s > 0.0) || !finite(s) {
+        return vec3f(0.0);
+    }
+    return c * (atan2(s, dot(p, q)) / s);
+}
+
 // Scratch polygons of the integral (private: one per invocation).
 var<private> ig_t: array<vec3f, MAXV>;
 var<private> ig_c: array<vec3f, MAXV>;
+// For a textured light: the direction of the last integrated polygon's vector form factor in
+// the lobe's space (unnormalised, z ≥ 0), where the texture is fetched [Heitz16 §5.3].
+var<private> ig_dir: vec3f;
 
 // ∫ over the polygon `poly[0..count]` of the LTC with inverse matrix `m` (normalised): the
 // polygon transformed by M⁻¹, scaled by a power of two, clipped to z ≥ 0 and integrated
@@ -170,6 +192,8 @@ fn integrate_poly(m: mat3x3f, count: u32) -> f32 {
     for (var i = 1u; i < k; i++) {
         width = max(width, length(normalize(ig_c[i]) - u0));
     }
+    let want_dir = light_textured();
+    var dir = vec3f(0.0);
     var v: f32;
     if width < SMALL {
         var sum = 0.0;
@@ -178,7 +202,11 @@ fn integrate_poly(m: mat3x3f, count: u32) -> f32 {
             let c = normalize(ig_c[i]);
             let num = dot(u0, cross(b - u0, c - u0));
             let den = 1.0 + dot(u0, b) + dot(b, c) + dot(c, u0);
-            sum += 2.0 * atan2(num, den) * normalize(u0 + b + c).z;
+            // Each triangle's solid angle times its centroid's direction: the fan's vector
+            // form factor (its z is the integral).
+            let omega = 2.0 * atan2(num, den) * normalize(u0 + b + c);
+            sum += omega.z;
+            dir += omega;
             b = c;
         }
         v = abs(sum) / PI;
@@ -188,10 +216,14 @@ fn integrate_poly(m: mat3x3f, count: u32) -> f32 {
         for (var i = 0u; i < k; i++) {
             let q = ig_c[i];
             sum += edge(p, q);
+            if want_dir {
+                dir += edge_vec(p, q);
+            }
             p = q;
         }
         v = abs(sum) / (2.0 * PI);
     }
+    ig_dir = select(dir, -dir, dir.z < 0.0);
     if !finite(v) {
         return 0.0;
     }
@@ -272,3 +304,210 @@ fn light_directions(p: vec3f, n: vec3f) -> u32 {
     return k;
 }
 
+
+// Textured lights [Heitz16 §5.3] (client/src/texture.rs): the prefiltered pyramid read through
+// light_tex (LightTexture::gpu_words: [0] = (levels, size), [1 + l] = (width, height, offset)
+// of level l as u32 bits, then the texels). A lobe fetches it once per piece where its vector
+// form factor meets the light's plane, at the level of the lobe's footprint, bounded by the
+// piece's own extent (LightFrame::piece_lod).
+
+fn tex_word(i: u32) -> vec3u {
+    let w = light_tex(i);
+    return vec3u(bitcast<u32>(w.x), bitcast<u32>(w.y), bitcast<u32>(w.z));
+}
+
+fn tex_texel(h: vec3u, x: i32, y: i32) -> vec3f {
+    let xi = u32(clamp(x, 0, i32(h.x) - 1));
+    let yi = u32(clamp(y, 0, i32(h.y) - 1));
+    return light_tex(h.z + yi * h.x + xi).xyz;
+}
+
+// Level::bilinear: clamp to edge, v down the image.
+fn tex_bilinear(l: u32, uv_in: vec2f) -> vec3f {
+    let h = tex_word(1u + l);
+    // Beyond a texture's width outside [0, 1], every tap is an edge texel: clamping there
+    // keeps the conversion to integers in range and changes nothing.
+    let uv = clamp(uv_in, vec2f(-1.0), vec2f(2.0));
+    let x = uv.x * f32(h.x) - 0.5;
+    let y = uv.y * f32(h.y) - 0.5;
+    let x0 = floor(x);
+    let y0 = floor(y);
+    let fx = x - x0;
+    let fy = y - y0;
+    let xi = i32(x0);
+    let yi = i32(y0);
+    let top = mix(tex_texel(h, xi, yi), tex_texel(h, xi + 1, yi), fx);
+    let bottom = mix(tex_texel(h, xi, yi + 1), tex_texel(h, xi + 1, yi + 1), fx);
+    return mix(top, bottom, fy);
+}
+
+// LightTexture::sample: trilinear at level `lod` (clamped; NaN and +∞ → the coarsest).
+fn tex_sample(uv_in: vec2f, lod_in: f32) -> vec3f {
+    let levels = tex_word(0u).x;
+    let top = f32(levels - 1u);
+    var lod = clamp(lod_in, 0.0, top);
+    if !finite(lod_in) {
+        lod = select(top, 0.0, lod_in < 0.0);
+    }
+    let uv = select(vec2f(0.5), uv_in, finite(uv_in.x) && finite(uv_in.y));
+    let l0 = min(u32(floor(lod)), levels - 1u);
+    let f = lod - f32(l0);
+    let a = tex_bilinear(l0, uv);
+    if f > 0.0 && l0 + 1u < levels {
+        return mix(a, tex_bilinear(l0 + 1u, uv), f);
+    }
+    return a;
+}
+
+// The texture's mean: the coarsest level's one texel.
+fn tex_average() -> vec3f {
+    return light_tex(tex_word(tex_word(0u).x).z).xyz;
+}
+
+// Coordinates of q in the basis (e1, e2) of a plane (texture::uv_in).
+fn plane_uv(e1: vec3f, e2: vec3f, q: vec3f) -> vec2f {
+    let d11 = dot(e1, e1);
+    let d12 = dot(e1, e2);
+    let d22 = dot(e2, e2);
+    let det = d11 * d22 - d12 * d12;
+    if !(abs(det) > 0.0) || !finite(det) {
+        return vec2f(0.5);
+    }
+    let a = dot(e1, q);
+    let b = dot(e2, q);
+    return vec2f((d22 * a - d12 * b) / det, (d11 * b - d12 * a) / det);
+}
+
+// The light's frame from p (LightFrame::new): p₀ − p, p₁ − p₀, pₙ₋₁ − p₀, all scaled by one
+// power of two to magnitudes below 1 (exact; what is computed from them does not depend on
+// their common scale, and f32 keeps its range for any scene's units).
+struct LightPlane {
+    o: vec3f,
+    e1: vec3f,
+    e2: vec3f,
+}
+
+fn light_plane(p: vec3f) -> LightPlane {
+    let n = light_count();
+    let v0 = light_vertex(0u);
+    var l: LightPlane;
+    l.o = v0 - p;
+    l.e1 = light_vertex(1u) - v0;
+    l.e2 = light_vertex(n - 1u) - v0;
+    let a = max(abs(l.o), max(abs(l.e1), abs(l.e2)));
+    let big = max(a.x, max(a.y, a.z));
+    if big > 0.0 && finite(big) {
+        let scale = ldexp(1.0, -frexp(big).exp);
+        l.o *= scale;
+        l.e1 *= scale;
+        l.e2 *= scale;
+    }
+    return l;
+}
+
+// PlaneLookup [Heitz16 §5.3], evaluated in world space: the ray along a lobe's vector form
+// factor meets the light's plane at the same (u, v) in either space (a linear map keeps
+// coordinates on a plane), and in f32 the world is the well-conditioned side (the cosine space
+// of α = 1e-4 stretches the plane by 1/α², and (u, v) solved there loses every digit).
+// `fwd`: world ← the lobe's space (up to a scale); `lod`: the footprint's level log₂(d · size),
+// d = distance / √area in the lobe's space = |dist| |det A|^½ / |Aᵀ ortho|^{3/2} (A = the
+// lobe's local ← cosine map; ortho and dist the plane's in the local frame).
+struct Lookup {
+    fwd: mat3x3f,
+    lod: f32,
+}
+
+// `frame`: world → local; `a`, `det_a`: local ← the lobe's space and its determinant.
+fn plane_lookup(frame: mat3x3f, a: mat3x3f, det_a: f32, l: LightPlane) -> Lookup {
+    var k: Lookup;
+    k.fwd = transpose(frame) * a;
+    let ortho = cross(l.e1, l.e2);
+    let dist = dot(ortho, l.o);
+    let t = transpose(a) * (frame * ortho);
+    let tl = length(t);
+    let d = abs(dist) * sqrt(abs(det_a)) / (tl * sqrt(tl));
+    k.lod = log2(max(d * f32(tex_word(0u).y), 1.0));
+    return k;
+}
+
+// PlaneLookup::fetch: the texture where the ray along f (the lobe's space) meets the plane,
+// the level bounded by max_lod; the mean where the ray misses it or the plane is degenerate.
+fn plane_fetch(k: Lookup, l: LightPlane, f_in: vec3f, max_lod: f32) -> vec3f {
+    let fw = k.fwd * f_in;
+    let fl = length(fw);
+    let ortho = cross(l.e1, l.e2);
+    if !(fl > 0.0) || !finite(fl) || !(length(ortho) > 0.0) {
+        return tex_average();
+    }
+    let f = fw / fl;
+    let denom = dot(ortho, f);
+    if !(abs(denom) > 0.0) {
+        return tex_average();
+    }
+    let q = f * (dot(ortho, l.o) / denom) - l.o;
+    return tex_sample(plane_uv(l.e1, l.e2, q), min(k.lod, max_lod));
+}
+
+// LightFrame::piece_lod for the piece ig_src[0..count] (unit world directions): the finest
+// level that still averages over all of the piece, log₂(√(its area on the light's plane / the
+// texture's area) · size); 1e30 (no bound) when a direction does not reach the plane.
+fn piece_lod(l: LightPlane, count: u32) -> f32 {
+    let none = 1e30;
+    let ortho = cross(l.e1, l.e2);
+    let texture_area = length(ortho);
+    let dist = dot(ortho, l.o);
+    if !(texture_area > 0.0) || !(abs(dist) > 0.0) || count < 3u {
+        return none;
+    }
+    var twice = vec3f(0.0);
+    var first = vec3f(0.0);
+    var prev = vec3f(0.0);
+    for (var i = 0u; i < count; i++) {
+        let w = ig_src[i];
+        let den = dot(ortho, w);
+        if !(den * dist > 0.0) {
+            return none;
+        }
+        let q = w * (dist / den);
+        if i == 0u {
+            first = q;
+        } else {
+            twice += cross(prev, q);
+        }
+        prev = q;
+    }
+    twice += cross(prev, first);
+    let ratio = 0.5 * length(twice) / texture_area;
+    let lod = log2(max(sqrt(ratio) * f32(tex_word(0u).y), 1.0));
+    return select(none, lod, finite(lod));
+}
+
+// Both integrals of the polygon ig_src[0..count] with the light's colour (shade::Lobes::
+// shade): diffuse in d, specular in s; xyz the integral times the texture fetched where its
+// vector form factor points (1 for an untextured light), w the integral.
+struct Piece {
+    d: vec4f,
+    s: vec4f,
+}
+
+fn shade_piece(count: u32, frame: mat3x3f, to_ltc: mat3x3f, plane: LightPlane, l0: Lookup,
+    l1: Lookup) -> Piece {
+    var out: Piece;
+    let d = integrate_poly(frame, count);
+    var dc = vec3f(d);
+    var lod = 0.0;
+    if light_textured() {
+        lod = piece_lod(plane, count);
+        if d > 0.0 {
+            dc = plane_fetch(l0, plane, ig_dir, lod) * d;
+        }
+    }
+    let s = integrate_poly(to_ltc, count);
+    var sc = vec3f(s);
+    if light_textured() && s > 0.0 {
+        sc = plane_fetch(l1, plane, ig_dir, lod) * s;
+    }
+    out.d = vec4f(dc, d);
+    out.s = vec4f(sc, s);
+    return out;
+}

@@ -377,6 +377,7 @@ impl GpuFrames {
             &self.ltc,
         ]
         .map(|b| b.clone());
+        let light_texture = self.shader.light_texture.clone();
         let t = self.target(gpu, w, h);
         let vis_view = t.visibility.create_view(&Default::default());
         let depth_view = t.depth.create_view(&Default::default());
@@ -412,6 +413,10 @@ impl GpuFrames {
         entries.push(wgpu::BindGroupEntry {
             binding: 8,
             resource: wgpu::BindingResource::TextureView(&vis_view),
+        });
+        entries.push(wgpu::BindGroupEntry {
+            binding: 9,
+            resource: light_texture.as_entire_binding(),
         });
         let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("bspvt resolve"),

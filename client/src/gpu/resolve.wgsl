@@ -21,6 +21,7 @@ struct ResolveParams {
     up: vec4f,
     // xyz: the emitting side's unit normal; w: 1 when two-sided.
     light_normal: vec4f,
+    // w: 1 when textured (light_tex holds the texture).
     radiance: vec4f,
     light: array<vec4f, 8>,
     // light vertices, mode (0 per vertex, 1 per pixel), LTC table size, materials.
@@ -31,8 +32,9 @@ struct ResolveParams {
 
 struct VertexOut {
     colour: vec4f,
-    ratio: vec2f,
+    ratio_d: vec3f,
     pieces: u32,
+    ratio_s: vec3f,
     dropped: u32,
 }
 
@@ -49,6 +51,8 @@ struct VertexOut {
 @group(0) @binding(6) var<storage, read> ltc: array<vec4f>;
 // Linear radiance per pixel, row-major.
 @group(0) @binding(7) var<storage, read_write> image: array<vec4f>;
+// The light's texture (LightTexture::gpu_words; a placeholder when untextured).
+@group(0) @binding(9) var<storage, read> light_texture: array<vec4f>;
 
 fn light_count() -> u32 {
     return fp.counts.x;
@@ -58,6 +62,12 @@ fn light_vertex(i: u32) -> vec3f {
 }
 fn light_normal() -> vec4f {
     return fp.light_normal;
+}
+fn light_textured() -> bool {
+    return fp.radiance.w != 0.0;
+}
+fn light_tex(i: u32) -> vec4f {
+    return light_texture[i];
 }
 fn ltc_size() -> u32 {
     return fp.counts.z;
@@ -162,14 +172,21 @@ fn shade(t: u32, x: f32, y: f32) -> vec3f {
     for (var i = 0u; i < nd; i++) {
         ig_src[i] = dirs[i];
     }
-    let d = integrate_poly(frame, nd);
-    for (var i = 0u; i < nd; i++) {
-        ig_src[i] = dirs[i];
+    let to_ltc = lt.m_inv * frame;
+    let plane = light_plane(pos);
+    var l0: Lookup;
+    var l1: Lookup;
+    if light_textured() {
+        let id = mat3x3f(vec3f(1.0, 0.0, 0.0), vec3f(0.0, 1.0, 0.0), vec3f(0.0, 0.0, 1.0));
+        l0 = plane_lookup(frame, id, 1.0, plane);
+        l1 = plane_lookup(frame, lt.m, lt.det, plane);
     }
-    let s = integrate_poly(lt.m_inv * frame, nd);
-    let r = clamp(w.x * shading[i0].ratio + w.y * shading[i1].ratio + w.z * shading[i2].ratio,
-        vec2f(0.0), vec2f(1.0));
-    let c = fp.radiance.xyz * (albedo.xyz * d * r.x + spec * s * r.y);
+    let pc = shade_piece(nd, frame, to_ltc, plane, l0, l1);
+    let rd = clamp(w.x * shading[i0].ratio_d + w.y * shading[i1].ratio_d
+        + w.z * shading[i2].ratio_d, vec3f(0.0), vec3f(1.0));
+    let rs = clamp(w.x * shading[i0].ratio_s + w.y * shading[i1].ratio_s
+        + w.z * shading[i2].ratio_s, vec3f(0.0), vec3f(1.0));
+    let c = fp.radiance.xyz * (albedo.xyz * pc.d.xyz * rd + spec * pc.s.xyz * rs);
     return select(vec3f(0.0), c, finite3(c));
 }
 

@@ -16,6 +16,7 @@ struct Params {
     eye: vec4f,
     // xyz: the emitting side's unit normal; w: 1 when two-sided.
     light_normal: vec4f,
+    // w: 1 when textured (light_tex holds the texture).
     radiance: vec4f,
     light: array<vec4f, 8>,
     // light vertices, jobs (visible vertices), codec offsets O, LTC table size.
@@ -27,9 +28,10 @@ struct Params {
 struct VertexOut {
     // rgb: radiance; w: flags (OVERFLOW).
     colour: vec4f,
-    // shadowed / unshadowed, diffuse and specular (1 where nothing is unshadowed).
-    ratio: vec2f,
+    // shadowed / unshadowed per channel, diffuse and specular (1 where nothing is unshadowed).
+    ratio_d: vec3f,
     pieces: u32,
+    ratio_s: vec3f,
     dropped: u32,
 }
 
@@ -46,6 +48,8 @@ struct VertexOut {
 // Two per table node: (δ, ln m11, ln m22, q), (m31, magnitude, fresnel, 0).
 @group(0) @binding(6) var<storage, read> ltc: array<vec4f>;
 @group(0) @binding(7) var<storage, read_write> results: array<VertexOut>;
+// The light's texture (LightTexture::gpu_words; a placeholder when untextured).
+@group(0) @binding(8) var<storage, read> light_texture: array<vec4f>;
 
 fn light_count() -> u32 {
     return params.counts.x;
@@ -58,6 +62,12 @@ fn light_normal() -> vec4f {
 }
 fn ltc_size() -> u32 {
     return params.counts.w;
+}
+fn light_textured() -> bool {
+    return params.radiance.w != 0.0;
+}
+fn light_tex(i: u32) -> vec4f {
+    return light_texture[i];
 }
 fn ltc_a(k: u32) -> vec4f {
     return ltc[2u * k];
@@ -111,6 +121,11 @@ fn pop() -> vec2u {
     return vec2u(stk_node[sp], count);
 }
 
+// Shaded::ratio: shadowed / unshadowed per channel in [0, 1]; 1 where nothing is unshadowed.
+fn ratio3(s: vec3f, u: vec3f) -> vec3f {
+    return select(vec3f(1.0), clamp(s / u, vec3f(0.0), vec3f(1.0)), u > vec3f(0.0));
+}
+
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3u) {
     if gid.x >= params.counts.y {
@@ -140,7 +155,8 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
 
     var res: VertexOut;
     res.colour = vec4f(0.0);
-    res.ratio = vec2f(1.0);
+    res.ratio_d = vec3f(1.0);
+    res.ratio_s = vec3f(1.0);
     res.pieces = 0u;
     res.dropped = 0u;
 
@@ -149,12 +165,22 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
         results[v] = res;
         return;
     }
-    let ud = integrate_poly(frame, nd);
-    let us = integrate_poly(to_ltc, nd);
+    // The light's plane and texture lookups, once per vertex (shade::Emitter::for_lobes).
+    let plane = light_plane(p);
+    var l0: Lookup;
+    var l1: Lookup;
+    if light_textured() {
+        let id = mat3x3f(vec3f(1.0, 0.0, 0.0), vec3f(0.0, 1.0, 0.0), vec3f(0.0, 0.0, 1.0));
+        l0 = plane_lookup(frame, id, 1.0, plane);
+        l1 = plane_lookup(frame, lt.m, lt.det, plane);
+    }
+    let un = shade_piece(nd, frame, to_ltc, plane, l0, l1);
+    let ud = un.d.w;
+    let us = un.s.w;
     let root0 = roots[6u * v];
     if root0 == NO_TREES {
         // Trees not streamed in yet: unshadowed (render::renderer::Trees::has).
-        res.colour = vec4f(radiance * (albedo.xyz * ud + spec * us), 0.0);
+        res.colour = vec4f(radiance * (albedo.xyz * un.d.xyz + spec * un.s.xyz), 0.0);
         results[v] = res;
         return;
     }
@@ -163,8 +189,9 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
         return;
     }
 
-    var sd = 0.0;
-    var ss = 0.0;
+    // Σ v̄ᵢ × each piece's integrals with the light's colour.
+    var sd = vec3f(0.0);
+    var ss = vec3f(0.0);
     let node_count = arrayLength(&nodes);
     for (var f = 0u; f < 6u; f++) {
         // tree::clip_to_face: |d·a| ≤ d·w, |d·b| ≤ d·w.
@@ -184,8 +211,9 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
         if root == ABSENT {
             // bspvt::ABSENT_FACE_VALUE: visible.
             res.pieces += 1u;
-            sd += integrate_poly(frame, count);
-            ss += integrate_poly(to_ltc, count);
+            let pc = shade_piece(count, frame, to_ltc, plane, l0, l1);
+            sd += pc.d.xyz;
+            ss += pc.s.xyz;
             continue;
         }
         sp = 0u;
@@ -207,8 +235,9 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
                 } else {
                     res.pieces += 1u;
                     let vbar = f32(value) / 255.0;
-                    sd += vbar * integrate_poly(frame, count);
-                    ss += vbar * integrate_poly(to_ltc, count);
+                    let pc = shade_piece(count, frame, to_ltc, plane, l0, l1);
+                    sd += vbar * pc.d.xyz;
+                    ss += vbar * pc.s.xyz;
                 }
                 next_piece = true;
             } else {
@@ -280,19 +309,13 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
         }
     }
 
-    var ratio = vec2f(1.0);
-    if ud > 0.0 {
-        ratio.x = clamp(sd / ud, 0.0, 1.0);
-    }
-    if us > 0.0 {
-        ratio.y = clamp(ss / us, 0.0, 1.0);
-    }
     var c = radiance * (albedo.xyz * sd + spec * ss);
     if !finite3(c) {
         c = vec3f(0.0);
         flags |= OVERFLOW;
     }
     res.colour = vec4f(c, f32(flags));
-    res.ratio = ratio;
+    res.ratio_d = ratio3(sd, un.d.xyz);
+    res.ratio_s = ratio3(ss, un.s.xyz);
     results[v] = res;
 }

@@ -12,7 +12,7 @@ use crate::light::Light;
 use crate::ltc::table::LtcTable;
 use crate::render::renderer::Trees;
 
-/// The per-vertex result, as the shader writes it (32 bytes).
+/// The per-vertex result, as the shader writes it (48 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GpuVertex {
@@ -20,13 +20,25 @@ pub struct GpuVertex {
     pub colour: [f32; 3],
     /// Non-zero when the walk ran out of room (the result is then incomplete).
     pub flags: f32,
-    /// Shadowed / unshadowed, diffuse and specular (1 where the unshadowed value is 0).
-    pub ratio: [f32; 2],
+    /// Shadowed / unshadowed per channel, diffuse (1 where the unshadowed value is 0).
+    pub ratio_diffuse: [f32; 3],
     /// Pieces integrated (v̄ > 0).
     pub pieces: u32,
+    /// Shadowed / unshadowed per channel, specular.
+    pub ratio_specular: [f32; 3],
     /// Pieces dropped (v̄ = 0).
     pub dropped: u32,
 }
+
+impl GpuVertex {
+    /// The shadow ratios as the CPU's [`crate::shade::ShadowRatio`].
+    pub fn ratio(&self) -> crate::shade::ShadowRatio {
+        [self.ratio_diffuse, self.ratio_specular]
+    }
+}
+
+/// Bytes of one [`GpuVertex`].
+const OUT_BYTES: u64 = std::mem::size_of::<GpuVertex>() as u64;
 
 /// One point to shade: where, its unit normal and its material (textures already looked up).
 #[derive(Clone, Debug)]
@@ -51,7 +63,8 @@ pub(crate) fn vertex_record(p: &ShadePoint) -> [[f32; 4]; 4] {
 }
 
 /// The light as the shaders read it (`light_normal`, `radiance`, `light` of their uniforms):
-/// the emitting side's unit normal (w: 1 when two-sided), the radiance and up to 8 vertices.
+/// the emitting side's unit normal (w: 1 when two-sided), the radiance (w: 1 when textured)
+/// and up to 8 vertices.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 pub(crate) struct LightRecord {
@@ -69,7 +82,11 @@ pub(crate) fn light_record(light: &Light) -> (LightRecord, u32) {
             .as_vec3()
             .extend(if light.two_sided { 1.0 } else { 0.0 })
             .to_array(),
-        radiance: light.radiance.as_vec3().extend(0.0).to_array(),
+        radiance: light
+            .radiance
+            .as_vec3()
+            .extend(if light.texture.is_some() { 1.0 } else { 0.0 })
+            .to_array(),
         vertices: [[0.0; 4]; 8],
     };
     for (k, v) in light.vertices.iter().enumerate().take(8) {
@@ -95,11 +112,8 @@ struct Params {
     codec: [f32; 4],
 }
 
-/// Whether the GPU shades this light: at most 8 vertices, untextured, finite.
+/// Whether the GPU shades this light: at most 8 vertices.
 pub(crate) fn supports(light: &Light) -> Result<()> {
-    if light.texture.is_some() {
-        bail!("textured lights are shaded on the CPU");
-    }
     if light.vertices.len() > 8 {
         bail!("lights of more than 8 vertices are shaded on the CPU");
     }
@@ -129,6 +143,10 @@ pub struct VertexShader {
     /// The results, indexed by vertex (also the raster pass's per-vertex attributes).
     pub(crate) out: wgpu::Buffer,
     pub(crate) trees: GpuTrees,
+    /// The light's texture as `common.wgsl` reads it, and which texture it holds (the
+    /// address of the light's shared pyramid; `None`: the placeholder of untextured lights).
+    pub(crate) light_texture: wgpu::Buffer,
+    light_texture_of: Option<usize>,
     vertices: usize,
 }
 
@@ -188,10 +206,12 @@ impl VertexShader {
             out: buffer(
                 gpu,
                 "per-vertex shading",
-                n * 32,
-                U::STORAGE | U::VERTEX | U::COPY_SRC,
+                n * OUT_BYTES,
+                U::STORAGE | U::COPY_SRC,
             ),
             trees: GpuTrees::new(gpu, vertices),
+            light_texture: buffer(gpu, "light texture", 16, U::STORAGE),
+            light_texture_of: None,
             vertices,
         })
     }
@@ -220,15 +240,37 @@ impl VertexShader {
         self.trees.sync(gpu, trees);
     }
 
+    /// Uploads `light`'s texture unless it is the one already there (the same shared
+    /// pyramid: a moving light keeps its texture).
+    pub(crate) fn sync_light_texture(&mut self, gpu: &Gpu, light: &Light) {
+        let Some(t) = &light.texture else {
+            return;
+        };
+        let id = std::sync::Arc::as_ptr(t) as usize;
+        if self.light_texture_of == Some(id) {
+            return;
+        }
+        use wgpu::util::DeviceExt;
+        self.light_texture = gpu
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("light texture"),
+                contents: bytemuck::cast_slice(&t.gpu_words()),
+                usage: wgpu::BufferUsages::STORAGE,
+            });
+        self.light_texture_of = Some(id);
+    }
+
     /// Records the pass for `light` seen from `eye` into `enc`.
     pub(crate) fn encode(
-        &self,
+        &mut self,
         gpu: &Gpu,
         enc: &mut wgpu::CommandEncoder,
         light: &Light,
         eye: DVec3,
     ) -> Result<()> {
         supports(light)?;
+        self.sync_light_texture(gpu, light);
         let (record, count) = light_record(light);
         let params = Params {
             eye: eye.as_vec3().extend(1.0).to_array(),
@@ -253,6 +295,7 @@ impl VertexShader {
             &self.trees.line_normals,
             &self.ltc,
             &self.out,
+            &self.light_texture,
         ];
         let group = gpu.bind_buffers("bspvt per vertex", &layout, &entries);
         let mut pass = enc.begin_compute_pass(&Default::default());
@@ -263,7 +306,7 @@ impl VertexShader {
     }
 
     /// Shades the jobs and waits.
-    pub(crate) fn run(&self, gpu: &Gpu, light: &Light, eye: DVec3) -> Result<()> {
+    pub(crate) fn run(&mut self, gpu: &Gpu, light: &Light, eye: DVec3) -> Result<()> {
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         self.encode(gpu, &mut enc, light, eye)?;
         gpu.queue.submit([enc.finish()]);
@@ -272,7 +315,7 @@ impl VertexShader {
 
     /// The results of every vertex (those not shaded: what was there before).
     pub fn read(&self, gpu: &Gpu) -> Result<Vec<GpuVertex>> {
-        let bytes = gpu.read_buffer(&self.out, self.vertices.max(1) as u64 * 32)?;
+        let bytes = gpu.read_buffer(&self.out, self.vertices.max(1) as u64 * OUT_BYTES)?;
         Ok(bytemuck::pod_collect_to_vec(&bytes))
     }
 }

@@ -135,6 +135,17 @@ pub struct Session<'a> {
     states: HashMap<&'static str, Result<Box<dyn MethodState>, String>>,
 }
 
+/// A session that ends stops its fetcher: the service may go away next (an embedded one
+/// stops with the process), and a fetcher told to stop ends without calling the broken stream
+/// an interruption to retry.
+impl Drop for Session<'_> {
+    fn drop(&mut self) {
+        if let Some(c) = &self.counters {
+            c.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    }
+}
+
 impl<'a> Session<'a> {
     /// A session on `scene` at `width`×`height`, drawing BSPVT per vertex.
     pub(crate) fn new(

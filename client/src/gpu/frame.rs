@@ -62,6 +62,8 @@ pub struct GpuFrames {
     indices: wgpu::Buffer,
     tri_material: wgpu::Buffer,
     materials: wgpu::Buffer,
+    /// The textures the materials sample (`materials::tables`).
+    surface_textures: wgpu::Buffer,
     materials_key: Option<u64>,
     ltc: wgpu::Buffer,
     triangles: u32,
@@ -171,16 +173,13 @@ fn pipelines(gpu: &Gpu, samples: u32) -> Result<(wgpu::RenderPipeline, wgpu::Com
 
 impl GpuFrames {
     /// The pipelines and the scene's buffers; `samples`: MSAA samples per pixel (1 or 4).
-    /// Scenes with textured materials are drawn on the CPU (the error says so).
     pub fn new(gpu: &Gpu, scene: &Scene, samples: u32) -> Result<GpuFrames> {
         use wgpu::util::DeviceExt;
-        if scene.materials.iter().any(|m| m.maps.is_some()) {
-            bail!("textured materials are drawn on the CPU");
-        }
         if !matches!(samples, 1 | 4) {
             bail!("MSAA samples must be 1 or 4, not {samples}");
         }
         let mesh = &scene.mesh;
+        let uvs = mesh.uvs.len() == mesh.vertex_count();
         let (raster, resolve) = pipelines(gpu, samples)?;
         let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
         let tri_material: Vec<u32> = (0..mesh.triangles.len())
@@ -220,7 +219,12 @@ impl GpuFrames {
             ),
             materials: init(
                 "materials",
-                &vec![0; 32 * scene.materials.len().max(1)],
+                &vec![0; 64 * scene.materials.len().max(1)],
+                U::STORAGE,
+            ),
+            surface_textures: init(
+                "surface textures",
+                bytemuck::cast_slice(&super::materials::tables(&scene.materials, uvs, true).1),
                 U::STORAGE,
             ),
             materials_key: None,
@@ -323,16 +327,9 @@ impl GpuFrames {
             .shade_renderer(gpu, &mut enc, renderer, &mut self.key, light, trees)?;
         let mkey = renderer.shading_key();
         if self.materials_key != Some(mkey) {
-            let m: Vec<[f32; 4]> = renderer
-                .materials()
-                .iter()
-                .flat_map(|m| {
-                    [
-                        [m.albedo[0], m.albedo[1], m.albedo[2], m.roughness],
-                        [m.specular[0], m.specular[1], m.specular[2], 0.0],
-                    ]
-                })
-                .collect();
+            let mesh = &renderer.scene.mesh;
+            let uvs = mesh.uvs.len() == mesh.vertex_count();
+            let (m, _) = super::materials::tables(renderer.materials(), uvs, false);
             gpu.queue
                 .write_buffer(&self.materials, 0, bytemuck::cast_slice(&m));
             self.materials_key = Some(mkey);
@@ -356,7 +353,13 @@ impl GpuFrames {
                 crate::ltc::table::LtcTable::builtin().size() as u32,
                 renderer.materials().len() as u32,
             ],
-            size: [w, h, self.samples, 0],
+            // The roughness override's bits (0: none), applied after a texture lookup.
+            size: [
+                w,
+                h,
+                self.samples,
+                renderer.roughness_override().map_or(0, f32::to_bits),
+            ],
         };
         gpu.queue
             .write_buffer(&self.resolve_params, 0, bytemuck::bytes_of(&resolve));
@@ -378,6 +381,7 @@ impl GpuFrames {
         ]
         .map(|b| b.clone());
         let light_texture = self.shader.light_texture.clone();
+        let surface_textures = self.surface_textures.clone();
         let t = self.target(gpu, w, h);
         let vis_view = t.visibility.create_view(&Default::default());
         let depth_view = t.depth.create_view(&Default::default());
@@ -417,6 +421,10 @@ impl GpuFrames {
         entries.push(wgpu::BindGroupEntry {
             binding: 9,
             resource: light_texture.as_entire_binding(),
+        });
+        entries.push(wgpu::BindGroupEntry {
+            binding: 10,
+            resource: surface_textures.as_entire_binding(),
         });
         let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("bspvt resolve"),

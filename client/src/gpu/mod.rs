@@ -6,6 +6,7 @@
 pub mod backend;
 pub mod context;
 pub mod frame;
+mod materials;
 pub(crate) mod trees;
 pub mod vertex;
 

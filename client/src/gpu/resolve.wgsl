@@ -26,7 +26,7 @@ struct ResolveParams {
     light: array<vec4f, 8>,
     // light vertices, mode (0 per vertex, 1 per pixel), LTC table size, materials.
     counts: vec4u,
-    // width, height, samples per pixel.
+    // width, height, samples per pixel, the roughness override's f32 bits (0: none).
     size: vec4u,
 }
 
@@ -39,13 +39,14 @@ struct VertexOut {
 }
 
 @group(0) @binding(0) var<uniform> fp: ResolveParams;
-// Four per vertex: position, normal, (albedo, α), (F0, 0) — the compute pass's records.
+// Four per vertex: position, (normal, u), (albedo, α), (F0, v) — the compute pass's records.
 @group(0) @binding(1) var<storage, read> verts: array<vec4f>;
 // Three per triangle.
 @group(0) @binding(2) var<storage, read> indices: array<u32>;
 // The material of each triangle.
 @group(0) @binding(3) var<storage, read> tri_material: array<u32>;
-// Two per material: (albedo, α), (F0, 0).
+// Four per material (gpu/materials.rs): (albedo, α), (F0, kind), then the textured kinds'
+// factors and texture indices.
 @group(0) @binding(4) var<storage, read> materials: array<vec4f>;
 @group(0) @binding(5) var<storage, read> shading: array<VertexOut>;
 @group(0) @binding(6) var<storage, read> ltc: array<vec4f>;
@@ -53,6 +54,9 @@ struct VertexOut {
 @group(0) @binding(7) var<storage, read_write> image: array<vec4f>;
 // The light's texture (LightTexture::gpu_words; a placeholder when untextured).
 @group(0) @binding(9) var<storage, read> light_texture: array<vec4f>;
+// The textures the materials sample: a (width, height, offset, wrap u | wrap v << 4) header
+// per texture use, then RGBA8 texels.
+@group(0) @binding(10) var<storage, read> surface_tex: array<u32>;
 
 fn light_count() -> u32 {
     return fp.counts.x;
@@ -124,6 +128,128 @@ fn weights(d: vec3f, p0: vec3f, p1: vec3f, p2: vec3f) -> vec3f {
     return vec3f(1.0 - u - v, u, v);
 }
 
+// IEC 61966-2-1 sRGB → linear (texture::srgb_table).
+fn srgb_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        return c / 12.92;
+    }
+    return pow((c + 0.055) / 1.055, 2.4);
+}
+
+fn surface_texel(h: vec4u, x: u32, y: u32, srgb: bool) -> vec4f {
+    let w = surface_tex[h.z + y * h.x + x];
+    let c = vec4f(f32(w & 255u), f32((w >> 8u) & 255u), f32((w >> 16u) & 255u),
+        f32(w >> 24u)) / 255.0;
+    if srgb {
+        return vec4f(srgb_linear(c.x), srgb_linear(c.y), srgb_linear(c.z), c.w);
+    }
+    return c;
+}
+
+// Wrap::index: repeat (0), clamp to edge (1), mirrored repeat (2).
+fn wrap_index(mode: u32, i: i32, n: i32) -> u32 {
+    if mode == 1u {
+        return u32(clamp(i, 0, n - 1));
+    }
+    if mode == 2u {
+        let m = ((i % (2 * n)) + 2 * n) % (2 * n);
+        return u32(select(2 * n - 1 - m, m, m < n));
+    }
+    return u32(((i % n) + n) % n);
+}
+
+// Texture::sample: bilinear between the four nearest texel centres, wrapped per axis; colour
+// textures linearised before filtering. The UV is first brought into one period of its wrap
+// mode (exact in f32), so a large UV keeps the texel's fraction.
+fn surface_sample(t: u32, uv_in: vec2f, srgb: bool) -> vec4f {
+    let h = vec4u(surface_tex[4u * t], surface_tex[4u * t + 1u], surface_tex[4u * t + 2u],
+        surface_tex[4u * t + 3u]);
+    if h.x == 0u || h.y == 0u {
+        return vec4f(0.0);
+    }
+    var uv = select(vec2f(0.0), uv_in, finite(uv_in.x) && finite(uv_in.y));
+    let modes = vec2u(h.w & 15u, (h.w >> 4u) & 15u);
+    for (var k = 0; k < 2; k++) {
+        if modes[k] == 0u {
+            uv[k] = uv[k] - floor(uv[k]);
+        } else if modes[k] == 2u {
+            uv[k] = uv[k] - 2.0 * floor(uv[k] * 0.5);
+        } else {
+            uv[k] = clamp(uv[k], -1.0, 2.0);
+        }
+    }
+    let x = uv.x * f32(h.x) - 0.5;
+    let y = uv.y * f32(h.y) - 0.5;
+    let x0 = floor(x);
+    let y0 = floor(y);
+    let fx = x - x0;
+    let fy = y - y0;
+    let n = vec2i(i32(h.x), i32(h.y));
+    let xs = vec2u(wrap_index(modes.x, i32(x0), n.x), wrap_index(modes.x, i32(x0) + 1, n.x));
+    let ys = vec2u(wrap_index(modes.y, i32(y0), n.y), wrap_index(modes.y, i32(y0) + 1, n.y));
+    let a = surface_texel(h, xs.x, ys.x, srgb);
+    let b = surface_texel(h, xs.y, ys.x, srgb);
+    let c = surface_texel(h, xs.x, ys.y, srgb);
+    let d = surface_texel(h, xs.y, ys.y, srgb);
+    let top = a + (b - a) * fx;
+    let bottom = c + (d - c) * fx;
+    return top + (bottom - top) * fy;
+}
+
+fn unit3(v: vec3f) -> vec3f {
+    return select(vec3f(0.0), clamp(v, vec3f(0.0), vec3f(1.0)), vec3<bool>(finite(v.x),
+        finite(v.y), finite(v.z)));
+}
+
+fn unit1(x: f32) -> f32 {
+    return select(0.0, clamp(x, 0.0, 1.0), finite(x));
+}
+
+// Material m at `uv` (MaterialMaps::eval): (albedo, α) and (F0, _); the roughness override
+// after the lookup, as Renderer::material_at.
+struct SurfaceMaterial {
+    albedo: vec4f,
+    f0: vec3f,
+}
+
+fn surface_material(m: u32, uv: vec2f) -> SurfaceMaterial {
+    var out: SurfaceMaterial;
+    out.albedo = materials[4u * m];
+    let r1 = materials[4u * m + 1u];
+    out.f0 = r1.xyz;
+    let kind = u32(r1.w);
+    if kind == 1u {
+        let factor = materials[4u * m + 2u];
+        let r3 = materials[4u * m + 3u];
+        let bt = bitcast<u32>(r3.z);
+        let mt = bitcast<u32>(r3.w);
+        var bc = vec4f(1.0);
+        var mr = vec4f(1.0);
+        if bt != 0u {
+            bc = surface_sample(bt - 1u, uv, true);
+        }
+        if mt != 0u {
+            mr = surface_sample(mt - 1u, uv, false);
+        }
+        let c = unit3(factor.xyz * bc.xyz);
+        let metal = unit1(r3.x * mr.z);
+        let rough = unit1(r3.y * mr.y);
+        out.albedo = vec4f(c * (1.0 - metal), clamp(rough * rough, 1e-3, 1.0));
+        out.f0 = vec3f(0.04) + (c - vec3f(0.04)) * metal;
+    } else if kind == 2u {
+        let kd = materials[4u * m + 2u];
+        let t = bitcast<u32>(materials[4u * m + 3u].z);
+        if t != 0u {
+            let tex = surface_sample(t - 1u, uv, true);
+            out.albedo = vec4f(unit3(kd.xyz * tex.xyz), out.albedo.w);
+        }
+    }
+    if kind != 0u && fp.size.w != 0u {
+        out.albedo.w = bitcast<f32>(fp.size.w);
+    }
+    return out;
+}
+
 // The radiance of triangle t seen along the ray through image point (x, y).
 fn shade(t: u32, x: f32, y: f32) -> vec3f {
     let i0 = indices[3u * t];
@@ -160,8 +286,12 @@ fn shade(t: u32, x: f32, y: f32) -> vec3f {
         return vec3f(0.0);
     }
     let m = min(tri_material[t], max(fp.counts.w, 1u) - 1u);
-    let albedo = materials[2u * m];
-    let f0 = materials[2u * m + 1u].xyz;
+    let uv = w.x * vec2f(verts[4u * i0 + 1u].w, verts[4u * i0 + 3u].w)
+        + w.y * vec2f(verts[4u * i1 + 1u].w, verts[4u * i1 + 3u].w)
+        + w.z * vec2f(verts[4u * i2 + 1u].w, verts[4u * i2 + 3u].w);
+    let mat = surface_material(m, uv);
+    let albedo = mat.albedo;
+    let f0 = mat.f0;
     let frame = to_local(n, wo);
     let lt = ltc_lookup(albedo.w, atan2(length(cross(n, wo)), dot(n, wo)));
     let spec = f0 * lt.magnitude + (vec3f(1.0) - f0) * lt.fresnel;

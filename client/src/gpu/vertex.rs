@@ -51,7 +51,8 @@ pub struct ShadePoint {
     pub material: Material,
 }
 
-/// The vertex record of the shader: position, normal, (albedo, α), (F0, 0).
+/// The vertex record of the shader: position, normal, (albedo, α), (F0, 0); the frames put
+/// the vertex's UV in the normal's and F0's w.
 pub(crate) fn vertex_record(p: &ShadePoint) -> [[f32; 4]; 4] {
     let m = &p.material;
     [
@@ -361,11 +362,17 @@ impl VertexShader {
             let records: Vec<_> = (0..self.vertices as u32)
                 .map(|v| {
                     let (p, n, m) = renderer.vertex_surface(v);
-                    vertex_record(&ShadePoint {
+                    let mut r = vertex_record(&ShadePoint {
                         p: p.as_vec3(),
                         n: n.as_vec3(),
                         material: m.into_owned(),
-                    })
+                    });
+                    // The UV rides in the normal's and F0's spare w (resolve.wgsl reads it).
+                    if let Some(uv) = renderer.scene.mesh.uvs.get(v as usize) {
+                        r[1][3] = uv.x;
+                        r[3][3] = uv.y;
+                    }
+                    r
                 })
                 .collect();
             self.set_vertices(gpu, &records);

@@ -1,7 +1,6 @@
 //! The GPU path of the methods that have one (`bspvt`, `ltc`): frames drawn by
 //! [`crate::gpu::frame::GpuFrames`] when [`Settings::backend`] asks for the GPU, the CPU's
-//! frame where the GPU cannot draw this scene or light (textured materials, more than 8 light
-//! vertices: said once).
+//! frame where the GPU cannot draw this light (more than 8 vertices: said once).
 
 use anyhow::Result;
 

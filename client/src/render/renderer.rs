@@ -199,6 +199,11 @@ impl<'a> Renderer<'a> {
         &self.materials
     }
 
+    /// The roughness override (`None`: the scene's own α).
+    pub(crate) fn roughness_override(&self) -> Option<f32> {
+        self.roughness
+    }
+
     fn material(&self, id: u32) -> &Material {
         let m = &self.materials;
         &m[(id as usize).min(m.len().saturating_sub(1))]

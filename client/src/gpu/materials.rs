@@ -1,0 +1,116 @@
+//! Materials as the resolve pass reads them (`resolve.wgsl`, `surface_material`): four vec4
+//! per material and the textures they sample (RGBA8, one `u32` per texel), so per-pixel frames
+//! evaluate a textured material at the pixel's UV as the CPU does
+//! ([`bspvt_proto::material::MaterialMaps`]: glTF metallic-roughness, OBJ `map_Kd`).
+
+use std::collections::HashMap;
+
+use bspvt_proto::scene::{Material, MaterialMaps};
+use bspvt_proto::texture::{TextureRef, Wrap};
+
+/// `resolve.wgsl`'s wrap modes: u in bits 0–3, v in bits 4–7.
+fn wrap_bits(w: [Wrap; 2]) -> u32 {
+    let one = |w: Wrap| match w {
+        Wrap::Repeat => 0u32,
+        Wrap::Clamp => 1,
+        Wrap::Mirror => 2,
+    };
+    one(w[0]) | one(w[1]) << 4
+}
+
+/// The index + 1 of texture use `t` (the image and its wrap modes), added on first use; 0 for
+/// none.
+fn use_of<'m>(
+    t: Option<&'m TextureRef>,
+    uses: &mut Vec<&'m TextureRef>,
+    index: &mut HashMap<(usize, u32), u32>,
+) -> u32 {
+    let Some(t) = t else { return 0 };
+    let key = (
+        std::sync::Arc::as_ptr(&t.texture) as usize,
+        wrap_bits(t.wrap),
+    );
+    *index.entry(key).or_insert_with(|| {
+        uses.push(t);
+        uses.len() as u32
+    })
+}
+
+/// `resolve.wgsl`'s material kinds.
+const CONSTANT: f32 = 0.0;
+const METALLIC_ROUGHNESS: f32 = 1.0;
+const DIFFUSE_MAP: f32 = 2.0;
+
+/// The material records and the texture words. Per material: (albedo, α), (F0, kind),
+/// then for metallic-roughness (base colour factor), (metallic, roughness, base colour
+/// texture + 1, metallic-roughness texture + 1), for `map_Kd` (Kd, 0), (0, 0, texture + 1, 0);
+/// texture indices as u32 bits, 0 for none. Texture words: a (width, height, offset, wrap u
+/// | wrap v << 4) header per texture use, then the texels (R | G << 8 | B << 16 | A << 24).
+/// `uvs`: whether the mesh has texture coordinates (without, every material is its constant
+/// fields, as on the CPU); `texels`: whether to build the texture words (the records alone
+/// when only the materials' constants changed: the texture indices do not depend on them).
+pub(crate) fn tables(materials: &[Material], uvs: bool, texels: bool) -> (Vec<[f32; 4]>, Vec<u32>) {
+    let bits = |x: u32| f32::from_bits(x);
+    let mut uses: Vec<&TextureRef> = Vec::new();
+    let mut index: HashMap<(usize, u32), u32> = HashMap::new();
+    let mut records = Vec::with_capacity(4 * materials.len().max(1));
+    for m in materials {
+        let c = |k: f32| {
+            [
+                [m.albedo[0], m.albedo[1], m.albedo[2], m.roughness],
+                [m.specular[0], m.specular[1], m.specular[2], k],
+            ]
+        };
+        match (&m.maps, uvs) {
+            (
+                Some(MaterialMaps::MetallicRoughness {
+                    base_color,
+                    metallic,
+                    roughness,
+                    base_color_texture,
+                    metallic_roughness_texture,
+                }),
+                true,
+            ) => {
+                records.extend(c(METALLIC_ROUGHNESS));
+                records.push([base_color[0], base_color[1], base_color[2], 0.0]);
+                let bc = use_of(base_color_texture.as_ref(), &mut uses, &mut index);
+                let mr = use_of(metallic_roughness_texture.as_ref(), &mut uses, &mut index);
+                records.push([*metallic, *roughness, bits(bc), bits(mr)]);
+            }
+            (Some(MaterialMaps::Diffuse { kd, texture }), true) => {
+                records.extend(c(DIFFUSE_MAP));
+                records.push([kd[0], kd[1], kd[2], 0.0]);
+                let t = use_of(Some(texture), &mut uses, &mut index);
+                records.push([0.0, 0.0, bits(t), 0.0]);
+            }
+            _ => {
+                records.extend(c(CONSTANT));
+                records.extend([[0.0; 4]; 2]);
+            }
+        }
+    }
+    if records.is_empty() {
+        records.extend([[0.0; 4]; 4]);
+    }
+    let mut words = vec![0u32; 4 * uses.len()];
+    for (k, t) in uses.iter().enumerate().filter(|_| texels) {
+        let tex = &t.texture;
+        let offset = words.len() as u32;
+        words[4 * k..4 * k + 4].copy_from_slice(&[
+            tex.width,
+            tex.height,
+            offset,
+            wrap_bits(t.wrap),
+        ]);
+        words.extend(
+            tex.rgba
+                .chunks_exact(4)
+                .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])),
+        );
+    }
+    if words.is_empty() {
+        words.extend([0; 4]);
+    }
+    (records, words)
+}

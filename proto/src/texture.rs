@@ -297,6 +297,22 @@ impl LightImage {
         })
     }
 
+    /// The width and height a light texture file declares (its header alone: no pixels
+    /// decoded), so that memory can be set aside before [`LightImage::decode`].
+    pub fn dimensions(bytes: &[u8]) -> Result<(u32, u32), String> {
+        image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| e.to_string())?
+            .into_dimensions()
+            .map_err(|e| e.to_string())
+    }
+
+    /// Bytes that decoding a `width × height` light texture may hold at its peak: the
+    /// decoder's buffer (at most 16 B per texel, its `max_alloc`) and the f32 texels.
+    pub fn decode_bytes(width: u32, height: u32) -> u64 {
+        u64::from(width) * u64::from(height) * (16 + 12)
+    }
+
     /// Whether the size matches the data and every texel is finite and ≥ 0.
     pub fn is_valid(&self) -> bool {
         self.width > 0

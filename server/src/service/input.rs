@@ -21,6 +21,7 @@ use std::io::Read;
 
 use bspvt_proto::import::{Asset, Format, Limits, load_asset_uploaded};
 use bspvt_proto::scene::SceneFile;
+use bspvt_proto::texture::LightImage;
 use bspvt_proto::{BakeSettings, Scene, SceneError};
 
 use super::error::{ApiError, ApiResult};
@@ -137,7 +138,7 @@ pub(crate) fn prepare(up: Upload, lim: &InputLimits, mem: &mut Reservation) -> A
                 ),
                 None => "scene JSON".to_string(),
             };
-            (compose(file, mesh.as_ref(), &up.files)?, source)
+            (compose(file, mesh.as_ref(), &up.files, mem)?, source)
         }
         (None, Some((name, m))) => {
             let source = format!(
@@ -263,7 +264,22 @@ fn compose(
     mut file: SceneFile,
     upload: Option<&(String, Asset)>,
     files: &BTreeMap<String, Vec<u8>>,
+    mem: &mut Reservation,
 ) -> ApiResult<Scene> {
+    // Light textures are decoded to f32 texels that the stored scene keeps: their memory is
+    // set aside first, from the sizes their headers declare (what cannot be read is refused
+    // by the decode below, with the light named).
+    for l in file.lights.iter().filter(|l| l.image.is_none()) {
+        let Some(bytes) = l.texture.as_deref().and_then(|t| files.get(file_name(t))) else {
+            continue;
+        };
+        if let Ok((w, h)) = LightImage::dimensions(bytes)
+            && u64::from(w) * u64::from(h) <= bspvt_proto::texture::MAX_TEXTURE_TEXELS
+        {
+            mem.grow_to(mem.bytes() + LightImage::decode_bytes(w, h))
+                .map_err(|r| ApiError::memory("decoding this scene's light textures", r))?;
+        }
+    }
     file.load_light_textures(|path| {
         let name = file_name(path);
         files.get(name).cloned().ok_or_else(|| {
@@ -601,5 +617,40 @@ mod tests {
         .err()
         .expect("refused");
         assert_eq!(err.status, axum::http::StatusCode::PAYLOAD_TOO_LARGE);
+    }
+
+    /// A light texture is decoded on the service (the stored scene carries its texels): its
+    /// memory is set aside from its header's size first, so a budget too small for it refuses
+    /// the scene instead of being exceeded.
+    #[test]
+    fn light_textures_reserve_their_memory() {
+        // A flat (not run-length encoded) 128² Radiance HDR file, every texel (0.5, 0.5, 0.5).
+        let mut hdr = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 128 +X 128\n".to_vec();
+        for _ in 0..128 * 128 {
+            hdr.extend_from_slice(&[128, 128, 128, 128]);
+        }
+        let mut json: serde_json::Value =
+            serde_json::from_str(bspvt_proto::builtin::DYNAMIC_JSON).expect("json");
+        json["lights"][0]["texture"] = "tex/sky.hdr".into();
+        let up = || Upload {
+            mesh: None,
+            files: BTreeMap::from([("sky.hdr".to_string(), hdr.clone())]),
+            scene: Some(json.to_string()),
+            settings: None,
+        };
+        let ok = prepare(up(), &limits(), &mut unbounded()).unwrap_or_else(|e| panic!("{e:?}"));
+        let image = ok.scene.lights[0].image.as_ref().expect("decoded");
+        assert_eq!((image.width, image.height), (128, 128));
+        assert!(
+            (image.texels[0][0] - 0.5).abs() < 1e-6,
+            "{:?}",
+            image.texels[0]
+        );
+        let budget = crate::service::memory::MemoryBudget::new(100_000);
+        let mut small = budget.try_reserve(0).expect("an empty reservation");
+        let e = prepare(up(), &limits(), &mut small)
+            .err()
+            .expect("128² × 28 B is over a 100 kB budget");
+        assert_eq!(e.code, "over_memory_budget", "{}", e.detail);
     }
 }

@@ -213,6 +213,16 @@ impl Texture {
     }
 }
 
+/// The width and height an image file declares (its header alone: no pixels decoded), so
+/// that memory can be set aside before it is decoded.
+pub fn image_dimensions(bytes: &[u8]) -> Result<(u32, u32), String> {
+    image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| e.to_string())?
+        .into_dimensions()
+        .map_err(|e| e.to_string())
+}
+
 /// A light's texture in the light's own parametrisation (see `bspvt_client::texture`: (u, v)
 /// in the basis (p₁ − p₀, pₙ₋₁ − p₀) of its plane, v down the rows): linear RGB multipliers
 /// of the light's radiance, row-major from the top.
@@ -295,16 +305,6 @@ impl LightImage {
             height,
             texels,
         })
-    }
-
-    /// The width and height a light texture file declares (its header alone: no pixels
-    /// decoded), so that memory can be set aside before [`LightImage::decode`].
-    pub fn dimensions(bytes: &[u8]) -> Result<(u32, u32), String> {
-        image::ImageReader::new(std::io::Cursor::new(bytes))
-            .with_guessed_format()
-            .map_err(|e| e.to_string())?
-            .into_dimensions()
-            .map_err(|e| e.to_string())
     }
 
     /// Bytes that decoding a `width × height` light texture may hold at its peak: the

@@ -21,7 +21,7 @@ use std::io::Read;
 
 use bspvt_proto::import::{Asset, Format, Limits, load_asset_uploaded};
 use bspvt_proto::scene::SceneFile;
-use bspvt_proto::texture::LightImage;
+use bspvt_proto::texture::{LightImage, image_dimensions};
 use bspvt_proto::{BakeSettings, Scene, SceneError};
 
 use super::error::{ApiError, ApiResult};
@@ -215,7 +215,16 @@ fn load_upload(
         None => (name.clone(), bytes),
     };
     let format = Format::from_name(&inner)?;
-    mem.grow_to(mem.bytes() + parse_bytes(bytes.len() as u64))
+    // The mesh's uploaded images (textures) decode to far more than their compressed bytes:
+    // 8 B per texel their headers declare (the decoder's RGB buffer and the RGBA8 texels),
+    // at most the texels an asset may hold in all.
+    let texels: u64 = files
+        .values()
+        .filter_map(|b| image_dimensions(b).ok())
+        .map(|(w, h)| u64::from(w) * u64::from(h))
+        .sum::<u64>()
+        .min(bspvt_proto::texture::MAX_ASSET_TEXELS);
+    mem.grow_to(mem.bytes() + parse_bytes(bytes.len() as u64) + 8 * texels)
         .map_err(|r| ApiError::memory("parsing this mesh", r))?;
     let asset = load_asset_uploaded(&bytes, format, lim, files)?;
     Ok((inner, asset))
@@ -273,7 +282,7 @@ fn compose(
         let Some(bytes) = l.texture.as_deref().and_then(|t| files.get(file_name(t))) else {
             continue;
         };
-        if let Ok((w, h)) = LightImage::dimensions(bytes)
+        if let Ok((w, h)) = image_dimensions(bytes)
             && u64::from(w) * u64::from(h) <= bspvt_proto::texture::MAX_TEXTURE_TEXELS
         {
             mem.grow_to(mem.bytes() + LightImage::decode_bytes(w, h))

@@ -50,8 +50,14 @@ impl GpuContext {
     /// The highest-performance adapter with its own limits (large storage buffers), or
     /// [`GpuError::NoAdapter`].
     pub fn new() -> Result<GpuContext, GpuError> {
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        // Vulkan, Metal or DX12 (the project's backends; lavapipe is Vulkan). wgpu's GL
+        // backend would also probe EGL and, on a machine without a display or GL driver, log
+        // an error on every run of every command. `WGPU_BACKEND` still chooses.
+        if std::env::var_os("WGPU_BACKEND").is_none() {
+            desc.backends = wgpu::Backends::PRIMARY;
+        }
+        let instance = wgpu::Instance::new(desc);
         let adapter = block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
             power_preference: wgpu::PowerPreference::HighPerformance,
             ..Default::default()

@@ -464,11 +464,7 @@ impl App<'_, '_> {
     /// V: the current camera and light into a scene file.
     fn save_view(&mut self) {
         let s = &*self.session;
-        let added_ground = s
-            .scene()
-            .warnings
-            .iter()
-            .any(|w| w.contains("ground plane under it were added"));
+        let added_ground = save::added_ground(&self.opts.source);
         let r = save::view_file(
             &self.opts.source,
             self.opts.save_view.as_deref(),

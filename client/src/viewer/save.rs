@@ -39,6 +39,16 @@ pub(crate) fn screenshot(
     Ok(path)
 }
 
+/// Whether the loader put a ground plane (and a quad light) around the scene: a bare mesh
+/// that brings no light of its own. The asset itself is asked: the scene a service serves
+/// carries no loader warnings to tell (the viewer once matched one, and saved every bare mesh's
+/// view without its ground).
+pub(crate) fn added_ground(source: &SceneSource) -> bool {
+    source.mesh.as_deref().is_some_and(|m| {
+        bspvt_proto::import::load_asset(m).is_ok_and(|a| bspvt_proto::Scene::adds_ground(&a))
+    })
+}
+
 /// The scene file of `source` with `camera` and the first light replaced by `light` (as posed
 /// now), and where to write it: `out` if given, else `<scene>.view.json` beside a scene file
 /// (its relative mesh paths stay valid), `out/views/<name>.view.json` for a built-in scene or a
@@ -221,5 +231,50 @@ mod tests {
         let err =
             view_file(&remote, None, &[], false, scene.camera.clone(), None).expect_err("no file");
         assert!(err.to_string().contains("came from a service"), "{err}");
+    }
+
+    /// A bare mesh without lights gets a ground from the loader, and its saved view keeps it
+    /// (the scene as served has no warnings to say so: the asset is asked). A mesh with its own
+    /// lamp (the Cornell box) and a built-in scene get none.
+    #[test]
+    fn a_bare_mesh_view_keeps_the_ground_it_was_given() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let obj = dir.path().join("tri.obj");
+        std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 1\nf 1 2 3\n").expect("obj");
+        let bare = SceneSource {
+            scene: None,
+            mesh: Some(obj.clone()),
+        };
+        assert!(added_ground(&bare));
+        let cornell = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../assets/rooms/cornell-box.obj");
+        assert!(!added_ground(&SceneSource {
+            scene: None,
+            mesh: Some(cornell),
+        }));
+        assert!(!added_ground(&SceneSource {
+            scene: Some("builtin:plate".into()),
+            mesh: None,
+        }));
+        let scene = bspvt_proto::Scene::from_mesh_path(&obj).expect("scene");
+        let light = Light::from_scene(&scene.lights[0]);
+        let out = dir.path().join("tri.view.json");
+        let (file, out) = view_file(
+            &bare,
+            Some(&out),
+            &scene.lights,
+            added_ground(&bare),
+            scene.camera.clone(),
+            Some(&light),
+        )
+        .expect("view");
+        assert!(file.ground_plane);
+        write_view(&file, &out).expect("write");
+        let again = bspvt_proto::Scene::load(&out).expect("the saved view loads");
+        assert_eq!(
+            again.mesh.triangles.len(),
+            scene.mesh.triangles.len(),
+            "the ground is there again"
+        );
     }
 }

@@ -618,6 +618,12 @@ impl Scene {
         s
     }
 
+    /// Whether [`Scene::from_asset`] puts a ground plane and a quad light around `asset`: it
+    /// brings no light of its own, neither lamps nor punctual lights.
+    pub fn adds_ground(asset: &Asset) -> bool {
+        asset.lights.is_empty() && asset.punctual.is_empty()
+    }
+
     /// The default scene for a bare mesh (an asset without lamps, materials or camera).
     pub fn from_mesh(mesh: Mesh) -> Result<Scene, SceneError> {
         Scene::from_asset(Asset {
@@ -633,6 +639,7 @@ impl Scene {
     /// under it and a quad light above it, and a warning says so. Without materials of its
     /// own, it gets a grey GGX (and the ground a slightly rougher grey).
     pub fn from_asset(asset: Asset) -> Result<Scene, SceneError> {
+        let adds_ground = Scene::adds_ground(&asset);
         let Asset {
             mut mesh,
             materials,
@@ -668,7 +675,7 @@ impl Scene {
                 punctual.len()
             ));
             lights
-        } else if lights.is_empty() {
+        } else if adds_ground {
             let ground_id = materials.len() as u32;
             materials.push(Material {
                 name: "ground".into(),

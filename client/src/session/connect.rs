@@ -67,6 +67,12 @@ pub fn connect(a: &ConnectOptions) -> Result<Connected> {
         .map(|d| Cache::new(d, &served.id))
         .transpose()?;
     let (mut scene, scene_bytes_fetched) = served.remote.scene(&served.id, cache.as_ref())?;
+    // What the service's importer added or left out (a default light and ground, a material
+    // library not uploaded, …) is in the status, not in the stored scene: the session says it
+    // as a local load does.
+    if let Ok(status) = served.remote.status(&served.id) {
+        scene.warnings = status.warnings;
+    }
     // The service keeps what the bake needs; the sky of a local scene file is the client's.
     if scene.environment.is_none() {
         scene.environment = local_environment(&src);

@@ -134,6 +134,31 @@ fn a_mesh_is_submitted_with_the_files_it_reads() {
         // Only the bake's cost is saved here: the scene is what this test is about.
         bspvt_tests::service::delete(&a, &srv.url(&format!("/v1/scenes/{id}")), None);
     }
+    // A bare mesh without lamps, opened as `view --mesh` opens it: the session is told what
+    // the service's importer added (the stored scene carries no warnings; the status does).
+    let tri = tmp.path().join("tri.obj");
+    std::fs::write(&tri, "v 0 0 0\nv 1 0 0\nv 0 1 1\nf 1 2 3\n").expect("obj");
+    let connected =
+        bspvt_client::session::connect::connect(&bspvt_client::session::connect::ConnectOptions {
+            source: None,
+            mesh: Some(tri),
+            server: Some(srv.base.clone()),
+            api_key: None,
+            data_dir: tmp.path().join("client"),
+            cache_dir: None,
+            embedded: None,
+        })
+        .expect("connect");
+    assert!(
+        connected
+            .scene
+            .warnings
+            .iter()
+            .any(|w| w.contains("a quad light above it and a ground plane under it were added")),
+        "{:?}",
+        connected.scene.warnings
+    );
+
     let textured = bspvt_client::scene::open(None, Some(&gltf)).expect("offline");
     assert!(textured.materials.iter().any(|m| m.maps.is_some()));
 

@@ -215,9 +215,13 @@ fn integrate_poly(m: mat3x3f, count: u32) -> f32 {
         var p = ig_c[k - 1u];
         for (var i = 0u; i < k; i++) {
             let q = ig_c[i];
-            sum += edge(p, q);
             if want_dir {
-                dir += edge_vec(p, q);
+                // The vector form factor's term; its z is the integral's term.
+                let e = edge_vec(p, q);
+                sum += e.z;
+                dir += e;
+            } else {
+                sum += edge(p, q);
             }
             p = q;
         }
@@ -322,23 +326,33 @@ fn tex_texel(h: vec3u, x: i32, y: i32) -> vec3f {
     return light_tex(h.z + yi * h.x + xi).xyz;
 }
 
+// The bilinear footprint of `uv` on a w × h image (texel centres at half-integers, v down the
+// image): the top-left tap (x₀, y₀) and the weights (fx, fy) toward the next tap on each axis.
+struct Taps {
+    x0: i32,
+    y0: i32,
+    f: vec2f,
+}
+
+fn bilinear_taps(uv: vec2f, w: u32, h: u32) -> Taps {
+    let xy = uv * vec2f(f32(w), f32(h)) - 0.5;
+    let c = floor(xy);
+    var t: Taps;
+    t.x0 = i32(c.x);
+    t.y0 = i32(c.y);
+    t.f = xy - c;
+    return t;
+}
+
 // Level::bilinear: clamp to edge, v down the image.
 fn tex_bilinear(l: u32, uv_in: vec2f) -> vec3f {
     let h = tex_word(1u + l);
     // Beyond a texture's width outside [0, 1], every tap is an edge texel: clamping there
     // keeps the conversion to integers in range and changes nothing.
-    let uv = clamp(uv_in, vec2f(-1.0), vec2f(2.0));
-    let x = uv.x * f32(h.x) - 0.5;
-    let y = uv.y * f32(h.y) - 0.5;
-    let x0 = floor(x);
-    let y0 = floor(y);
-    let fx = x - x0;
-    let fy = y - y0;
-    let xi = i32(x0);
-    let yi = i32(y0);
-    let top = mix(tex_texel(h, xi, yi), tex_texel(h, xi + 1, yi), fx);
-    let bottom = mix(tex_texel(h, xi, yi + 1), tex_texel(h, xi + 1, yi + 1), fx);
-    return mix(top, bottom, fy);
+    let t = bilinear_taps(clamp(uv_in, vec2f(-1.0), vec2f(2.0)), h.x, h.y);
+    let top = mix(tex_texel(h, t.x0, t.y0), tex_texel(h, t.x0 + 1, t.y0), t.f.x);
+    let bottom = mix(tex_texel(h, t.x0, t.y0 + 1), tex_texel(h, t.x0 + 1, t.y0 + 1), t.f.x);
+    return mix(top, bottom, t.f.y);
 }
 
 // LightTexture::sample: trilinear at level `lod` (clamped; NaN and +∞ → the coarsest).
@@ -385,6 +399,9 @@ struct LightPlane {
     o: vec3f,
     e1: vec3f,
     e2: vec3f,
+    // e₁ × e₂ (twice the texture's area along the plane's normal) and its dot with o.
+    ortho: vec3f,
+    dist: f32,
 }
 
 fn light_plane(p: vec3f) -> LightPlane {
@@ -402,6 +419,8 @@ fn light_plane(p: vec3f) -> LightPlane {
         l.e1 *= scale;
         l.e2 *= scale;
     }
+    l.ortho = cross(l.e1, l.e2);
+    l.dist = dot(l.ortho, l.o);
     return l;
 }
 
@@ -421,11 +440,9 @@ struct Lookup {
 fn plane_lookup(frame: mat3x3f, a: mat3x3f, det_a: f32, l: LightPlane) -> Lookup {
     var k: Lookup;
     k.fwd = transpose(frame) * a;
-    let ortho = cross(l.e1, l.e2);
-    let dist = dot(ortho, l.o);
-    let t = transpose(a) * (frame * ortho);
+    let t = transpose(a) * (frame * l.ortho);
     let tl = length(t);
-    let d = abs(dist) * sqrt(abs(det_a)) / (tl * sqrt(tl));
+    let d = abs(l.dist) * sqrt(abs(det_a)) / (tl * sqrt(tl));
     k.lod = log2(max(d * f32(tex_word(0u).y), 1.0));
     return k;
 }
@@ -435,16 +452,15 @@ fn plane_lookup(frame: mat3x3f, a: mat3x3f, det_a: f32, l: LightPlane) -> Lookup
 fn plane_fetch(k: Lookup, l: LightPlane, f_in: vec3f, max_lod: f32) -> vec3f {
     let fw = k.fwd * f_in;
     let fl = length(fw);
-    let ortho = cross(l.e1, l.e2);
-    if !(fl > 0.0) || !finite(fl) || !(length(ortho) > 0.0) {
+    if !(fl > 0.0) || !finite(fl) || !(length(l.ortho) > 0.0) {
         return tex_average();
     }
     let f = fw / fl;
-    let denom = dot(ortho, f);
+    let denom = dot(l.ortho, f);
     if !(abs(denom) > 0.0) {
         return tex_average();
     }
-    let q = f * (dot(ortho, l.o) / denom) - l.o;
+    let q = f * (l.dist / denom) - l.o;
     return tex_sample(plane_uv(l.e1, l.e2, q), min(k.lod, max_lod));
 }
 
@@ -453,9 +469,9 @@ fn plane_fetch(k: Lookup, l: LightPlane, f_in: vec3f, max_lod: f32) -> vec3f {
 // texture's area) · size); 1e30 (no bound) when a direction does not reach the plane.
 fn piece_lod(l: LightPlane, count: u32) -> f32 {
     let none = 1e30;
-    let ortho = cross(l.e1, l.e2);
+    let ortho = l.ortho;
     let texture_area = length(ortho);
-    let dist = dot(ortho, l.o);
+    let dist = l.dist;
     if !(texture_area > 0.0) || !(abs(dist) > 0.0) || count < 3u {
         return none;
     }
@@ -490,22 +506,46 @@ struct Piece {
     s: vec4f,
 }
 
-fn shade_piece(count: u32, frame: mat3x3f, to_ltc: mat3x3f, plane: LightPlane, l0: Lookup,
-    l1: Lookup) -> Piece {
+// What a shading point needs of the light beyond its polygon (shade::Emitter::for_lobes):
+// the lobes' maps, and for a textured light its plane and each lobe's lookup, made once for
+// the many pieces a tree cuts from the light.
+struct Emitter {
+    frame: mat3x3f,
+    to_ltc: mat3x3f,
+    plane: LightPlane,
+    l0: Lookup,
+    l1: Lookup,
+}
+
+// `frame`: world → the local shading frame; `lt`: the specular lobe's LTC at the point p.
+fn emitter(p: vec3f, frame: mat3x3f, lt: Ltc) -> Emitter {
+    var e: Emitter;
+    e.frame = frame;
+    e.to_ltc = lt.m_inv * frame;
+    if light_textured() {
+        e.plane = light_plane(p);
+        let id = mat3x3f(vec3f(1.0, 0.0, 0.0), vec3f(0.0, 1.0, 0.0), vec3f(0.0, 0.0, 1.0));
+        e.l0 = plane_lookup(frame, id, 1.0, e.plane);
+        e.l1 = plane_lookup(frame, lt.m, lt.det, e.plane);
+    }
+    return e;
+}
+
+fn shade_piece(count: u32, e: Emitter) -> Piece {
     var out: Piece;
-    let d = integrate_poly(frame, count);
+    let d = integrate_poly(e.frame, count);
     var dc = vec3f(d);
     var lod = 0.0;
     if light_textured() {
-        lod = piece_lod(plane, count);
+        lod = piece_lod(e.plane, count);
         if d > 0.0 {
-            dc = plane_fetch(l0, plane, ig_dir, lod) * d;
+            dc = plane_fetch(e.l0, e.plane, ig_dir, lod) * d;
         }
     }
-    let s = integrate_poly(to_ltc, count);
+    let s = integrate_poly(e.to_ltc, count);
     var sc = vec3f(s);
     if light_textured() && s > 0.0 {
-        sc = plane_fetch(l1, plane, ig_dir, lod) * s;
+        sc = plane_fetch(e.l1, e.plane, ig_dir, lod) * s;
     }
     out.d = vec4f(dc, d);
     out.s = vec4f(sc, s);

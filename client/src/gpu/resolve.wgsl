@@ -178,22 +178,17 @@ fn surface_sample(t: u32, uv_in: vec2f, srgb: bool) -> vec4f {
             uv[k] = clamp(uv[k], -1.0, 2.0);
         }
     }
-    let x = uv.x * f32(h.x) - 0.5;
-    let y = uv.y * f32(h.y) - 0.5;
-    let x0 = floor(x);
-    let y0 = floor(y);
-    let fx = x - x0;
-    let fy = y - y0;
+    let tap = bilinear_taps(uv, h.x, h.y);
     let n = vec2i(i32(h.x), i32(h.y));
-    let xs = vec2u(wrap_index(modes.x, i32(x0), n.x), wrap_index(modes.x, i32(x0) + 1, n.x));
-    let ys = vec2u(wrap_index(modes.y, i32(y0), n.y), wrap_index(modes.y, i32(y0) + 1, n.y));
+    let xs = vec2u(wrap_index(modes.x, tap.x0, n.x), wrap_index(modes.x, tap.x0 + 1, n.x));
+    let ys = vec2u(wrap_index(modes.y, tap.y0, n.y), wrap_index(modes.y, tap.y0 + 1, n.y));
     let a = surface_texel(h, xs.x, ys.x, srgb);
     let b = surface_texel(h, xs.y, ys.x, srgb);
     let c = surface_texel(h, xs.x, ys.y, srgb);
     let d = surface_texel(h, xs.y, ys.y, srgb);
-    let top = a + (b - a) * fx;
-    let bottom = c + (d - c) * fx;
-    return top + (bottom - top) * fy;
+    let top = a + (b - a) * tap.f.x;
+    let bottom = c + (d - c) * tap.f.x;
+    return top + (bottom - top) * tap.f.y;
 }
 
 fn unit3(v: vec3f) -> vec3f {
@@ -299,19 +294,8 @@ fn shade(t: u32, x: f32, y: f32) -> vec3f {
     if nd < 3u {
         return vec3f(0.0);
     }
-    for (var i = 0u; i < nd; i++) {
-        ig_src[i] = dirs[i];
-    }
-    let to_ltc = lt.m_inv * frame;
-    let plane = light_plane(pos);
-    var l0: Lookup;
-    var l1: Lookup;
-    if light_textured() {
-        let id = mat3x3f(vec3f(1.0, 0.0, 0.0), vec3f(0.0, 1.0, 0.0), vec3f(0.0, 0.0, 1.0));
-        l0 = plane_lookup(frame, id, 1.0, plane);
-        l1 = plane_lookup(frame, lt.m, lt.det, plane);
-    }
-    let pc = shade_piece(nd, frame, to_ltc, plane, l0, l1);
+    // light_directions leaves its polygon in ig_src, where shade_piece reads it.
+    let pc = shade_piece(nd, emitter(pos, frame, lt));
     let rd = clamp(w.x * shading[i0].ratio_d + w.y * shading[i1].ratio_d
         + w.z * shading[i2].ratio_d, vec3f(0.0), vec3f(1.0));
     let rs = clamp(w.x * shading[i0].ratio_s + w.y * shading[i1].ratio_s

@@ -149,7 +149,6 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
     let frame = to_local(n, wo);
     let theta = atan2(length(cross(n, wo)), dot(n, wo));
     let lt = ltc_lookup(albedo.w, theta);
-    let to_ltc = lt.m_inv * frame;
     let spec = f0 * lt.magnitude + (vec3f(1.0) - f0) * lt.fresnel;
     let radiance = params.radiance.xyz;
 
@@ -165,16 +164,8 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
         results[v] = res;
         return;
     }
-    // The light's plane and texture lookups, once per vertex (shade::Emitter::for_lobes).
-    let plane = light_plane(p);
-    var l0: Lookup;
-    var l1: Lookup;
-    if light_textured() {
-        let id = mat3x3f(vec3f(1.0, 0.0, 0.0), vec3f(0.0, 1.0, 0.0), vec3f(0.0, 0.0, 1.0));
-        l0 = plane_lookup(frame, id, 1.0, plane);
-        l1 = plane_lookup(frame, lt.m, lt.det, plane);
-    }
-    let un = shade_piece(nd, frame, to_ltc, plane, l0, l1);
+    let em = emitter(p, frame, lt);
+    let un = shade_piece(nd, em);
     let ud = un.d.w;
     let us = un.s.w;
     let root0 = roots[6u * v];
@@ -211,7 +202,7 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
         if root == ABSENT {
             // bspvt::ABSENT_FACE_VALUE: visible.
             res.pieces += 1u;
-            let pc = shade_piece(count, frame, to_ltc, plane, l0, l1);
+            let pc = shade_piece(count, em);
             sd += pc.d.xyz;
             ss += pc.s.xyz;
             continue;
@@ -235,7 +226,7 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
                 } else {
                     res.pieces += 1u;
                     let vbar = f32(value) / 255.0;
-                    let pc = shade_piece(count, frame, to_ltc, plane, l0, l1);
+                    let pc = shade_piece(count, em);
                     sd += vbar * pc.d.xyz;
                     ss += vbar * pc.s.xyz;
                 }

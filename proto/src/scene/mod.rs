@@ -416,7 +416,9 @@ impl Scene {
             if len > MAX_LIGHT_TEXTURE_FILE_BYTES {
                 return Err(format!("{len} bytes is over the limit"));
             }
-            std::fs::read(&path).map_err(|e| e.to_string())
+            std::fs::read(&path)
+                .map(std::borrow::Cow::Owned)
+                .map_err(|e| e.to_string())
         })?;
         Scene::assemble(file, parts)
     }
@@ -728,9 +730,9 @@ impl SceneFile {
     /// upload's files), so the scene carries the texels wherever it goes (a service's stored
     /// scene, every client). A texture that cannot be read or decoded is an error naming the
     /// light.
-    pub fn load_light_textures(
+    pub fn load_light_textures<'f>(
         &mut self,
-        read: impl Fn(&str) -> Result<Vec<u8>, String>,
+        read: impl Fn(&str) -> Result<std::borrow::Cow<'f, [u8]>, String>,
     ) -> Result<(), SceneError> {
         for (i, l) in self.lights.iter_mut().enumerate() {
             if let (Some(path), None) = (&l.texture, &l.image) {

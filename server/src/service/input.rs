@@ -291,7 +291,7 @@ fn compose(
     }
     file.load_light_textures(|path| {
         let name = file_name(path);
-        files.get(name).cloned().ok_or_else(|| {
+        files.get(name).map(|b| b.as_slice().into()).ok_or_else(|| {
             format!(
                 "it was not uploaded (send it as a `file` field named {:?})",
                 super::error::truncate(name, 200)

@@ -72,6 +72,7 @@ fn frame(
             index: 7,
             time: 0.0,
             mode,
+            on_gpu: false,
         })
         .unwrap()
         .image

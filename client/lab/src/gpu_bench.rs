@@ -10,6 +10,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use bspvt_client::gpu::Gpu;
 use bspvt_client::gpu::frame::GpuFrames;
+use bspvt_client::gpu::present::{Compositor, Offscreen, Pixels};
 use bspvt_client::light::Light;
 use bspvt_client::method::trees::{cached_bake, load_checked};
 use bspvt_client::render::renderer::{Mode, Renderer, Trees};
@@ -64,6 +65,9 @@ pub struct Row {
     pub gpu_shade_us: f64,
     /// GPU: a whole frame (shading, raster, read-back into an image), ms.
     pub gpu_frame_ms: f64,
+    /// GPU: a frame as the window presents it (shading, raster, tone mapping and the
+    /// overlay into an 8-bit target; no read-back), waited for, ms.
+    pub gpu_present_ms: f64,
     /// CPU: per-vertex shading of every visible vertex, µs.
     pub cpu_shade_us: f64,
     /// CPU: a whole frame, ms.
@@ -179,10 +183,20 @@ pub fn run(a: &BenchGpuArgs) -> Result<Report> {
                     rest.transformed(&rot)
                 };
                 let mut frames = GpuFrames::new(gpu, &scene, a.samples)?;
+                let mut compositor = Compositor::new(gpu, Offscreen::FORMAT)?;
+                let target = Offscreen::new(gpu, w, h)?;
+                let overlay = vec![0u32; (w * h) as usize];
                 for mode in [Mode::Vertex, Mode::Pixel] {
                     // Warm-up: uploads, pipelines.
                     frames.frame(gpu, &r, &pose(0), Some(&all), mode)?;
+                    let present = |frames: &mut GpuFrames, c: &mut Compositor, k: usize| {
+                        let (img, _) = frames.frame_on_gpu(gpu, &r, &pose(k), Some(&all), mode)?;
+                        c.draw(gpu, Pixels::Gpu(&img), 1.0, &overlay, &target.view())?;
+                        target.finish(gpu)
+                    };
+                    present(&mut frames, &mut compositor, 0)?;
                     let (mut gs, mut gf, mut cs, mut cf) = (vec![], vec![], vec![], vec![]);
+                    let mut gp = vec![];
                     for k in 0..a.frames {
                         let t = Instant::now();
                         frames.shade_only(gpu, &r, &pose(k + 1), Some(&all))?;
@@ -190,6 +204,9 @@ pub fn run(a: &BenchGpuArgs) -> Result<Report> {
                         let t = Instant::now();
                         frames.frame(gpu, &r, &pose(k + 1), Some(&all), mode)?;
                         gf.push(t.elapsed().as_secs_f64() * 1e3);
+                        let t = Instant::now();
+                        present(&mut frames, &mut compositor, k + 1)?;
+                        gp.push(t.elapsed().as_secs_f64() * 1e3);
                     }
                     for k in 0..a.cpu_frames {
                         let t = Instant::now();
@@ -207,11 +224,12 @@ pub fn run(a: &BenchGpuArgs) -> Result<Report> {
                         mode: format!("{mode:?}").to_lowercase(),
                         gpu_shade_us: median(gs),
                         gpu_frame_ms: median(gf),
+                        gpu_present_ms: median(gp),
                         cpu_shade_us: median(cs),
                         cpu_frame_ms: median(cf),
                     };
                     eprintln!(
-                        "{} ({} vertices, {} visible) {} {}: GPU shade {:.0} µs, frame {:.1} ms | CPU shade {:.0} µs, frame {:.1} ms",
+                        "{} ({} vertices, {} visible) {} {}: GPU shade {:.0} µs, frame {:.1} ms read back, {:.1} ms presented | CPU shade {:.0} µs, frame {:.1} ms",
                         row.mesh,
                         row.vertices,
                         row.visible,
@@ -219,6 +237,7 @@ pub fn run(a: &BenchGpuArgs) -> Result<Report> {
                         row.mode,
                         row.gpu_shade_us,
                         row.gpu_frame_ms,
+                        row.gpu_present_ms,
                         row.cpu_shade_us,
                         row.cpu_frame_ms
                     );

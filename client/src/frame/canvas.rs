@@ -1,4 +1,5 @@
-//! Text, lines and widgets drawn into the window's 0RGB framebuffer (8×8 bitmap font,
+//! Text, lines and widgets drawn into the window's 0RGB framebuffer, or into a transparent
+//! layer composited over the frame by the GPU (`gpu/present.wgsl`) (8×8 bitmap font,
 //! public-domain glyphs from `font8x8`: Basic Latin, Latin-1 (², °, ×, µ), Greek (α, ε, σ),
 //! box drawing and a few symbols).
 
@@ -24,23 +25,38 @@ pub fn has_glyph(ch: char) -> bool {
         || MISC_FONTS.get(ch).is_some()
 }
 
-/// A 0RGB framebuffer to draw text and widgets into.
+/// A framebuffer to draw text and widgets into.
 pub struct Canvas<'a> {
-    /// Pixels, row by row, 0x00RRGGBB.
+    /// Pixels, row by row: 0x00RRGGBB, or premultiplied 0xAARRGGBB where `layer`.
     pub buf: &'a mut [u32],
     /// Width in pixels.
     pub width: usize,
     /// Height in pixels.
     pub height: usize,
+    /// `false`: an opaque frame that drawing blends into. `true`: a transparent layer that
+    /// takes the same drawing as "over" operations, to be put over a frame by [`composite`]
+    /// (or `present.wgsl`) with the same result.
+    pub layer: bool,
 }
 
 impl Canvas<'_> {
+    /// `rgb` over pixel `k` with opacity `alpha`.
+    fn put(&mut self, k: usize, rgb: u32, alpha: f32) {
+        let p = &mut self.buf[k];
+        *p = if self.layer {
+            over(*p, rgb, alpha)
+        } else if alpha >= 1.0 {
+            rgb & 0x00ff_ffff
+        } else {
+            blend(*p, rgb, alpha)
+        };
+    }
+
     /// Darkens a rectangle (the text's background) by half.
     pub(crate) fn shade(&mut self, x0: usize, y0: usize, w: usize, h: usize) {
         for y in y0..(y0 + h).min(self.height) {
             for x in x0..(x0 + w).min(self.width) {
-                let p = &mut self.buf[y * self.width + x];
-                *p = (*p >> 1) & 0x007f_7f7f;
+                self.put(y * self.width + x, 0, 0.5);
             }
         }
     }
@@ -48,7 +64,7 @@ impl Canvas<'_> {
     pub(crate) fn fill(&mut self, x0: usize, y0: usize, w: usize, h: usize, rgb: u32) {
         for y in y0..(y0 + h).min(self.height) {
             for x in x0..(x0 + w).min(self.width) {
-                self.buf[y * self.width + x] = rgb;
+                self.put(y * self.width + x, rgb, 1.0);
             }
         }
     }
@@ -64,7 +80,7 @@ impl Canvas<'_> {
                     if bits & (1 << col) != 0 {
                         let (px, py) = (x + i * 8 + col, y + row);
                         if px < self.width && py < self.height {
-                            self.buf[py * self.width + px] = rgb;
+                            self.put(py * self.width + px, rgb, 1.0);
                         }
                     }
                 }
@@ -119,7 +135,7 @@ impl Canvas<'_> {
                     continue;
                 }
             }
-            self.buf[k] = blend(self.buf[k], rgb, alpha);
+            self.put(k, rgb, alpha);
         }
     }
 
@@ -129,6 +145,35 @@ impl Canvas<'_> {
         let filled = ((w as f64) * t.clamp(0.0, 1.0)) as usize;
         self.fill(x, y + 10, filled, 4, 0x00f0_b040);
         self.text(x + 4, y + 1, label, 0x00ff_ffff);
+    }
+}
+
+/// `rgb` with opacity `alpha` over a premultiplied 0xAARRGGBB pixel: c = α·rgb + (1 − α)·c,
+/// a = α + (1 − α)·a, in 8 bits.
+fn over(under: u32, rgb: u32, alpha: f32) -> u32 {
+    let a = alpha.clamp(0.0, 1.0);
+    let src = (rgb & 0x00ff_ffff) | 0xff00_0000;
+    let mut out = 0;
+    for shift in [24, 16, 8, 0] {
+        let u = ((under >> shift) & 0xff) as f32;
+        let o = ((src >> shift) & 0xff) as f32;
+        out |= ((o * a + u * (1.0 - a)).round() as u32 & 0xff) << shift;
+    }
+    out
+}
+
+/// A layer drawn with `layer: true` put over an opaque 0RGB frame: c = o + (1 − a)·c (what
+/// `present.wgsl` does on the GPU).
+pub(crate) fn composite(frame: &mut [u32], layer: &[u32]) {
+    for (f, &o) in frame.iter_mut().zip(layer) {
+        let k = 1.0 - ((o >> 24) & 0xff) as f32 / 255.0;
+        let mut out = 0;
+        for shift in [16, 8, 0] {
+            let u = ((*f >> shift) & 0xff) as f32;
+            let c = ((o >> shift) & 0xff) as f32;
+            out |= (((c + k * u).round() as u32).min(255)) << shift;
+        }
+        *f = out;
     }
 }
 
@@ -166,6 +211,7 @@ mod tests {
             buf: &mut buf,
             width: 16,
             height: 4,
+            layer: false,
         };
         // Depth 0.5 → 2.0 along the line, 1/z linear in t: in front of depth 1 for t < 2/3,
         // pixels 0–9 of 15.
@@ -181,5 +227,51 @@ mod tests {
         let row: Vec<bool> = (0..16).map(|x| buf[16 + x] != 0).collect();
         assert!(row[..10].iter().all(|&r| r), "{row:?}");
         assert!(row[11..].iter().all(|&r| !r), "{row:?}");
+    }
+
+    /// What is drawn into a layer and put over a frame is what is drawn into the frame
+    /// itself (the GPU window's overlay against the CPU window's), within one 8-bit step.
+    #[test]
+    fn a_layer_over_the_frame_is_the_frame_drawn_into() {
+        let (w, h) = (64, 24);
+        let frame: Vec<u32> = (0..w * h)
+            .map(|i| {
+                let v = (i * 2654435761usize) as u32;
+                v & 0x00ff_ffff
+            })
+            .collect();
+        let draw = |c: &mut Canvas| {
+            c.panel(2, 2, &["ε² × 3".to_string(), "α = 0.25".to_string()]);
+            c.line((0.0, 0.0), (63.0, 23.0), 1.0, 1.0, None, 0x00ff_8020, 0.6);
+            c.slider(0, 10, 64, 0.4, "roughness");
+        };
+        let mut direct = frame.clone();
+        draw(&mut Canvas {
+            buf: &mut direct,
+            width: w,
+            height: h,
+            layer: false,
+        });
+        let mut layer = vec![0u32; w * h];
+        draw(&mut Canvas {
+            buf: &mut layer,
+            width: w,
+            height: h,
+            layer: true,
+        });
+        let mut composed = frame.clone();
+        composite(&mut composed, &layer);
+        let mut worst = 0;
+        for (a, b) in direct.iter().zip(&composed) {
+            for shift in [16, 8, 0] {
+                worst =
+                    worst.max((((a >> shift) & 0xff) as i32 - ((b >> shift) & 0xff) as i32).abs());
+            }
+        }
+        assert!(worst <= 1, "largest difference {worst} (8-bit)");
+        // The layer drew something, and left the rest transparent.
+        assert!(layer.iter().any(|&p| p >> 24 == 0xff));
+        assert!(layer.contains(&0));
+        assert_ne!(direct, frame);
     }
 }

@@ -10,6 +10,10 @@ use bspvt_raytrace::gpu::block_on;
 
 /// A device and its queue, with the adapter's name.
 pub struct Gpu {
+    /// The instance (the viewer makes its window's surface from it).
+    pub(crate) instance: wgpu::Instance,
+    /// The adapter the device is on.
+    pub(crate) adapter_handle: wgpu::Adapter,
     pub(crate) device: wgpu::Device,
     pub(crate) queue: wgpu::Queue,
     /// The adapter, e.g. `llvmpipe (LLVM 19.1.7, 256 bits) (Vulkan, Cpu)`.
@@ -47,6 +51,8 @@ impl Gpu {
         Ok(Gpu {
             adapter: format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type),
             software: info.device_type == wgpu::DeviceType::Cpu,
+            instance: ctx.instance,
+            adapter_handle: ctx.adapter,
             device: ctx.device,
             queue: ctx.queue,
             shade_pipeline: OnceLock::new(),

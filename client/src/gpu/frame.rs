@@ -318,8 +318,54 @@ impl GpuFrames {
         trees: Option<&Trees>,
         mode: Mode,
     ) -> Result<(Image, FrameCounts)> {
-        supports(light)?;
         let _queue = gpu.exclusive();
+        let (mut enc, counts) = self.encode(gpu, renderer, light, trees, mode)?;
+        let Some(t) = self.target.as_ref() else {
+            bail!("the frame's target was not made");
+        };
+        enc.copy_buffer_to_buffer(&t.image, 0, &t.readback, 0, t.image.size());
+        gpu.queue.submit([enc.finish()]);
+        let bytes = gpu.map_read(&t.readback)?;
+        Ok((image_from_bytes(t.size, &bytes), counts))
+    }
+
+    /// The same frame left on the GPU (submitted, not waited for): what a window presents
+    /// without reading 16 bytes per pixel back ([`super::present`]).
+    pub fn frame_on_gpu(
+        &mut self,
+        gpu: &Gpu,
+        renderer: &Renderer,
+        light: &Light,
+        trees: Option<&Trees>,
+        mode: Mode,
+    ) -> Result<(GpuImage, FrameCounts)> {
+        let _queue = gpu.exclusive();
+        let (enc, counts) = self.encode(gpu, renderer, light, trees, mode)?;
+        gpu.queue.submit([enc.finish()]);
+        let Some(t) = self.target.as_ref() else {
+            bail!("the frame's target was not made");
+        };
+        Ok((
+            GpuImage {
+                buffer: t.image.clone(),
+                width: t.size.0,
+                height: t.size.1,
+            },
+            counts,
+        ))
+    }
+
+    /// Records a frame's passes (per-vertex shading, visibility raster, resolve) into the
+    /// target's radiance buffer; the caller holds the queue.
+    fn encode(
+        &mut self,
+        gpu: &Gpu,
+        renderer: &Renderer,
+        light: &Light,
+        trees: Option<&Trees>,
+        mode: Mode,
+    ) -> Result<(wgpu::CommandEncoder, FrameCounts)> {
+        supports(light)?;
         let view = &renderer.view;
         let (w, h) = (view.width, view.height);
         let mut enc = gpu.device.create_command_encoder(&Default::default());
@@ -437,16 +483,6 @@ impl GpuFrames {
             pass.set_bind_group(0, &group, &[]);
             pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
         }
-        enc.copy_buffer_to_buffer(&t.image, 0, &t.readback, 0, t.image.size());
-        gpu.queue.submit([enc.finish()]);
-        let bytes = gpu.map_read(&t.readback)?;
-        let mut img = Image::new(w, h);
-        for (px, texel) in img.pixels.iter_mut().zip(bytes.chunks_exact(16)) {
-            *px = std::array::from_fn(|c| {
-                let o = c * 4;
-                f32::from_le_bytes([texel[o], texel[o + 1], texel[o + 2], texel[o + 3]])
-            });
-        }
         let counts = FrameCounts {
             vertices_shaded: renderer.visible_vertices.len(),
             pixels_shaded: if mode == Mode::Pixel {
@@ -456,8 +492,41 @@ impl GpuFrames {
             },
             ..FrameCounts::default()
         };
-        Ok((img, counts))
+        Ok((enc, counts))
     }
+}
+
+/// A frame left on the GPU: linear radiance, one `vec4<f32>` per pixel, row by row (the
+/// resolve pass's output; valid until the next frame of the same [`GpuFrames`]).
+#[derive(Clone, Debug)]
+pub struct GpuImage {
+    pub(crate) buffer: wgpu::Buffer,
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+}
+
+impl GpuImage {
+    /// Reads it back (screenshots; a frame shown in a window is not read back).
+    pub fn read(&self, gpu: &Gpu) -> Result<Image> {
+        let _queue = gpu.exclusive();
+        let bytes = u64::from(self.width) * u64::from(self.height) * 16;
+        let data = gpu.read_buffer(&self.buffer, bytes)?;
+        Ok(image_from_bytes((self.width, self.height), &data))
+    }
+}
+
+/// An image from the resolve pass's little-endian `vec4<f32>` texels.
+fn image_from_bytes((w, h): (u32, u32), bytes: &[u8]) -> Image {
+    let mut img = Image::new(w, h);
+    for (px, texel) in img.pixels.iter_mut().zip(bytes.chunks_exact(16)) {
+        *px = std::array::from_fn(|c| {
+            let o = c * 4;
+            f32::from_le_bytes([texel[o], texel[o + 1], texel[o + 2], texel[o + 3]])
+        });
+    }
+    img
 }
 
 /// The camera's world → clip matrix, matching [`crate::frame::camera::View`]'s rays (wgpu's

@@ -7,6 +7,7 @@ pub mod backend;
 pub mod context;
 pub mod frame;
 mod materials;
+pub mod present;
 pub(crate) mod trees;
 pub mod vertex;
 

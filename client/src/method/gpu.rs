@@ -5,6 +5,7 @@
 use anyhow::Result;
 
 use super::{Frame, FrameInput, Settings};
+use crate::frame::image::Image;
 use crate::gpu::frame::GpuFrames;
 use crate::gpu::{Backend, Gpu};
 use crate::light::Light;
@@ -58,6 +59,13 @@ impl GpuPath {
         let Some(frames) = self.frames.as_mut() else {
             return Ok(None);
         };
+        if f.on_gpu {
+            let (image, counts) =
+                frames.frame_on_gpu(self.gpu, f.renderer, light, trees, f.mode)?;
+            let mut frame = Frame::new(Image::new(0, 0), counts);
+            frame.gpu = Some(image);
+            return Ok(Some(frame));
+        }
         let (image, counts) = frames.frame(self.gpu, f.renderer, light, trees, f.mode)?;
         Ok(Some(Frame::new(image, counts)))
     }

@@ -225,6 +225,9 @@ pub struct FrameInput<'a> {
     pub time: f32,
     /// Per-vertex or per-pixel (methods that offer both).
     pub mode: Mode,
+    /// A window presents the frame from the GPU: a method drawing there may leave it there
+    /// ([`Frame::gpu`]) instead of reading it back.
+    pub on_gpu: bool,
 }
 
 impl FrameInput<'_> {
@@ -248,6 +251,9 @@ pub struct Frame {
     pub maps_ms: Option<f64>,
     /// A moving scene: the time to pose it, ms (inside the frame).
     pub pose_ms: Option<f64>,
+    /// The frame left on the GPU (only where [`FrameInput::on_gpu`] asked; `image` is then
+    /// empty).
+    pub gpu: Option<crate::gpu::frame::GpuImage>,
 }
 
 impl Frame {
@@ -259,6 +265,7 @@ impl Frame {
             noise: None,
             maps_ms: None,
             pose_ms: None,
+            gpu: None,
         }
     }
 }

@@ -172,6 +172,7 @@ pub fn render_sequence(
             index: k as u64,
             time: k as f32 / frames as f32,
             mode: opts.settings.mode,
+            on_gpu: false,
         })?;
         ms.push(t.elapsed().as_secs_f64() * 1e3);
         maps_ms.extend(f.maps_ms);

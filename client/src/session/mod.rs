@@ -14,6 +14,7 @@ use bspvt_proto::scene::Camera;
 use glam::{DAffine3, DQuat, DVec3};
 
 use crate::frame::image::Image;
+use crate::gpu::frame::GpuImage;
 use crate::light::Light;
 use crate::method::{FrameInput, FrameMethod, MethodState, SceneData, Settings, registry};
 use crate::render::path::LightPath;
@@ -90,6 +91,15 @@ impl Default for LightPose {
             radiance_scale: 1.0,
         }
     }
+}
+
+/// A frame to show: linear radiance on the CPU, or left on the GPU by a method that draws
+/// there ([`Session::frame_to_show`]).
+pub enum Shown {
+    /// On the CPU.
+    Cpu(Image),
+    /// On the GPU.
+    Gpu(GpuImage),
 }
 
 /// A scene being viewed: what the window, `animate` and `demo` draw through.
@@ -348,6 +358,11 @@ impl<'a> Session<'a> {
         self.invalidate();
     }
 
+    /// Who draws the methods that have a GPU path.
+    pub fn backend(&self) -> crate::gpu::Backend {
+        self.settings.backend
+    }
+
     /// Who draws the methods that have a GPU path (resolve `auto` first:
     /// [`crate::gpu::Backend::resolve`]); their states are prepared again.
     pub fn set_backend(&mut self, backend: crate::gpu::Backend) {
@@ -452,6 +467,21 @@ impl<'a> Session<'a> {
     /// Draws one frame with the current method; a method that cannot draw (its preparation
     /// or frame failed) is replaced by unshadowed LTC, with a warning.
     pub fn frame(&mut self) -> Image {
+        match self.frame_to_show(false) {
+            Shown::Cpu(image) => image,
+            // Not asked for; read back all the same.
+            Shown::Gpu(image) => crate::gpu::Gpu::shared()
+                .and_then(|gpu| image.read(gpu))
+                .unwrap_or_else(|e| {
+                    tracing::warn!("reading the GPU's frame back: {e:#}");
+                    Image::new(self.renderer.gbuffer.width, self.renderer.gbuffer.height)
+                }),
+        }
+    }
+
+    /// [`Session::frame`] for a window that presents from the GPU (`on_gpu`): a method that
+    /// draws on the GPU leaves its frame there.
+    pub fn frame_to_show(&mut self, on_gpu: bool) -> Shown {
         let light = self.light();
         let m = self.method;
         if m.needs().sky_trees {
@@ -478,13 +508,17 @@ impl<'a> Session<'a> {
                     index: 0,
                     time: self.path_t.unwrap_or(0.0) as f32,
                     mode: self.mode,
+                    on_gpu,
                 })
                 .map_err(|e| format!("{e:#}")),
             Err(e) => Err(e.clone()),
         };
         match result {
-            Ok(f) => f.image,
-            Err(e) => match &light {
+            Ok(f) => match f.gpu {
+                Some(g) => Shown::Gpu(g),
+                None => Shown::Cpu(f.image),
+            },
+            Err(e) => Shown::Cpu(match &light {
                 Some(light) => {
                     tracing::warn!("{}: {e}; drawing unshadowed LTC", m.name());
                     self.renderer.ltc(light, Mode::Pixel).0
@@ -493,7 +527,7 @@ impl<'a> Session<'a> {
                     tracing::warn!("{}: {e}", m.name());
                     Image::new(self.renderer.gbuffer.width, self.renderer.gbuffer.height)
                 }
-            },
+            }),
         }
     }
 

@@ -6,21 +6,23 @@
 //! next frame ([`input`]): a short press is never lost and a held key acts for as long as it
 //! was held, at any frame rate. The key map is [`KEYS_HELP`] (the `H` overlay, `bspvt view
 //! --help`). Frames are drawn on this thread by the session's backend (CPU or GPU) and
-//! presented through softbuffer; the trees arrive on the fetcher's thread.
+//! presented ([`present`]): with the GPU backend through a wgpu surface, the frame never
+//! leaving the GPU and the overlay drawn on the CPU into a transparent layer put over it
+//! there; otherwise through softbuffer. The trees arrive on the fetcher's thread.
 
 mod guides;
 mod input;
+mod present;
 mod save;
 
 pub use input::KEYS_HELP;
 pub use save::SceneSource;
 
-use std::num::NonZeroU32;
 use std::path::PathBuf;
-use std::rc::Rc;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result, anyhow};
+use anyhow::{Context, Result};
 use glam::DVec3;
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
@@ -30,11 +32,14 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::platform::x11::EventLoopBuilderExtX11;
 use winit::window::{Window, WindowId};
 
-use crate::frame::canvas::Canvas;
+use crate::frame::canvas::{Canvas, composite};
+use crate::frame::image::Image;
+use crate::gpu::present::Pixels;
 use crate::method::METHODS;
 use crate::render::renderer::Mode;
-use crate::session::Session;
+use crate::session::{Session, Shown};
 use input::Input;
+use present::Output;
 
 /// How the window runs.
 pub struct ViewerOptions {
@@ -99,7 +104,7 @@ pub fn run(session: &mut Session, opts: &ViewerOptions, started: Instant) -> Res
         opts,
         started,
         window: None,
-        surface: None,
+        output: None,
         input: Input::default(),
         buf: Vec::new(),
         depth: None,
@@ -135,16 +140,15 @@ pub fn run(session: &mut Session, opts: &ViewerOptions, started: Instant) -> Res
     Ok(app.report)
 }
 
-type Surface = softbuffer::Surface<Rc<Window>, Rc<Window>>;
-
 struct App<'s, 'a> {
     session: &'s mut Session<'a>,
     opts: &'s ViewerOptions,
     started: Instant,
-    window: Option<Rc<Window>>,
-    surface: Option<Surface>,
+    window: Option<Arc<Window>>,
+    output: Option<Output>,
     input: Input,
-    /// The window's pixels, 0RGB.
+    /// The window's pixels, 0RGB; on a GPU surface, the overlay layer (premultiplied
+    /// 0xAARRGGBB, transparent where nothing is drawn).
     buf: Vec<u32>,
     /// The frame's depth for the guides (`None`: the camera or the size changed).
     depth: Option<Vec<f32>>,
@@ -179,6 +183,13 @@ impl ApplicationHandler for App<'_, '_> {
         match event {
             WindowEvent::CloseRequested => event_loop.exit(),
             WindowEvent::Resized(s) => self.pending_size = Some((s.width, s.height)),
+            // winit makes up presses for the keys down when the window gains focus (read
+            // when it handles the focus, so a key pressed just after counted twice, and its
+            // hold began early): a key acts from its own press; releases on focus loss are
+            // `release_all`'s.
+            WindowEvent::KeyboardInput {
+                is_synthetic: true, ..
+            } => {}
             WindowEvent::KeyboardInput { event, .. } => {
                 if let PhysicalKey::Code(code) = event.physical_key {
                     if code == KeyCode::Escape {
@@ -228,17 +239,16 @@ impl App<'_, '_> {
             .with_title(self.opts.title.clone())
             .with_inner_size(PhysicalSize::new(self.size.0, self.size.1))
             .with_min_inner_size(PhysicalSize::new(64, 64));
-        let window = Rc::new(
+        let window = Arc::new(
             event_loop
                 .create_window(attrs)
                 .context("cannot open a window")?,
         );
-        let context = softbuffer::Context::new(window.clone())
-            .map_err(|e| anyhow!("cannot draw into the window: {e}"))?;
-        let surface = softbuffer::Surface::new(&context, window.clone())
-            .map_err(|e| anyhow!("cannot draw into the window: {e}"))?;
+        let (gpu, _) = self.session.backend().resolve()?;
+        let (output, line) = Output::open(&window, gpu)?;
+        println!("{line}");
         self.window = Some(window);
-        self.surface = Some(surface);
+        self.output = Some(output);
         Ok(())
     }
 
@@ -260,35 +270,51 @@ impl App<'_, '_> {
         self.apply(f, dt);
 
         let (w, h) = (self.size.0 as usize, self.size.1 as usize);
-        let img = self.session.frame();
-        let rgb = img.to_srgb8(1.0);
+        let on_gpu = matches!(self.output, Some(Output::Gpu(_)));
+        let shown = self.session.frame_to_show(on_gpu);
         self.buf.clear();
-        self.buf.extend(
-            rgb.pixels()
-                .map(|p| (u32::from(p.0[0]) << 16) | (u32::from(p.0[1]) << 8) | u32::from(p.0[2])),
-        );
-        self.buf.resize(w * h, 0);
-        let frame_dt = self.t_last.elapsed().as_secs_f64().max(1e-6);
+        if on_gpu {
+            self.buf.resize(w * h, 0);
+        } else {
+            let img = self.read(&shown)?;
+            self.buf.extend(
+                img.to_srgb8(1.0).pixels().map(|p| {
+                    (u32::from(p.0[0]) << 16) | (u32::from(p.0[1]) << 8) | u32::from(p.0[2])
+                }),
+            );
+            self.buf.resize(w * h, 0);
+        }
+        // Frames per second on screen: from one frame's start to the next (drawing,
+        // presenting and the events between), not the time to submit this one (a GPU
+        // frame's work is still queued here).
+        let frame_dt = dt.max(1e-6);
         self.fps = if self.fps == 0.0 {
             1.0 / frame_dt
         } else {
             0.9 * self.fps + 0.1 / frame_dt
         };
         if self.show_overlay {
-            self.draw_overlay(w, h);
+            self.draw_overlay(w, h, on_gpu);
         }
         if std::mem::take(&mut self.want_screenshot) {
-            let n = self.report.screenshots.len() as u64;
-            match save::screenshot(&self.opts.screenshot_dir, &self.buf, w, h, n) {
-                Ok(p) => {
-                    println!("screenshot: {}", p.display());
-                    self.say(format!("screenshot: {}", p.display()));
-                    self.report.screenshots.push(p);
-                }
-                Err(e) => self.say(format!("screenshot failed: {e:#}")),
-            }
+            self.screenshot(&shown, on_gpu, w, h);
         }
-        self.present(w, h)?;
+        match self.output.as_mut() {
+            Some(Output::Soft(surface)) => Output::present_soft(surface, &self.buf, w, h)?,
+            Some(Output::Gpu(surface)) => {
+                let pixels = match &shown {
+                    Shown::Gpu(g) => Pixels::Gpu(g),
+                    Shown::Cpu(i) => Pixels::Cpu(i),
+                };
+                let overlay: &[u32] = if pixels.size() == (w as u32, h as u32) {
+                    &self.buf
+                } else {
+                    &[]
+                };
+                surface.present(pixels, overlay, w as u32, h as u32)?;
+            }
+            None => {}
+        }
         self.report.frames += 1;
         if self.report.first_frame.is_none() {
             self.report.first_frame = Some(self.started.elapsed());
@@ -304,24 +330,42 @@ impl App<'_, '_> {
         Ok(())
     }
 
-    fn present(&mut self, w: usize, h: usize) -> Result<()> {
-        let (Some(surface), Some(nw), Some(nh)) = (
-            self.surface.as_mut(),
-            NonZeroU32::new(w as u32),
-            NonZeroU32::new(h as u32),
-        ) else {
-            return Ok(());
+    /// The frame's linear radiance on the CPU (a GPU frame read back).
+    fn read(&self, shown: &Shown) -> Result<Image> {
+        Ok(match shown {
+            Shown::Cpu(img) => img.clone(),
+            Shown::Gpu(g) => g.read(crate::gpu::Gpu::shared()?)?,
+        })
+    }
+
+    /// F12: the window's pixels as shown (on a GPU surface: the frame read back, tone-mapped
+    /// and the overlay layer put over it as the GPU does) into a PNG.
+    fn screenshot(&mut self, shown: &Shown, on_gpu: bool, w: usize, h: usize) {
+        let pixels = if on_gpu {
+            self.read(shown).map(|img| {
+                let mut px: Vec<u32> = img
+                    .to_srgb8(1.0)
+                    .pixels()
+                    .map(|p| {
+                        (u32::from(p.0[0]) << 16) | (u32::from(p.0[1]) << 8) | u32::from(p.0[2])
+                    })
+                    .collect();
+                px.resize(w * h, 0);
+                composite(&mut px, &self.buf);
+                px
+            })
+        } else {
+            Ok(self.buf.clone())
         };
-        surface
-            .resize(nw, nh)
-            .map_err(|e| anyhow!("cannot draw into the window: {e}"))?;
-        let mut out = surface
-            .buffer_mut()
-            .map_err(|e| anyhow!("cannot draw into the window: {e}"))?;
-        out.copy_from_slice(&self.buf);
-        out.present()
-            .map_err(|e| anyhow!("cannot draw into the window: {e}"))?;
-        Ok(())
+        let n = self.report.screenshots.len() as u64;
+        match pixels.and_then(|px| save::screenshot(&self.opts.screenshot_dir, &px, w, h, n)) {
+            Ok(p) => {
+                println!("screenshot: {}", p.display());
+                self.say(format!("screenshot: {}", p.display()));
+                self.report.screenshots.push(p);
+            }
+            Err(e) => self.say(format!("screenshot failed: {e:#}")),
+        }
     }
 
     fn say(&mut self, m: String) {
@@ -487,7 +531,8 @@ impl App<'_, '_> {
         }
     }
 
-    fn draw_overlay(&mut self, w: usize, h: usize) {
+    /// The guides, panels and slider, into the frame or (`layer`) into a transparent layer.
+    fn draw_overlay(&mut self, w: usize, h: usize, layer: bool) {
         if self.opts.guides {
             if self.depth.as_ref().is_none_or(|d| d.len() != w * h) {
                 self.depth = Some(self.session.depth());
@@ -497,6 +542,7 @@ impl App<'_, '_> {
                 buf: &mut self.buf,
                 width: w,
                 height: h,
+                layer,
             };
             guides::draw(
                 &mut c,
@@ -525,6 +571,7 @@ impl App<'_, '_> {
             buf: &mut self.buf,
             width: w,
             height: h,
+            layer,
         };
         c.panel(4, 4, &lines);
         if self.show_help {
@@ -558,6 +605,8 @@ impl App<'_, '_> {
             "window": [self.size.0, self.size.1],
             "frames": self.report.frames,
             "key_presses": self.report.key_presses,
+            "mean_frame_ms": self.t_loop.elapsed().as_secs_f64() * 1e3
+                / self.report.frames.max(1) as f64,
             "overlay": self.show_overlay,
             "help": self.show_help,
         })

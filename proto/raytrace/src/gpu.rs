@@ -38,6 +38,10 @@ impl std::error::Error for GpuError {}
 
 /// A wgpu device and queue on the chosen adapter.
 pub struct GpuContext {
+    /// The instance the adapter came from (a window's surface is made from it).
+    pub instance: wgpu::Instance,
+    /// The adapter (a surface's capabilities are asked of it).
+    pub adapter: wgpu::Adapter,
     /// The device.
     pub device: wgpu::Device,
     /// Its queue.
@@ -71,6 +75,8 @@ impl GpuContext {
         }))
         .map_err(|e| GpuError::Device(e.to_string()))?;
         Ok(GpuContext {
+            instance,
+            adapter,
             device,
             queue,
             info,

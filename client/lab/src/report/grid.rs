@@ -62,6 +62,7 @@ impl Grid {
             buf: &mut buf,
             width,
             height,
+            layer: false,
         };
         for (i, t) in self.tiles.iter().enumerate() {
             let (x0, y0) = ((i % cols) * cw, (i / cols) * ch);

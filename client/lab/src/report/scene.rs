@@ -560,6 +560,7 @@ impl Draw<'_> {
             index,
             time: 0.0,
             mode,
+            on_gpu: false,
         };
         timed(frames, || state.frame(&input).map(|f| f.image))
     }

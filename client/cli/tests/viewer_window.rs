@@ -105,16 +105,26 @@ fn the_viewer_window_shows_the_shaded_scene() {
 /// the CPU's within docs/gpu.md's bound, far below the 8-bit tolerance here.
 #[test]
 fn the_viewer_window_on_the_gpu_backend_shows_the_same_scene() {
+    if !gpu_adapter() {
+        return;
+    }
+    window_shows_the_headless_frame("gpu");
+}
+
+/// Whether a GPU adapter exists (named), or a message saying the test is skipped.
+fn gpu_adapter() -> bool {
     match bspvt_client::gpu::Gpu::shared() {
-        Ok(g) => eprintln!("adapter: {}", g.adapter),
+        Ok(g) => {
+            eprintln!("adapter: {}", g.adapter);
+            true
+        }
         Err(e) => {
             eprintln!(
                 "SKIPPED: no GPU adapter ({e:#}); CI installs lavapipe (mesa-vulkan-drivers)"
             );
-            return;
+            false
         }
     }
-    window_shows_the_headless_frame("gpu");
 }
 
 /// `bspvt view --backend BACKEND` in Xvfb against the headless CPU session's frame.
@@ -270,14 +280,8 @@ fn the_viewport_applies_every_event_resizes_and_draws_the_light() {
 /// pixels as the window.
 #[test]
 fn the_viewport_on_a_gpu_surface_applies_every_event_resizes_and_draws_the_light() {
-    match bspvt_client::gpu::Gpu::shared() {
-        Ok(g) => eprintln!("adapter: {}", g.adapter),
-        Err(e) => {
-            eprintln!(
-                "SKIPPED: no GPU adapter ({e:#}); CI installs lavapipe (mesa-vulkan-drivers)"
-            );
-            return;
-        }
+    if !gpu_adapter() {
+        return;
     }
     viewport(Some("gpu"));
 }

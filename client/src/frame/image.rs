@@ -76,6 +76,17 @@ impl Image {
         out
     }
 
+    /// [`Image::to_srgb8`] as 0x00RRGGBB words, row by row (a window's framebuffer).
+    pub fn to_0rgb(&self, exposure: f32) -> Vec<u32> {
+        self.pixels
+            .iter()
+            .map(|p| {
+                let [r, g, b] = p.map(|c| u32::from(encode_srgb(aces(c * exposure))));
+                (r << 16) | (g << 8) | b
+            })
+            .collect()
+    }
+
     /// Mean of the three channels over all pixels (for reports and sanity checks).
     pub fn mean(&self) -> f64 {
         let s: f64 = self

@@ -320,9 +320,7 @@ impl GpuFrames {
     ) -> Result<(Image, FrameCounts)> {
         let _queue = gpu.exclusive();
         let (mut enc, counts) = self.encode(gpu, renderer, light, trees, mode)?;
-        let Some(t) = self.target.as_ref() else {
-            bail!("the frame's target was not made");
-        };
+        let t = self.made_target()?;
         enc.copy_buffer_to_buffer(&t.image, 0, &t.readback, 0, t.image.size());
         gpu.queue.submit([enc.finish()]);
         let bytes = gpu.map_read(&t.readback)?;
@@ -342,9 +340,7 @@ impl GpuFrames {
         let _queue = gpu.exclusive();
         let (enc, counts) = self.encode(gpu, renderer, light, trees, mode)?;
         gpu.queue.submit([enc.finish()]);
-        let Some(t) = self.target.as_ref() else {
-            bail!("the frame's target was not made");
-        };
+        let t = self.made_target()?;
         Ok((
             GpuImage {
                 buffer: t.image.clone(),
@@ -353,6 +349,14 @@ impl GpuFrames {
             },
             counts,
         ))
+    }
+
+    /// The target [`GpuFrames::encode`] drew into.
+    fn made_target(&self) -> Result<&Target> {
+        match &self.target {
+            Some(t) => Ok(t),
+            None => bail!("the frame's target was not made"),
+        }
     }
 
     /// Records a frame's passes (per-vertex shading, visibility raster, resolve) into the

@@ -318,11 +318,7 @@ mod tests {
                 (a << 24) | (c(rand()) << 16) | (c(rand()) << 8) | c(rand())
             })
             .collect();
-        let mut want: Vec<u32> = img
-            .to_srgb8(1.0)
-            .pixels()
-            .map(|p| (u32::from(p.0[0]) << 16) | (u32::from(p.0[1]) << 8) | u32::from(p.0[2]))
-            .collect();
+        let mut want = img.to_0rgb(1.0);
         crate::frame::canvas::composite(&mut want, &overlay);
 
         let mut compositor = Compositor::new(gpu, Offscreen::FORMAT).expect("compositor");

@@ -18,6 +18,7 @@ mod save;
 pub use input::KEYS_HELP;
 pub use save::SceneSource;
 
+use std::borrow::Cow;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -272,18 +273,13 @@ impl App<'_, '_> {
         let (w, h) = (self.size.0 as usize, self.size.1 as usize);
         let on_gpu = matches!(self.output, Some(Output::Gpu(_)));
         let shown = self.session.frame_to_show(on_gpu);
-        self.buf.clear();
-        if on_gpu {
-            self.buf.resize(w * h, 0);
+        // The window's pixels, or (on a GPU surface) a transparent overlay layer.
+        self.buf = if on_gpu {
+            vec![0; w * h]
         } else {
-            let img = self.read(&shown)?;
-            self.buf.extend(
-                img.to_srgb8(1.0).pixels().map(|p| {
-                    (u32::from(p.0[0]) << 16) | (u32::from(p.0[1]) << 8) | u32::from(p.0[2])
-                }),
-            );
-            self.buf.resize(w * h, 0);
-        }
+            read(&shown)?.to_0rgb(1.0)
+        };
+        self.buf.resize(w * h, 0);
         // Frames per second on screen: from one frame's start to the next (drawing,
         // presenting and the events between), not the time to submit this one (a GPU
         // frame's work is still queued here).
@@ -330,26 +326,12 @@ impl App<'_, '_> {
         Ok(())
     }
 
-    /// The frame's linear radiance on the CPU (a GPU frame read back).
-    fn read(&self, shown: &Shown) -> Result<Image> {
-        Ok(match shown {
-            Shown::Cpu(img) => img.clone(),
-            Shown::Gpu(g) => g.read(crate::gpu::Gpu::shared()?)?,
-        })
-    }
-
     /// F12: the window's pixels as shown (on a GPU surface: the frame read back, tone-mapped
     /// and the overlay layer put over it as the GPU does) into a PNG.
     fn screenshot(&mut self, shown: &Shown, on_gpu: bool, w: usize, h: usize) {
         let pixels = if on_gpu {
-            self.read(shown).map(|img| {
-                let mut px: Vec<u32> = img
-                    .to_srgb8(1.0)
-                    .pixels()
-                    .map(|p| {
-                        (u32::from(p.0[0]) << 16) | (u32::from(p.0[1]) << 8) | u32::from(p.0[2])
-                    })
-                    .collect();
+            read(shown).map(|img| {
+                let mut px = img.to_0rgb(1.0);
                 px.resize(w * h, 0);
                 composite(&mut px, &self.buf);
                 px
@@ -611,6 +593,14 @@ impl App<'_, '_> {
             "help": self.show_help,
         })
     }
+}
+
+/// The frame's linear radiance on the CPU (a GPU frame read back, a CPU frame borrowed).
+fn read(shown: &Shown) -> Result<Cow<'_, Image>> {
+    Ok(match shown {
+        Shown::Cpu(img) => Cow::Borrowed(img),
+        Shown::Gpu(g) => Cow::Owned(g.read(crate::gpu::Gpu::shared()?)?),
+    })
 }
 
 /// A quarter of the scene's diagonal: how far the light moves per second of a held key.

@@ -85,7 +85,7 @@ struct Cell {
     k: u16,
     /// The face point the search scores the cell at ([`Fitter::centre`]), computed once.
     at: Vec2,
-    /// Its pixels w = size² and w·k packed as `w | (w·k) << 32` ([`Packed`]).
+    /// Its pixels w = size² and w·k, [`pack`]ed.
     wk: u64,
     /// w·k² (at most 16² · 64² < 2³²).
     wk2: u32,
@@ -95,17 +95,9 @@ struct Cell {
 /// pixels of k ≤ 8² (`BakeSettings::MAX_FACE_RES`, `MAX_SUPERSAMPLING`), so Σk < 2²⁴ and
 /// the low half never carries into the high one. The split search's histogram adds one
 /// word per cell instead of three.
-struct Packed;
-
-impl Packed {
-    #[inline]
-    fn n(w: u64) -> u64 {
-        w & 0xffff_ffff
-    }
-    #[inline]
-    fn s1(w: u64) -> u64 {
-        w >> 32
-    }
+#[inline]
+fn pack(n: u32, s1: u32) -> u64 {
+    u64::from(n) | u64::from(s1) << 32
 }
 
 /// Sums over a pixel set: count, Σk, Σk².
@@ -117,12 +109,22 @@ struct Moments {
 }
 
 impl Moments {
+    /// The moments of a [`pack`]ed count and Σk, and Σk² (`None`: one ray per pixel, k ∈
+    /// {0, 1}, so Σk² = Σk).
+    #[inline]
+    fn unpack(w: u64, s2: Option<u64>) -> Moments {
+        let s1 = w >> 32;
+        Moments {
+            n: w & 0xffff_ffff,
+            s1,
+            s2: s2.unwrap_or(s1),
+        }
+    }
+
     /// Adds a cell's moments.
     #[inline]
     fn add_cell(&mut self, c: &Cell) {
-        self.n += Packed::n(c.wk);
-        self.s1 += Packed::s1(c.wk);
-        self.s2 += c.wk2 as u64;
+        *self = self.plus(Moments::unpack(c.wk, Some(u64::from(c.wk2))));
     }
 
     fn plus(self, o: Moments) -> Moments {
@@ -269,7 +271,7 @@ impl Fitter<'_> {
             size,
             k,
             at: self.centre(i, j, size),
-            wk: u64::from(w) | u64::from(w * k as u32) << 32,
+            wk: pack(w, w * k as u32),
             wk2: w * k as u32 * k as u32,
         }
     }
@@ -438,16 +440,17 @@ impl Fitter<'_> {
             }
         };
         let mut best = Best::default();
-        let mut coarse: Vec<((u64, u64), u32)> = Vec::with_capacity(COARSE_ANGLES as usize);
+        // The best coarse angle: the lowest (score, angle).
+        let mut start: Option<((u64, u64), u32)> = None;
         for a in (0..half).step_by(step_coarse as usize) {
             let mut b = Best::default();
             self.sweep(cells, total, a as u16, &mut b, stats, scratch);
-            coarse.push((score(&b), a));
+            let here = (score(&b), a);
+            start = Some(start.map_or(here, |s| s.min(here)));
             best.take(b);
         }
-        coarse.sort_unstable();
-        // Refine the best angle by bisection: ±step/2, ±step/4, … ±1 around the current best.
-        if let Some(&(sc, a0)) = coarse.first() {
+        // Refine it by bisection: ±step/2, ±step/4, … ±1 around the current best.
+        if let Some((sc, a0)) = start {
             let (mut centre, mut centre_score) = (a0, sc);
             let mut step = step_coarse / 2;
             while step > 0 {
@@ -511,15 +514,8 @@ impl Fitter<'_> {
                 bins.push((lo + b) as u32);
             }
         }
-        let moments = |b: u32| {
-            let w = hist[b as usize];
-            let s1 = Packed::s1(w);
-            Moments {
-                n: Packed::n(w),
-                s1,
-                s2: if squares { hist_k2[b as usize] } else { s1 },
-            }
-        };
+        let moments =
+            |b: u32| Moments::unpack(hist[b as usize], squares.then(|| hist_k2[b as usize]));
         let s = self.samples as u64;
         // Line o: left = bins ≤ o, right = bins > o. The partition changes only at non-empty
         // bins: "left = bins ≤ b" holds for every o in [b, b′ − 1], b′ the next non-empty bin,
@@ -656,7 +652,7 @@ impl Fitter<'_> {
 
 /// Buffers the split search reuses across the nodes of a face.
 struct Scratch {
-    /// Count and Σk per offset bin, [`Packed`] (zero between sweeps).
+    /// Count and Σk per offset bin, [`pack`]ed (zero between sweeps).
     hist: Vec<u64>,
     /// Σk² per offset bin, where a pixel has more than one ray (zero between sweeps).
     hist_k2: Vec<u64>,

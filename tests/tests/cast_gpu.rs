@@ -69,14 +69,15 @@ struct Seen {
     worst: Vec<(u64, u32, usize)>,
 }
 
-/// Compares the GPU cast of `count` vertices spread over the mesh with the full CPU cast.
+/// Compares the GPU cast of `count` vertices spread over the mesh (the centres of `count`
+/// equal runs of its vertices) with the full CPU cast.
 fn compare(ctx: &Arc<GpuContext>, b: &Baker, label: &str, count: u32) -> Seen {
     let n = b.mesh().vertex_count() as u32;
     let s = b.header().supersampling.pow(2) as u16;
     let caster = b.gpu_caster(ctx.clone()).expect("BVH on the GPU");
     let count = count.min(n);
     let vertices: Vec<u32> = (0..count)
-        .map(|k| (k as u64 * n as u64 / count as u64) as u32)
+        .map(|k| ((2 * k as u64 + 1) * n as u64 / (2 * count as u64)) as u32)
         .collect();
     let mut seen = Seen::default();
     for &v in &vertices {

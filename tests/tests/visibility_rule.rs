@@ -103,3 +103,148 @@ fn without_the_rule_the_ceiling_would_shadow() {
     let baker = Baker::with_settings(s.mesh.clone(), s.bake.clone(), None);
     assert_eq!(centre_visibility(&baker), 0.0);
 }
+
+/// A wall facing +x under the lamp of [`scene`]: a 4×4-vertex grid at x = −2, y ∈ [0, 1.5],
+/// z ∈ [−1.5, 1.5], alone (nothing occludes it).
+fn wall_scene(dir: &Path) -> Scene {
+    let mut s = String::new();
+    for j in 0..4 {
+        for k in 0..4 {
+            s += &format!("v -2 {} {}\n", 0.5 * j as f32, -1.5 + k as f32);
+        }
+    }
+    for j in 0..3 {
+        for k in 0..3 {
+            let a = 1 + 4 * j + k;
+            // Counter-clockwise seen from +x (y up, z toward −x × y).
+            s += &format!("f {a} {} {}\nf {a} {} {}\n", a + 5, a + 1, a + 4, a + 5);
+        }
+    }
+    std::fs::write(dir.join("wall.obj"), s).expect("write obj");
+    let json = r#"{"meshes": [{"path": "wall.obj"}],
+        "lights": [{"vertices": [[-0.3, 1.8, -0.3], [-0.3, 1.8, 0.3], [0.3, 1.8, 0.3], [0.3, 1.8, -0.3]],
+                    "radiance": [10, 10, 10]}],
+        "camera": {"position": [3, 1, 0], "target": [-2, 0.75, 0]},
+        "bake": {"face_res": 16}}"#;
+    Scene::from_json(json, dir).expect("scene")
+}
+
+/// A light without a region moves in its plane (docs/bake.md, "Where a ray ends"), so a
+/// direction that never meets the plane never meets the light: its pixels are "don't care",
+/// neither cast nor stored. For a wall under a ceiling lamp that is the lower half of every
+/// vertex's hemisphere; a pixel is kept when any of its directions rises toward the plane.
+#[test]
+fn directions_that_never_reach_the_lights_plane_do_not_matter() {
+    use bspvt_proto::cubemap::{FACES, FaceFrame, pixel_centres};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let s = wall_scene(dir.path());
+    let res = s.bake.face_res;
+    let baker = Baker::new(&s);
+    let unbounded = Baker::with_settings(s.mesh.clone(), s.bake.clone(), None);
+    let half_pixel = 1.5 / res as f32; // > a 16² pixel's angular radius anywhere on a face
+    let centres = pixel_centres(res);
+    for v in 0..s.mesh.vertex_count() as u32 {
+        let n = s.mesh.normals[v as usize];
+        assert!(n.x > 0.99, "vertex {v}: normal {n}");
+        let kept = baker.reference_cube_map(v);
+        assert_eq!(kept, baker.cube_map(v).0, "vertex {v}: the casts disagree");
+        let all = unbounded.reference_cube_map(v);
+        let (mut n_kept, mut n_all) = (0, 0);
+        for f in 0..FACES {
+            let frame = FaceFrame::of(f);
+            let kept_px = kept[f].as_ref().map(|p| p.index.as_slice()).unwrap_or(&[]);
+            let all_px = all[f].as_ref().map(|p| p.index.as_slice()).unwrap_or(&[]);
+            n_kept += kept_px.len();
+            n_all += all_px.len();
+            for (p, uv) in centres.iter().enumerate() {
+                let d = frame.direction(*uv).normalize();
+                let above = d.dot(n) > 0.0;
+                let is_kept = kept_px.contains(&(p as u32));
+                assert_eq!(above, all_px.contains(&(p as u32)), "vertex {v}: horizon");
+                if above && d.y > 0.0 {
+                    assert!(
+                        is_kept,
+                        "vertex {v} face {f} pixel {p}: {d} rises to the lamp"
+                    );
+                }
+                if is_kept {
+                    assert!(d.y > -half_pixel, "vertex {v} face {f} pixel {p}: {d} kept");
+                }
+            }
+        }
+        // About half of the hemisphere rises toward the plane (plus the pixels across the
+        // plane's horizon).
+        let ratio = n_kept as f64 / n_all as f64;
+        assert!(
+            (0.45..0.62).contains(&ratio),
+            "vertex {v}: kept {n_kept} of {n_all}"
+        );
+    }
+}
+
+/// Leaving out the directions that cannot reach the light costs no accuracy where it can be:
+/// on a shared mesh with its default lamp (a quad above it, no region), the trees baked
+/// without those directions fit the pixels that can see the lamp's plane at least as well as
+/// trees fitted to every pixel above the horizon (the previous rule, reproduced here by a
+/// second light whose region holds the whole scene: every direction reaches it, and a region
+/// that contains a ray's origin does not end the ray). Mean |ΔV| over those pixels, the trees
+/// read at pixel centres.
+#[test]
+fn leaving_out_unreachable_directions_keeps_the_error_where_the_light_can_be() {
+    use bspvt_proto::cubemap::{FACES, FaceFrame, pixel_centres};
+    use bspvt_proto::scene::Region;
+    let path = bspvt_proto::paths::meshes_dir().join("bunny_res4.ply");
+    if !path.is_file() {
+        eprintln!("skipped: {} not found (set BSPVT_ASSETS)", path.display());
+        return;
+    }
+    let mut scene = Scene::from_mesh_path(&path).expect("mesh scene");
+    scene.bake.face_res = 32;
+    let mut every = scene.clone();
+    let b = scene.mesh.bounds();
+    let pad = Vec3::splat(b.diagonal());
+    let mut all = every.lights[0].clone();
+    all.region = Some(Region {
+        min: (b.min - pad).to_array(),
+        max: (b.max + pad).to_array(),
+    });
+    every.lights.push(all);
+    let (kept, previous) = (Baker::new(&scene), Baker::new(&every));
+    let centres = pixel_centres(scene.bake.face_res);
+    let samples = scene.bake.supersampling.max(1).pow(2) as f32;
+    let n = scene.mesh.vertex_count() as u32;
+    let (mut err_kept, mut err_prev, mut pixels, mut pixels_prev) = (0.0, 0.0, 0usize, 0usize);
+    // The bunny's own vertices that do not face straight up (the added ground's all do: every
+    // direction above their horizon rises to the lamp).
+    let sides: Vec<u32> = (0..n)
+        .filter(|&v| scene.mesh.normals[v as usize].y < 0.9)
+        .collect();
+    for &v in sides.iter().step_by((sides.len() / 300).max(1)) {
+        let map = kept.cube_map(v).0;
+        let map_prev = previous.cube_map(v).0;
+        let (t_kept, t_prev) = (kept.bake_vertex(v).trees, previous.bake_vertex(v).trees);
+        for f in 0..FACES {
+            pixels_prev += map_prev[f].as_ref().map_or(0, |p| p.index.len());
+            let Some(px) = &map[f] else { continue };
+            let frame = FaceFrame::of(f);
+            for (&p, &vis) in px.index.iter().zip(&px.visible) {
+                let d = frame.direction(centres[p as usize]).normalize();
+                let truth = vis as f32 / samples;
+                err_kept += (t_kept.visibility(kept.codec(), d) - truth).abs() as f64;
+                err_prev += (t_prev.visibility(previous.codec(), d) - truth).abs() as f64;
+                pixels += 1;
+            }
+        }
+    }
+    let (e_kept, e_prev) = (err_kept / pixels as f64, err_prev / pixels as f64);
+    eprintln!(
+        "bunny_res4, 32²: {pixels} pixels can reach the lamp of {pixels_prev} above the \
+         horizon; mean |ΔV| there {e_kept:.5} (their own trees) vs {e_prev:.5} (trees of every \
+         pixel above the horizon)"
+    );
+    assert!(
+        pixels > 0 && pixels < pixels_prev * 3 / 4,
+        "{pixels} of {pixels_prev}"
+    );
+    assert!(e_kept <= e_prev * 1.05, "{e_kept} > {e_prev}");
+}

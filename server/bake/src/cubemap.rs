@@ -179,9 +179,9 @@ pub(crate) struct VertexRays<'a> {
     /// Hits nearer than this are not counted ([`crate::RAY_T_MIN_SCALE`] of the scene's
     /// diagonal).
     pub t_min: f32,
-    /// Light regions; `None` when a light may go anywhere.
-    pub regions: Option<&'a [Aabb]>,
-    /// Where rays end (at the first stop they reach).
+    /// Where rays end (at the first stop they reach); a direction matters when it can reach
+    /// one of them ([`LightStop::reachable`]), every direction when there are none (the sky's
+    /// bake).
     pub stops: &'a [LightStop],
 }
 
@@ -211,13 +211,63 @@ impl VertexRays<'_> {
             .fold(f32::INFINITY, f32::min)
     }
 
-    /// Whether direction `d` can matter: above the horizon and toward a light region.
-    #[inline]
-    pub(crate) fn matters(&self, origin: Vec3, d: Vec3) -> bool {
-        d.dot(self.normal) > 0.0
-            && self
-                .regions
-                .is_none_or(|rs| rs.iter().any(|r| r.hit_by_ray(origin, d)))
+    /// Which pixels of face `f` can matter (`out[p]`, one per pixel); returns whether any can.
+    ///
+    /// A pixel matters when its centre is above the horizon and it can reach a light's stop
+    /// (every pixel above the horizon when there are none: the sky's bake):
+    /// * a region: the centre's ray meets its box;
+    /// * a plane: some direction of the pixel crosses it ahead of the origin. A light without
+    ///   a region moves in its plane (docs/bake.md, "Where a ray ends"), so a direction that
+    ///   never meets the plane never meets the light: it is "don't care". With k the plane's
+    ///   normal turned toward the plane, the corner (u, v) of the face's cone gives
+    ///   (w + u a + v b)·k, linear and separable in u and v; the pixel's cone is spanned by its
+    ///   corners, so it crosses the plane iff w·k + max over its two u of u a·k + max over its
+    ///   two v of v b·k > 0. An origin on the plane keeps every direction.
+    pub(crate) fn face_mask(&self, table: &RayTable, f: usize, out: &mut [bool]) -> bool {
+        let res = table.res as usize;
+        let centre = &table.centre[f];
+        let fr = FaceFrame::of(f);
+        // Per plane stop: w·k and, per pixel column and row, the larger corner term.
+        let e = |i: usize| 2.0 * i as f32 / res as f32 - 1.0;
+        let planes: Vec<(f32, Vec<f32>, Vec<f32>)> = self
+            .stops
+            .iter()
+            .filter_map(|s| match *s {
+                LightStop::Plane { point, normal } => {
+                    let side = (point - self.origin).dot(normal);
+                    let k = normal * side.signum();
+                    let terms = |axis: Vec3| -> Vec<f32> {
+                        let g = axis.dot(k);
+                        (0..res).map(|i| (e(i) * g).max(e(i + 1) * g)).collect()
+                    };
+                    // On the plane (or NaN): a constant 1 keeps every pixel.
+                    Some(match side.abs() > 0.0 {
+                        true => (fr.w.dot(k), terms(fr.a), terms(fr.b)),
+                        false => (1.0, vec![0.0; res], vec![0.0; res]),
+                    })
+                }
+                LightStop::Region(_) => None,
+            })
+            .collect();
+        let regions: Vec<Aabb> = self
+            .stops
+            .iter()
+            .filter_map(|s| match *s {
+                LightStop::Region(b) => Some(b),
+                LightStop::Plane { .. } => None,
+            })
+            .collect();
+        let everywhere = self.stops.is_empty();
+        let mut any = false;
+        for (p, (m, &d)) in out.iter_mut().zip(centre).enumerate() {
+            let (i, j) = (p % res, p / res);
+            *m = d.dot(self.normal) > 0.0
+                && (everywhere
+                    || planes.iter().any(|(w, u, v)| w + u[i] + v[j] > 0.0)
+                    || regions.iter().any(|r| r.hit_by_ray(self.origin, d)));
+            any |= *m;
+        }
+        any
     }
 
     /// Casts the rays of every pixel that matters; returns per-face pixel sets (`None` for
@@ -248,12 +298,7 @@ impl VertexRays<'_> {
         };
         let mut stack = Vec::new();
         let faces = std::array::from_fn(|f| {
-            let mut any = false;
-            for (m, &d) in matters.iter_mut().zip(&table.centre[f]) {
-                *m = self.matters(origin, d);
-                any |= *m;
-            }
-            if !any {
+            if !self.face_mask(table, f, &mut matters) {
                 return None;
             }
             blocker.fill(NO_BLOCKER);
@@ -295,17 +340,17 @@ impl VertexRays<'_> {
     ) -> [Option<FacePixels>; FACES] {
         let origin = self.origin;
         let s = table.samples as usize;
+        let mut matters = vec![false; table.centre[0].len()];
         std::array::from_fn(|f| {
             let mut px = FacePixels::default();
-            for (p, &d) in table.centre[f].iter().enumerate() {
-                if self.matters(origin, d) {
-                    let subs = &table.sub[f][p * s..(p + 1) * s];
-                    px.index.push(p as u32);
-                    px.visible.push(self.escaping(subs, |d| {
-                        let t_max = self.t_max(origin, d);
-                        occ.occluded_between(origin, d, self.t_min, t_max, self.vertex)
-                    }));
-                }
+            self.face_mask(table, f, &mut matters);
+            for p in (0..matters.len()).filter(|&p| matters[p]) {
+                let subs = &table.sub[f][p * s..(p + 1) * s];
+                px.index.push(p as u32);
+                px.visible.push(self.escaping(subs, |d| {
+                    let t_max = self.t_max(origin, d);
+                    occ.occluded_between(origin, d, self.t_min, t_max, self.vertex)
+                }));
             }
             (!px.index.is_empty()).then_some(px)
         })

@@ -84,14 +84,14 @@ impl Baker {
             .map(|&v| {
                 let r = self.vertex_rays(v);
                 let mut mask = vec![0u32; words];
+                let mut matters = vec![false; res2];
                 let faces = std::array::from_fn(|f| {
                     let mut index = Vec::new();
-                    for (p, &d) in t.centre[f].iter().enumerate() {
-                        if r.matters(r.origin, d) {
-                            let bit = f * res2 + p;
-                            mask[bit / 32] |= 1 << (bit % 32);
-                            index.push(p as u32);
-                        }
+                    r.face_mask(t, f, &mut matters);
+                    for p in (0..res2).filter(|&p| matters[p]) {
+                        let bit = f * res2 + p;
+                        mask[bit / 32] |= 1 << (bit % 32);
+                        index.push(p as u32);
                     }
                     index
                 });

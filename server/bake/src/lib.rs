@@ -42,8 +42,9 @@ use fit::{FitStats, Fitter};
 /// Bumped whenever the same scene and settings bake to other bytes (the pinned bakes of
 /// `tests/tests/bake_pinned.rs` change): caches of finished bakes key on it, so that an
 /// upgrade does not serve trees baked by the old rule. 2: rays of open-boundary vertices leave
-/// from inside their own surface ([`origin`]).
-pub const ALGORITHM_VERSION: u32 = 2;
+/// from inside their own surface ([`origin`]). 3: the fit's coarse-to-fine angle schedule, and
+/// directions that cannot reach a light's plane are "don't care" (docs/bake.md).
+pub const ALGORITHM_VERSION: u32 = 3;
 
 /// Ray origins are offset along the normal by this fraction of the scene's diagonal.
 pub(crate) const RAY_OFFSET_SCALE: f32 = 1e-4;
@@ -58,7 +59,6 @@ pub(crate) const RAY_T_MIN_SCALE: f32 = 1e-6;
 pub struct Baker {
     mesh: Mesh,
     settings: BakeSettings,
-    regions: Option<Vec<Aabb>>,
     /// Where the rays end: at the lights (see [`LightStop`]).
     stops: Vec<LightStop>,
     occluder: Occluder,
@@ -165,7 +165,6 @@ impl Baker {
         Baker::build(
             scene.mesh.clone(),
             scene.bake.clone(),
-            scene.light_region(),
             LightStop::of_scene(scene),
         )
     }
@@ -178,15 +177,10 @@ impl Baker {
             .flatten()
             .map(|&r| LightStop::Region(r))
             .collect();
-        Baker::build(mesh, settings, regions, stops)
+        Baker::build(mesh, settings, stops)
     }
 
-    fn build(
-        mesh: Mesh,
-        settings: BakeSettings,
-        regions: Option<Vec<Aabb>>,
-        stops: Vec<LightStop>,
-    ) -> Baker {
+    fn build(mesh: Mesh, settings: BakeSettings, stops: Vec<LightStop>) -> Baker {
         let tris = bspvt_raytrace::mesh_triangles(&mesh);
         let occluder = Occluder::new(&mesh, &tris);
         let culler = frustum::FrustumCuller::new(&mesh, &tris, &occluder);
@@ -199,7 +193,6 @@ impl Baker {
         Baker {
             mesh,
             settings,
-            regions,
             stops,
             occluder,
             culler,
@@ -252,7 +245,6 @@ impl Baker {
             normal: self.mesh.normals[v as usize],
             vertex: v,
             t_min: self.t_min,
-            regions: self.regions.as_deref(),
             stops: &self.stops,
         }
     }

@@ -572,3 +572,90 @@ impl BlockWalk<'_> {
 
 /// Blocks of this size or smaller are always ray-cast.
 const MIN_BLOCK: u32 = 4;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+    use proptest::prelude::*;
+
+    /// f64 reference of the plane test: whether some corner of pixel (i, j) of face `f` points
+    /// toward the plane (`None` when the answer is within rounding of 0: a tie).
+    fn crosses(f: usize, i: usize, j: usize, res: usize, k: DVec3) -> Option<bool> {
+        let fr = FaceFrame::of(f);
+        let e = |i: usize| 2.0 * i as f64 / res as f64 - 1.0;
+        let mut best = f64::NEG_INFINITY;
+        for (u, v) in [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)] {
+            let c = fr.w.as_dvec3() + e(u) * fr.a.as_dvec3() + e(v) * fr.b.as_dvec3();
+            best = best.max(c.dot(k));
+        }
+        (best.abs() > 1e-5).then_some(best > 0.0)
+    }
+
+    proptest! {
+        /// `face_mask`'s separable plane test keeps exactly the pixels above the horizon some
+        /// corner of which points toward the light's plane, for any plane, origin and normal.
+        #[test]
+        fn the_plane_test_is_the_corner_test(
+            res in 1u32..40,
+            o in prop::array::uniform3(-2.0f32..2.0),
+            p in prop::array::uniform3(-2.0f32..2.0),
+            n in prop::array::uniform3(-1.0f32..1.0),
+            vn in prop::array::uniform3(-1.0f32..1.0),
+        ) {
+            let (normal, vertex_normal) = (Vec3::from(n), Vec3::from(vn));
+            prop_assume!(normal.length() > 0.1 && vertex_normal.length() > 0.1);
+            let (normal, vertex_normal) = (normal.normalize(), vertex_normal.normalize());
+            let (origin, point) = (Vec3::from(o), Vec3::from(p));
+            let side = (point - origin).dot(normal);
+            prop_assume!(side.abs() > 1e-3);
+            let stops = [LightStop::Plane { point, normal }];
+            let rays = VertexRays {
+                origin,
+                normal: vertex_normal,
+                vertex: 0,
+                t_min: 0.0,
+                stops: &stops,
+            };
+            let table = RayTable::new(res, 1);
+            let r = res as usize;
+            let k = normal.as_dvec3() * side.signum() as f64;
+            let mut mask = vec![false; r * r];
+            for f in 0..FACES {
+                rays.face_mask(&table, f, &mut mask);
+                for (q, &m) in mask.iter().enumerate() {
+                    let above = table.centre[f][q].dot(vertex_normal) > 0.0;
+                    if let Some(c) = crosses(f, q % r, q / r, r, k) {
+                        prop_assert_eq!(m, above && c, "face {} pixel {}", f, q);
+                    }
+                }
+            }
+        }
+    }
+
+    /// An origin on the plane keeps every pixel above its horizon; no stops (the sky) too.
+    #[test]
+    fn on_the_plane_or_without_lights_every_direction_matters() {
+        let table = RayTable::new(8, 1);
+        let plane = [LightStop::Plane {
+            point: Vec3::new(3.0, 1.0, -2.0),
+            normal: Vec3::Y,
+        }];
+        for stops in [&plane[..], &[]] {
+            let rays = VertexRays {
+                origin: Vec3::new(0.0, 1.0, 0.0),
+                normal: Vec3::new(0.6, 0.0, 0.8),
+                vertex: 0,
+                t_min: 0.0,
+                stops,
+            };
+            let mut mask = vec![false; 64];
+            for f in 0..FACES {
+                rays.face_mask(&table, f, &mut mask);
+                for (q, &m) in mask.iter().enumerate() {
+                    assert_eq!(m, table.centre[f][q].dot(rays.normal) > 0.0, "{f} {q}");
+                }
+            }
+        }
+    }
+}

@@ -170,6 +170,14 @@ impl LightStop {
     }
 }
 
+/// One light stop's test of which pixels of a face can reach it ([`VertexRays::face_mask`]).
+enum Reach {
+    /// The centre's ray meets the box.
+    Region(Aabb),
+    /// w·k + u\[i\] + v\[j\] > 0 for pixel (i, j).
+    Plane(f32, Vec<f32>, Vec<f32>),
+}
+
 /// Where a vertex's rays start and which directions can matter.
 pub(crate) struct VertexRays<'a> {
     /// Where the rays start: the vertex lifted off its surface ([`crate::origin`]).
@@ -227,12 +235,14 @@ impl VertexRays<'_> {
         let res = table.res as usize;
         let centre = &table.centre[f];
         let fr = FaceFrame::of(f);
-        // Per plane stop: w·k and, per pixel column and row, the larger corner term.
+        // Per stop, its test: a region's box, or a plane's w·k and, per pixel column and row,
+        // the larger corner term.
         let e = |i: usize| 2.0 * i as f32 / res as f32 - 1.0;
-        let planes: Vec<(f32, Vec<f32>, Vec<f32>)> = self
+        let reach: Vec<Reach> = self
             .stops
             .iter()
-            .filter_map(|s| match *s {
+            .map(|s| match *s {
+                LightStop::Region(b) => Reach::Region(b),
                 LightStop::Plane { point, normal } => {
                     let side = (point - self.origin).dot(normal);
                     let k = normal * side.signum();
@@ -241,30 +251,22 @@ impl VertexRays<'_> {
                         (0..res).map(|i| (e(i) * g).max(e(i + 1) * g)).collect()
                     };
                     // On the plane (or NaN): a constant 1 keeps every pixel.
-                    Some(match side.abs() > 0.0 {
-                        true => (fr.w.dot(k), terms(fr.a), terms(fr.b)),
-                        false => (1.0, vec![0.0; res], vec![0.0; res]),
-                    })
+                    match side.abs() > 0.0 {
+                        true => Reach::Plane(fr.w.dot(k), terms(fr.a), terms(fr.b)),
+                        false => Reach::Plane(1.0, vec![0.0; res], vec![0.0; res]),
+                    }
                 }
-                LightStop::Region(_) => None,
             })
             .collect();
-        let regions: Vec<Aabb> = self
-            .stops
-            .iter()
-            .filter_map(|s| match *s {
-                LightStop::Region(b) => Some(b),
-                LightStop::Plane { .. } => None,
-            })
-            .collect();
-        let everywhere = self.stops.is_empty();
         let mut any = false;
         for (p, (m, &d)) in out.iter_mut().zip(centre).enumerate() {
             let (i, j) = (p % res, p / res);
             *m = d.dot(self.normal) > 0.0
-                && (everywhere
-                    || planes.iter().any(|(w, u, v)| w + u[i] + v[j] > 0.0)
-                    || regions.iter().any(|r| r.hit_by_ray(self.origin, d)));
+                && (reach.is_empty()
+                    || reach.iter().any(|r| match r {
+                        Reach::Region(b) => b.hit_by_ray(self.origin, d),
+                        Reach::Plane(w, u, v) => w + u[i] + v[j] > 0.0,
+                    }));
             any |= *m;
         }
         any

@@ -8,6 +8,10 @@
 - room.gltf: a 4 x 2.5 x 4 m room (glTF 2.0, one embedded buffer): coloured walls, an
   emissive ceiling quad with KHR_materials_emissive_strength, a metal box and a glossy sphere
   under a node hierarchy, and a perspective camera on a node.
+- two-lamps.gltf: the same shell lit by two lamps at different heights (issue 34): the ceiling
+  lamp and a small pendant lamp 1.2 m lower, facing the floor, off to one side; a board hung at
+  1.8 m, between the pendant's height and the ceiling, under the ceiling lamp, shadows the floor
+  from it (not from the pendant, which is below it); a box on the floor under the pendant.
 """
 import base64, json, math, os, struct
 
@@ -244,6 +248,58 @@ def room():
     g.write(os.path.join(HERE, "room.gltf"))
 
 
+def shell(g):
+    white = g.material("white wall", [0.75, 0.74, 0.72], 0.0, 0.9)
+    red = g.material("red wall", [0.7, 0.08, 0.06], 0.0, 0.9)
+    blue = g.material("blue wall", [0.1, 0.2, 0.65], 0.0, 0.9)
+    floor = g.material("oak floor", [0.55, 0.4, 0.25], 0.0, 0.55)
+    X, Y, Z = 2.0, 2.5, 2.0
+    return g.mesh("shell", [
+        quad_prim(g, [(-X, 0, -Z), (-X, 0, Z), (X, 0, Z), (X, 0, -Z)], (0, 1, 0), floor),
+        quad_prim(g, [(-X, Y, -Z), (X, Y, -Z), (X, Y, Z), (-X, Y, Z)], (0, -1, 0), white),
+        quad_prim(g, [(-X, 0, -Z), (X, 0, -Z), (X, Y, -Z), (-X, Y, -Z)], (0, 0, 1), white),
+        quad_prim(g, [(-X, 0, Z), (-X, Y, Z), (X, Y, Z), (X, 0, Z)], (0, 0, -1), white),
+        quad_prim(g, [(-X, 0, -Z), (-X, Y, -Z), (-X, Y, Z), (-X, 0, Z)], (1, 0, 0), red),
+        quad_prim(g, [(X, 0, -Z), (X, 0, Z), (X, Y, Z), (X, Y, -Z)], (-1, 0, 0), blue),
+    ])
+
+
+def two_lamps():
+    g = Gltf()
+    shell_mesh = shell(g)
+    ceiling = g.material("ceiling lamp", [1.0, 1.0, 1.0], 0.0, 1.0, [1.0, 0.9, 0.75], 12.0)
+    pendant = g.material("pendant lamp", [1.0, 1.0, 1.0], 0.0, 1.0, [0.8, 0.9, 1.0], 40.0)
+    board = g.material("painted board", [0.6, 0.6, 0.62], 0.0, 0.6)
+    gold = g.material("brushed gold", [1.0, 0.78, 0.34], 1.0, 0.35)
+    Y = 2.5
+
+    def down_quad(s, material):
+        return quad_prim(g, [(-s, 0, -s), (s, 0, -s), (s, 0, s), (-s, 0, s)], (0, -1, 0),
+                         material)
+
+    ceiling_mesh = g.mesh("ceiling lamp", [down_quad(0.4, ceiling)])
+    pendant_mesh = g.mesh("pendant lamp", [down_quad(0.15, pendant)])
+    # The board: 0.9 x 0.04 x 0.9 m, hung 1.8 m up under the ceiling lamp.
+    board_mesh = g.mesh("board", [box(g, (0.45, 0.02, 0.45), board)])
+    box_mesh = g.mesh("metal box", [box(g, (0.25, 0.25, 0.25), gold)])
+    g.doc["cameras"].append({"name": "view", "type": "perspective",
+                             "perspective": {"yfov": 0.9, "aspectRatio": 1.5,
+                                             "znear": 0.05, "zfar": 50.0}})
+    t = math.radians(-20) / 2
+    nodes = [
+        g.node("shell", mesh=shell_mesh),
+        g.node("ceiling lamp", mesh=ceiling_mesh, translation=[-0.5, Y - 0.02, -0.2]),
+        g.node("pendant lamp", mesh=pendant_mesh, translation=[0.9, 1.3, 0.1]),
+        g.node("board", mesh=board_mesh, translation=[-0.4, 1.8, -0.2]),
+        g.node("metal box", mesh=box_mesh, translation=[0.9, 0.25, -0.2]),
+        g.node("camera", camera=0, translation=[0.0, 1.6, 1.9],
+               rotation=[math.sin(t), 0.0, 0.0, math.cos(t)]),
+    ]
+    g.doc["scenes"].append({"name": "two lamps", "nodes": nodes})
+    g.write(os.path.join(HERE, "two-lamps.gltf"))
+
+
 if __name__ == "__main__":
     cornell()
     room()
+    two_lamps()

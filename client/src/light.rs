@@ -94,6 +94,24 @@ impl Light {
         }
     }
 
+    /// Where the ray from `o` along unit `d` meets the light's emitting side: (distance, the
+    /// point), if it does. A one-sided light is seen from its emitting side only; a ray in
+    /// its plane does not meet it.
+    pub fn hit(&self, o: DVec3, d: DVec3) -> Option<(f64, DVec3)> {
+        if !self.two_sided && !(d.dot(self.normal) < 0.0) {
+            return None;
+        }
+        crate::frame::brdf::polygon_crossing(&self.vertices, self.normal, o, d)
+    }
+
+    /// The light's polygon as a surface in the way of other lights' shadow rays.
+    pub fn surface(&self) -> crate::frame::brdf::LampSurface {
+        crate::frame::brdf::LampSurface {
+            vertices: self.vertices.clone(),
+            normal: self.normal,
+        }
+    }
+
     /// Area of the polygon.
     pub(crate) fn area(&self) -> f64 {
         let v = &self.vertices;

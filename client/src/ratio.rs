@@ -125,7 +125,7 @@ pub fn render_ratio(
         Some(radius) => denoised_ratio(&sums, guide, radius),
         None => ratio(&sums),
     };
-    compose(&r.shade_pixels(light, None), &factor)
+    compose(&r.shade_pixels(std::slice::from_ref(light), None), &factor)
 }
 
 #[cfg(test)]

@@ -113,7 +113,7 @@ fn check_scene(gpu: &Gpu, name: &str, scene: &Scene, w: u32, h: u32, shadows: bo
     let present: Vec<bool> = (0..b.trees.len()).map(|v| (v / 64) % 2 == 0).collect();
     let partial = Trees::partial(&b.trees, codec.clone(), &present);
     for mode in [Mode::Vertex, Mode::Pixel] {
-        let (cpu, _) = r.bspvt(&light, &partial, mode);
+        let (cpu, _) = r.bspvt(std::slice::from_ref(&light), &partial, mode);
         let (g, _) = frames.frame(gpu, &r, &light, Some(&partial), mode).unwrap();
         assert_close(&format!("{name} partial bake {mode:?}"), &cpu, &g);
     }
@@ -122,12 +122,12 @@ fn check_scene(gpu: &Gpu, name: &str, scene: &Scene, w: u32, h: u32, shadows: bo
     // Then all of them: the rest is uploaded incrementally.
     let full = Trees::full(&b.trees, codec);
     for mode in [Mode::Vertex, Mode::Pixel] {
-        let (cpu, _) = r.bspvt(&light, &full, mode);
+        let (cpu, _) = r.bspvt(std::slice::from_ref(&light), &full, mode);
         let (g, _) = frames.frame(gpu, &r, &light, Some(&full), mode).unwrap();
         assert_close(&format!("{name} {mode:?}"), &cpu, &g);
         // The shadows matter: the unshadowed frame differs.
         if shadows {
-            let (ltc, _) = r.ltc(&light, mode);
+            let (ltc, _) = r.ltc(std::slice::from_ref(&light), mode);
             assert!(
                 differences(&ltc, &cpu).1 > 4.0 * MEAN,
                 "{name}: no visible shadow"
@@ -136,7 +136,7 @@ fn check_scene(gpu: &Gpu, name: &str, scene: &Scene, w: u32, h: u32, shadows: bo
     }
     assert_eq!(frames.trees_uploaded(), b.trees.len());
     for mode in [Mode::Vertex, Mode::Pixel] {
-        let (cpu, _) = r.ltc(&light, mode);
+        let (cpu, _) = r.ltc(std::slice::from_ref(&light), mode);
         let (g, _) = frames.frame(gpu, &r, &light, None, mode).unwrap();
         assert_close(&format!("{name} unshadowed {mode:?}"), &cpu, &g);
     }
@@ -238,7 +238,7 @@ fn msaa_frames_are_finite_and_close() {
     let r = Renderer::new(&scene, w as u32, h as u32);
     let light = Light::from_scene(&scene.lights[0]);
     let mut frames = GpuFrames::new(gpu, &scene, 4).unwrap();
-    let (cpu, _) = r.ltc(&light, Mode::Pixel);
+    let (cpu, _) = r.ltc(std::slice::from_ref(&light), Mode::Pixel);
     let (g, _) = frames.frame(gpu, &r, &light, None, Mode::Pixel).unwrap();
     let (off, mean, _) = differences(&cpu, &g);
     let tri = &r.gbuffer.tri;

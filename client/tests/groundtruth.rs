@@ -144,6 +144,7 @@ fn view_at(theta_deg: f64) -> DVec3 {
 }
 
 const NO_SHADOWS: Shadows<'static> = Shadows {
+    lamps: Vec::new(),
     occluder: None,
     epsilon: 1e-6,
 };
@@ -287,6 +288,7 @@ fn occluded_receiver_matches_analytic_visibility() {
     let mesh = occluded_setup(ho as f32, so as f32);
     let occ = Occluder::new(&mesh, &mesh_triangles(&mesh));
     let shadows = Shadows {
+        lamps: Vec::new(),
         occluder: Some(&occ),
         epsilon: 1e-5,
     };
@@ -461,6 +463,7 @@ fn no_nan_or_inf_from_any_input() {
         }
         let occ = Occluder::new(&mesh, &mesh_triangles(&mesh));
         let shadows = Shadows {
+            lamps: Vec::new(),
             occluder: (case % 2 == 0).then_some(&occ),
             epsilon: 1e-4 * scale,
         };
@@ -544,13 +547,39 @@ fn small_scene() -> (bspvt_proto::Scene, View, GBuffer, Light, Occluder) {
 #[test]
 fn images_are_reproducible() {
     let (scene, view, gb, light, occ) = small_scene();
-    let (a, ra) = render_mc(&scene, &view, &gb, &light, &occ, 16, 42);
+    let (a, ra) = render_mc(
+        &scene,
+        &view,
+        &gb,
+        std::slice::from_ref(&light),
+        &occ,
+        16,
+        42,
+    );
     let one_thread = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .expect("thread pool");
-    let (b, _) = one_thread.install(|| render_mc(&scene, &view, &gb, &light, &occ, 16, 42));
-    let (c, _) = render_mc(&scene, &view, &gb, &light, &occ, 16, 43);
+    let (b, _) = one_thread.install(|| {
+        render_mc(
+            &scene,
+            &view,
+            &gb,
+            std::slice::from_ref(&light),
+            &occ,
+            16,
+            42,
+        )
+    });
+    let (c, _) = render_mc(
+        &scene,
+        &view,
+        &gb,
+        std::slice::from_ref(&light),
+        &occ,
+        16,
+        43,
+    );
     assert_eq!(a, b, "same seed, different thread count → different image");
     assert_ne!(a, c, "different seeds → same image");
     assert!(
@@ -571,10 +600,26 @@ fn convergence_reaches_the_target() {
         min_spp: 64,
         max_spp: 8192,
     };
-    let (img, rep) = render_mc_until(&scene, &view, &gb, &light, &occ, &conv, 7);
+    let (img, rep) = render_mc_until(
+        &scene,
+        &view,
+        &gb,
+        std::slice::from_ref(&light),
+        &occ,
+        &conv,
+        7,
+    );
     eprintln!("until 2 %: {rep}");
     // Against a fixed-spp image of the same scene: the difference is noise.
-    let (fixed, rf) = render_mc(&scene, &view, &gb, &light, &occ, 1024, 8);
+    let (fixed, rf) = render_mc(
+        &scene,
+        &view,
+        &gb,
+        std::slice::from_ref(&light),
+        &occ,
+        1024,
+        8,
+    );
     let mut chi2 = 0.0;
     let mut n = 0;
     for i in 0..img.pixels.len() {
@@ -602,7 +647,15 @@ fn convergence_reaches_the_target() {
 fn ltc_exact_visibility_tracks_the_ground_truth() {
     use bspvt_client::groundtruth::{builtin_lookup, render_ltc_exact_visibility};
     let (scene, view, gb, light, occ) = small_scene();
-    let (mc, rep) = render_mc(&scene, &view, &gb, &light, &occ, 1024, 3);
+    let (mc, rep) = render_mc(
+        &scene,
+        &view,
+        &gb,
+        std::slice::from_ref(&light),
+        &occ,
+        1024,
+        3,
+    );
     let ltc =
         render_ltc_exact_visibility(&scene, &view, &gb, &light, &occ, &builtin_lookup, 512, 4);
     let unshadowed =
@@ -648,7 +701,15 @@ fn noise_levels() {
     let occ = Occluder::new(&scene.mesh, &mesh_triangles(&scene.mesh));
     for spp in [256, 1024, 4096] {
         let t = std::time::Instant::now();
-        let (_, rep) = render_mc(&scene, &view, &gb, &light, &occ, spp, 1);
+        let (_, rep) = render_mc(
+            &scene,
+            &view,
+            &gb,
+            std::slice::from_ref(&light),
+            &occ,
+            spp,
+            1,
+        );
         eprintln!("{spp} spp ({:.1} s): {rep}", t.elapsed().as_secs_f64());
     }
     let conv = Convergence {
@@ -657,6 +718,14 @@ fn noise_levels() {
         max_spp: 65536,
     };
     let t = std::time::Instant::now();
-    let (_, rep) = render_mc_until(&scene, &view, &gb, &light, &occ, &conv, 1);
+    let (_, rep) = render_mc_until(
+        &scene,
+        &view,
+        &gb,
+        std::slice::from_ref(&light),
+        &occ,
+        &conv,
+        1,
+    );
     eprintln!("until 1 % ({:.1} s): {rep}", t.elapsed().as_secs_f64());
 }

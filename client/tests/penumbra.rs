@@ -113,7 +113,7 @@ fn rt_penumbra_beats_hard_shadow_against_ltc_exact() {
     for (name, l) in poses {
         let reference =
             render_ltc_exact_visibility(&s, &r.view, &r.gbuffer, &l, &occ, &builtin_lookup, 256, 1);
-        let unshadowed = r.shade_pixels(&l, None);
+        let unshadowed = r.shade_pixels(std::slice::from_ref(&l), None);
         let mut err = Vec::new();
         for t in ALL {
             let start = Instant::now();
@@ -345,7 +345,7 @@ fn frames_along_the_light_path() {
             width: 64,
             height: 48,
             frames: 3,
-            light: 0,
+            light: None,
             env_spin_deg: 0.0,
             settings: Settings {
                 mode: Mode::Pixel,

@@ -57,15 +57,16 @@ fn frame(
         .unwrap()
         .prepare(&data, &settings)
         .unwrap();
-    let light = scene
+    let lights: Vec<_> = scene
         .lights
-        .first()
-        .map(|l| bspvt_client::light::Light::load(l).unwrap());
+        .iter()
+        .map(|l| bspvt_client::light::Light::load(l).unwrap())
+        .collect();
     state
         .frame(&FrameInput {
             scene: &data,
             renderer: r,
-            light: light.as_ref(),
+            lights: &lights,
             trees,
             sky_trees: sky,
             env_rotation_deg: 0.0,

@@ -193,9 +193,10 @@ pub struct SceneStatus {
 
 /// 2: adds the moving parts ([`bspvt_proto::motion`]); 3: adds `bake.refine`; 4: adds the
 /// camera's `aspect`; 5: adds the mesh's UVs, the materials' textures (each image once, as the
-/// PNG or JPEG it came from), the lamps' texture images and the punctual lights. Versions 1 to 4
-/// still read.
-const STORED_VERSION: u16 = 5;
+/// PNG or JPEG it came from), the lamps' texture images and the punctual lights; 6 adds which
+/// lights move in their plane (before it, every light without a region did; without one now,
+/// a lamp is fixed). Versions 1 to 5 still read.
+const STORED_VERSION: u16 = 6;
 
 #[derive(Serialize, Deserialize)]
 struct StoredScene {
@@ -214,6 +215,47 @@ struct StoredScene {
     /// One per light (or empty: none has an image).
     light_images: Vec<Option<StoredLightImage>>,
     punctual: Vec<PunctualLight>,
+    /// One per light (or empty: none moves in its plane).
+    moves_in_plane: Vec<bool>,
+}
+
+/// Version 5: version 6 without `moves_in_plane` (every light without a region moved in its
+/// plane).
+#[derive(Serialize, Deserialize)]
+struct StoredSceneV5 {
+    version: u16,
+    mesh: Mesh,
+    materials: Vec<Material>,
+    lights: Vec<StoredLight>,
+    camera: StoredCamera,
+    bake: BakeSettings,
+    motion: Vec<MovingPart>,
+    uvs: Vec<[f32; 2]>,
+    textures: Vec<StoredTexture>,
+    maps: Vec<Option<StoredMaps>>,
+    light_images: Vec<Option<StoredLightImage>>,
+    punctual: Vec<PunctualLight>,
+}
+
+impl From<StoredSceneV5> for StoredScene {
+    fn from(v: StoredSceneV5) -> StoredScene {
+        let moves_in_plane = v.lights.iter().map(|l| l.region.is_none()).collect();
+        StoredScene {
+            version: v.version,
+            mesh: v.mesh,
+            materials: v.materials,
+            lights: v.lights,
+            camera: v.camera,
+            bake: v.bake,
+            motion: v.motion,
+            uvs: v.uvs,
+            textures: v.textures,
+            maps: v.maps,
+            light_images: v.light_images,
+            punctual: v.punctual,
+            moves_in_plane,
+        }
+    }
 }
 
 /// Version 4: version 5 without textures, UVs and punctual lights.
@@ -579,13 +621,17 @@ pub fn encode_scene(s: &Scene) -> Vec<u8> {
         maps,
         light_images,
         punctual: s.punctual.clone(),
+        moves_in_plane: match s.lights.iter().any(|l| l.moves_in_plane) {
+            true => s.lights.iter().map(|l| l.moves_in_plane).collect(),
+            false => Vec::new(),
+        },
     };
     postcard::to_stdvec(&stored).unwrap_or_default()
 }
 
 /// Version 4 and before: nothing textured, no punctual lights.
 fn from_v4(v: StoredSceneV4) -> StoredScene {
-    StoredScene {
+    StoredSceneV5 {
         version: v.version,
         mesh: v.mesh,
         materials: v.materials,
@@ -599,6 +645,7 @@ fn from_v4(v: StoredSceneV4) -> StoredScene {
         light_images: Vec::new(),
         punctual: Vec::new(),
     }
+    .into()
 }
 
 /// Reads back [`encode_scene`]'s bytes (and version 1's).
@@ -643,6 +690,9 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
             })
         }
         4 => from_v4(postcard::from_bytes(bytes).map_err(bad)?),
+        5 => postcard::from_bytes::<StoredSceneV5>(bytes)
+            .map_err(bad)?
+            .into(),
         STORED_VERSION => postcard::from_bytes(bytes).map_err(bad)?,
         v => return Err(format!("stored scene has version {v}")),
     };
@@ -663,7 +713,11 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
     if !s.light_images.is_empty() && s.light_images.len() != s.lights.len() {
         return Err("stored scene: light images do not match the lights".into());
     }
+    if !s.moves_in_plane.is_empty() && s.moves_in_plane.len() != s.lights.len() {
+        return Err("stored scene: the lights' motions do not match the lights".into());
+    }
     let mut images = s.light_images.into_iter();
+    let mut in_plane = s.moves_in_plane.into_iter();
     let mut mesh = s.mesh;
     mesh.uvs = s.uvs.into_iter().map(glam::Vec2::from).collect();
     let scene = Scene {
@@ -678,6 +732,7 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
                 two_sided: l.two_sided,
                 texture: l.texture,
                 region: l.region,
+                moves_in_plane: in_plane.next().unwrap_or(false),
                 image: images.next().flatten().map(|i| {
                     Arc::new(LightImage {
                         width: i.width,
@@ -721,6 +776,14 @@ mod tests {
         assert_eq!(decode_scene(&encode_scene(&p)).as_ref(), Ok(&p));
     }
 
+    /// A scene as stored before version 6 reads back: every light without a region moved in
+    /// its plane.
+    fn before_fixed_lamps(s: &mut Scene) {
+        for l in &mut s.lights {
+            l.moves_in_plane = l.region.is_none();
+        }
+    }
+
     fn v3_camera(c: &Camera) -> CameraV3 {
         CameraV3 {
             position: c.position,
@@ -749,6 +812,7 @@ mod tests {
         })
         .expect("encode v3");
         p.camera.aspect = None;
+        before_fixed_lamps(&mut p);
         assert_eq!(decode_scene(&v3).as_ref(), Ok(&p));
     }
 
@@ -778,7 +842,10 @@ mod tests {
         })
         .expect("encode v2");
         p.warnings.clear();
+        let fixed = p.clone();
+        before_fixed_lamps(&mut p);
         assert_eq!(decode_scene(&v2).as_ref(), Ok(&p));
+        let mut p = fixed;
         p.bake.refine = Some(crate::scene::Refinement {
             tolerance: 0.25,
             lighting: 0.0,
@@ -789,8 +856,8 @@ mod tests {
     }
 
     /// A version-4 stored scene (before textures and punctual lights) still reads, with
-    /// none; the version-5 encoding of an untextured scene is version 4's and five empty
-    /// lists (4 bytes more).
+    /// none; the version-6 encoding of an untextured scene without lights moving in their
+    /// planes is version 4's and six empty lists.
     #[test]
     fn version_4_reads() {
         let mut p = crate::builtin::scene("room").expect("builtin");
@@ -805,10 +872,18 @@ mod tests {
             motion: p.motion.clone(),
         })
         .expect("encode v4");
-        assert_eq!(decode_scene(&v4).as_ref(), Ok(&p));
-        let v5 = encode_scene(&p);
-        assert_eq!(v5.len(), v4.len() + 5, "the five empty lists");
-        assert_eq!(decode_scene(&v5).as_ref(), Ok(&p));
+        // Before version 6 every light without a region moved in its plane.
+        let mut moving = p.clone();
+        for l in &mut moving.lights {
+            l.moves_in_plane = l.region.is_none();
+        }
+        assert!(moving.lights.iter().any(|l| l.moves_in_plane));
+        assert_eq!(decode_scene(&v4).as_ref(), Ok(&moving));
+        let v6 = encode_scene(&p);
+        assert_eq!(v6.len(), v4.len() + 6, "the six empty lists");
+        assert_eq!(decode_scene(&v6).as_ref(), Ok(&p));
+        // A light that moves in its plane round-trips.
+        assert_eq!(decode_scene(&encode_scene(&moving)).as_ref(), Ok(&moving));
     }
 
     #[test]

@@ -28,6 +28,11 @@ pub struct PolygonLight {
     /// reach this box can never see the light, so the bake treats them as "don't care".
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub region: Option<Region>,
+    /// Without a region: the light moves in its own plane (dragged, or along its path), and
+    /// the bake ends rays at that plane. Neither this nor a region: the lamp is fixed where it
+    /// is, and rays end at its polygon ([`PolygonLight::motion`]; docs/bake.md).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub moves_in_plane: bool,
     /// The texture's texels: the file `texture` names, decoded by the scene loader
     /// (`SceneFile::load_light_textures`), or a glTF lamp's emissive texture resampled onto the
     /// polygon's parametrisation. Not written in scene files; the stored scene carries it
@@ -56,7 +61,29 @@ impl Region {
     }
 }
 
+/// Where a light may be while the scene is shown: what its bake assumed (docs/bake.md, "Where
+/// a ray ends").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightMotion {
+    /// Fixed where the scene put it (an asset's lamp): rays end at its polygon.
+    Fixed,
+    /// Anywhere in its own plane: rays end at the plane.
+    Plane,
+    /// Anywhere inside this box: rays end where they enter it.
+    Region(Region),
+}
+
 impl PolygonLight {
+    /// Where the light may move: its region where it declares one, else its plane when it
+    /// says so, else nowhere.
+    pub fn motion(&self) -> LightMotion {
+        match (self.region, self.moves_in_plane) {
+            (Some(r), _) => LightMotion::Region(r),
+            (None, true) => LightMotion::Plane,
+            (None, false) => LightMotion::Fixed,
+        }
+    }
+
     /// The light's corners as vectors.
     pub fn points(&self) -> Vec<Vec3> {
         self.vertices.iter().map(|&v| Vec3::from(v)).collect()
@@ -105,6 +132,9 @@ impl PolygonLight {
         }
         if self.image.as_ref().is_some_and(|i| !i.is_valid()) {
             return bad("its texture image is empty or not finite".into());
+        }
+        if self.region.is_some() && self.moves_in_plane {
+            return bad("declares both a region and moves_in_plane: a light moves in one".into());
         }
         if let Some(r) = &self.region {
             let b = r.aabb();

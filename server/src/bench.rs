@@ -1,6 +1,7 @@
 //! `bspvt-server bench`: the bake measured on real meshes.
 //!
-//! For each mesh (its default `--mesh` scene: the mesh, a ground plane, a quad light), an
+//! For each mesh (its default `--mesh` scene: the mesh, a ground plane, a quad light; an
+//! asset with lamps: its lamps, and again with them moving in their planes), an
 //! evenly spaced sample of vertices is ray-cast once per cast mode (`--casts`); each cast's
 //! cube maps are compared with the first cast's (the visibility error: pixels that differ,
 //! mean |ΔV|) and fitted with every split method, so casts and methods are compared in the
@@ -12,6 +13,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use bspvt_proto::encoding::encode_chunk;
+use bspvt_proto::scene::LightMotion;
 use bspvt_proto::{BakeSettings, Scene, SplitMethod};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -244,7 +246,11 @@ pub fn run(a: &BenchArgs) -> Result<()> {
         scenes.push(("builtin:plate, no light region".into(), free));
     }
     for m in &a.meshes {
-        let p = dir.join(m);
+        // A path that exists as given (e.g. assets/rooms/room.gltf), else a file in the folder.
+        let p = match std::path::Path::new(m).is_file() {
+            true => PathBuf::from(m),
+            false => dir.join(m),
+        };
         if !p.exists() {
             eprintln!(
                 "skipped: {} not found (set --meshes-dir or BSPVT_ASSETS)",
@@ -252,7 +258,27 @@ pub fn run(a: &BenchArgs) -> Result<()> {
             );
             continue;
         }
-        scenes.push((m.clone(), Scene::from_mesh_path(&p)?));
+        let mut scene = Scene::from_mesh_path(&p)?;
+        // The mesh a bake of it bakes: refined where the scene asks (an asset with its own
+        // lamps), once, so that both light rules below bake the same vertices.
+        bspvt_bake::refine::refine_scene(&mut scene)?;
+        // An asset's own lamps are fixed: rays end at their polygons. The same scene with its
+        // lamps moving in their planes (rays end at the planes: the rule before issue 34) is
+        // the baseline of what fixed lamps leave out.
+        let fixed = scene
+            .lights
+            .iter()
+            .any(|l| l.motion() == LightMotion::Fixed);
+        if fixed {
+            let mut planes = scene.clone();
+            for l in planes.lights.iter_mut().filter(|l| l.region.is_none()) {
+                l.moves_in_plane = true;
+            }
+            scenes.push((m.clone(), scene));
+            scenes.push((format!("{m}, lamps moving in their planes"), planes));
+        } else {
+            scenes.push((m.clone(), scene));
+        }
     }
     let mut rows = Vec::new();
     for (name, mut scene) in scenes {

@@ -1,8 +1,9 @@
-//! Visibility ends at the light (issue 19, docs/bake.md "Where a ray ends"): V(p, ω) = 1 when
-//! the ray from p along ω reaches the light — its declared region, or its plane when it has
-//! none — before an occluder. A floor under a ceiling with a lamp between them sees the lamp;
-//! an occluder between floor and lamp still shadows; without the rule the ceiling would
-//! shadow everything.
+//! Visibility ends at the light (issues 19 and 34, docs/bake.md "Where a ray ends"): V(p, ω) = 1
+//! when the ray from p along ω reaches the light — its declared region, its plane when it moves
+//! in it, else the lamp's own polygon — before an occluder. A floor under a ceiling with a lamp
+//! between them sees the lamp; an occluder between floor and lamp still shadows; without the
+//! rule the ceiling would shadow everything; a second, lower lamp does not end the rays that
+//! pass beside it.
 
 use std::path::Path;
 
@@ -48,7 +49,7 @@ fn room_obj(blocker: bool) -> String {
 }
 
 /// The scene: the room and a downward-facing lamp at y = 1.8 (with a region around it when
-/// `region`).
+/// `region`; else fixed, its rays ending at its polygon).
 fn scene(dir: &Path, blocker: bool, region: bool) -> Scene {
     std::fs::write(dir.join("room.obj"), room_obj(blocker)).expect("write obj");
     let region = if region {
@@ -58,7 +59,7 @@ fn scene(dir: &Path, blocker: bool, region: bool) -> Scene {
     };
     let json = format!(
         r#"{{"meshes": [{{"path": "room.obj"}}],
-            "lights": [{{"vertices": [[-0.3, 1.8, -0.3], [-0.3, 1.8, 0.3], [0.3, 1.8, 0.3], [0.3, 1.8, -0.3]],
+            "lights": [{{"vertices": [[-0.3, 1.8, -0.3], [0.3, 1.8, -0.3], [0.3, 1.8, 0.3], [-0.3, 1.8, 0.3]],
                          "radiance": [10, 10, 10]{region}}}],
             "camera": {{"position": [0, 1, 5], "target": [0, 0, 0]}},
             "bake": {{"face_res": 16}}}}"#
@@ -122,11 +123,127 @@ fn wall_scene(dir: &Path) -> Scene {
     }
     std::fs::write(dir.join("wall.obj"), s).expect("write obj");
     let json = r#"{"meshes": [{"path": "wall.obj"}],
-        "lights": [{"vertices": [[-0.3, 1.8, -0.3], [-0.3, 1.8, 0.3], [0.3, 1.8, 0.3], [0.3, 1.8, -0.3]],
-                    "radiance": [10, 10, 10]}],
+        "lights": [{"vertices": [[-0.3, 1.8, -0.3], [0.3, 1.8, -0.3], [0.3, 1.8, 0.3], [-0.3, 1.8, 0.3]],
+                    "radiance": [10, 10, 10], "moves_in_plane": true}],
         "camera": {"position": [3, 1, 0], "target": [-2, 0.75, 0]},
         "bake": {"face_res": 16}}"#;
     Scene::from_json(json, dir).expect("scene")
+}
+
+/// A fixed lamp (no region, not moving in its plane) is reached only through its polygon:
+/// the wall's pixels that matter are those whose cone meets the lamp — every pixel whose
+/// centre's ray hits it, and none farther than a pixel's cone from it — a small share of those
+/// that rise to its plane; and the map there is the one casting toward the plane gives.
+#[test]
+fn a_fixed_lamp_keeps_only_the_directions_that_reach_it() {
+    use bspvt_proto::cubemap::{FACES, FaceFrame, pixel_centres};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let plane = wall_scene(dir.path());
+    let mut fixed = plane.clone();
+    fixed.lights[0].moves_in_plane = false;
+    let res = fixed.bake.face_res;
+    let (b_fixed, b_plane) = (Baker::new(&fixed), Baker::new(&plane));
+    let centres = pixel_centres(res);
+    let (lo, hi) = (Vec3::new(-0.3, 1.8, -0.3), Vec3::new(0.3, 1.8, 0.3));
+    let (mut n_fixed, mut n_plane) = (0, 0);
+    for v in 0..fixed.mesh.vertex_count() as u32 {
+        let o = fixed.mesh.positions[v as usize];
+        let kept = b_fixed.reference_cube_map(v);
+        assert_eq!(
+            kept,
+            b_fixed.cube_map(v).0,
+            "vertex {v}: the casts disagree"
+        );
+        let in_plane = b_plane.reference_cube_map(v);
+        for f in 0..FACES {
+            let frame = FaceFrame::of(f);
+            let kept_px = kept[f].as_ref().map(|p| p.index.as_slice()).unwrap_or(&[]);
+            let plane_px = in_plane[f].as_ref();
+            n_fixed += kept_px.len();
+            n_plane += plane_px.map_or(0, |p| p.index.len());
+            for (p, uv) in centres.iter().enumerate() {
+                let d = frame.direction(*uv).normalize();
+                if d.dot(fixed.mesh.normals[v as usize]) <= 0.0 || d.y <= 0.0 {
+                    continue;
+                }
+                let q = o + d * ((1.8 - o.y) / d.y);
+                let hits = q.x >= lo.x && q.x <= hi.x && q.z >= lo.z && q.z <= hi.z;
+                let is_kept = kept_px.contains(&(p as u32));
+                if hits {
+                    assert!(is_kept, "vertex {v} face {f} pixel {p}: {d} hits the lamp");
+                }
+                // A 16² pixel's cone is at most 1.5 / 16 rad wide; at distance t the lamp
+                // grows by at most t · 0.09 / cos.
+                let grow = (q - o).length() * 0.09 / d.y + 1e-4;
+                let near = q.x >= lo.x - grow
+                    && q.x <= hi.x + grow
+                    && q.z >= lo.z - grow
+                    && q.z <= hi.z + grow;
+                if is_kept {
+                    assert!(
+                        near,
+                        "vertex {v} face {f} pixel {p}: {d} kept, far from the lamp"
+                    );
+                    // Nothing occludes the wall: the same value as toward the plane.
+                    let k = kept_px.iter().position(|&x| x == p as u32).expect("kept");
+                    let j = plane_px
+                        .and_then(|px| px.index.iter().position(|&x| x == p as u32))
+                        .expect("a pixel that reaches the lamp reaches its plane");
+                    assert_eq!(
+                        kept[f].as_ref().map(|x| x.visible[k]),
+                        plane_px.map(|x| x.visible[j])
+                    );
+                }
+            }
+        }
+    }
+    eprintln!(
+        "wall under a 0.6 m lamp, 16²: {n_fixed} pixels matter (fixed lamp), {n_plane} (plane)"
+    );
+    assert!(
+        n_fixed > 0 && n_fixed * 3 < n_plane,
+        "{n_fixed} of {n_plane}"
+    );
+}
+
+/// Two lamps at different heights (issue 34): the ceiling lamp and a small pendant lamp lower
+/// down, beside the floor's centre, with a board between the pendant's height and the ceiling.
+/// The floor's centre looks up through the board at the ceiling lamp: the board shadows it
+/// (the ray passes beside the pendant and does not end at the pendant's plane). Control: with
+/// both lights moving in their planes the ray ends at the pendant's plane below the board, and
+/// the board casts no shadow — the bug the issue describes.
+#[test]
+fn a_lower_lamp_does_not_end_the_rays_that_pass_beside_it() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut s = scene(dir.path(), true, false);
+    let mut pendant = s.lights[0].clone();
+    // Facing down, as the ceiling lamp (counter-clockwise seen from below).
+    pendant.vertices = vec![
+        [1.1, 0.8, -0.1],
+        [1.3, 0.8, -0.1],
+        [1.3, 0.8, 0.1],
+        [1.1, 0.8, 0.1],
+    ];
+    s.lights.push(pendant);
+    s.validate().expect("valid");
+    assert!(
+        s.lights
+            .iter()
+            .all(|l| !l.moves_in_plane && l.region.is_none())
+    );
+    assert_eq!(
+        centre_visibility(&Baker::new(&s)),
+        0.0,
+        "the board did not shadow"
+    );
+    for l in &mut s.lights {
+        l.moves_in_plane = true;
+    }
+    assert_eq!(
+        centre_visibility(&Baker::new(&s)),
+        1.0,
+        "control: rays ending at the pendant's plane pass the board"
+    );
 }
 
 /// A light without a region moves in its plane (docs/bake.md, "Where a ray ends"), so a

@@ -54,6 +54,9 @@ pub(crate) struct RenderArgs {
     /// Frames along the light path; more than one writes OUT-000.png, OUT-001.png, …
     #[arg(long, default_value_t = 1)]
     frames: usize,
+    /// Shade only this scene light (0-based) [default: every light, summed].
+    #[arg(long)]
+    light: Option<usize>,
     /// Output image: .png (tone-mapped) or .exr (linear).
     #[arg(long)]
     out: PathBuf,
@@ -130,7 +133,7 @@ pub(crate) fn run(a: RenderArgs) -> Result<()> {
             width: a.width,
             height: scene.camera.image_height(a.width, a.height),
             frames: a.frames,
-            light: 0,
+            light: a.light,
             env_spin_deg: a.env_spin,
             settings: Settings {
                 mode,

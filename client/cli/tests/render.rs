@@ -44,9 +44,9 @@ fn bspvt_matches_exact_visibility_and_has_shadows() {
     let trees = Trees::full(&b.trees, b.header.codec());
     let r = Renderer::new(&scene, 96, 72);
     let light = Light::from_scene(&scene.lights[0]);
-    let (vertex, c) = r.bspvt(&light, &trees, Mode::Vertex);
-    let (pixel, _) = r.bspvt(&light, &trees, Mode::Pixel);
-    let (unshadowed, _) = r.ltc(&light, Mode::Pixel);
+    let (vertex, c) = r.bspvt(std::slice::from_ref(&light), &trees, Mode::Vertex);
+    let (pixel, _) = r.bspvt(std::slice::from_ref(&light), &trees, Mode::Pixel);
+    let (unshadowed, _) = r.ltc(std::slice::from_ref(&light), Mode::Pixel);
     assert!(
         c.vertices_shaded > 500 && c.pieces > 0 && c.pieces_dropped > 0,
         "{c:?}"

@@ -257,7 +257,7 @@ fn rel(a: [f32; 3], b: [f32; 3]) -> f64 {
 fn ltc(scene: &Scene, mode: Mode) -> Image {
     let r = Renderer::new(scene, SIZE, SIZE);
     let light = Light::load(&scene.lights[0]).expect("light");
-    r.ltc(&light, mode).0
+    r.ltc(std::slice::from_ref(&light), mode).0
 }
 
 /// The scene with the floor's material replaced by a constant one (no texture).
@@ -557,7 +557,16 @@ fn emissive_texture_becomes_the_lamps_texture() {
     };
     let mc = |s: &Scene| {
         let light = Light::load(&s.lights[0]).expect("light");
-        bspvt_client::groundtruth::render_mc(s, &r.view, &r.gbuffer, &light, &occ, 512, 3).0
+        bspvt_client::groundtruth::render_mc(
+            s,
+            &r.view,
+            &r.gbuffer,
+            std::slice::from_ref(&light),
+            &occ,
+            512,
+            3,
+        )
+        .0
     };
     let (mc_tex, mc_plain) = (mc(&tex), mc(&plain));
     // Off-centre, at x = ±0.6, the white half (centre x = 0.125) is nearer than the black
@@ -1074,12 +1083,19 @@ fn textured_asset_bspvt_against_monte_carlo() {
     let trees = bspvt_client::render::renderer::Trees::full(&b.trees, b.header.codec());
     let r = Renderer::new(&scene, 64, 64);
     let light = Light::load(&scene.lights[0]).expect("light");
-    let (pixel, _) = r.bspvt(&light, &trees, Mode::Pixel);
-    let (vertex, _) = r.bspvt(&light, &trees, Mode::Vertex);
+    let (pixel, _) = r.bspvt(std::slice::from_ref(&light), &trees, Mode::Pixel);
+    let (vertex, _) = r.bspvt(std::slice::from_ref(&light), &trees, Mode::Vertex);
     let occ =
         bspvt_raytrace::Occluder::new(&scene.mesh, &bspvt_raytrace::mesh_triangles(&scene.mesh));
-    let (mc, _) =
-        bspvt_client::groundtruth::render_mc(&scene, &r.view, &r.gbuffer, &light, &occ, 2048, 11);
+    let (mc, _) = bspvt_client::groundtruth::render_mc(
+        &scene,
+        &r.view,
+        &r.gbuffer,
+        std::slice::from_ref(&light),
+        &occ,
+        2048,
+        11,
+    );
     let mean = |img: &Image| {
         img.pixels
             .iter()

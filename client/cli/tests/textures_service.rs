@@ -60,7 +60,11 @@ fn the_service_stores_and_serves_the_textured_scene() {
     );
     assert_eq!(served.punctual.len(), 1);
     let light = Light::load(&served.lights[0]).expect("light");
-    let frame = |s: &bspvt_proto::Scene| Renderer::new(s, 48, 48).ltc(&light, Mode::Pixel).0;
+    let frame = |s: &bspvt_proto::Scene| {
+        Renderer::new(s, 48, 48)
+            .ltc(std::slice::from_ref(&light), Mode::Pixel)
+            .0
+    };
     assert!(frame(&served) == frame(&offline));
     eprintln!(
         "stored scene: {} bytes ({} vertices)",

@@ -152,7 +152,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                     width: a.size,
                     height: a.size,
                     frames: a.frames,
-                    light: 0,
+                    light: None,
                     env_spin_deg: 0.0,
                     settings: Settings {
                         mode,

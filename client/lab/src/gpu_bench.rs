@@ -210,10 +210,10 @@ pub fn run(a: &BenchGpuArgs) -> Result<Report> {
                     }
                     for k in 0..a.cpu_frames {
                         let t = Instant::now();
-                        let _ = r.shade_vertices(&pose(k + 1), &all);
+                        let _ = r.shade_vertices(std::slice::from_ref(&pose(k + 1)), &all, false);
                         cs.push(t.elapsed().as_secs_f64() * 1e6);
                         let t = Instant::now();
-                        let _ = r.bspvt(&pose(k + 1), &all, mode);
+                        let _ = r.bspvt(std::slice::from_ref(&pose(k + 1)), &all, mode);
                         cf.push(t.elapsed().as_secs_f64() * 1e3);
                     }
                     let row = Row {

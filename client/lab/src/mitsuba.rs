@@ -14,9 +14,9 @@
 //!   emitter and a black `diffuse` BSDF. A two-sided light adds `light<k>_back.ply`: the same
 //!   polygon with reversed winding, 1e-4 × its diagonal behind (Mitsuba's area emitters are
 //!   one-sided; two coplanar copies would hide each other at random). Every light of the scene
-//!   is written (the asset's lamps too), or the one `--light` names. bspvt's renderers shade
-//!   one light at a time (`bspvt render --light k`); direct light is linear in the lights, so
-//!   Mitsuba's image of all of them is the sum of those.
+//!   is written (the asset's lamps too), or the one `--light` names, as bspvt's renderers
+//!   shade all of them (or `bspvt render --light k`). A lamp is a surface in the way of the
+//!   others in both (the Monte Carlo's shadow rays stop at other lamps).
 //!
 //! **Materials.** Our BRDF is a sum, albedo/π + F·D·G₁G₁/(4 cos θo cos θi) with Schlick's F;
 //! Mitsuba has no additive BSDF, but every term has an exact counterpart:

@@ -391,7 +391,9 @@ fn measure_case(scene_name: &str, case: &Case, st: &Settings, out: &Path) -> Res
         })?;
         rows.push(row(name, None, ms, &img)?);
     }
-    let (ms, img) = timed(st.frames, || Ok(r.shade_pixels(&light, None)))?;
+    let (ms, img) = timed(st.frames, || {
+        Ok(r.shade_pixels(std::slice::from_ref(&light), None))
+    })?;
     rows.push(row("unshadowed", None, ms, &img)?);
     for (k, &spp) in st.mc_spp.iter().enumerate() {
         let mut seed = SEED_MC + 100 * k as u64;

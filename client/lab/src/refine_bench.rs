@@ -182,8 +182,24 @@ fn bench_scene(path: &Path, a: &BenchRefineArgs) -> Result<SceneResult> {
     let cov = covered(&r.gbuffer);
     let occ = Occluder::new(&given.mesh, &mesh_triangles(&given.mesh));
     let t = Instant::now();
-    let (ref_a, _) = render_mc(&given, &r.view, &r.gbuffer, &light, &occ, a.spp, 1);
-    let (ref_b, _) = render_mc(&given, &r.view, &r.gbuffer, &light, &occ, a.spp, 2);
+    let (ref_a, _) = render_mc(
+        &given,
+        &r.view,
+        &r.gbuffer,
+        std::slice::from_ref(&light),
+        &occ,
+        a.spp,
+        1,
+    );
+    let (ref_b, _) = render_mc(
+        &given,
+        &r.view,
+        &r.gbuffer,
+        std::slice::from_ref(&light),
+        &occ,
+        a.spp,
+        2,
+    );
     let mut reference = ref_a.clone();
     for (p, q) in reference.pixels.iter_mut().zip(&ref_b.pixels) {
         *p = std::array::from_fn(|k| 0.5 * (p[k] + q[k]));
@@ -208,7 +224,7 @@ fn bench_scene(path: &Path, a: &BenchRefineArgs) -> Result<SceneResult> {
         a.spp,
         t.elapsed().as_secs_f64()
     );
-    let (unshadowed, _) = r.ltc(&light, Mode::Pixel);
+    let (unshadowed, _) = r.ltc(std::slice::from_ref(&light), Mode::Pixel);
 
     let measure = |scene: &Scene, kind: &str, budget: u32, refine_s: f64| -> Result<Row> {
         let t = Instant::now();
@@ -219,8 +235,8 @@ fn bench_scene(path: &Path, a: &BenchRefineArgs) -> Result<SceneResult> {
         let b = decode_bake(&bytes)?;
         let trees = Trees::full(&b.trees, b.header.codec());
         let rr = Renderer::new(scene, w, h);
-        let (pixel, _) = rr.bspvt(&light, &trees, Mode::Pixel);
-        let (vertex, _) = rr.bspvt(&light, &trees, Mode::Vertex);
+        let (pixel, _) = rr.bspvt(std::slice::from_ref(&light), &trees, Mode::Pixel);
+        let (vertex, _) = rr.bspvt(std::slice::from_ref(&light), &trees, Mode::Vertex);
         let (prmse, pmae) = rmse_mae(&pixel, &reference, &cov);
         let (vrmse, vmae) = rmse_mae(&vertex, &reference, &cov);
         let row = Row {

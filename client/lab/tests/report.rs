@@ -213,7 +213,7 @@ fn ratio_estimator_is_exact_when_unoccluded_and_converges() {
     let occ = Occluder::new(&scene.mesh, &mesh_triangles(&scene.mesh));
     let guide = Guide::new(&r);
     let cov = covered(&r.gbuffer);
-    let unshadowed = r.shade_pixels(&light, None);
+    let unshadowed = r.shade_pixels(std::slice::from_ref(&light), None);
     let exact = render_ltc_exact_visibility(
         &scene,
         &r.view,

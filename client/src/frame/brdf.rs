@@ -111,12 +111,45 @@ pub(crate) fn cosine_hemisphere(u: [f64; 2]) -> DVec3 {
 /// Shadow rays: an occluder (none = nothing casts shadows) and the offset ε that keeps rays
 /// off their own surface. Origins move by ε along the geometric normal (toward the ray's side)
 /// and segments stop ε short of the light.
-#[derive(Clone, Copy)]
+#[derive(Clone)]
 pub struct Shadows<'a> {
     /// The scene's BVH (`None`: nothing casts shadows).
     pub occluder: Option<&'a Occluder>,
     /// Offset along the geometric normal and short of the light.
     pub epsilon: f64,
+    /// The scene's lamps as posed: each is a surface in the way of the others (a pendant
+    /// lamp under a ceiling lamp shadows it, as in Mitsuba, where emitters are shapes). A ray
+    /// to a point of a lamp ends short of that lamp, so it never blocks its own light.
+    pub lamps: Vec<LampSurface>,
+}
+
+/// A lamp's polygon as a surface shadow rays cross (either side).
+#[derive(Clone, Debug)]
+pub struct LampSurface {
+    /// Convex polygon, counter-clockwise about `normal`.
+    pub vertices: Vec<DVec3>,
+    /// Unit normal.
+    pub normal: DVec3,
+}
+
+/// Where the ray from `o` along unit `d` crosses the convex polygon `v` (counter-clockwise
+/// about unit `n`), from either side: (distance, the point). A ray in the polygon's plane
+/// does not cross it.
+pub fn polygon_crossing(v: &[DVec3], n: DVec3, o: DVec3, d: DVec3) -> Option<(f64, DVec3)> {
+    if v.len() < 3 {
+        return None;
+    }
+    let t = (v[0] - o).dot(n) / d.dot(n);
+    if !(t > 0.0) || !t.is_finite() {
+        return None;
+    }
+    let q = o + t * d;
+    // Inside when left of every edge.
+    let inside = (0..v.len()).all(|i| {
+        let (a, b) = (v[i], v[(i + 1) % v.len()]);
+        (b - a).cross(q - a).dot(n) >= 0.0
+    });
+    inside.then_some((t, q))
 }
 
 impl<'a> Shadows<'a> {
@@ -125,6 +158,7 @@ impl<'a> Shadows<'a> {
         let diag = f64::from(scene.mesh.bounds().diagonal());
         Shadows {
             occluder,
+            lamps: Vec::new(),
             epsilon: 1e-4
                 * if diag.is_finite() && diag > 0.0 {
                     diag
@@ -139,6 +173,14 @@ impl<'a> Shadows<'a> {
         let Some(occ) = self.occluder else {
             return true;
         };
+        let short = dist - self.epsilon;
+        if self
+            .lamps
+            .iter()
+            .any(|l| polygon_crossing(&l.vertices, l.normal, p, w).is_some_and(|x| x.0 < short))
+        {
+            return false;
+        }
         let side = if ng.dot(w) >= 0.0 { 1.0 } else { -1.0 };
         let origin = p + ng * (self.epsilon * side);
         let d = (p + w * dist) - origin;

@@ -294,6 +294,7 @@ mod tests {
         let shadows = Shadows {
             occluder: None,
             epsilon: 1e-4,
+            lamps: Vec::new(),
         };
         let mut rng = Pcg32::new(3, 9);
         let e = shade_point(&sp, &brdf, &env, sampler.as_ref(), &shadows, 4000, &mut rng);

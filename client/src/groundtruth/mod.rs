@@ -284,6 +284,49 @@ pub fn shade_mc(
     est
 }
 
+/// One shading point's samplers for several lights: a sample is the sum of one MIS sample of
+/// each light the point can see (direct light is linear in the lights; a light behind the
+/// point or below its horizon costs nothing).
+struct McLights<'a> {
+    points: Vec<(McPoint, &'a Light)>,
+}
+
+impl<'a> McLights<'a> {
+    fn new(sp: &ShadingPoint, lights: &'a [Light]) -> McLights<'a> {
+        McLights {
+            points: lights
+                .iter()
+                .filter_map(|l| McPoint::new(sp, l).map(|p| (p, l)))
+                .collect(),
+        }
+    }
+
+    /// `k` samples into `est`.
+    fn sample_into(
+        &self,
+        est: &mut Estimate,
+        brdf: &Brdf,
+        shadows: &Shadows,
+        k: u64,
+        rng: &mut Pcg32,
+    ) {
+        if self.points.is_empty() {
+            est.push_zeros(k);
+            return;
+        }
+        for _ in 0..k {
+            est.push(self.sample(brdf, shadows, rng));
+        }
+    }
+
+    fn sample(&self, brdf: &Brdf, shadows: &Shadows, rng: &mut Pcg32) -> DVec3 {
+        self.points
+            .iter()
+            .map(|(pt, l)| pt.sample(brdf, l, shadows, rng))
+            .sum()
+    }
+}
+
 /// The noise level of a Monte Carlo image.
 ///
 /// Per covered pixel: m = mean of the three channels' estimates, s = mean of their standard
@@ -422,6 +465,12 @@ impl<'a> Ctx<'a> {
         }
     }
 
+    /// Shadow rays also stopped by `lamps` (each a surface in the way of the others).
+    pub(crate) fn with_lamps(mut self, lamps: &[Light]) -> Ctx<'a> {
+        self.shadows.lamps = lamps.iter().map(Light::surface).collect();
+        self
+    }
+
     /// The BRDF at a shading point: its triangle's material, evaluated through the mesh's
     /// UVs where the material is textured (the same texel the per-pixel LTC shades with).
     pub(crate) fn brdf(&self, s: &crate::frame::gbuffer::Surface) -> Brdf {
@@ -441,20 +490,20 @@ impl<'a> Ctx<'a> {
     }
 }
 
-/// Monte Carlo ground truth at the G-buffer's shading points (pixel centres — the same
-/// points the LTC and BSPVT renderers shade), `spp` samples per pixel, reproducible for a
-/// given `seed`. Pixels without a surface are black.
+/// Monte Carlo ground truth of `lights` (their sum) at the G-buffer's shading points (pixel
+/// centres — the same points the LTC and BSPVT renderers shade), `spp` samples per pixel,
+/// reproducible for a given `seed`. Pixels without a surface are black.
 pub fn render_mc(
     scene: &Scene,
     view: &View,
     gbuffer: &GBuffer,
-    light: &Light,
+    lights: &[Light],
     occluder: &Occluder,
     spp: u32,
     seed: u64,
 ) -> (Image, NoiseReport) {
-    let ctx = Ctx::new(scene, Some(occluder));
-    let est = centre_pass(&ctx, view, gbuffer, light, seed, &|_| u64::from(spp));
+    let ctx = Ctx::new(scene, Some(occluder)).with_lamps(lights);
+    let est = centre_pass(&ctx, view, gbuffer, lights, seed, &|_| u64::from(spp));
     finish(gbuffer.width, gbuffer.height, &est)
 }
 
@@ -477,15 +526,15 @@ pub fn render_mc_until(
     scene: &Scene,
     view: &View,
     gbuffer: &GBuffer,
-    light: &Light,
+    lights: &[Light],
     occluder: &Occluder,
     conv: &Convergence,
     seed: u64,
 ) -> (Image, NoiseReport) {
-    let ctx = Ctx::new(scene, Some(occluder));
+    let ctx = Ctx::new(scene, Some(occluder)).with_lamps(lights);
     let min = u64::from(conv.min_spp.max(2));
     let max = u64::from(conv.max_spp).max(min);
-    let mut est = centre_pass(&ctx, view, gbuffer, light, seed, &|_| min);
+    let mut est = centre_pass(&ctx, view, gbuffer, lights, seed, &|_| min);
     for round in 1..64u64 {
         let floor = rel_floor(&est);
         let more: Vec<u64> = est
@@ -501,7 +550,7 @@ pub fn render_mc_until(
             break;
         }
         let round_seed = rng::splitmix64(seed ^ round.wrapping_mul(0xA24B_AED4_963E_E407));
-        let add = centre_pass(&ctx, view, gbuffer, light, round_seed, &|i| more[i]);
+        let add = centre_pass(&ctx, view, gbuffer, lights, round_seed, &|i| more[i]);
         for (e, a) in est.iter_mut().zip(&add) {
             if let (Some(e), Some(a)) = (e.as_mut(), a) {
                 e.merge(a);
@@ -525,7 +574,7 @@ fn centre_pass(
     ctx: &Ctx,
     view: &View,
     gbuffer: &GBuffer,
-    light: &Light,
+    lights: &[Light],
     seed: u64,
     spp: &(dyn Fn(usize) -> u64 + Sync),
 ) -> Vec<Option<Estimate>> {
@@ -543,14 +592,7 @@ fn centre_pass(
             let brdf = &ctx.brdf(&s);
             let mut rng = Pcg32::for_key(seed, i as u64);
             let mut est = Estimate::default();
-            match McPoint::new(&sp, light) {
-                None => est.push_zeros(k),
-                Some(pt) => {
-                    for _ in 0..k {
-                        est.push(pt.sample(brdf, light, &ctx.shadows, &mut rng));
-                    }
-                }
-            }
+            McLights::new(&sp, lights).sample_into(&mut est, brdf, &ctx.shadows, k, &mut rng);
             Some(est)
         })
         .collect()
@@ -564,12 +606,12 @@ pub fn render_mc_box(
     scene: &Scene,
     view: &View,
     tracer: &Tracer,
-    light: &Light,
+    lights: &[Light],
     occluder: &Occluder,
     spp: u32,
     seed: u64,
 ) -> (Image, NoiseReport) {
-    let ctx = Ctx::new(scene, Some(occluder));
+    let ctx = Ctx::new(scene, Some(occluder)).with_lamps(lights);
     let (w, h) = (view.width as usize, view.height as usize);
     let est: Vec<Option<Estimate>> = (0..w * h)
         .into_par_iter()
@@ -587,10 +629,7 @@ pub fn render_mc_box(
                     Some(s) => {
                         hit = true;
                         let sp = ShadingPoint::from_surface(&s, view.eye);
-                        match McPoint::new(&sp, light) {
-                            None => DVec3::ZERO,
-                            Some(pt) => pt.sample(&ctx.brdf(&s), light, &ctx.shadows, &mut rng),
-                        }
+                        McLights::new(&sp, lights).sample(&ctx.brdf(&s), &ctx.shadows, &mut rng)
                     }
                 };
                 est.push(v);

@@ -17,7 +17,7 @@ impl FrameMethod for Bspvt {
         "BSPVT"
     }
     fn description(&self) -> &'static str {
-        "baked BSPVT visibility × LTC GGX over the light's pieces (paper 000)"
+        "baked BSPVT visibility × LTC GGX over the lights' pieces (paper 000)"
     }
     fn needs(&self) -> Needs {
         Needs {
@@ -42,15 +42,15 @@ struct State {
 
 impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
-        let light = f.light()?;
+        let lights = f.lights()?;
         if let Some(g) = self.gpu.as_mut()
-            && let Some(frame) = g.frame(f, light, f.trees)?
+            && let Some(frame) = g.frame(f, lights, f.trees)?
         {
             return Ok(frame);
         }
         let (image, counts) = match f.trees {
-            Some(trees) => f.renderer.bspvt(light, trees, f.mode),
-            None => f.renderer.ltc(light, f.mode),
+            Some(trees) => f.renderer.bspvt(lights, trees, f.mode),
+            None => f.renderer.ltc(lights, f.mode),
         };
         Ok(Frame::new(image, counts))
     }

@@ -78,10 +78,10 @@ impl MethodState for State {
             }
         };
         // The lamps, shadowed by their own trees (unshadowed until those arrive).
-        if let Some(light) = f.light {
+        if !f.lights.is_empty() {
             let (lamps, c) = match f.trees {
-                Some(trees) => f.renderer.bspvt(light, trees, f.mode),
-                None => f.renderer.ltc(light, f.mode),
+                Some(trees) => f.renderer.bspvt(f.lights, trees, f.mode),
+                None => f.renderer.ltc(f.lights, f.mode),
             };
             image.add(&lamps);
             counts = FrameCounts {

@@ -36,12 +36,14 @@ impl GpuPath {
         }))
     }
 
-    /// The GPU's frame of `light` with `trees` (`None`: unshadowed), or `None` where the
-    /// CPU must draw it.
+    /// The GPU's frame of `lights` with `trees` (`None`: unshadowed), or `None` where the
+    /// CPU must draw it. Several lights are drawn one GPU frame each and summed (read back:
+    /// a window is then given the sum as a CPU image); each light's per-pixel frame has its
+    /// own shadow ratios, as on the CPU.
     pub(crate) fn frame(
         &mut self,
         f: &FrameInput,
-        light: &Light,
+        lights: &[Light],
         trees: Option<&Trees>,
     ) -> Result<Option<Frame>> {
         if self.refused.is_some() {
@@ -53,11 +55,32 @@ impl GpuPath {
                 Err(e) => return Ok(self.refuse(format!("{e:#}"))),
             }
         }
-        if let Err(e) = crate::gpu::vertex::supports(light) {
+        if let Some(e) = lights
+            .iter()
+            .find_map(|l| crate::gpu::vertex::supports(l).err())
+        {
             return Ok(self.refuse(format!("{e:#}")));
         }
         let Some(frames) = self.frames.as_mut() else {
             return Ok(None);
+        };
+        let light = match lights {
+            [one] => one,
+            _ => {
+                let mut sum: Option<(Image, crate::render::renderer::FrameCounts)> = None;
+                for l in lights {
+                    let (image, c) = frames.frame(self.gpu, f.renderer, l, trees, f.mode)?;
+                    match sum.as_mut() {
+                        None => sum = Some((image, c)),
+                        Some((s, counts)) => {
+                            s.add(&image);
+                            counts.pieces += c.pieces;
+                            counts.pieces_dropped += c.pieces_dropped;
+                        }
+                    }
+                }
+                return Ok(sum.map(|(image, counts)| Frame::new(image, counts)));
+            }
         };
         if f.on_gpu {
             let (image, counts) =

@@ -16,7 +16,7 @@ impl FrameMethod for Ltc {
         "LTC (no shadows)"
     }
     fn description(&self) -> &'static str {
-        "unshadowed LTC GGX of the polygon light (Heitz et al. 2016), no visibility"
+        "unshadowed LTC GGX of the polygon lights (Heitz et al. 2016), no visibility"
     }
     fn needs(&self) -> Needs {
         Needs {
@@ -41,11 +41,11 @@ struct State {
 impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
         if let Some(g) = self.gpu.as_mut()
-            && let Some(frame) = g.frame(f, f.light()?, None)?
+            && let Some(frame) = g.frame(f, f.lights()?, None)?
         {
             return Ok(frame);
         }
-        let (image, counts) = f.renderer.ltc(f.light()?, f.mode);
+        let (image, counts) = f.renderer.ltc(f.lights()?, f.mode);
         Ok(Frame::new(image, counts))
     }
 }

@@ -41,16 +41,18 @@ struct State {
 impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
         let r = f.renderer;
-        let image = render_ltc_exact_visibility(
-            f.scene.scene,
-            &r.view,
-            &r.gbuffer,
-            f.light()?,
-            f.scene.occluder(),
-            &builtin_lookup,
-            self.rays,
-            f.index,
-        );
+        let image = super::sum_over_lights(f.lights, |light| {
+            Ok(render_ltc_exact_visibility(
+                f.scene.scene,
+                &r.view,
+                &r.gbuffer,
+                light,
+                f.scene.occluder(),
+                &builtin_lookup,
+                self.rays,
+                f.index,
+            ))
+        })?;
         Ok(Frame::new(image, FrameCounts::default()))
     }
 

@@ -46,14 +46,14 @@ struct State {
 
 impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
-        let (r, light) = (f.renderer, f.light()?);
+        let (r, lights) = (f.renderer, f.lights()?);
         let occ = f.scene.occluder();
         let Some((sum, passes)) = self.progressive.as_mut() else {
             let (image, noise) = groundtruth::render_mc(
                 f.scene.scene,
                 &r.view,
                 &r.gbuffer,
-                light,
+                lights,
                 occ,
                 self.spp,
                 f.index,
@@ -66,7 +66,7 @@ impl MethodState for State {
             f.scene.scene,
             &r.view,
             &r.gbuffer,
-            light,
+            lights,
             occ,
             1,
             u64::from(*passes),

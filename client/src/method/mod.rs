@@ -211,8 +211,9 @@ pub struct FrameInput<'a> {
     pub scene: &'a SceneData<'a>,
     /// The camera: view, G-buffer, visible vertices, roughness override.
     pub renderer: &'a Renderer<'a>,
-    /// The polygonal light as posed for this frame (`None`: the scene has none).
-    pub light: Option<&'a Light>,
+    /// The scene's polygonal lights as posed for this frame (those `--light` keeps; empty:
+    /// none). Every method shades their sum.
+    pub lights: &'a [Light],
     /// Baked trees (all or those streamed so far); `None`: none yet.
     pub trees: Option<&'a Trees<'a>>,
     /// Baked sky trees ([`Needs::sky_trees`]); `None`: none yet.
@@ -231,12 +232,30 @@ pub struct FrameInput<'a> {
 }
 
 impl FrameInput<'_> {
-    /// The light, or an error saying the method needs one.
-    pub fn light(&self) -> Result<&Light> {
-        self.light.ok_or_else(|| {
-            anyhow::anyhow!("this method needs a polygonal light; the scene has none")
-        })
+    /// The lights, or an error saying the method needs one.
+    pub fn lights(&self) -> Result<&[Light]> {
+        if self.lights.is_empty() {
+            anyhow::bail!("this method needs a polygonal light; the scene has none");
+        }
+        Ok(self.lights)
     }
+}
+
+/// A single-light technique's image of several lights: the sum of its image of each (direct
+/// light is linear in the lights).
+pub(crate) fn sum_over_lights(
+    lights: &[Light],
+    mut one: impl FnMut(&Light) -> Result<Image>,
+) -> Result<Image> {
+    let mut sum: Option<Image> = None;
+    for l in lights {
+        let image = one(l)?;
+        match sum.as_mut() {
+            None => sum = Some(image),
+            Some(s) => s.add(&image),
+        }
+    }
+    sum.ok_or_else(|| anyhow::anyhow!("this method needs a polygonal light; the scene has none"))
 }
 
 /// A drawn frame and what it cost.

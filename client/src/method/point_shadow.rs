@@ -58,7 +58,10 @@ impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
         let occ = self.technique.needs_rays().then(|| f.scene.occluder());
         let image = if f.renderer.scene.punctual.is_empty() {
-            penumbra::render(f.renderer, f.light()?, self.technique, occ, &self.params)?
+            // Each polygon light as a point light at its centroid, summed.
+            super::sum_over_lights(f.lights, |light| {
+                penumbra::render(f.renderer, light, self.technique, occ, &self.params)
+            })?
         } else {
             penumbra::render_punctual(f.renderer, self.technique, occ, &self.params)?
         };

@@ -71,15 +71,17 @@ impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
         let r = f.renderer;
         let guide = Guide::new(r);
-        let image = render_ratio(
-            r,
-            &guide,
-            f.light()?,
-            f.scene.occluder(),
-            self.spp,
-            f.index,
-            self.denoise,
-        );
+        let image = super::sum_over_lights(f.lights, |light| {
+            Ok(render_ratio(
+                r,
+                &guide,
+                light,
+                f.scene.occluder(),
+                self.spp,
+                f.index,
+                self.denoise,
+            ))
+        })?;
         Ok(Frame::new(
             image,
             FrameCounts {

@@ -28,8 +28,8 @@ pub struct Options {
     /// Frames along the light path (1: the light at rest); for a moving scene with an
     /// environment method, frame k is at cycle time k / frames.
     pub frames: usize,
-    /// The scene light that moves.
-    pub light: usize,
+    /// Only this scene light (`--light K`; `None`: every light, each on its own path).
+    pub light: Option<usize>,
     /// Turns the environment by this many degrees about +y per frame (the sky methods that
     /// turn it at run time: `bspvt-env`).
     pub env_spin_deg: f64,
@@ -115,34 +115,50 @@ pub fn render_sequence(
     // k / frames).
     // A point-light method on a scene whose only lights are punctual needs no polygon light.
     let punctual_only = needs.punctual && !scene.punctual.is_empty() && scene.lights.is_empty();
-    let lamp =
-        (needs.polygon_light && !punctual_only) || (needs.sky_trees && !scene.lights.is_empty());
-    let light = if lamp {
-        let Some(light) = scene.lights.get(opts.light) else {
-            bail!("the scene has no light {}", opts.light);
+    // The environment methods draw the lamps beside the sky (`sg` ignores them).
+    let lamp = (needs.polygon_light && !punctual_only)
+        || ((needs.sky_trees || needs.env_map) && !scene.lights.is_empty());
+    let lights: Vec<(LightPath, Light)> = if lamp {
+        let chosen: Vec<usize> = match opts.light {
+            Some(k) if k >= scene.lights.len() => {
+                bail!(
+                    "--light {k}: the scene has {} light(s) (0 to {})",
+                    scene.lights.len(),
+                    scene.lights.len().saturating_sub(1)
+                )
+            }
+            Some(k) => vec![k],
+            None => (0..scene.lights.len()).collect(),
         };
+        if chosen.is_empty() {
+            bail!("the scene has no polygonal light");
+        }
         if needs.lamp_trees(scene) && trees.is_none() {
             bail!("--method {} needs baked trees", method.name());
         }
-        if scene.is_dynamic() {
+        if scene.is_dynamic() && !needs.env_map {
             tracing::warn!(
                 "the scene's meshes move, but --method {} renders them at t = 0 (motion is \
                  for the run-time environment methods, sg and mc-env)",
                 method.name()
             );
         }
-        if scene.lights_facing_away().contains(&opts.light) {
-            tracing::warn!(
-                "light {} faces away from every vertex of the scene: it lights nothing and the \
-                 image will be black (wind its vertices the other way round, or make it \
-                 two_sided)",
-                opts.light
-            );
+        let away = scene.lights_facing_away();
+        let mut out = Vec::with_capacity(chosen.len());
+        for k in chosen {
+            if away.contains(&k) {
+                tracing::warn!(
+                    "light {k} faces away from every vertex of the scene: it lights nothing \
+                     (wind its vertices the other way round, or make it two_sided)"
+                );
+            }
+            let light = &scene.lights[k];
+            let rest = Light::load(light)?;
+            out.push((LightPath::new(light, rest.clone()), rest));
         }
-        let rest = Light::load(light)?;
-        Some((LightPath::new(light, rest.clone()), rest))
+        out
     } else {
-        None
+        Vec::new()
     };
     let start = Instant::now();
     let r = Renderer::new(scene, opts.width, opts.height);
@@ -154,18 +170,21 @@ pub fn render_sequence(
     let mut counts = FrameCounts::default();
     let mut noise = None;
     for k in 0..frames {
-        let l = light.as_ref().map(|(path, rest)| {
-            if frames == 1 {
-                rest.clone()
-            } else {
-                path.frame(k, frames)
-            }
-        });
+        let posed: Vec<Light> = lights
+            .iter()
+            .map(|(path, rest)| {
+                if frames == 1 {
+                    rest.clone()
+                } else {
+                    path.frame(k, frames)
+                }
+            })
+            .collect();
         let t = Instant::now();
         let f = state.frame(&FrameInput {
             scene: &data,
             renderer: &r,
-            light: l.as_ref(),
+            lights: &posed,
             trees,
             sky_trees,
             env_rotation_deg: opts.env_spin_deg * k as f64,
@@ -174,12 +193,14 @@ pub fn render_sequence(
             mode: opts.settings.mode,
             on_gpu: false,
         })?;
+        let mut image = f.image;
+        r.draw_emitters(&mut image, &posed);
         ms.push(t.elapsed().as_secs_f64() * 1e3);
         maps_ms.extend(f.maps_ms);
         pose_ms.extend(f.pose_ms);
         noise = f.noise.or(noise);
         counts = f.counts;
-        sink(k, &f.image)?;
+        sink(k, &image)?;
     }
     let seconds = setup_seconds + ms.iter().sum::<f64>() / 1e3;
     let mean = ms.iter().sum::<f64>() / ms.len() as f64;
@@ -242,7 +263,7 @@ mod tests {
             width: 48,
             height: 40,
             frames: 2,
-            light: 0,
+            light: None,
             env_spin_deg: 0.0,
             settings: Settings {
                 mode: Mode::Pixel,

@@ -104,7 +104,10 @@ pub fn render(
     }
     let guide = Guide::new(r);
     let s = shadow_factor(r, &guide, light, technique, occluder, params)?;
-    Ok(compose(&r.shade_pixels(light, None), &s))
+    Ok(compose(
+        &r.shade_pixels(std::slice::from_ref(light), None),
+        &s,
+    ))
 }
 
 /// The scene's punctual lights: Σ over the lights of the unshadowed punctual shading

@@ -1,11 +1,12 @@
 //! The light's motion over an animation: a circle through the light's declared region (or
-//! around its rest position) with a rocking rotation about a horizontal axis through its
-//! centre — translate + rotate, as the paper's interactive demo allows.
+//! around its rest position, for a light that moves in its plane) with a rocking rotation
+//! about a horizontal axis through its centre — translate + rotate, as the paper's interactive
+//! demo allows. A fixed lamp stays where it is (its bake holds for that place only).
 
 use glam::{DAffine3, DQuat, DVec3};
 
 use crate::light::Light;
-use bspvt_proto::scene::PolygonLight;
+use bspvt_proto::scene::{LightMotion, PolygonLight};
 
 /// The light's default motion: around a horizontal circle, turning as it goes.
 #[derive(Clone, Debug)]
@@ -21,10 +22,20 @@ pub struct LightPath {
 
 impl LightPath {
     /// The default path of a scene light: a circle of 35 % of the region's smaller horizontal
-    /// extent (or of the light's own size when no region is declared), tilting ±20°.
-    /// `base`: the scene light `light` as loaded ([`Light::load`], with its texture).
+    /// extent (or of the light's own size when it moves in its plane), tilting ±20°; a fixed
+    /// lamp's path is its place. `base`: the scene light `light` as loaded ([`Light::load`],
+    /// with its texture).
     pub fn new(light: &PolygonLight, base: Light) -> LightPath {
         let centre = base.centroid();
+        if light.motion() == LightMotion::Fixed {
+            return LightPath {
+                base,
+                centre,
+                orbit_centre: centre,
+                radius: 0.0,
+                tilt: 0.0,
+            };
+        }
         let (orbit_centre, radius) = match &light.region {
             Some(r) => {
                 let (lo, hi) = (

@@ -21,7 +21,7 @@ use crate::light::Light;
 use crate::ltc::table::LtcTable;
 use crate::shade::bspvt::shade_vertex;
 use crate::shade::sky::{shade_vertex_sky, unshadowed_sky};
-use crate::shade::{Lobes, ShadowRatio, UNSHADOWED, unshadowed};
+use crate::shade::{Lobes, Shaded, ShadowRatio, UNSHADOWED, unshadowed, unshadowed_lights};
 
 /// Where shading is evaluated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -242,37 +242,37 @@ impl<'a> Renderer<'a> {
         (Lobes::new(self.table, &m, n, wo), p, n)
     }
 
-    /// Shades every visible vertex with `shade(v, lobes, p, n)` → (radiance, shadow ratios,
-    /// pieces, dropped); vertices the camera does not see are left at zero (ratio 1).
-    fn per_vertex(
+    /// Shades every visible vertex with `shade(v, lobes, p, n)` → (radiance, extra, pieces,
+    /// dropped); vertices the camera does not see are left at zero. Returns the colours, each
+    /// shaded vertex's `extra` and the counts.
+    fn per_vertex<X: Send>(
         &self,
-        shade: impl Fn(u32, &Lobes, DVec3, DVec3) -> ([f32; 3], ShadowRatio, u32, u32) + Sync,
-    ) -> (Vec<[f32; 3]>, Vec<ShadowRatio>, FrameCounts) {
+        shade: impl Fn(u32, &Lobes, DVec3, DVec3) -> ([f32; 3], X, u32, u32) + Sync,
+    ) -> (Vec<[f32; 3]>, Vec<(u32, X)>, FrameCounts) {
         let n = self.scene.mesh.vertex_count();
-        // (vertex, radiance, shadow ratios, pieces, dropped)
-        type Shaded = (u32, [f32; 3], ShadowRatio, u32, u32);
-        let shaded: Vec<Shaded> = self
+        // (vertex, radiance, extra, pieces, dropped)
+        let shaded: Vec<(u32, [f32; 3], X, u32, u32)> = self
             .visible_vertices
             .par_iter()
             .map(|&v| {
                 let (lobes, p, nrm) = self.vertex_lobes(v);
-                let (c, r, pieces, dropped) = shade(v, &lobes, p, nrm);
-                (v, c, r, pieces, dropped)
+                let (c, x, pieces, dropped) = shade(v, &lobes, p, nrm);
+                (v, c, x, pieces, dropped)
             })
             .collect();
         let mut colour = vec![[0.0; 3]; n];
-        let mut ratio = vec![UNSHADOWED; n];
+        let mut extra = Vec::with_capacity(shaded.len());
         let mut counts = FrameCounts {
             vertices_shaded: shaded.len(),
             ..FrameCounts::default()
         };
-        for (v, c, r, pieces, dropped) in shaded {
+        for (v, c, x, pieces, dropped) in shaded {
             colour[v as usize] = c;
-            ratio[v as usize] = r;
+            extra.push((v, x));
             counts.pieces += u64::from(pieces);
             counts.pieces_dropped += u64::from(dropped);
         }
-        (colour, ratio, counts)
+        (colour, extra, counts)
     }
 
     /// Vertices of the triangles the camera sees.
@@ -280,28 +280,44 @@ impl<'a> Renderer<'a> {
         self.visible_vertices.len()
     }
 
-    /// BSPVT per vertex: for every visible vertex, (shadowed radiance, shadow ratios).
-    /// Vertices the camera does not see are left at zero.
+    /// BSPVT per vertex: for every visible vertex, its shadowed radiance — the sum over
+    /// `lights`, one tree set serving them all (docs/bake.md) — and, with `ratios`, each
+    /// light's shadow ratios (`[light][vertex]`; empty without). Vertices the camera does not
+    /// see are left at zero (ratio 1); a light a vertex cannot see costs a horizon test.
     pub fn shade_vertices(
         &self,
-        light: &Light,
+        lights: &[Light],
         trees: &Trees,
-    ) -> (Vec<[f32; 3]>, Vec<ShadowRatio>, FrameCounts) {
-        self.per_vertex(|v, lobes, p, nrm| {
-            if !trees.has(v) {
-                let i = unshadowed(lobes, light, p, nrm);
-                let c = lobes.radiance(light.radiance, &i);
-                return (c.as_vec3().to_array(), UNSHADOWED, 0, 0);
+        ratios: bool,
+    ) -> (Vec<[f32; 3]>, Vec<Vec<ShadowRatio>>, FrameCounts) {
+        let k = if ratios { lights.len() } else { 0 };
+        let mut per_light = vec![vec![UNSHADOWED; self.scene.mesh.vertex_count()]; k];
+        let (colour, shaded, counts) = self.per_vertex(|v, lobes, p, nrm| {
+            let mut sum = Shaded::default();
+            let mut r = Vec::with_capacity(k);
+            let (mut pieces, mut dropped) = (0, 0);
+            for light in lights {
+                if !trees.has(v) {
+                    sum += unshadowed(lobes, light, p, nrm).tinted(light.radiance);
+                    continue;
+                }
+                let s = shade_vertex(lobes, light, p, nrm, &trees.trees[v as usize], &trees.codec);
+                sum += s.shadowed.tinted(light.radiance);
+                if ratios {
+                    r.push(s.shadowed.ratio(&s.unshadowed));
+                }
+                pieces += s.pieces;
+                dropped += s.dropped;
             }
-            let r = shade_vertex(lobes, light, p, nrm, &trees.trees[v as usize], &trees.codec);
-            let c = lobes.radiance(light.radiance, &r.shadowed);
-            (
-                c.as_vec3().to_array(),
-                r.shadowed.ratio(&r.unshadowed),
-                r.pieces,
-                r.dropped,
-            )
-        })
+            let c = lobes.radiance(DVec3::ONE, &sum);
+            (c.as_vec3().to_array(), r, pieces, dropped)
+        });
+        for (v, r) in shaded {
+            for (l, x) in r.into_iter().enumerate() {
+                per_light[l][v as usize] = x;
+            }
+        }
+        (colour, per_light, counts)
     }
 
     /// The sky through the baked sky trees per vertex ([`crate::shade::sky`]); vertices
@@ -312,7 +328,7 @@ impl<'a> Renderer<'a> {
         trees: Option<&Trees>,
         ratios: bool,
     ) -> (Vec<[f32; 3]>, Vec<ShadowRatio>, FrameCounts) {
-        self.per_vertex(|v, lobes, _, nrm| {
+        let (colour, shaded, counts) = self.per_vertex(|v, lobes, _, nrm| {
             let Some(trees) = trees.filter(|t| t.has(v)) else {
                 let s = unshadowed_sky(lobes, pieces, nrm);
                 let c = lobes.radiance(DVec3::ONE, &s);
@@ -329,19 +345,24 @@ impl<'a> Renderer<'a> {
             let c = lobes.radiance(DVec3::ONE, &r.shadowed);
             let ratio = if ratios { r.ratio() } else { UNSHADOWED };
             (c.as_vec3().to_array(), ratio, r.pieces, r.dropped)
-        })
+        });
+        let mut ratio = vec![UNSHADOWED; colour.len()];
+        for (v, r) in shaded {
+            ratio[v as usize] = r;
+        }
+        (colour, ratio, counts)
     }
 
-    /// Unshadowed LTC per vertex (the "ltc" method in vertex mode).
-    pub(crate) fn shade_vertices_unshadowed(&self, light: &Light) -> Vec<[f32; 3]> {
+    /// Unshadowed LTC per vertex (the "ltc" method in vertex mode), summed over `lights`.
+    pub(crate) fn shade_vertices_unshadowed(&self, lights: &[Light]) -> Vec<[f32; 3]> {
         let n = self.scene.mesh.vertex_count();
         let shaded: Vec<(u32, [f32; 3])> = self
             .visible_vertices
             .par_iter()
             .map(|&v| {
                 let (lobes, p, nrm) = self.vertex_lobes(v);
-                let i = unshadowed(&lobes, light, p, nrm);
-                (v, lobes.radiance(light.radiance, &i).as_vec3().to_array())
+                let i = unshadowed_lights(&lobes, lights, p, nrm);
+                (v, lobes.radiance(DVec3::ONE, &i).as_vec3().to_array())
             })
             .collect();
         let mut colour = vec![[0.0; 3]; n];
@@ -349,6 +370,50 @@ impl<'a> Renderer<'a> {
             colour[v as usize] = c;
         }
         colour
+    }
+
+    /// The lamps themselves as the camera sees them: per pixel, the radiance of the light
+    /// whose emitting side its camera ray meets nearer than the surface it sees (its
+    /// texture's finest level there) — what the Monte Carlo's camera ray would find — or
+    /// `None`.
+    pub fn emitters(&self, lights: &[Light]) -> Vec<Option<[f32; 3]>> {
+        let (mesh, g, view) = (&self.scene.mesh, &self.gbuffer, &self.view);
+        let w = g.width as usize;
+        (0..g.tri.len())
+            .into_par_iter()
+            .map(|i| {
+                if lights.is_empty() {
+                    return None;
+                }
+                let d = view.ray_dir((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+                let surface = g
+                    .surface(mesh, view, i)
+                    .map_or(f64::INFINITY, |s| (s.position - view.eye).length());
+                let (_, l, q) = lights
+                    .iter()
+                    .filter_map(|l| l.hit(view.eye, d).map(|(t, q)| (t, l, q)))
+                    // A lamp flush with the surface behind it (an asset's emitting triangles
+                    // on a ceiling) is in front of it.
+                    .filter(|(t, _, _)| *t <= surface * (1.0 + 1e-6))
+                    .min_by(|a, b| a.0.total_cmp(&b.0))?;
+                let c = l.radiance_at(q);
+                c.is_finite().then(|| c.as_vec3().to_array())
+            })
+            .collect()
+    }
+
+    /// Draws the lamps over a frame ([`Self::emitters`]). Every method's frame goes through
+    /// it ([`crate::method::sequence`], the session; a window's GPU frame gets them in its
+    /// overlay layer).
+    pub fn draw_emitters(&self, img: &mut Image, lights: &[Light]) {
+        if lights.is_empty() || img.pixels.len() != self.gbuffer.tri.len() {
+            return;
+        }
+        for (px, e) in img.pixels.iter_mut().zip(self.emitters(lights)) {
+            if let Some(c) = e {
+                *px = c;
+            }
+        }
     }
 
     /// Interpolates per-vertex colours over the visible triangles.
@@ -397,6 +462,18 @@ impl<'a> Renderer<'a> {
         img
     }
 
+    /// Per-vertex shadow ratios `r` interpolated at surface `s`.
+    fn ratio_at(&self, r: &[ShadowRatio], s: &Surface) -> ShadowRatio {
+        let idx = self.scene.mesh.triangles[s.tri as usize];
+        let w = s.weights;
+        let f = |lobe: usize, c: usize| {
+            (w[0] * f64::from(r[idx[0] as usize][lobe][c])
+                + w[1] * f64::from(r[idx[1] as usize][lobe][c])
+                + w[2] * f64::from(r[idx[2] as usize][lobe][c])) as f32
+        };
+        [0, 1].map(|lobe| [0, 1, 2].map(|c| f(lobe, c)))
+    }
+
     /// Shades every covered pixel with `shade(lobes, p, n, ratio)`, `ratio` the per-vertex
     /// shadow ratios interpolated at the pixel ([`UNSHADOWED`] without).
     fn per_pixel(
@@ -404,23 +481,9 @@ impl<'a> Renderer<'a> {
         ratio: Option<&[ShadowRatio]>,
         shade: impl Fn(&Lobes, DVec3, DVec3, ShadowRatio) -> DVec3 + Sync,
     ) -> Image {
-        let mesh = &self.scene.mesh;
         self.per_surface(|s, wo, m| {
             let lobes = Lobes::new(self.table, m, s.normal, wo);
-            let r = match ratio {
-                Some(r) => {
-                    let idx = mesh.triangles[s.tri as usize];
-                    let w = s.weights;
-                    let f = |lobe: usize, c: usize| {
-                        (w[0] * f64::from(r[idx[0] as usize][lobe][c])
-                            + w[1] * f64::from(r[idx[1] as usize][lobe][c])
-                            + w[2] * f64::from(r[idx[2] as usize][lobe][c]))
-                            as f32
-                    };
-                    [0, 1].map(|lobe| [0, 1, 2].map(|c| f(lobe, c)))
-                }
-                None => UNSHADOWED,
-            };
+            let r = ratio.map_or(UNSHADOWED, |r| self.ratio_at(r, s));
             Some(shade(&lobes, s.position, s.normal, r))
         })
     }
@@ -450,11 +513,24 @@ impl<'a> Renderer<'a> {
         })
     }
 
-    /// Per-pixel LTC times interpolated shadow ratios (`None`: unshadowed).
-    pub fn shade_pixels(&self, light: &Light, ratio: Option<&[ShadowRatio]>) -> Image {
-        self.per_pixel(ratio, |lobes, p, n, r| {
-            let integrals = unshadowed(lobes, light, p, n);
-            lobes.radiance_scaled(light.radiance, &integrals, r)
+    /// Per-pixel LTC of `lights`, each times its own per-vertex shadow ratios interpolated
+    /// (`ratios[l]`; `None`: unshadowed): Σ_l L_l ⊙ (albedo·D_l·r_l,d + spec·S_l·r_l,s).
+    pub fn shade_pixels(&self, lights: &[Light], ratios: Option<&[Vec<ShadowRatio>]>) -> Image {
+        self.per_surface(|s, wo, m| {
+            let lobes = Lobes::new(self.table, m, s.normal, wo);
+            let mut c = DVec3::ZERO;
+            for (l, light) in lights.iter().enumerate() {
+                let i = unshadowed(&lobes, light, s.position, s.normal);
+                if i.integrals.diffuse <= 0.0 && i.integrals.specular <= 0.0 {
+                    continue;
+                }
+                let r = match ratios.and_then(|r| r.get(l)) {
+                    Some(r) => self.ratio_at(r, s),
+                    None => UNSHADOWED,
+                };
+                c += lobes.radiance_scaled(light.radiance, &i, r);
+            }
+            Some(c)
         })
     }
 
@@ -484,30 +560,30 @@ impl<'a> Renderer<'a> {
         }
     }
 
-    /// One BSPVT frame in `mode`.
-    pub fn bspvt(&self, light: &Light, trees: &Trees, mode: Mode) -> (Image, FrameCounts) {
-        let (colour, ratio, mut counts) = self.shade_vertices(light, trees);
+    /// One BSPVT frame of `lights` in `mode`.
+    pub fn bspvt(&self, lights: &[Light], trees: &Trees, mode: Mode) -> (Image, FrameCounts) {
+        let (colour, ratios, mut counts) = self.shade_vertices(lights, trees, mode == Mode::Pixel);
         match mode {
             Mode::Vertex => (self.interpolate(&colour), counts),
             Mode::Pixel => {
                 counts.pixels_shaded = self.gbuffer.covered();
-                (self.shade_pixels(light, Some(&ratio)), counts)
+                (self.shade_pixels(lights, Some(&ratios)), counts)
             }
         }
     }
 
-    /// One unshadowed-LTC frame in `mode`.
-    pub fn ltc(&self, light: &Light, mode: Mode) -> (Image, FrameCounts) {
+    /// One unshadowed-LTC frame of `lights` in `mode`.
+    pub fn ltc(&self, lights: &[Light], mode: Mode) -> (Image, FrameCounts) {
         match mode {
             Mode::Vertex => (
-                self.interpolate(&self.shade_vertices_unshadowed(light)),
+                self.interpolate(&self.shade_vertices_unshadowed(lights)),
                 FrameCounts {
                     vertices_shaded: self.visible_vertices.len(),
                     ..FrameCounts::default()
                 },
             ),
             Mode::Pixel => (
-                self.shade_pixels(light, None),
+                self.shade_pixels(lights, None),
                 FrameCounts {
                     pixels_shaded: self.gbuffer.covered(),
                     ..FrameCounts::default()

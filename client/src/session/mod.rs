@@ -10,7 +10,7 @@ use std::sync::mpsc::{Receiver, TryRecvError};
 use std::collections::HashMap;
 
 use bspvt_proto::Scene;
-use bspvt_proto::scene::Camera;
+use bspvt_proto::scene::{Camera, LightMotion};
 use glam::{DAffine3, DQuat, DVec3};
 
 use crate::frame::image::Image;
@@ -119,11 +119,15 @@ pub struct Session<'a> {
     pub mode: Mode,
     /// The camera.
     pub(crate) orbit: Orbit,
-    /// The first light at rest and its default path (`None`: a scene lit by its environment
-    /// alone).
-    rest: Option<(Light, LightPath)>,
-    /// The user's pose of the light.
+    /// Every light at rest, its default path and where its bake lets it go (empty: a scene
+    /// lit by its environment alone).
+    rest: Vec<(Light, LightPath, LightMotion)>,
+    /// The light the mouse and keys move (an index into the scene's lights).
+    selected: usize,
+    /// The user's pose of the selected light.
     pub(crate) pose: LightPose,
+    /// The poses of the others (the selected one's is `pose`).
+    poses: Vec<LightPose>,
     /// Position on the light's default path in [0, 1) (`None`: the user's pose alone); also
     /// the cycle time of a moving scene for the run-time methods.
     pub path_t: Option<f64>,
@@ -169,21 +173,24 @@ impl<'a> Session<'a> {
         for w in &scene.warnings {
             tracing::warn!("{w}");
         }
-        if scene.lights_facing_away().contains(&0) {
+        for k in scene.lights_facing_away() {
             tracing::warn!(
-                "light 0 faces away from every vertex of the scene: it lights nothing (wind its \
-                 vertices the other way round, or make it two_sided)"
+                "light {k} faces away from every vertex of the scene: it lights nothing (wind \
+                 its vertices the other way round, or make it two_sided)"
             );
         }
-        let rest = match scene.lights.first() {
-            Some(light) => {
-                let rest = Light::load(light)?;
-                Some((rest.clone(), LightPath::new(light, rest)))
-            }
-            None => None,
-        };
+        let mut rest = Vec::with_capacity(scene.lights.len());
+        for light in &scene.lights {
+            let r = Light::load(light)?;
+            rest.push((r.clone(), LightPath::new(light, r), light.motion()));
+        }
         // A scene lit by its environment alone opens on the sky through the trees.
-        let method = if rest.is_some() { "bspvt" } else { "bspvt-env" };
+        let method = if rest.is_empty() {
+            "bspvt-env"
+        } else {
+            "bspvt"
+        };
+        let poses = vec![LightPose::default(); rest.len()];
         Ok(Session {
             scene,
             renderer: Renderer::new(scene, width, height),
@@ -194,7 +201,9 @@ impl<'a> Session<'a> {
             mode: Mode::Vertex,
             orbit: Orbit::from_camera(&scene.camera),
             rest,
+            selected: 0,
             pose: LightPose::default(),
+            poses,
             path_t: None,
             roughness: None,
             data: SceneData::new(scene),
@@ -285,16 +294,74 @@ impl<'a> Session<'a> {
         self.invalidate();
     }
 
-    /// Moves the user's light back inside the first light's region, if it has one (the bake
-    /// treats directions that cannot reach the region as "don't care": a light outside it
-    /// would be shadowed wrongly). The light's box is shifted, axis by axis, the least that
-    /// puts it inside; a light wider than the region is centred on it.
-    pub fn keep_light_in_region(&mut self) {
-        let Some(region) = self.scene.lights.first().and_then(|l| l.region) else {
+    /// The light the mouse and keys move.
+    pub fn selected_light(&self) -> usize {
+        self.selected
+    }
+
+    /// Makes light `k` the one the mouse and keys move (each light keeps its own pose).
+    pub fn select_light(&mut self, k: usize) {
+        if k >= self.rest.len() || k == self.selected {
             return;
-        };
+        }
+        if let Some(p) = self.poses.get_mut(self.selected) {
+            *p = self.pose;
+        }
+        self.selected = k;
+        self.pose = self.poses[k];
+    }
+
+    /// Keeps the selected light where its bake holds (docs/bake.md, "Where a ray ends"), and
+    /// says what it held back, if anything: a fixed lamp does not move (its radiance still
+    /// scales); a light that moves in its plane keeps its offset in that plane; a light with
+    /// a region is shifted back inside it.
+    pub fn keep_light_baked(&mut self) -> Option<String> {
+        let (rest, _, motion) = self.rest.get(self.selected)?;
+        match *motion {
+            LightMotion::Fixed => {
+                let moved = self.pose.offset != DVec3::ZERO
+                    || self.pose.yaw != 0.0
+                    || self.pose.tilt != 0.0;
+                if !moved {
+                    return None;
+                }
+                self.pose = LightPose {
+                    radiance_scale: self.pose.radiance_scale,
+                    ..LightPose::default()
+                };
+                self.invalidate();
+                Some(format!(
+                    "light {} is fixed: its shadows were baked where it is (give it a region \
+                     or moves_in_plane in the scene file to move it)",
+                    self.selected
+                ))
+            }
+            LightMotion::Plane => {
+                let n = rest.normal;
+                let off = self.pose.offset.dot(n);
+                if off == 0.0 || !off.is_finite() {
+                    return None;
+                }
+                self.pose.offset -= off * n;
+                self.invalidate();
+                Some(format!(
+                    "light {} moves in its plane (as baked): kept in it",
+                    self.selected
+                ))
+            }
+            LightMotion::Region(region) => self
+                .keep_light_in_region(region)
+                .then(|| format!("light {} kept inside its region (as baked)", self.selected)),
+        }
+    }
+
+    /// Moves the selected light back inside `region` (the bake treats directions that cannot
+    /// reach the region as "don't care": a light outside it would be shadowed wrongly); returns
+    /// whether it moved. The light's box is shifted, axis by axis, the least that puts it
+    /// inside; a light wider than the region is centred on it.
+    fn keep_light_in_region(&mut self, region: bspvt_proto::scene::Region) -> bool {
         let Some(light) = self.light() else {
-            return;
+            return false;
         };
         let (rmin, rmax) = (
             DVec3::from(region.min.map(f64::from)),
@@ -320,7 +387,9 @@ impl<'a> Session<'a> {
         if shift != DVec3::ZERO && shift.is_finite() {
             self.pose.offset += shift;
             self.invalidate();
+            return true;
         }
+        false
     }
 
     /// The camera the frames are drawn from.
@@ -379,22 +448,37 @@ impl<'a> Session<'a> {
             .retain(|name, _| !registry::find(name).is_some_and(|m| m.needs().env_map));
     }
 
-    /// The light for the current frame (`None`: the scene has none).
-    pub fn light(&self) -> Option<Light> {
-        let (rest, path) = self.rest.as_ref()?;
+    /// Light `k` for the current frame: on its path (`path_t`), then in its pose.
+    fn posed(&self, k: usize) -> Option<Light> {
+        let (rest, path, _) = self.rest.get(k)?;
+        let pose = if k == self.selected {
+            &self.pose
+        } else {
+            self.poses.get(k)?
+        };
         let base = match self.path_t {
             Some(t) => path.at(t),
             None => rest.clone(),
         };
         let c = base.centroid();
-        let m = DAffine3::from_translation(c + self.pose.offset)
+        let m = DAffine3::from_translation(c + pose.offset)
             * DAffine3::from_quat(
-                DQuat::from_rotation_y(self.pose.yaw) * DQuat::from_rotation_x(self.pose.tilt),
+                DQuat::from_rotation_y(pose.yaw) * DQuat::from_rotation_x(pose.tilt),
             )
             * DAffine3::from_translation(-c);
         let mut l = base.transformed(&m);
-        l.radiance *= self.pose.radiance_scale;
+        l.radiance *= pose.radiance_scale;
         Some(l)
+    }
+
+    /// The selected light for the current frame (`None`: the scene has none).
+    pub fn light(&self) -> Option<Light> {
+        self.posed(self.selected)
+    }
+
+    /// Every light for the current frame.
+    pub fn lights(&self) -> Vec<Light> {
+        (0..self.rest.len()).filter_map(|k| self.posed(k)).collect()
     }
 
     /// The sky's trees so far: starts their bake on first call (in the background, cached in
@@ -482,7 +566,7 @@ impl<'a> Session<'a> {
     /// [`Session::frame`] for a window that presents from the GPU (`on_gpu`): a method that
     /// draws on the GPU leaves its frame there.
     pub fn frame_to_show(&mut self, on_gpu: bool) -> Shown {
-        let light = self.light();
+        let lights = self.lights();
         let m = self.method;
         if m.needs().sky_trees {
             self.sky_trees();
@@ -501,7 +585,7 @@ impl<'a> Session<'a> {
                 .frame(&FrameInput {
                     scene: &self.data,
                     renderer: &self.renderer,
-                    light: light.as_ref(),
+                    lights: &lights,
                     trees: trees.as_ref(),
                     sky_trees: sky.as_ref(),
                     env_rotation_deg: self.env_rotation_deg,
@@ -513,21 +597,46 @@ impl<'a> Session<'a> {
                 .map_err(|e| format!("{e:#}")),
             Err(e) => Err(e.clone()),
         };
-        match result {
+        let mut image = match result {
             Ok(f) => match f.gpu {
-                Some(g) => Shown::Gpu(g),
-                None => Shown::Cpu(f.image),
+                // The window draws the lamps into its overlay layer ([`Session::lamp_layer`]).
+                Some(g) => return Shown::Gpu(g),
+                None => f.image,
             },
-            Err(e) => Shown::Cpu(match &light {
-                Some(light) => {
-                    tracing::warn!("{}: {e}; drawing unshadowed LTC", m.name());
-                    self.renderer.ltc(light, Mode::Pixel).0
-                }
-                None => {
-                    tracing::warn!("{}: {e}", m.name());
-                    Image::new(self.renderer.gbuffer.width, self.renderer.gbuffer.height)
-                }
-            }),
+            Err(e) if !lights.is_empty() => {
+                tracing::warn!("{}: {e}; drawing unshadowed LTC", m.name());
+                self.renderer.ltc(&lights, Mode::Pixel).0
+            }
+            Err(e) => {
+                tracing::warn!("{}: {e}", m.name());
+                Image::new(self.renderer.gbuffer.width, self.renderer.gbuffer.height)
+            }
+        };
+        self.renderer.draw_emitters(&mut image, &lights);
+        Shown::Cpu(image)
+    }
+
+    /// The lamps as the camera sees them, into a window's overlay layer over a frame left on
+    /// the GPU (premultiplied 0xAARRGGBB, opaque where a lamp is, tone-mapped as the frame is
+    /// at exposure 1: [`Image::to_0rgb`]); the pixels without a lamp are left as they are.
+    pub fn lamp_layer(&self, layer: &mut [u32]) {
+        let lights = self.lights();
+        if lights.is_empty() {
+            return;
+        }
+        let e = self.renderer.emitters(&lights);
+        if layer.len() != e.len() || e.iter().all(Option::is_none) {
+            return;
+        }
+        let (w, h) = (self.renderer.gbuffer.width, self.renderer.gbuffer.height);
+        let mut img = Image::new(w, h);
+        for (p, c) in img.pixels.iter_mut().zip(&e) {
+            *p = c.unwrap_or_default();
+        }
+        for ((l, c), x) in layer.iter_mut().zip(&e).zip(img.to_0rgb(1.0)) {
+            if c.is_some() {
+                *l = 0xff00_0000 | x;
+            }
         }
     }
 

@@ -62,7 +62,27 @@ pub struct Shaded {
     pub specular_rgb: DVec3,
 }
 
+impl std::ops::AddAssign for Shaded {
+    fn add_assign(&mut self, o: Shaded) {
+        self.integrals += o.integrals;
+        self.diffuse_rgb += o.diffuse_rgb;
+        self.specular_rgb += o.specular_rgb;
+    }
+}
+
 impl Shaded {
+    /// The coloured integrals times a light's radiance `l` (the scalar integrals unchanged):
+    /// direct light is linear in the lights, so several lights sum as `Σ L_l ⊙ Shaded_l`,
+    /// shaded with radiance 1.
+    #[inline]
+    pub(crate) fn tinted(self, l: DVec3) -> Shaded {
+        Shaded {
+            integrals: self.integrals,
+            diffuse_rgb: self.diffuse_rgb * l,
+            specular_rgb: self.specular_rgb * l,
+        }
+    }
+
     /// Adds `v` × one piece.
     #[inline]
     pub(crate) fn add_weighted(&mut self, piece: &Shaded, v: f64) {
@@ -268,4 +288,14 @@ pub fn unshadowed(lobes: &Lobes, light: &Light, p: DVec3, n: DVec3) -> Shaded {
         return Shaded::default();
     }
     lobes.shade(&dirs, &Emitter::new(light, p))
+}
+
+/// Unshadowed LTC of several lights at a point, each tinted by its radiance
+/// ([`Shaded::tinted`]): shade with radiance 1.
+pub fn unshadowed_lights(lobes: &Lobes, lights: &[Light], p: DVec3, n: DVec3) -> Shaded {
+    let mut sum = Shaded::default();
+    for l in lights {
+        sum += unshadowed(lobes, l, p, n).tinted(l.radiance);
+    }
+    sum
 }

@@ -19,6 +19,7 @@ W A S D  Q E   move the light (-z -x +z +x, down, up)
 R F  T G       turn / tilt the light
 - =            light radiance ÷ / × (held)
 P   L          light along its path / back to rest
+N              next light (keys and mouse move it)
 Y U            turn the environment (sky methods)
 1-9, 0         method, in the registry's order
 M              per vertex / per pixel

@@ -280,6 +280,10 @@ impl App<'_, '_> {
             read(&shown)?.to_0rgb(1.0)
         };
         self.buf.resize(w * h, 0);
+        // A frame left on the GPU gets the lamps in its overlay layer (a CPU frame has them).
+        if matches!(shown, Shown::Gpu(_)) {
+            self.session.lamp_layer(&mut self.buf);
+        }
         // Frames per second on screen: from one frame's start to the next (drawing,
         // presenting and the events between), not the time to submit this one (a GPU
         // frame's work is still queued here).
@@ -425,6 +429,12 @@ impl App<'_, '_> {
                     }
                 }
                 KeyCode::KeyL => s.reset_light(),
+                KeyCode::KeyN => {
+                    let n = s.scene().lights.len().max(1);
+                    s.select_light((s.selected_light() + 1) % n);
+                    let k = s.selected_light();
+                    self.say(format!("the keys and mouse move light {k}"));
+                }
                 KeyCode::KeyC => {
                     s.reset_camera();
                     self.depth = None;
@@ -482,8 +492,11 @@ impl App<'_, '_> {
             s.set_roughness(roughness);
         }
         if moved_light {
-            s.keep_light_in_region();
+            let held = s.keep_light_baked();
             s.invalidate();
+            if let Some(m) = held {
+                self.say(m);
+            }
         }
     }
 
@@ -497,7 +510,7 @@ impl App<'_, '_> {
             &s.scene().lights,
             added_ground,
             s.camera(),
-            s.light().as_ref(),
+            s.light().as_ref().map(|l| (s.selected_light(), l)),
         )
         .and_then(|(file, out)| save::write_view(&file, &out).map(|()| out));
         match r {

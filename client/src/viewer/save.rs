@@ -49,8 +49,8 @@ pub(crate) fn added_ground(source: &SceneSource) -> bool {
     })
 }
 
-/// The scene file of `source` with `camera` and the first light replaced by `light` (as posed
-/// now), and where to write it: `out` if given, else `<scene>.view.json` beside a scene file
+/// The scene file of `source` with `camera` and light k replaced by `light` = (k, light as
+/// posed now), and where to write it: `out` if given, else `<scene>.view.json` beside a scene file
 /// (its relative mesh paths stay valid), `out/views/<name>.view.json` for a built-in scene or a
 /// bare mesh. The scene file itself is never overwritten. `added_ground`: the loader put a
 /// ground under a bare mesh that brought no lamp.
@@ -60,7 +60,7 @@ pub(crate) fn view_file(
     scene_lights: &[PolygonLight],
     added_ground: bool,
     camera: Camera,
-    light: Option<&Light>,
+    light: Option<(usize, &Light)>,
 ) -> Result<(SceneFile, PathBuf)> {
     let (mut file, default_out, from_file) = match (&source.scene, &source.mesh) {
         (Some(s), _) if s.starts_with("builtin:") => {
@@ -124,24 +124,25 @@ pub(crate) fn view_file(
         aspect: None,
         ..camera
     });
-    if let Some(l) = light {
+    if let Some((k, l)) = light {
         let posed = |base: &PolygonLight| PolygonLight {
             vertices: l.vertices.iter().map(|v| v.as_vec3().to_array()).collect(),
             radiance: l.radiance.as_vec3().to_array(),
             two_sided: l.two_sided,
             texture: base.texture.clone(),
             region: base.region,
+            moves_in_plane: base.moves_in_plane,
             image: None,
         };
-        match file.lights.first_mut() {
-            // The scene file's own first light is the scene's first light.
-            Some(first) if from_file => *first = posed(first),
+        match file.lights.get_mut(k) {
+            // The scene file's own lights come first in the scene's.
+            Some(own) if from_file => *own = posed(own),
             _ => {
                 // The light came from the asset (a lamp, or the quad added over a bare mesh):
-                // the scene file takes every light explicitly, the moved one first.
+                // the scene file takes every light explicitly, the moved one posed.
                 file.lights = scene_lights.to_vec();
-                if let Some(first) = file.lights.first_mut() {
-                    *first = posed(first);
+                if let Some(moved) = file.lights.get_mut(k) {
+                    *moved = posed(moved);
                 }
                 file.asset_lights = false;
                 if !from_file {
@@ -193,8 +194,15 @@ mod tests {
             scene: Some("builtin:plate".into()),
             mesh: None,
         };
-        let (file, out) =
-            view_file(&source, None, &scene.lights, false, camera, Some(&light)).expect("view");
+        let (file, out) = view_file(
+            &source,
+            None,
+            &scene.lights,
+            false,
+            camera,
+            Some((0, &light)),
+        )
+        .expect("view");
         assert_eq!(out, PathBuf::from("out/views/plate.view.json"));
         assert_eq!(file.camera.as_ref().map(|c| c.fov_y_deg), Some(33.0));
         let (a, b) = (file.lights[0].vertices[0], scene.lights[0].vertices[0]);
@@ -265,7 +273,7 @@ mod tests {
             &scene.lights,
             added_ground(&bare),
             scene.camera.clone(),
-            Some(&light),
+            Some((0, &light)),
         )
         .expect("view");
         assert!(file.ground_plane);

@@ -39,7 +39,7 @@ impl CubeSource {
 }
 
 /// Where a ray ends (the bake's light stops), for [`GpuOccluder::cube_table`].
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum GpuStop {
     /// Where the ray enters the box (`Aabb::ray_entry`; a ray starting inside is unbounded).
     Region {
@@ -55,7 +55,25 @@ pub enum GpuStop {
         /// The plane's unit normal.
         normal: glam::Vec3,
     },
+    /// Where the ray crosses the plane `normal · x = offset` within `t · spread / |cos|` of the
+    /// convex polygon `m · x ≥ c` (`edges`: (m, c), at most 8); from the side `normal` points
+    /// to only, unless `two_sided` (bspvt-bake's `LampStop`).
+    Lamp {
+        /// The plane's unit normal.
+        normal: glam::Vec3,
+        /// The plane's offset.
+        offset: f32,
+        /// The polygon's edges as in-plane half-planes.
+        edges: Vec<glam::Vec4>,
+        /// How much the polygon grows per unit of distance.
+        spread: f32,
+        /// Reached from both sides.
+        two_sided: bool,
+    },
 }
+
+/// vec4 words per stop in the shader's table: a header of two, then up to eight edges.
+const STOP_WORDS: usize = 10;
 
 /// A cube map's sub-ray directions and the rays' stops, on the GPU for a whole bake.
 pub struct GpuCubeTable {
@@ -223,14 +241,38 @@ impl GpuOccluder {
         let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let dir_words: Vec<[f32; 4]> = dirs.iter().map(|d| d.extend(0.0).to_array()).collect();
-        let mut stop_words: Vec<[f32; 4]> = stops
-            .iter()
-            .flat_map(|s| match *s {
-                GpuStop::Region { min, max } => [min.extend(0.0), max.extend(0.0)],
-                GpuStop::Plane { point, normal } => [point.extend(1.0), normal.extend(0.0)],
-            })
-            .map(|v| v.to_array())
-            .collect();
+        let mut stop_words: Vec<[f32; 4]> = Vec::with_capacity(stops.len() * STOP_WORDS);
+        for s in stops {
+            let mut words = [glam::Vec4::ZERO; STOP_WORDS];
+            match s {
+                GpuStop::Region { min, max } => {
+                    words[0] = min.extend(0.0);
+                    words[1] = max.extend(0.0);
+                }
+                GpuStop::Plane { point, normal } => {
+                    words[0] = point.extend(1.0);
+                    words[1] = normal.extend(0.0);
+                }
+                GpuStop::Lamp {
+                    normal,
+                    offset,
+                    edges,
+                    spread,
+                    two_sided,
+                } => {
+                    let n = edges.len().min(STOP_WORDS - 2);
+                    words[0] = normal.extend(2.0);
+                    words[1] = glam::Vec4::new(
+                        *offset,
+                        *spread,
+                        n as f32,
+                        if *two_sided { 1.0 } else { 0.0 },
+                    );
+                    words[2..2 + n].copy_from_slice(&edges[..n]);
+                }
+            }
+            stop_words.extend(words.iter().map(|v| v.to_array()));
+        }
         // wgpu refuses empty buffers.
         if stop_words.is_empty() {
             stop_words.push([0.0; 4]);

@@ -22,8 +22,9 @@
 // the CPU (VertexRays::matters) so that the sets are the CPU's exactly, and the number of
 // pixels that matter before them in the dispatch (where their counts go).
 @group(0) @binding(5) var<storage, read> mask: array<vec2<u32>>;
-// Where rays end (cubemap::LightStop), two vec4 per stop: a region box (min.xyz, 0),
-// (max.xyz, 0), or a plane (point.xyz, 1), (normal.xyz, 0).
+// Where rays end (cubemap::LightStop), ten vec4 per stop: a region box (min.xyz, 0),
+// (max.xyz, 0); a plane (point.xyz, 1), (normal.xyz, 0); or a fixed lamp (normal.xyz, 2),
+// (offset, spread, edges, two-sided), then per edge (inward in-plane normal, offset).
 @group(0) @binding(6) var<storage, read> stops: array<vec4<f32>>;
 // Per pixel that matters, in order, 16 bits (two per word): escaping sub-rays | cast sub-rays
 // << 8 (at most 64 each: supersampling ≤ 8).
@@ -203,13 +204,14 @@ fn fmax(a: f32, b: f32) -> f32 {
 }
 
 // VertexRays::t_max: the distance at which the ray from o along unit d reaches its first stop
-// (LightStop::distance: Aabb::ray_entry for a region, the plane crossing otherwise); f32::MAX
-// when it reaches none.
+// (LightStop::distance: Aabb::ray_entry for a region, the plane crossing for a light moving in
+// its plane, the crossing within the grown polygon for a fixed lamp); f32::MAX when it reaches
+// none. Ten vec4 per stop (gpu_occluder.rs, STOP_WORDS).
 fn ray_end(o: vec3<f32>, d: vec3<f32>) -> f32 {
     var t = F32_MAX;
     for (var k = 0u; k < cp.shape.w; k++) {
-        let a = stops[2u * k];
-        let b = stops[2u * k + 1u];
+        let a = stops[10u * k];
+        let b = stops[10u * k + 1u];
         if a.w == 0.0 {
             let inv = vec3<f32>(1.0) / d;
             let t0 = (a.xyz - o) * inv;
@@ -219,10 +221,33 @@ fn ray_end(o: vec3<f32>, d: vec3<f32>) -> f32 {
             if enter > 0.0 && enter <= exit {
                 t = min(t, enter);
             }
-        } else {
+        } else if a.w == 1.0 {
             let den = dot(d, b.xyz);
             let tp = dot(a.xyz - o, b.xyz) / den;
             if den != 0.0 && tp > 0.0 && tp <= F32_MAX {
+                t = min(t, tp);
+            }
+        } else {
+            // LampStop::distance.
+            let height = b.x - dot(a.xyz, o);
+            if b.w == 0.0 && !(height < 0.0) {
+                continue;
+            }
+            let den = dot(d, a.xyz);
+            let tp = height / den;
+            if !(den != 0.0 && tp > 0.0 && tp <= F32_MAX) {
+                continue;
+            }
+            let x = o + tp * d;
+            let grow = tp * b.y / abs(den);
+            var inside = true;
+            for (var e = 0u; e < u32(b.z); e++) {
+                let m = stops[10u * k + 2u + e];
+                if dot(m.xyz, x) - m.w < -grow {
+                    inside = false;
+                }
+            }
+            if inside {
                 t = min(t, tp);
             }
         }

@@ -151,7 +151,9 @@ pub(crate) fn merge(emitters: &[Emitter]) -> Lamps {
             radiance: emitters[src].radiance,
             two_sided: emitters[src].two_sided,
             texture: None,
+            // An asset's lamp is where the asset put it.
             region: None,
+            moves_in_plane: false,
             image: None,
         })
         .collect();

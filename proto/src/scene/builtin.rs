@@ -6,6 +6,9 @@
 //! `assets/rooms/make_rooms.py`): coloured walls, an emissive ceiling quad, a metal box and a
 //! glossy sphere, read by the glTF importer as any asset given alone ([`Scene::from_asset`]).
 //!
+//! `two-lamps`: the same shell lit by a ceiling lamp and a pendant lamp 1.2 m lower, with a
+//! board hung between them (`assets/rooms/two-lamps.gltf`, issue 34).
+//!
 //! `plate`: a 160×160 receiver grid (25,600 vertices) under a sphere and a tilted slab, lit by a
 //! quad light that may move in a declared box above them (28,258 vertices in all).
 
@@ -18,7 +21,7 @@ use crate::scene::{
 };
 
 /// Names accepted by [`scene`] and [`mesh`] (and by `builtin:NAME` in scene files).
-pub const NAMES: &[&str] = &["plate", "plate-small", "dynamic", "room"];
+pub const NAMES: &[&str] = &["plate", "plate-small", "dynamic", "room", "two-lamps"];
 
 /// Single-object meshes for scene files to place (`builtin:NAME`, with a `transform`):
 /// `sphere` (unit radius, 2,562 vertices) and `cube` (unit side, 12 × 12 vertices a face).
@@ -30,6 +33,9 @@ pub const DYNAMIC_JSON: &str = include_str!("../../../assets/scenes/dynamic.json
 
 /// `room`: the project's glTF room (self-contained: its buffer is a `data:` URI).
 const ROOM_GLTF: &[u8] = include_bytes!("../../../assets/rooms/room.gltf");
+
+/// `two-lamps`: the project's two-lamp glTF room (self-contained).
+const TWO_LAMPS_GLTF: &[u8] = include_bytes!("../../../assets/rooms/two-lamps.gltf");
 
 /// Every name [`mesh`] accepts.
 pub fn mesh_names() -> Vec<&'static str> {
@@ -52,13 +58,17 @@ pub fn scene(name: &str) -> Option<Scene> {
         // The same layout, coarse enough for fast tests (1,849 + 642 + 96 vertices).
         "plate-small" => Some(plate(43, 3)),
         "dynamic" => Scene::from_json(DYNAMIC_JSON, std::path::Path::new("")).ok(),
-        "room" => {
-            let limits = crate::import::Limits::default();
-            let asset = crate::import::load_asset_bytes(ROOM_GLTF, Format::Gltf, &limits);
-            asset.ok().and_then(|a| Scene::from_asset(a).ok())
-        }
+        "room" => gltf_scene(ROOM_GLTF),
+        "two-lamps" => gltf_scene(TWO_LAMPS_GLTF),
         _ => None,
     }
+}
+
+/// A self-contained glTF asset given alone.
+fn gltf_scene(bytes: &[u8]) -> Option<Scene> {
+    let limits = crate::import::Limits::default();
+    let asset = crate::import::load_asset_bytes(bytes, Format::Gltf, &limits);
+    asset.ok().and_then(|a| Scene::from_asset(a).ok())
 }
 
 /// A built-in scene as a scene file (what a client uploads for it): the scene's own file
@@ -116,6 +126,7 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
             min: [-2.5, 2.0, -2.5],
             max: [2.5, 4.0, 2.5],
         }),
+        moves_in_plane: false,
         image: None,
     };
     Scene {
@@ -318,7 +329,9 @@ pub(crate) fn quad_light_above(bounds: &Aabb, radiance: [f32; 3]) -> PolygonLigh
         radiance,
         two_sided: false,
         texture: None,
+        // The default lamp of a bare mesh is the one users drag: it moves in its plane.
         region: None,
+        moves_in_plane: true,
         image: None,
     }
 }

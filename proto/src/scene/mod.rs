@@ -18,7 +18,7 @@ pub mod builtin;
 
 pub use crate::camera::Camera;
 pub use crate::environment::Environment;
-pub use crate::light::{PolygonLight, PunctualLight, Region, Spot};
+pub use crate::light::{LightMotion, PolygonLight, PunctualLight, Region, Spot};
 pub use crate::material::{Material, MaterialMaps};
 
 /// How the BSPVT builder chooses a split line.

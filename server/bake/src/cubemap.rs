@@ -117,42 +117,128 @@ impl std::ops::AddAssign for CastCounts {
 
 /// Where a visibility ray ends: at the light it looks for. V(p, ω) = 1 when the ray from p
 /// along ω reaches the light before any occluder, so geometry beyond the light (a ceiling over
-/// a lamp, the wall behind it) never shadows it. With several lights a ray ends at the first
-/// stop it reaches. Occluders inside a light's region, between the region's boundary and the
-/// light itself, are not seen (documented in docs/bake.md).
+/// a lamp, the wall behind it) never shadows it. A ray ends at the nearest stop it *reaches*;
+/// crossing a lamp's plane beside the lamp ends nothing. Occluders inside a light's region,
+/// between the region's boundary and the light itself, are not seen (docs/bake.md).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum LightStop {
     /// A light's declared region: the ray ends where it enters the box (a vertex inside the
     /// box casts its rays unbounded).
     Region(Aabb),
-    /// A light without a region: the ray ends where it crosses the light polygon's plane (the
-    /// plane the light moves in when it is dragged or follows its path).
+    /// A light that moves in its plane: the ray ends where it crosses that plane.
     Plane {
         /// A point of the plane (the polygon's centroid).
         point: Vec3,
         /// The plane's unit normal.
         normal: Vec3,
     },
+    /// A fixed lamp: the ray ends where it crosses the lamp's polygon, grown by the cone of
+    /// the cube-map pixel around it ([`LampStop`]).
+    Lamp(LampStop),
+}
+
+/// A fixed lamp's polygon as a ray stop. A pixel's rays lie in a cone of half-angle θ
+/// around its centre (tan θ ≤ `spread` = √2 / res: half a pixel's diagonal at the face's
+/// centre, its widest), and the pixel matters when that cone meets the lamp; so the centre's
+/// ray stops where it crosses the lamp's plane within `t · spread / |cos|` (the cone's
+/// footprint there, t the distance, cos the incidence) of the polygon — the same test for the
+/// pixel mask and for the rays, so a pixel straddling the lamp's outline is traced to the lamp,
+/// not beyond it. A one-sided lamp is reached only from its emitting side.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LampStop {
+    /// The plane's unit normal (the emitting side's).
+    pub normal: Vec3,
+    /// The plane: normal · x = `offset`.
+    pub offset: f32,
+    /// Per edge, the in-plane unit normal pointing inside and its offset: a point x of the
+    /// plane is inside the polygon when `m · x ≥ c` for every edge (first `edge_count`).
+    pub edges: [(Vec3, f32); MAX_LAMP_EDGES],
+    /// Edges in use (3 to 8).
+    pub edge_count: u32,
+    /// tan θ of the pixels' cones.
+    pub spread: f32,
+    /// Reached from both sides.
+    pub two_sided: bool,
+}
+
+/// The most edges a lamp has (a scene's light has 3 to 8 vertices).
+pub const MAX_LAMP_EDGES: usize = 8;
+
+impl LampStop {
+    /// `light`'s polygon as a stop for cube maps of `res` pixels a side (`None`: degenerate).
+    pub fn new(light: &bspvt_proto::scene::PolygonLight, res: u32) -> Option<LampStop> {
+        let pts = light.points();
+        let normal = light.normal();
+        if pts.len() < 3 || pts.len() > MAX_LAMP_EDGES || normal == Vec3::ZERO {
+            return None;
+        }
+        let mut edges = [(Vec3::ZERO, 0.0); MAX_LAMP_EDGES];
+        for (i, e) in edges.iter_mut().enumerate().take(pts.len()) {
+            let (a, b) = (pts[i], pts[(i + 1) % pts.len()]);
+            // Counter-clockwise seen from the emitting side: n × edge points inside.
+            let m = normal.cross(b - a).normalize_or_zero();
+            *e = (m, m.dot(a));
+        }
+        let c = pts.iter().copied().sum::<Vec3>() / pts.len() as f32;
+        Some(LampStop {
+            normal,
+            offset: normal.dot(c),
+            edges,
+            edge_count: pts.len() as u32,
+            spread: std::f32::consts::SQRT_2 / res.max(1) as f32,
+            two_sided: light.two_sided,
+        })
+    }
+
+    /// Where the ray from `origin` along unit `d` stops here, if it does.
+    #[inline]
+    pub(crate) fn distance(&self, origin: Vec3, d: Vec3) -> Option<f32> {
+        let height = self.offset - self.normal.dot(origin);
+        // A one-sided lamp sends nothing to the points behind it (height ≥ 0 there).
+        if !self.two_sided && !(height < 0.0) {
+            return None;
+        }
+        let den = d.dot(self.normal);
+        let t = height / den;
+        if !(den != 0.0 && t > 0.0 && t.is_finite()) {
+            return None;
+        }
+        let x = origin + t * d;
+        let grow = t * self.spread / den.abs();
+        self.edges[..self.edge_count as usize]
+            .iter()
+            .all(|&(m, c)| m.dot(x) - c >= -grow)
+            .then_some(t)
+    }
 }
 
 impl LightStop {
-    /// The stops of a scene's lights: its region where it declares one, else its plane.
+    /// The stops of a scene's lights, for its bake's cube maps
+    /// ([`LightStop::of_light`]).
     pub fn of_scene(scene: &bspvt_proto::Scene) -> Vec<LightStop> {
-        scene.lights.iter().map(LightStop::of_light).collect()
+        scene
+            .lights
+            .iter()
+            .filter_map(|l| LightStop::of_light(l, scene.bake.face_res))
+            .collect()
     }
 
-    /// The stop of one light: its region where it declares one, else its plane.
-    pub fn of_light(light: &bspvt_proto::scene::PolygonLight) -> LightStop {
-        match light.region {
-            Some(r) => LightStop::Region(r.aabb()),
-            None => {
+    /// The stop of one light, for cube maps of `res` pixels a side: its region where it
+    /// declares one, its plane where it moves in it, else its polygon (`None`: a degenerate
+    /// lamp, which a validated scene has not).
+    pub fn of_light(light: &bspvt_proto::scene::PolygonLight, res: u32) -> Option<LightStop> {
+        use bspvt_proto::scene::LightMotion;
+        match light.motion() {
+            LightMotion::Region(r) => Some(LightStop::Region(r.aabb())),
+            LightMotion::Plane => {
                 let pts = light.points();
                 let c = pts.iter().copied().sum::<Vec3>() / pts.len().max(1) as f32;
-                LightStop::Plane {
+                Some(LightStop::Plane {
                     point: c,
                     normal: light.normal(),
-                }
+                })
             }
+            LightMotion::Fixed => LampStop::new(light, res).map(LightStop::Lamp),
         }
     }
 
@@ -166,16 +252,19 @@ impl LightStop {
                 let t = (point - origin).dot(normal) / den;
                 (den != 0.0 && t > 0.0 && t.is_finite()).then_some(t)
             }
+            LightStop::Lamp(ref l) => l.distance(origin, d),
         }
     }
 }
 
 /// One light stop's test of which pixels of a face can reach it ([`VertexRays::face_mask`]).
-enum Reach {
+enum Reach<'a> {
     /// The centre's ray meets the box.
     Region(Aabb),
     /// w·k + u\[i\] + v\[j\] > 0 for pixel (i, j).
     Plane(f32, Vec<f32>, Vec<f32>),
+    /// The centre's ray reaches the lamp ([`LampStop::distance`]).
+    Lamp(&'a LampStop),
 }
 
 /// Where a vertex's rays start and which directions can matter.
@@ -224,6 +313,7 @@ impl VertexRays<'_> {
     /// A pixel matters when its centre is above the horizon and it can reach a light's stop
     /// (every pixel above the horizon when there are none: the sky's bake):
     /// * a region: the centre's ray meets its box;
+    /// * a fixed lamp: the pixel's cone meets the lamp ([`LampStop`]);
     /// * a plane: some direction of the pixel crosses it ahead of the origin. A light without
     ///   a region moves in its plane (docs/bake.md, "Where a ray ends"), so a direction that
     ///   never meets the plane never meets the light: it is "don't care". With k the plane's
@@ -241,9 +331,10 @@ impl VertexRays<'_> {
         let reach: Vec<Reach> = self
             .stops
             .iter()
-            .map(|s| match *s {
-                LightStop::Region(b) => Reach::Region(b),
-                LightStop::Plane { point, normal } => {
+            .map(|s| match s {
+                LightStop::Region(b) => Reach::Region(*b),
+                LightStop::Lamp(l) => Reach::Lamp(l),
+                &LightStop::Plane { point, normal } => {
                     let side = (point - self.origin).dot(normal);
                     let k = normal * side.signum();
                     let terms = |axis: Vec3| -> Vec<f32> {
@@ -266,6 +357,7 @@ impl VertexRays<'_> {
                     || reach.iter().any(|r| match r {
                         Reach::Region(b) => b.hit_by_ray(self.origin, d),
                         Reach::Plane(w, u, v) => w + u[i] + v[j] > 0.0,
+                        Reach::Lamp(l) => l.distance(self.origin, d).is_some(),
                     }));
             any |= *m;
         }

@@ -66,6 +66,16 @@ impl Baker {
                     max: b.max,
                 },
                 LightStop::Plane { point, normal } => GpuStop::Plane { point, normal },
+                LightStop::Lamp(l) => GpuStop::Lamp {
+                    normal: l.normal,
+                    offset: l.offset,
+                    edges: l.edges[..l.edge_count as usize]
+                        .iter()
+                        .map(|&(m, c)| m.extend(c))
+                        .collect(),
+                    spread: l.spread,
+                    two_sided: l.two_sided,
+                },
             })
             .collect();
         let pixels = (FACES as u32) * t.res * t.res;

@@ -35,7 +35,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use bspvt_raytrace::Occluder;
-pub use cubemap::{CastCounts, CastMode, LightStop};
+pub use cubemap::{CastCounts, CastMode, LampStop, LightStop};
 use cubemap::{RayTable, VertexRays};
 use fit::{FitStats, Fitter};
 
@@ -43,8 +43,10 @@ use fit::{FitStats, Fitter};
 /// `tests/tests/bake_pinned.rs` change): caches of finished bakes key on it, so that an
 /// upgrade does not serve trees baked by the old rule. 2: rays of open-boundary vertices leave
 /// from inside their own surface ([`origin`]). 3: the fit's coarse-to-fine angle schedule, and
-/// directions that cannot reach a light's plane are "don't care" (docs/bake.md).
-pub const ALGORITHM_VERSION: u32 = 3;
+/// directions that cannot reach a light's plane are "don't care" (docs/bake.md). 4: a fixed
+/// lamp (no region, not moving in its plane) stops rays at its polygon, not its plane, and only
+/// the directions that reach it matter.
+pub const ALGORITHM_VERSION: u32 = 4;
 
 /// Ray origins are offset along the normal by this fraction of the scene's diagonal.
 pub(crate) const RAY_OFFSET_SCALE: f32 = 1e-4;

@@ -395,7 +395,9 @@ impl Visibility {
         let sampled: Vec<(LightSamples, LightStop)> = lights
             .iter()
             .map(|l| scaled_light(l, scale))
-            .filter_map(|l| LightSamples::of(&l).map(|s| (s, LightStop::of_light(&l))))
+            // Rays aim at points of the lamps: a lamp stops them exactly at its polygon (no
+            // pixel's cone to grow it by).
+            .filter_map(|l| Some((LightSamples::of(&l)?, LightStop::of_light(&l, u32::MAX)?)))
             .collect();
         let offset = RAY_OFFSET_SCALE * scene_diagonal(&occ_mesh) as f32;
         let offset = if offset.is_finite() { offset } else { 0.0 };

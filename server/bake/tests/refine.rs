@@ -22,6 +22,7 @@ fn down_light(y: f32, h: f32) -> PolygonLight {
         two_sided: false,
         texture: None,
         region: None,
+        moves_in_plane: true,
         image: None,
     }
 }

@@ -55,8 +55,12 @@ pub fn offline_frame(
     size: u32,
 ) -> Image {
     let r = Renderer::with_camera(scene, camera, size, size);
-    r.bspvt(light, &Trees::full(&bake.trees, bake.header.codec()), mode)
-        .0
+    r.bspvt(
+        std::slice::from_ref(light),
+        &Trees::full(&bake.trees, bake.header.codec()),
+        mode,
+    )
+    .0
 }
 
 pub fn all_finite(img: &Image) -> bool {

@@ -170,10 +170,15 @@ pub(crate) fn measure(
     cache: &Path,
     out: &Path,
 ) -> Result<SceneReport> {
-    let Some(pl) = scene.lights.first() else {
+    if scene.lights.is_empty() {
         bail!("{name}: the scene has no light");
-    };
-    let light = Light::load(pl)?;
+    }
+    // Every method and the ground truth are lit by all of the scene's lights.
+    let lights = scene
+        .lights
+        .iter()
+        .map(Light::load)
+        .collect::<Result<Vec<_>>>()?;
     let stem = file_stem(name);
     let dir = out.join(&stem);
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -185,11 +190,11 @@ pub(crate) fn measure(
     let draw = Draw {
         data: &data,
         r: &r,
-        light: &light,
+        lights: &lights,
         frames: st.frames,
     };
 
-    let (gt_img, gt) = ground_truth(name, scene, &r, &light, &occ, st, cache)?;
+    let (gt_img, gt) = ground_truth(name, scene, &r, &lights, &occ, st, cache)?;
     gt_img.save(&dir.join("ground-truth.png"), EXPOSURE)?;
     gt_img.save(&dir.join("ground-truth.exr"), EXPOSURE)?;
     let scale = error_scale(&gt_img, &covered);
@@ -425,7 +430,7 @@ fn ground_truth(
     name: &str,
     scene: &Scene,
     r: &Renderer,
-    light: &Light,
+    lights: &[Light],
     occ: &Occluder,
     st: &Settings,
     cache: &Path,
@@ -438,7 +443,7 @@ fn ground_truth(
     let mut h = bspvt_proto::hash::Fnv1a::default();
     h.write(
         format!(
-            "gt1 {:x} {:?} {:?} {:?} {} {:?} {SEED_GT}",
+            "gt2 {:x} {:?} {:?} {:?} {} {:?} {SEED_GT}",
             scene.mesh.content_hash(),
             scene.lights,
             scene.materials,
@@ -468,7 +473,7 @@ fn ground_truth(
         conv.max_spp
     );
     let t = Instant::now();
-    let (img, noise) = render_mc_until(scene, &r.view, &r.gbuffer, light, occ, &conv, SEED_GT);
+    let (img, noise) = render_mc_until(scene, &r.view, &r.gbuffer, lights, occ, &conv, SEED_GT);
     let seconds = t.elapsed().as_secs_f64();
     let covered = covered_pixels(&r.gbuffer);
     let gt = GroundTruth {
@@ -504,7 +509,7 @@ pub(super) fn load_exr(path: &Path) -> Result<Image> {
 struct Draw<'a> {
     data: &'a SceneData<'a>,
     r: &'a Renderer<'a>,
-    light: &'a Light,
+    lights: &'a [Light],
     frames: usize,
 }
 
@@ -553,7 +558,7 @@ impl Draw<'_> {
         let input = FrameInput {
             scene: self.data,
             renderer: self.r,
-            light: Some(self.light),
+            lights: self.lights,
             trees,
             sky_trees: None,
             env_rotation_deg: 0.0,

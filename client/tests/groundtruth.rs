@@ -535,51 +535,25 @@ fn tiny_and_huge_lights_are_accurate() {
 // ---------------------------------------------------------------------------------------
 // (e) determinism, and the renderers
 
-fn small_scene() -> (bspvt_proto::Scene, View, GBuffer, Light, Occluder) {
+fn small_scene() -> (bspvt_proto::Scene, View, GBuffer, Vec<Light>, Occluder) {
     let scene = bspvt_proto::builtin::scene("plate-small").expect("built-in scene");
     let view = View::new(&scene.camera, 40, 30);
     let gb = GBuffer::rasterize(&scene.mesh, &view);
-    let light = Light::from_scene(&scene.lights[0]);
+    let lights = vec![Light::from_scene(&scene.lights[0])];
     let occ = Occluder::new(&scene.mesh, &mesh_triangles(&scene.mesh));
-    (scene, view, gb, light, occ)
+    (scene, view, gb, lights, occ)
 }
 
 #[test]
 fn images_are_reproducible() {
-    let (scene, view, gb, light, occ) = small_scene();
-    let (a, ra) = render_mc(
-        &scene,
-        &view,
-        &gb,
-        std::slice::from_ref(&light),
-        &occ,
-        16,
-        42,
-    );
+    let (scene, view, gb, lights, occ) = small_scene();
+    let (a, ra) = render_mc(&scene, &view, &gb, &lights, &occ, 16, 42);
     let one_thread = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .expect("thread pool");
-    let (b, _) = one_thread.install(|| {
-        render_mc(
-            &scene,
-            &view,
-            &gb,
-            std::slice::from_ref(&light),
-            &occ,
-            16,
-            42,
-        )
-    });
-    let (c, _) = render_mc(
-        &scene,
-        &view,
-        &gb,
-        std::slice::from_ref(&light),
-        &occ,
-        16,
-        43,
-    );
+    let (b, _) = one_thread.install(|| render_mc(&scene, &view, &gb, &lights, &occ, 16, 42));
+    let (c, _) = render_mc(&scene, &view, &gb, &lights, &occ, 16, 43);
     assert_eq!(a, b, "same seed, different thread count → different image");
     assert_ne!(a, c, "different seeds → same image");
     assert!(
@@ -594,32 +568,16 @@ fn images_are_reproducible() {
 
 #[test]
 fn convergence_reaches_the_target() {
-    let (scene, view, gb, light, occ) = small_scene();
+    let (scene, view, gb, lights, occ) = small_scene();
     let conv = Convergence {
         target_rel_stderr: 0.02,
         min_spp: 64,
         max_spp: 8192,
     };
-    let (img, rep) = render_mc_until(
-        &scene,
-        &view,
-        &gb,
-        std::slice::from_ref(&light),
-        &occ,
-        &conv,
-        7,
-    );
+    let (img, rep) = render_mc_until(&scene, &view, &gb, &lights, &occ, &conv, 7);
     eprintln!("until 2 %: {rep}");
     // Against a fixed-spp image of the same scene: the difference is noise.
-    let (fixed, rf) = render_mc(
-        &scene,
-        &view,
-        &gb,
-        std::slice::from_ref(&light),
-        &occ,
-        1024,
-        8,
-    );
+    let (fixed, rf) = render_mc(&scene, &view, &gb, &lights, &occ, 1024, 8);
     let mut chi2 = 0.0;
     let mut n = 0;
     for i in 0..img.pixels.len() {
@@ -646,20 +604,20 @@ fn convergence_reaches_the_target() {
 #[test]
 fn ltc_exact_visibility_tracks_the_ground_truth() {
     use bspvt_client::groundtruth::{builtin_lookup, render_ltc_exact_visibility};
-    let (scene, view, gb, light, occ) = small_scene();
-    let (mc, rep) = render_mc(
+    let (scene, view, gb, lights, occ) = small_scene();
+    let (mc, rep) = render_mc(&scene, &view, &gb, &lights, &occ, 1024, 3);
+    let ltc = render_ltc_exact_visibility(
         &scene,
         &view,
         &gb,
-        std::slice::from_ref(&light),
+        &lights[0],
         &occ,
-        1024,
-        3,
+        &builtin_lookup,
+        512,
+        4,
     );
-    let ltc =
-        render_ltc_exact_visibility(&scene, &view, &gb, &light, &occ, &builtin_lookup, 512, 4);
     let unshadowed =
-        render_ltc_exact_visibility(&scene, &view, &gb, &light, &occ, &builtin_lookup, 0, 0);
+        render_ltc_exact_visibility(&scene, &view, &gb, &lights[0], &occ, &builtin_lookup, 0, 0);
     let (m, l, u) = (mc.mean(), ltc.mean(), unshadowed.mean());
     let mut rel = Vec::new();
     for i in 0..mc.pixels.len() {
@@ -697,19 +655,11 @@ fn noise_levels() {
     let scene = bspvt_proto::builtin::scene("plate-small").expect("built-in scene");
     let view = View::new(&scene.camera, 128, 96);
     let gb = GBuffer::rasterize(&scene.mesh, &view);
-    let light = Light::from_scene(&scene.lights[0]);
+    let lights = vec![Light::from_scene(&scene.lights[0])];
     let occ = Occluder::new(&scene.mesh, &mesh_triangles(&scene.mesh));
     for spp in [256, 1024, 4096] {
         let t = std::time::Instant::now();
-        let (_, rep) = render_mc(
-            &scene,
-            &view,
-            &gb,
-            std::slice::from_ref(&light),
-            &occ,
-            spp,
-            1,
-        );
+        let (_, rep) = render_mc(&scene, &view, &gb, &lights, &occ, spp, 1);
         eprintln!("{spp} spp ({:.1} s): {rep}", t.elapsed().as_secs_f64());
     }
     let conv = Convergence {
@@ -718,14 +668,6 @@ fn noise_levels() {
         max_spp: 65536,
     };
     let t = std::time::Instant::now();
-    let (_, rep) = render_mc_until(
-        &scene,
-        &view,
-        &gb,
-        std::slice::from_ref(&light),
-        &occ,
-        &conv,
-        1,
-    );
+    let (_, rep) = render_mc_until(&scene, &view, &gb, &lights, &occ, &conv, 1);
     eprintln!("until 1 % ({:.1} s): {rep}", t.elapsed().as_secs_f64());
 }

@@ -162,17 +162,11 @@ fn bench_scene(path: &Path, a: &BenchRefineArgs) -> Result<SceneResult> {
     }
     given.bake.refine = None;
     given.validate()?;
-    let Some(light) = given.lights.first() else {
+    if given.lights.is_empty() {
         bail!("the scene has no polygon light");
-    };
-    if given.lights.len() > 1 {
-        eprintln!(
-            "{}: only light 0 of {} is measured",
-            path.display(),
-            given.lights.len()
-        );
     }
-    let light = Light::from_scene(light);
+    // Every light of the scene, summed, in the reference and the frames.
+    let lights: Vec<Light> = given.lights.iter().map(Light::from_scene).collect();
     let name = path
         .file_name()
         .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
@@ -182,24 +176,8 @@ fn bench_scene(path: &Path, a: &BenchRefineArgs) -> Result<SceneResult> {
     let cov = covered(&r.gbuffer);
     let occ = Occluder::new(&given.mesh, &mesh_triangles(&given.mesh));
     let t = Instant::now();
-    let (ref_a, _) = render_mc(
-        &given,
-        &r.view,
-        &r.gbuffer,
-        std::slice::from_ref(&light),
-        &occ,
-        a.spp,
-        1,
-    );
-    let (ref_b, _) = render_mc(
-        &given,
-        &r.view,
-        &r.gbuffer,
-        std::slice::from_ref(&light),
-        &occ,
-        a.spp,
-        2,
-    );
+    let (ref_a, _) = render_mc(&given, &r.view, &r.gbuffer, &lights, &occ, a.spp, 1);
+    let (ref_b, _) = render_mc(&given, &r.view, &r.gbuffer, &lights, &occ, a.spp, 2);
     let mut reference = ref_a.clone();
     for (p, q) in reference.pixels.iter_mut().zip(&ref_b.pixels) {
         *p = std::array::from_fn(|k| 0.5 * (p[k] + q[k]));
@@ -224,7 +202,7 @@ fn bench_scene(path: &Path, a: &BenchRefineArgs) -> Result<SceneResult> {
         a.spp,
         t.elapsed().as_secs_f64()
     );
-    let (unshadowed, _) = r.ltc(std::slice::from_ref(&light), Mode::Pixel);
+    let (unshadowed, _) = r.ltc(&lights, Mode::Pixel);
 
     let measure = |scene: &Scene, kind: &str, budget: u32, refine_s: f64| -> Result<Row> {
         let t = Instant::now();
@@ -235,8 +213,8 @@ fn bench_scene(path: &Path, a: &BenchRefineArgs) -> Result<SceneResult> {
         let b = decode_bake(&bytes)?;
         let trees = Trees::full(&b.trees, b.header.codec());
         let rr = Renderer::new(scene, w, h);
-        let (pixel, _) = rr.bspvt(std::slice::from_ref(&light), &trees, Mode::Pixel);
-        let (vertex, _) = rr.bspvt(std::slice::from_ref(&light), &trees, Mode::Vertex);
+        let (pixel, _) = rr.bspvt(&lights, &trees, Mode::Pixel);
+        let (vertex, _) = rr.bspvt(&lights, &trees, Mode::Vertex);
         let (prmse, pmae) = rmse_mae(&pixel, &reference, &cov);
         let (vrmse, vmae) = rmse_mae(&vertex, &reference, &cov);
         let row = Row {

@@ -202,52 +202,6 @@ def sphere(g, r, material, rings=12, segments=24):
     return g.primitive(pos, nrm, tris, material)
 
 
-def room():
-    g = Gltf()
-    white = g.material("white wall", [0.75, 0.74, 0.72], 0.0, 0.9)
-    red = g.material("red wall", [0.7, 0.08, 0.06], 0.0, 0.9)
-    blue = g.material("blue wall", [0.1, 0.2, 0.65], 0.0, 0.9)
-    floor = g.material("oak floor", [0.55, 0.4, 0.25], 0.0, 0.55)
-    lamp = g.material("ceiling lamp", [1.0, 1.0, 1.0], 0.0, 1.0, [1.0, 0.9, 0.75], 12.0)
-    gold = g.material("brushed gold", [1.0, 0.78, 0.34], 1.0, 0.35)
-    glossy = g.material("glossy plastic", [0.05, 0.3, 0.1], 0.0, 0.2)
-    X, Y, Z = 2.0, 2.5, 2.0
-    shell = g.mesh("shell", [
-        quad_prim(g, [(-X, 0, -Z), (-X, 0, Z), (X, 0, Z), (X, 0, -Z)], (0, 1, 0), floor),
-        quad_prim(g, [(-X, Y, -Z), (X, Y, -Z), (X, Y, Z), (-X, Y, Z)], (0, -1, 0), white),
-        quad_prim(g, [(-X, 0, -Z), (X, 0, -Z), (X, Y, -Z), (-X, Y, -Z)], (0, 0, 1), white),
-        quad_prim(g, [(-X, 0, Z), (-X, Y, Z), (X, Y, Z), (X, 0, Z)], (0, 0, -1), white),
-        quad_prim(g, [(-X, 0, -Z), (-X, Y, -Z), (-X, Y, Z), (-X, 0, Z)], (1, 0, 0), red),
-        quad_prim(g, [(X, 0, -Z), (X, 0, Z), (X, Y, Z), (X, Y, -Z)], (-1, 0, 0), blue),
-    ])
-    s = 0.4  # the lamp: a 0.8 m square 2 cm under the ceiling, in its node's frame
-    lamp_mesh = g.mesh("lamp", [quad_prim(g, [(-s, 0, -s), (s, 0, -s), (s, 0, s), (-s, 0, s)],
-                                          (0, -1, 0), lamp)])
-    box_mesh = g.mesh("metal box", [box(g, (0.35, 0.35, 0.35), gold)])
-    ball_mesh = g.mesh("glossy sphere", [sphere(g, 0.4, glossy)])
-    g.doc["cameras"].append({"name": "view", "type": "perspective",
-                             "perspective": {"yfov": 0.9, "aspectRatio": 1.5,
-                                             "znear": 0.05, "zfar": 50.0}})
-    # Camera at (0, 1.4, 1.8) looking down its -Z, tilted 12 degrees down.
-    t = math.radians(-12) / 2
-    nodes = [
-        g.node("shell", mesh=shell),
-        g.node("lamp", mesh=lamp_mesh, translation=[0.0, Y - 0.02, 0.0]),
-        g.node("furniture", translation=[0.0, 0.0, -0.3], children=[]),
-        g.node("camera", camera=0, translation=[0.0, 1.4, 1.8],
-               rotation=[math.sin(t), 0.0, 0.0, math.cos(t)]),
-    ]
-    furniture = g.doc["nodes"][nodes[2]]
-    r = math.radians(30) / 2
-    furniture["children"] = [
-        g.node("metal box", mesh=box_mesh, translation=[-0.7, 0.35, 0.0],
-               rotation=[0.0, math.sin(r), 0.0, math.cos(r)]),
-        g.node("glossy sphere", mesh=ball_mesh, translation=[0.8, 0.4, 0.3]),
-    ]
-    g.doc["scenes"].append({"name": "room", "nodes": nodes})
-    g.write(os.path.join(HERE, "room.gltf"))
-
-
 def shell(g):
     white = g.material("white wall", [0.75, 0.74, 0.72], 0.0, 0.9)
     red = g.material("red wall", [0.7, 0.08, 0.06], 0.0, 0.9)
@@ -262,6 +216,41 @@ def shell(g):
         quad_prim(g, [(-X, 0, -Z), (-X, Y, -Z), (-X, Y, Z), (-X, 0, Z)], (1, 0, 0), red),
         quad_prim(g, [(X, 0, -Z), (X, 0, Z), (X, Y, Z), (X, Y, -Z)], (-1, 0, 0), blue),
     ])
+
+
+def room():
+    g = Gltf()
+    shell_mesh = shell(g)
+    lamp = g.material("ceiling lamp", [1.0, 1.0, 1.0], 0.0, 1.0, [1.0, 0.9, 0.75], 12.0)
+    gold = g.material("brushed gold", [1.0, 0.78, 0.34], 1.0, 0.35)
+    glossy = g.material("glossy plastic", [0.05, 0.3, 0.1], 0.0, 0.2)
+    Y = 2.5
+    s = 0.4  # the lamp: a 0.8 m square 2 cm under the ceiling, in its node's frame
+    lamp_mesh = g.mesh("lamp", [quad_prim(g, [(-s, 0, -s), (s, 0, -s), (s, 0, s), (-s, 0, s)],
+                                          (0, -1, 0), lamp)])
+    box_mesh = g.mesh("metal box", [box(g, (0.35, 0.35, 0.35), gold)])
+    ball_mesh = g.mesh("glossy sphere", [sphere(g, 0.4, glossy)])
+    g.doc["cameras"].append({"name": "view", "type": "perspective",
+                             "perspective": {"yfov": 0.9, "aspectRatio": 1.5,
+                                             "znear": 0.05, "zfar": 50.0}})
+    # Camera at (0, 1.4, 1.8) looking down its -Z, tilted 12 degrees down.
+    t = math.radians(-12) / 2
+    nodes = [
+        g.node("shell", mesh=shell_mesh),
+        g.node("lamp", mesh=lamp_mesh, translation=[0.0, Y - 0.02, 0.0]),
+        g.node("furniture", translation=[0.0, 0.0, -0.3], children=[]),
+        g.node("camera", camera=0, translation=[0.0, 1.4, 1.8],
+               rotation=[math.sin(t), 0.0, 0.0, math.cos(t)]),
+    ]
+    furniture = g.doc["nodes"][nodes[2]]
+    r = math.radians(30) / 2
+    furniture["children"] = [
+        g.node("metal box", mesh=box_mesh, translation=[-0.7, 0.35, 0.0],
+               rotation=[0.0, math.sin(r), 0.0, math.cos(r)]),
+        g.node("glossy sphere", mesh=ball_mesh, translation=[0.8, 0.4, 0.3]),
+    ]
+    g.doc["scenes"].append({"name": "room", "nodes": nodes})
+    g.write(os.path.join(HERE, "room.gltf"))
 
 
 def two_lamps():

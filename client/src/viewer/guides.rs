@@ -27,12 +27,14 @@ struct Segment {
     occluded: bool,
 }
 
-/// Draws the guides of `scene` and `light` (the light as posed now) into `canvas`.
+/// Draws the guides of `scene` and its light `selected` (as posed now: `light`) into `canvas`:
+/// the light's gizmo and, where it declares one, its region.
 pub(crate) fn draw(
     canvas: &mut Canvas,
     view: &View,
     depth: &[f32],
     scene: &Scene,
+    selected: usize,
     light: Option<&Light>,
 ) {
     let b = scene.mesh.bounds();
@@ -44,7 +46,7 @@ pub(crate) fn draw(
     if let Some(l) = light {
         light_gizmo(&mut segs, l, view, size);
     }
-    if let Some(r) = scene.lights.first().and_then(|l| l.region) {
+    if let Some(r) = scene.lights.get(selected).and_then(|l| l.region) {
         boxed(
             &mut segs,
             DVec3::from(r.min.map(f64::from)),

@@ -544,6 +544,7 @@ impl App<'_, '_> {
                 &self.session.renderer.view,
                 self.depth.as_deref().unwrap_or(&[]),
                 self.session.scene(),
+                self.session.selected_light(),
                 light.as_ref(),
             );
         }
@@ -640,6 +641,16 @@ fn overlay_lines(s: &Session, fps: f64, opts: &ViewerOptions) -> Vec<String> {
     }
     if let Some(n) = &opts.note {
         lines.push(n.clone());
+    }
+    let lights = s.scene().lights.len();
+    if lights > 1 {
+        let k = s.selected_light();
+        let how = match s.scene().lights[k].motion() {
+            bspvt_proto::scene::LightMotion::Fixed => "fixed",
+            bspvt_proto::scene::LightMotion::Plane => "moves in its plane",
+            bspvt_proto::scene::LightMotion::Region(_) => "moves in its region",
+        };
+        lines.push(format!("{lights} lights; keys move light {k} ({how}; N next)"));
     }
     if s.method.needs().sky_trees {
         lines.push(format!(

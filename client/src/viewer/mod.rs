@@ -650,7 +650,9 @@ fn overlay_lines(s: &Session, fps: f64, opts: &ViewerOptions) -> Vec<String> {
             bspvt_proto::scene::LightMotion::Plane => "moves in its plane",
             bspvt_proto::scene::LightMotion::Region(_) => "moves in its region",
         };
-        lines.push(format!("{lights} lights; keys move light {k} ({how}; N next)"));
+        lines.push(format!(
+            "{lights} lights; keys move light {k} ({how}; N next)"
+        ));
     }
     if s.method.needs().sky_trees {
         lines.push(format!(

@@ -190,6 +190,88 @@ impl LampStop {
         })
     }
 
+    /// Which pixels of face `fr` (`res` a side, index `j · res + i`) may reach the lamp from
+    /// `origin`: `out[p]` is false only where [`Self::distance`] surely fails for the pixel's
+    /// centre. For d = w + u a + v b unnormalised, N = n·d, M_k = m_k·d, L² = |d|² and the
+    /// height h = offset − n·o, the centre's test is N h > 0 and, for every edge,
+    /// e_k N²/|h| + |N| M_k + s L² ≥ 0 (its edge test times N²/|h|; e_k = m_k·o − c_k).
+    /// Blocks of pixels are bounded in interval arithmetic (f64, with a relative slack for
+    /// the f32 test) and split down to 4×4: a block where no direction heads to the plane, or
+    /// some edge's bound is negative, holds no pixel that reaches the lamp.
+    pub(crate) fn candidates(&self, origin: Vec3, fr: &FaceFrame, res: usize, out: &mut [bool]) {
+        out.fill(false);
+        let o = origin.as_dvec3();
+        let n = self.normal.as_dvec3();
+        let h = f64::from(self.offset) - n.dot(o);
+        if !(h.abs() > 0.0) || (!self.two_sided && !(h < 0.0)) {
+            return;
+        }
+        let sigma = h.signum();
+        // An affine g(u, v) = g0 + u gu + v gv as (g0, gu, gv), for g = x · d.
+        let affine = |x: glam::DVec3| (x.dot(fr.w64()), x.dot(fr.a64()), x.dot(fr.b64()));
+        let nd = affine(n * sigma);
+        let edges: Vec<(f64, (f64, f64, f64))> = self.edges[..self.edge_count as usize]
+            .iter()
+            .map(|&(m, c)| {
+                let m = m.as_dvec3();
+                ((m.dot(o) - f64::from(c)) / h.abs(), affine(m))
+            })
+            .collect();
+        let spread = f64::from(self.spread);
+        let e = |i: usize| 2.0 * i as f64 / res as f64 - 1.0;
+        let range = |g: (f64, f64, f64), u: (f64, f64), v: (f64, f64)| {
+            let (a, b) = ((u.0 * g.1).min(u.1 * g.1), (u.0 * g.1).max(u.1 * g.1));
+            let (c, d) = ((v.0 * g.2).min(v.1 * g.2), (v.0 * g.2).max(v.1 * g.2));
+            (g.0 + a + c, g.0 + b + d)
+        };
+        // May any centre of the block [i0, i1) × [j0, j1) reach the lamp?
+        let may = |i0: usize, i1: usize, j0: usize, j1: usize| -> bool {
+            let (u, v) = ((e(i0), e(i1)), (e(j0), e(j1)));
+            // |N| where N heads toward the plane (σN > 0).
+            let (p_lo, p_hi) = range(nd, u, v);
+            if !(p_hi > 0.0) {
+                return false;
+            }
+            let p_lo = p_lo.max(0.0);
+            let l2 = 1.0 + u.0.powi(2).max(u.1.powi(2)) + v.0.powi(2).max(v.1.powi(2));
+            edges.iter().all(|&(ek, mk)| {
+                let (m_lo, m_hi) = range(mk, u, v);
+                let t1 = if ek >= 0.0 {
+                    ek * p_hi * p_hi
+                } else {
+                    ek * p_lo * p_lo
+                };
+                let t2 = (p_lo * m_lo)
+                    .max(p_lo * m_hi)
+                    .max(p_hi * m_lo)
+                    .max(p_hi * m_hi);
+                let t3 = spread * l2;
+                let slack = 1e-5 * (t1.abs() + t2.abs() + t3.abs()) + 1e-12;
+                t1 + t2 + t3 >= -slack
+            })
+        };
+        let mut stack = vec![(0, res, 0, res)];
+        while let Some((i0, i1, j0, j1)) = stack.pop() {
+            if !may(i0, i1, j0, j1) {
+                continue;
+            }
+            if i1 - i0 <= 4 && j1 - j0 <= 4 {
+                for j in j0..j1 {
+                    out[j * res + i0..j * res + i1].fill(true);
+                }
+                continue;
+            }
+            let (im, jm) = (i0 + (i1 - i0).div_ceil(2), j0 + (j1 - j0).div_ceil(2));
+            for (a, b) in [(i0, im), (im, i1)] {
+                for (c, d) in [(j0, jm), (jm, j1)] {
+                    if a < b && c < d {
+                        stack.push((a, b, c, d));
+                    }
+                }
+            }
+        }
+    }
+
     /// Where the ray from `origin` along unit `d` stops here, if it does.
     #[inline]
     pub(crate) fn distance(&self, origin: Vec3, d: Vec3) -> Option<f32> {
@@ -263,8 +345,9 @@ enum Reach<'a> {
     Region(Aabb),
     /// w·k + u\[i\] + v\[j\] > 0 for pixel (i, j).
     Plane(f32, Vec<f32>, Vec<f32>),
-    /// The centre's ray reaches the lamp ([`LampStop::distance`]).
-    Lamp(&'a LampStop),
+    /// The centre's ray reaches the lamp ([`LampStop::distance`]), tested where
+    /// [`LampStop::candidates`] leaves it possible.
+    Lamp(&'a LampStop, Vec<bool>),
 }
 
 /// Where a vertex's rays start and which directions can matter.
@@ -333,7 +416,11 @@ impl VertexRays<'_> {
             .iter()
             .map(|s| match s {
                 LightStop::Region(b) => Reach::Region(*b),
-                LightStop::Lamp(l) => Reach::Lamp(l),
+                LightStop::Lamp(l) => {
+                    let mut may = vec![false; res * res];
+                    l.candidates(self.origin, &fr, res, &mut may);
+                    Reach::Lamp(l, may)
+                }
                 &LightStop::Plane { point, normal } => {
                     let side = (point - self.origin).dot(normal);
                     let k = normal * side.signum();
@@ -357,7 +444,7 @@ impl VertexRays<'_> {
                     || reach.iter().any(|r| match r {
                         Reach::Region(b) => b.hit_by_ray(self.origin, d),
                         Reach::Plane(w, u, v) => w + u[i] + v[j] > 0.0,
-                        Reach::Lamp(l) => l.distance(self.origin, d).is_some(),
+                        Reach::Lamp(l, may) => may[p] && l.distance(self.origin, d).is_some(),
                     }));
             any |= *m;
         }
@@ -687,6 +774,49 @@ mod tests {
     }
 
     proptest! {
+        /// A fixed lamp's block bound never drops a pixel whose centre reaches the lamp:
+        /// `face_mask` is the same with it as testing every pixel, for any lamp (square, one- or
+        /// two-sided, any size and orientation), origin and resolution.
+        #[test]
+        fn the_lamp_candidates_keep_every_pixel_that_reaches_the_lamp(
+            res in 1u32..48,
+            o in prop::array::uniform3(-2.0f32..2.0),
+            c in prop::array::uniform3(-2.0f32..2.0),
+            n in prop::array::uniform3(-1.0f32..1.0),
+            half in 0.001f32..1.5,
+            two_sided in any::<bool>(),
+        ) {
+            let normal = Vec3::from(n);
+            prop_assume!(normal.length() > 0.1);
+            let normal = normal.normalize();
+            let t1 = normal.any_orthonormal_vector();
+            let t2 = normal.cross(t1);
+            let c = Vec3::from(c);
+            let corner = |a: f32, b: f32| (c + half * (a * t1 + b * t2)).to_array();
+            let light = bspvt_proto::scene::PolygonLight {
+                vertices: vec![corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0)],
+                radiance: [1.0; 3],
+                two_sided,
+                texture: None,
+                region: None,
+                moves_in_plane: false,
+                image: None,
+            };
+            let lamp = LampStop::new(&light, res).expect("a lamp");
+            let table = RayTable::new(res, 1);
+            let r = res as usize;
+            let origin = Vec3::from(o);
+            let mut may = vec![false; r * r];
+            for f in 0..FACES {
+                lamp.candidates(origin, &FaceFrame::of(f), r, &mut may);
+                for (q, &d) in table.centre[f].iter().enumerate() {
+                    if lamp.distance(origin, d).is_some() {
+                        prop_assert!(may[q], "face {} pixel {} reaches the lamp", f, q);
+                    }
+                }
+            }
+        }
+
         /// `face_mask`'s separable plane test keeps exactly the pixels above the horizon some
         /// corner of which points toward the light's plane, for any plane, origin and normal.
         #[test]

@@ -379,23 +379,26 @@ impl<'a> Renderer<'a> {
     pub fn emitters(&self, lights: &[Light]) -> Vec<Option<[f32; 3]>> {
         let (mesh, g, view) = (&self.scene.mesh, &self.gbuffer, &self.view);
         let w = g.width as usize;
+        if lights.is_empty() {
+            return vec![None; g.tri.len()];
+        }
         (0..g.tri.len())
             .into_par_iter()
             .map(|i| {
-                if lights.is_empty() {
-                    return None;
-                }
                 let d = view.ray_dir((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+                let (t, l, q) = lights
+                    .iter()
+                    .filter_map(|l| l.hit(view.eye, d).map(|(t, q)| (t, l, q)))
+                    .min_by(|a, b| a.0.total_cmp(&b.0))?;
+                // Only a pixel that sees a lamp asks for its surface (most see none). A lamp
+                // flush with the surface behind it (an asset's emitting triangles on a
+                // ceiling) is in front of it.
                 let surface = g
                     .surface(mesh, view, i)
                     .map_or(f64::INFINITY, |s| (s.position - view.eye).length());
-                let (_, l, q) = lights
-                    .iter()
-                    .filter_map(|l| l.hit(view.eye, d).map(|(t, q)| (t, l, q)))
-                    // A lamp flush with the surface behind it (an asset's emitting triangles
-                    // on a ceiling) is in front of it.
-                    .filter(|(t, _, _)| *t <= surface * (1.0 + 1e-6))
-                    .min_by(|a, b| a.0.total_cmp(&b.0))?;
+                if t > surface * (1.0 + 1e-6) {
+                    return None;
+                }
                 let c = l.radiance_at(q);
                 c.is_finite().then(|| c.as_vec3().to_array())
             })

@@ -12,6 +12,10 @@
   lamp and a small pendant lamp 1.2 m lower, facing the floor, off to one side; a board hung at
   1.8 m, between the pendant's height and the ceiling, under the ceiling lamp, shadows the floor
   from it (not from the pendant, which is below it); a box on the floor under the pendant.
+- punctual-room.gltf: a shell with a window in its +x wall, lit only by KHR_lights_punctual
+  lights, as Blender's glTF exporter writes a scene's lamps: a point light near the ceiling
+  over a box, a spot light aimed at a ball, and a sun shining through the window onto the
+  floor, where a post stands in its patch (issue 34).
 """
 import base64, json, math, os, struct
 
@@ -202,7 +206,8 @@ def sphere(g, r, material, rings=12, segments=24):
     return g.primitive(pos, nrm, tris, material)
 
 
-def shell(g):
+def shell(g, window=None):
+    """The 4 x 2.5 x 4 m room; `window` = (y0, y1, z0, z1) cuts an opening in the +x wall."""
     white = g.material("white wall", [0.75, 0.74, 0.72], 0.0, 0.9)
     red = g.material("red wall", [0.7, 0.08, 0.06], 0.0, 0.9)
     blue = g.material("blue wall", [0.1, 0.2, 0.65], 0.0, 0.9)
@@ -214,8 +219,18 @@ def shell(g):
         quad_prim(g, [(-X, 0, -Z), (X, 0, -Z), (X, Y, -Z), (-X, Y, -Z)], (0, 0, 1), white),
         quad_prim(g, [(-X, 0, Z), (-X, Y, Z), (X, Y, Z), (X, 0, Z)], (0, 0, -1), white),
         quad_prim(g, [(-X, 0, -Z), (-X, Y, -Z), (-X, Y, Z), (-X, 0, Z)], (1, 0, 0), red),
-        quad_prim(g, [(X, 0, -Z), (X, 0, Z), (X, Y, Z), (X, Y, -Z)], (-1, 0, 0), blue),
-    ])
+    ] + plus_x_wall(g, X, Y, Z, blue, window))
+
+
+def plus_x_wall(g, X, Y, Z, material, window):
+    """The +x wall (facing -x), whole or as four quads around `window`."""
+    def part(y0, y1, z0, z1):
+        return quad_prim(g, [(X, y0, z0), (X, y0, z1), (X, y1, z1), (X, y1, z0)], (-1, 0, 0),
+                         material)
+    if window is None:
+        return [part(0, Y, -Z, Z)]
+    y0, y1, z0, z1 = window
+    return [part(0, y0, -Z, Z), part(y1, Y, -Z, Z), part(y0, y1, -Z, z0), part(y0, y1, z1, Z)]
 
 
 def room():
@@ -288,7 +303,67 @@ def two_lamps():
     g.write(os.path.join(HERE, "two-lamps.gltf"))
 
 
+def looking(d):
+    """The node rotation (x, y, z, w) that turns -Z toward unit direction `d`."""
+    f = (0.0, 0.0, -1.0)
+    axis = cross(f, d)
+    s = math.sqrt(dot(axis, axis))
+    c = dot(f, d)
+    if s < 1e-9:
+        return [0.0, 0.0, 0.0, 1.0] if c > 0 else [1.0, 0.0, 0.0, 0.0]
+    angle = math.atan2(s, c)
+    k = math.sin(angle / 2) / s
+    return [axis[0] * k, axis[1] * k, axis[2] * k, math.cos(angle / 2)]
+
+
+def normalized(v):
+    n = math.sqrt(dot(v, v))
+    return tuple(x / n for x in v)
+
+
+def punctual_room():
+    g = Gltf()
+    shell_mesh = shell(g, window=(1.0, 1.8, -0.5, 0.5))
+    clay = g.material("clay", [0.7, 0.45, 0.3], 0.0, 0.8)
+    glossy = g.material("glossy plastic", [0.05, 0.3, 0.1], 0.0, 0.3)
+    box_mesh = g.mesh("box", [box(g, (0.3, 0.3, 0.3), clay)])
+    post_mesh = g.mesh("post", [box(g, (0.08, 0.35, 0.08), clay)])
+    ball_mesh = g.mesh("ball", [sphere(g, 0.3, glossy)])
+    sun_dir = normalized((-0.7, -0.6, 0.15))
+    ball = (1.0, 0.3, -1.1)
+    spot_at = (0.7, 2.3, -0.3)
+    spot_dir = normalized(sub(ball, spot_at))
+    g.doc["extensionsUsed"].append("KHR_lights_punctual")
+    g.doc["extensions"] = {"KHR_lights_punctual": {"lights": [
+        {"name": "bulb", "type": "point", "color": [1.0, 0.85, 0.7], "intensity": 5.0},
+        {"name": "spot", "type": "spot", "color": [0.8, 0.9, 1.0], "intensity": 20.0,
+         "spot": {"innerConeAngle": math.radians(18), "outerConeAngle": math.radians(26)}},
+        {"name": "sun", "type": "directional", "color": [1.0, 0.95, 0.85], "intensity": 4.0},
+    ]}}
+    g.doc["cameras"].append({"name": "view", "type": "perspective",
+                             "perspective": {"yfov": 0.9, "aspectRatio": 1.5,
+                                             "znear": 0.05, "zfar": 50.0}})
+    t = math.radians(-24) / 2
+    nodes = [
+        g.node("shell", mesh=shell_mesh),
+        g.node("bulb", translation=[-1.0, 2.1, -0.8],
+               extensions={"KHR_lights_punctual": {"light": 0}}),
+        g.node("spot", translation=list(spot_at), rotation=looking(spot_dir),
+               extensions={"KHR_lights_punctual": {"light": 1}}),
+        g.node("sun", translation=[3.0, 3.0, 0.0], rotation=looking(sun_dir),
+               extensions={"KHR_lights_punctual": {"light": 2}}),
+        g.node("box", mesh=box_mesh, translation=[-1.0, 0.3, -0.8]),
+        g.node("post", mesh=post_mesh, translation=[0.35, 0.35, 0.2]),
+        g.node("ball", mesh=ball_mesh, translation=list(ball)),
+        g.node("camera", camera=0, translation=[-0.3, 1.7, 1.9],
+               rotation=[math.sin(t), 0.0, 0.0, math.cos(t)]),
+    ]
+    g.doc["scenes"].append({"name": "punctual room", "nodes": nodes})
+    g.write(os.path.join(HERE, "punctual-room.gltf"))
+
+
 if __name__ == "__main__":
     cornell()
     room()
     two_lamps()
+    punctual_room()

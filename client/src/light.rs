@@ -1,30 +1,190 @@
-//! A polygonal light placed in the world for one frame: the scene's light moved by a rigid
-//! transform (translate + rotate), in f64.
+//! A light placed in the world for one frame — a polygon, a point or spot light's sphere, or
+//! the sun's disk at infinity — moved by a rigid transform (translate + rotate), in f64.
+//!
+//! Every method sees a light through what it subtends from a point ([`Light::directions`]):
+//! a polygon's corners; a sphere's silhouette, the cap of half-angle α (sin α = r / d), as a
+//! regular spherical [`ROUND_SIDES`]-gon of the cap's solid angle; the sun's disk likewise.
+//! The LTC integral of that polygon cut by the trees [paper000 §3.1 eq. 2] shades all three.
 
 use std::sync::Arc;
 
 use anyhow::Result;
-use bspvt_proto::scene::PolygonLight;
+use bspvt_proto::Scene;
+use bspvt_proto::scene::{LightMotion, PolygonLight, PunctualLight, SunLight};
 use glam::{DAffine3, DVec3};
 
 use crate::texture::{LightFrame, LightTexture};
 
-/// A polygonal light as posed for one frame.
+/// Sides of the spherical polygon a round light (sphere, sun) is integrated as.
+pub const ROUND_SIDES: usize = 12;
+
+/// What a light is, beyond its radiance.
+#[derive(Clone, Debug)]
+pub enum Shape {
+    /// A planar convex polygon ([`Light::vertices`]).
+    Polygon,
+    /// A point or spot light's sphere: the scene's light (its position, spot and range posed
+    /// with it), radius [`PunctualLight::sphere_radius`].
+    Sphere(PunctualLight),
+    /// A disk at infinity (the sun).
+    Distant {
+        /// Unit direction toward the disk's centre.
+        toward: DVec3,
+        /// Half its angular diameter (radians).
+        half_angle: f64,
+    },
+}
+
+/// A light as posed for one frame.
 #[derive(Clone, Debug)]
 pub struct Light {
-    /// Convex polygon, counter-clockwise seen from the emitting side.
+    /// A polygon's corners, counter-clockwise seen from the emitting side (empty for a
+    /// sphere or a sun: see [`Light::directions`]).
     pub vertices: Vec<DVec3>,
-    /// Unit normal of the emitting side.
+    /// Unit normal of a polygon's emitting side (zero for the others).
     pub normal: DVec3,
-    /// Linear RGB radiance.
+    /// Linear RGB radiance (a sphere's: I / (π r²); the sun's: E / Ω).
     pub radiance: DVec3,
     /// Emits from both sides.
     pub two_sided: bool,
     /// Prefiltered texture modulating the radiance (shared between frames).
     pub texture: Option<Arc<LightTexture>>,
+    /// Polygon, sphere or sun.
+    pub shape: Shape,
+}
+
+/// Every light of `scene` at rest, with where its bake lets it go: the polygon lights (with
+/// their textures), then the point and spot lights, then the suns — the order `--light K` and
+/// the viewer count in.
+pub fn scene_lights(scene: &Scene) -> Result<Vec<(Light, LightMotion)>> {
+    let mut out = Vec::with_capacity(light_count(scene));
+    for l in &scene.lights {
+        out.push((Light::load(l)?, l.motion()));
+    }
+    out.extend(
+        scene
+            .punctual
+            .iter()
+            .map(|l| (Light::sphere(l), l.motion())),
+    );
+    out.extend(scene.suns.iter().map(|l| (Light::sun(l), l.motion())));
+    Ok(out)
+}
+
+/// How many lights [`scene_lights`] gives.
+pub fn light_count(scene: &Scene) -> usize {
+    scene.lights.len() + scene.punctual.len() + scene.suns.len()
+}
+
+/// A regular spherical polygon of [`ROUND_SIDES`] unit directions around unit `axis` with the
+/// solid angle of the cap of half-angle α, given as `sin_half` = sin(α/2), counter-clockwise
+/// seen from the centre of the sphere (the point looking out along `axis`).
+///
+/// Each of its N isosceles triangles (apex angle C = 2π/N, sides β) has area E = Ω/N with
+/// tan(E/2) = t² sin C / (1 + t² cos C), t = tan(β/2) (Todhunter, "Spherical Trigonometry",
+/// §101), so t² = T / (sin C − T cos C) with T = tan(E/2) and Ω = 4π sin²(α/2).
+pub(crate) fn round_directions(axis: DVec3, sin_half: f64) -> Option<[DVec3; ROUND_SIDES]> {
+    let n = ROUND_SIDES as f64;
+    let c = std::f64::consts::TAU / n;
+    let omega = 4.0 * std::f64::consts::PI * sin_half * sin_half;
+    let big_t = (0.5 * omega / n).tan();
+    let t2 = big_t / (c.sin() - big_t * c.cos());
+    if !(t2 > 0.0) || !t2.is_finite() || !axis.is_finite() {
+        return None;
+    }
+    let beta = 2.0 * t2.sqrt().atan();
+    let (sb, cb) = beta.sin_cos();
+    let a = axis.normalize();
+    let (u, v) = a.any_orthonormal_pair();
+    let mut out = [DVec3::ZERO; ROUND_SIDES];
+    for (k, d) in out.iter_mut().enumerate() {
+        // Clockwise about `a` seen from outside = counter-clockwise from the centre.
+        let phi = -c * k as f64;
+        *d = a * cb + (u * phi.cos() + v * phi.sin()) * sb;
+    }
+    Some(out)
 }
 
 impl Light {
+    /// A point or spot light as its sphere (radiance I / (π r²), the same far field).
+    pub fn sphere(l: &PunctualLight) -> Light {
+        Light {
+            vertices: Vec::new(),
+            normal: DVec3::ZERO,
+            radiance: DVec3::from(l.sphere_radiance()),
+            two_sided: true,
+            texture: None,
+            shape: Shape::Sphere(l.clone()),
+        }
+    }
+
+    /// A sun as its disk at infinity (radiance E / Ω).
+    pub fn sun(l: &SunLight) -> Light {
+        Light {
+            vertices: Vec::new(),
+            normal: DVec3::ZERO,
+            radiance: DVec3::from(l.disk_radiance()),
+            two_sided: true,
+            texture: None,
+            shape: Shape::Distant {
+                toward: l.toward().as_dvec3(),
+                half_angle: f64::from(l.half_angle()),
+            },
+        }
+    }
+
+    /// True for a polygon light.
+    pub fn is_polygon(&self) -> bool {
+        matches!(self.shape, Shape::Polygon)
+    }
+
+    /// What the light subtends from `p`, as unit directions (polygon: its corners' directions,
+    /// in order; sphere and sun: [`round_directions`]); empty when `p` sees none of it (inside
+    /// the sphere, or at a corner).
+    pub fn directions(&self, p: DVec3) -> Vec<DVec3> {
+        match &self.shape {
+            Shape::Polygon => {
+                let mut out = Vec::with_capacity(self.vertices.len());
+                for &q in &self.vertices {
+                    let d = q - p;
+                    let len = d.length();
+                    if !(len > 0.0) || !len.is_finite() {
+                        return Vec::new();
+                    }
+                    out.push(d / len);
+                }
+                out
+            }
+            Shape::Sphere(l) => {
+                let c = glam::Vec3::from(l.position).as_dvec3();
+                let r = f64::from(l.sphere_radius());
+                let to = c - p;
+                let d = to.length();
+                if !(d > r) || !d.is_finite() {
+                    return Vec::new();
+                }
+                // sin(α/2) from sin α = r / d, stable for tiny α.
+                let sin_a = r / d;
+                let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
+                let sin_half = (sin_a / (2.0 * (1.0 + cos_a)).sqrt()).min(1.0);
+                round_directions(to / d, sin_half).map_or_else(Vec::new, |a| a.to_vec())
+            }
+            Shape::Distant { toward, half_angle } => {
+                round_directions(*toward, (0.5 * half_angle).sin())
+                    .map_or_else(Vec::new, |a| a.to_vec())
+            }
+        }
+    }
+
+    /// The radiance that reaches `p` (per unit of what [`Self::directions`] subtends): a
+    /// spot's cone and a range's window scale a sphere's ([`PunctualLight::falloff`]).
+    pub fn radiance_toward(&self, p: DVec3) -> DVec3 {
+        match &self.shape {
+            Shape::Sphere(l) => self.radiance * f64::from(l.falloff(p.as_vec3())),
+            _ => self.radiance,
+        }
+    }
+
     /// The scene light at rest, without its texture (see `Light::load`).
     pub fn from_scene(l: &PolygonLight) -> Light {
         Light {
@@ -33,6 +193,7 @@ impl Light {
             radiance: glam::Vec3::from(l.radiance).as_dvec3(),
             two_sided: l.two_sided,
             texture: None,
+            shape: Shape::Polygon,
         }
     }
 
@@ -55,8 +216,25 @@ impl Light {
         Ok(light)
     }
 
-    /// This light moved by a rigid transform.
+    /// This light moved by a rigid transform (a sun only turns).
     pub fn transformed(&self, m: &DAffine3) -> Light {
+        let shape = match &self.shape {
+            Shape::Polygon => Shape::Polygon,
+            Shape::Sphere(l) => {
+                let mut l = l.clone();
+                let c = m.transform_point3(glam::Vec3::from(l.position).as_dvec3());
+                l.position = c.as_vec3().to_array();
+                if let Some(s) = &mut l.spot {
+                    let d = glam::Vec3::from(s.direction).as_dvec3();
+                    s.direction = m.transform_vector3(d).normalize_or(d).as_vec3().to_array();
+                }
+                Shape::Sphere(l)
+            }
+            Shape::Distant { toward, half_angle } => Shape::Distant {
+                toward: m.transform_vector3(*toward).normalize_or(*toward),
+                half_angle: *half_angle,
+            },
+        };
         Light {
             vertices: self
                 .vertices
@@ -67,18 +245,38 @@ impl Light {
             radiance: self.radiance,
             two_sided: self.two_sided,
             texture: self.texture.clone(),
+            shape,
         }
     }
 
-    /// The mean of the polygon's vertices.
+    /// The mean of the polygon's vertices; a sphere's centre; for the sun, the origin (the
+    /// pivot it turns about).
     pub fn centroid(&self) -> DVec3 {
-        self.vertices.iter().sum::<DVec3>() / self.vertices.len().max(1) as f64
+        match &self.shape {
+            Shape::Polygon => {
+                self.vertices.iter().sum::<DVec3>() / self.vertices.len().max(1) as f64
+            }
+            Shape::Sphere(l) => glam::Vec3::from(l.position).as_dvec3(),
+            Shape::Distant { .. } => DVec3::ZERO,
+        }
     }
 
-    /// True when a point at `p` receives light from the emitting side(s).
+    /// True when a point at `p` receives light from the emitting side(s): a polygon's front
+    /// (or either side), outside a sphere within its spot's cone and range, anywhere for
+    /// the sun.
     #[inline]
     pub fn faces(&self, p: DVec3) -> bool {
-        self.two_sided || self.normal.dot(p - self.vertices[0]) > 0.0
+        match &self.shape {
+            Shape::Polygon => {
+                !self.vertices.is_empty()
+                    && (self.two_sided || self.normal.dot(p - self.vertices[0]) > 0.0)
+            }
+            Shape::Sphere(l) => {
+                let c = glam::Vec3::from(l.position).as_dvec3();
+                (p - c).length() > f64::from(l.sphere_radius()) && l.falloff(p.as_vec3()) > 0.0
+            }
+            Shape::Distant { .. } => true,
+        }
     }
 
     /// Radiance emitted at light point `q` toward the receiver: the radiance times the
@@ -86,29 +284,51 @@ impl Light {
     #[inline]
     pub fn radiance_at(&self, q: DVec3) -> DVec3 {
         match &self.texture {
-            None => self.radiance,
-            Some(t) => {
+            Some(t) if self.vertices.len() >= 3 => {
                 let f = LightFrame::new(&self.vertices, DVec3::ZERO);
                 self.radiance * t.sample(f.uv(q - self.vertices[0]), 0.0)
             }
+            _ => self.radiance,
         }
     }
 
     /// Where the ray from `o` along unit `d` meets the light's emitting side: (distance, the
     /// point), if it does. A one-sided light is seen from its emitting side only; a ray in
-    /// its plane does not meet it.
+    /// its plane does not meet it. The sun is met at infinity (distance `f64::INFINITY`, the
+    /// point its direction) by a ray within its disk.
     pub fn hit(&self, o: DVec3, d: DVec3) -> Option<(f64, DVec3)> {
-        if !self.two_sided && !(d.dot(self.normal) < 0.0) {
-            return None;
+        match &self.shape {
+            Shape::Polygon => {
+                if !self.two_sided && !(d.dot(self.normal) < 0.0) {
+                    return None;
+                }
+                crate::frame::brdf::polygon_crossing(&self.vertices, self.normal, o, d)
+            }
+            Shape::Sphere(l) => {
+                let c = glam::Vec3::from(l.position).as_dvec3();
+                let t = crate::frame::brdf::sphere_entry(c, f64::from(l.sphere_radius()), o, d)?;
+                Some((t, o + t * d))
+            }
+            Shape::Distant { toward, half_angle } => {
+                (d.dot(*toward) >= half_angle.cos()).then_some((f64::INFINITY, *toward))
+            }
         }
-        crate::frame::brdf::polygon_crossing(&self.vertices, self.normal, o, d)
     }
 
-    /// The light's polygon as a surface in the way of other lights' shadow rays.
-    pub fn surface(&self) -> crate::frame::brdf::LampSurface {
-        crate::frame::brdf::LampSurface {
-            vertices: self.vertices.clone(),
-            normal: self.normal,
+    /// The light's body as a surface in the way of other lights' shadow rays (none for the
+    /// sun).
+    pub fn surface(&self) -> Option<crate::frame::brdf::LampSurface> {
+        use crate::frame::brdf::LampSurface;
+        match &self.shape {
+            Shape::Polygon => Some(LampSurface::Polygon {
+                vertices: self.vertices.clone(),
+                normal: self.normal,
+            }),
+            Shape::Sphere(l) => Some(LampSurface::Sphere {
+                centre: glam::Vec3::from(l.position).as_dvec3(),
+                radius: f64::from(l.sphere_radius()),
+            }),
+            Shape::Distant { .. } => None,
         }
     }
 

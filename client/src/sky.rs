@@ -177,6 +177,7 @@ impl SkyPieces {
                     radiance: DVec3::splat(self.strength),
                     two_sided: true,
                     texture: Some(p.texture.clone()),
+                    shape: crate::light::Shape::Polygon,
                 }
             })
             .collect()
@@ -354,6 +355,7 @@ mod tests {
             motion: Vec::new(),
             warnings: Vec::new(),
             punctual: Vec::new(),
+            suns: Vec::new(),
         };
         scene.validate().expect("valid scene");
         let out = bspvt_bake::Baker::new(&scene)

@@ -61,6 +61,7 @@ fn light(vertices: Vec<DVec3>, two_sided: bool) -> Light {
         radiance: DVec3::ONE,
         two_sided,
         texture: None,
+        shape: bspvt_client::light::Shape::Polygon,
     }
 }
 

@@ -126,6 +126,7 @@ fn light_facing_origin(centre: DVec3, hs: f64, radiance: f64) -> Light {
         radiance: DVec3::splat(radiance),
         two_sided: false,
         texture: None,
+        shape: bspvt_client::light::Shape::Polygon,
     }
 }
 
@@ -298,6 +299,7 @@ fn occluded_receiver_matches_analytic_visibility() {
         radiance: DVec3::splat(2.0),
         two_sided: false,
         texture: None,
+        shape: bspvt_client::light::Shape::Polygon,
     };
     assert!(light.faces(DVec3::ZERO));
     // Broad diffuse + specular lobes, view 30° off the normal.
@@ -396,6 +398,7 @@ fn random_light(rng: &mut Pcg32, c: DVec3, n: DVec3, size: f64, two_sided: bool)
         radiance: DVec3::new(1.0, 10.0, 1e3),
         two_sided,
         texture: None,
+        shape: bspvt_client::light::Shape::Polygon,
     }
 }
 

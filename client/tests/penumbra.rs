@@ -105,7 +105,7 @@ fn rt_penumbra_beats_hard_shadow_against_ltc_exact() {
     let r = Renderer::new(&s, 200, 125);
     let occ = occluder(&s);
     let rest = light(&s);
-    let path = LightPath::new(&s.lights[0], rest.clone());
+    let path = LightPath::new(s.lights[0].motion(), rest.clone());
     let p = Params::default();
     let poses: Vec<(String, Light)> = std::iter::once(("rest".to_string(), rest.clone()))
         .chain((0..3).map(|k| (format!("path {k}/3"), path.frame(k, 3))))

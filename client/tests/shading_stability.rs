@@ -68,6 +68,7 @@ fn light(vertices: Vec<DVec3>, two_sided: bool) -> Light {
         radiance: DVec3::ONE,
         two_sided,
         texture: None,
+        shape: bspvt_client::light::Shape::Polygon,
     }
 }
 
@@ -189,7 +190,7 @@ proptest! {
         }
         let codec = LineCodec::for_resolution(64);
         let t = random_trees(7, &codec);
-        let l = Light { vertices: verts, normal: DVec3::Y, radiance: DVec3::ONE, two_sided: true, texture: None };
+        let l = Light { vertices: verts, normal: DVec3::Y, radiance: DVec3::ONE, two_sided: true, texture: None, shape: bspvt_client::light::Shape::Polygon };
         let r = shade(alpha, DVec3::Y, view(theta, 0.5), &l, DVec3::ZERO, &t);
         prop_assert!(finite(&r));
         let lobes = Lobes::new(LtcTable::builtin(), &material(alpha), DVec3::Y, view(theta, 0.5));

@@ -11,7 +11,7 @@ use std::sync::Arc;
 
 use crate::material::MaterialMaps;
 use crate::motion::MovingPart;
-use crate::scene::{Camera, Material, PolygonLight, PunctualLight, Region};
+use crate::scene::{Camera, Material, PolygonLight, PunctualLight, Region, Spot, SunLight};
 use crate::texture::{LightImage, Texture, TextureRef, Wrap};
 use crate::{BakeSettings, Mesh, Scene};
 
@@ -195,8 +195,9 @@ pub struct SceneStatus {
 /// camera's `aspect`; 5: adds the mesh's UVs, the materials' textures (each image once, as the
 /// PNG or JPEG it came from), the lamps' texture images and the punctual lights; 6 adds which
 /// lights move in their plane (before it, every light without a region did; without one now,
-/// a lamp is fixed). Versions 1 to 5 still read.
-const STORED_VERSION: u16 = 6;
+/// a lamp is fixed); 7 adds the point and spot lights' sphere radii and the suns. Versions 1
+/// to 6 still read.
+const STORED_VERSION: u16 = 7;
 
 #[derive(Serialize, Deserialize)]
 struct StoredScene {
@@ -217,6 +218,69 @@ struct StoredScene {
     punctual: Vec<PunctualLight>,
     /// One per light (or empty: none moves in its plane).
     moves_in_plane: Vec<bool>,
+    suns: Vec<SunLight>,
+}
+
+/// Version 6: version 7 with punctual lights without a radius and no suns.
+#[derive(Serialize, Deserialize)]
+struct StoredSceneV6 {
+    version: u16,
+    mesh: Mesh,
+    materials: Vec<Material>,
+    lights: Vec<StoredLight>,
+    camera: StoredCamera,
+    bake: BakeSettings,
+    motion: Vec<MovingPart>,
+    uvs: Vec<[f32; 2]>,
+    textures: Vec<StoredTexture>,
+    maps: Vec<Option<StoredMaps>>,
+    light_images: Vec<Option<StoredLightImage>>,
+    punctual: Vec<PunctualV6>,
+    moves_in_plane: Vec<bool>,
+}
+
+/// A punctual light as versions 5 and 6 stored it (no radius: the default's).
+#[derive(Serialize, Deserialize)]
+struct PunctualV6 {
+    name: String,
+    position: [f32; 3],
+    intensity: [f32; 3],
+    range: Option<f32>,
+    spot: Option<Spot>,
+}
+
+impl From<PunctualV6> for PunctualLight {
+    fn from(p: PunctualV6) -> PunctualLight {
+        PunctualLight {
+            name: p.name,
+            position: p.position,
+            intensity: p.intensity,
+            range: p.range,
+            spot: p.spot,
+            radius: None,
+        }
+    }
+}
+
+impl From<StoredSceneV6> for StoredScene {
+    fn from(v: StoredSceneV6) -> StoredScene {
+        StoredScene {
+            version: v.version,
+            mesh: v.mesh,
+            materials: v.materials,
+            lights: v.lights,
+            camera: v.camera,
+            bake: v.bake,
+            motion: v.motion,
+            uvs: v.uvs,
+            textures: v.textures,
+            maps: v.maps,
+            light_images: v.light_images,
+            punctual: v.punctual.into_iter().map(PunctualLight::from).collect(),
+            moves_in_plane: v.moves_in_plane,
+            suns: Vec::new(),
+        }
+    }
 }
 
 /// Version 5: version 6 without `moves_in_plane` (every light without a region moved in its
@@ -234,13 +298,13 @@ struct StoredSceneV5 {
     textures: Vec<StoredTexture>,
     maps: Vec<Option<StoredMaps>>,
     light_images: Vec<Option<StoredLightImage>>,
-    punctual: Vec<PunctualLight>,
+    punctual: Vec<PunctualV6>,
 }
 
 impl From<StoredSceneV5> for StoredScene {
     fn from(v: StoredSceneV5) -> StoredScene {
         let moves_in_plane = v.lights.iter().map(|l| l.region.is_none()).collect();
-        StoredScene {
+        StoredSceneV6 {
             version: v.version,
             mesh: v.mesh,
             materials: v.materials,
@@ -255,6 +319,7 @@ impl From<StoredSceneV5> for StoredScene {
             punctual: v.punctual,
             moves_in_plane,
         }
+        .into()
     }
 }
 
@@ -625,6 +690,7 @@ pub fn encode_scene(s: &Scene) -> Vec<u8> {
             true => s.lights.iter().map(|l| l.moves_in_plane).collect(),
             false => Vec::new(),
         },
+        suns: s.suns.clone(),
     };
     postcard::to_stdvec(&stored).unwrap_or_default()
 }
@@ -693,6 +759,9 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
         5 => postcard::from_bytes::<StoredSceneV5>(bytes)
             .map_err(bad)?
             .into(),
+        6 => postcard::from_bytes::<StoredSceneV6>(bytes)
+            .map_err(bad)?
+            .into(),
         STORED_VERSION => postcard::from_bytes(bytes).map_err(bad)?,
         v => return Err(format!("stored scene has version {v}")),
     };
@@ -743,6 +812,7 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
             })
             .collect(),
         punctual: s.punctual,
+        suns: s.suns,
         environment: None,
         camera: s.camera.into(),
         bake: s.bake,

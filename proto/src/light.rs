@@ -71,6 +71,8 @@ pub enum LightMotion {
     Plane,
     /// Anywhere inside this box: rays end where they enter it.
     Region(Region),
+    /// Turned to any direction (a sun): every direction is baked, rays run to infinity.
+    Turns,
 }
 
 impl PolygonLight {
@@ -161,14 +163,17 @@ pub(crate) fn newell_normal(p: &[Vec3]) -> Vec3 {
     n
 }
 
-/// A `KHR_lights_punctual` light (point or spot), placed by its node: what the point-light
-/// methods (paper 003) shade with when an asset has them. Polygon-light methods ignore it.
+/// A `KHR_lights_punctual` point or spot light, placed by its node (or written in a scene
+/// file). The point-light methods (paper 003) shade it as a point; every other method as a
+/// small sphere of [`PunctualLight::sphere_radius`] whose radiance gives the same far field
+/// ([`PunctualLight::sphere_radiance`]), shadowed through the trees (docs/scene-format.md).
 ///
 /// Units: `intensity` is the glTF colour × intensity, read as radiant intensity in the
 /// renderer's linear units per steradian (the glTF candela taken as W·sr⁻¹, no 683 lm/W
 /// factor, as emissive strengths are taken as radiance). Irradiance at distance d, normal
 /// incidence: I / d² × the spot's and the range's attenuation ([`PunctualLight::falloff`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct PunctualLight {
     /// The light's name in the file (for messages).
     pub name: String,
@@ -179,7 +184,83 @@ pub struct PunctualLight {
     /// glTF `range`: beyond it the light is off (`None`: infinite).
     pub range: Option<f32>,
     /// A spot's cone (`None`: a point light, emitting in every direction).
+    #[serde(default)]
     pub spot: Option<Spot>,
+    /// The radius of the sphere it is shaded as (`None`: the scene file's `punctual_radius`,
+    /// else [`DEFAULT_SPHERE_RADIUS`]). Stored scenes are postcard: no field is skipped.
+    #[serde(default)]
+    pub radius: Option<f32>,
+}
+
+/// The radius a point or spot light is given when neither it nor its scene says one: a bulb
+/// of 10 cm across (scene units are metres in glTF).
+pub const DEFAULT_SPHERE_RADIUS: f32 = 0.05;
+
+/// The sun's angular diameter, the default of a [`SunLight`]: 0.53°.
+pub const SUN_ANGULAR_DIAMETER: f32 = 0.53 * std::f32::consts::PI / 180.0;
+
+/// A directional light (`KHR_lights_punctual` `directional`: the sun): a disk at infinity of
+/// `angular_diameter`, shadowed through the trees with every direction baked (its rays run to
+/// infinity), so it may turn freely (docs/scene-format.md).
+///
+/// Units: `illuminance` is the glTF colour × intensity (lux, taken as W·m⁻² as `intensity`
+/// is above): the irradiance on a surface facing the sun. The disk's radiance is
+/// illuminance / its projected solid angle there ([`SunLight::disk_radiance`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SunLight {
+    /// The light's name in the file (for messages).
+    #[serde(default)]
+    pub name: String,
+    /// The direction the light travels (the node's −Z): from the sun toward the scene.
+    pub direction: [f32; 3],
+    /// Illuminance at normal incidence, linear RGB (colour × intensity).
+    pub illuminance: [f32; 3],
+    /// The disk's angular diameter in radians (`None`: [`SUN_ANGULAR_DIAMETER`]).
+    #[serde(default)]
+    pub angular_diameter: Option<f32>,
+}
+
+impl SunLight {
+    /// A sun turns freely: its bake holds every direction.
+    pub fn motion(&self) -> LightMotion {
+        LightMotion::Turns
+    }
+
+    /// Half the disk's angular diameter.
+    pub fn half_angle(&self) -> f32 {
+        0.5 * self.angular_diameter.unwrap_or(SUN_ANGULAR_DIAMETER)
+    }
+
+    /// Unit direction toward the sun.
+    pub fn toward(&self) -> Vec3 {
+        -Vec3::from(self.direction).normalize_or_zero()
+    }
+
+    /// The disk's radiance: illuminance / (π sin² h), h the half-angle — ∫ cos dω over a cap
+    /// of half-angle h around the normal is π sin² h —, so that a surface facing the sun
+    /// receives exactly the illuminance.
+    pub fn disk_radiance(&self) -> [f64; 3] {
+        let h = f64::from(self.half_angle());
+        let projected = std::f64::consts::PI * h.sin().powi(2);
+        self.illuminance.map(|e| f64::from(e) / projected)
+    }
+
+    pub(crate) fn validate(&self, index: usize) -> Result<(), SceneError> {
+        let bad = |m: &str| Err(SceneError::Invalid(format!("sun {index}: {m}")));
+        let d = Vec3::from(self.direction);
+        if !d.is_finite() || d.length_squared() < 1e-12 {
+            return bad("its direction is not a direction");
+        }
+        if self.illuminance.iter().any(|x| !x.is_finite() || *x < 0.0) {
+            return bad("its illuminance must be finite and ≥ 0");
+        }
+        let a = self.angular_diameter.unwrap_or(SUN_ANGULAR_DIAMETER);
+        if !(a > 1e-5 && a <= 0.5) {
+            return bad("its angular_diameter must be in [1e-5, 0.5] radians");
+        }
+        Ok(())
+    }
 }
 
 /// A spot light's cone (KHR_lights_punctual `spot`).
@@ -194,6 +275,24 @@ pub struct Spot {
 }
 
 impl PunctualLight {
+    /// A point or spot light stays where its scene put it: rays end at its sphere.
+    pub fn motion(&self) -> LightMotion {
+        LightMotion::Fixed
+    }
+
+    /// The radius of the sphere the light is shaded as.
+    pub fn sphere_radius(&self) -> f32 {
+        self.radius.unwrap_or(DEFAULT_SPHERE_RADIUS)
+    }
+
+    /// The sphere's radiance: I / (π r²), so that far away (d ≫ r) it gives the irradiance
+    /// I / d² of a point light of intensity I (a sphere is seen as a disk of area π r²).
+    pub fn sphere_radiance(&self) -> [f64; 3] {
+        let r = f64::from(self.sphere_radius());
+        self.intensity
+            .map(|i| f64::from(i) / (std::f64::consts::PI * r * r))
+    }
+
     /// The factor by which `intensity` is scaled toward the point `p`, without the 1/d² of
     /// distance: the spot's smooth falloff and the range window, as the KHR_lights_punctual
     /// specification recommends:
@@ -243,6 +342,9 @@ impl PunctualLight {
             {
                 return bad("its cone angles must satisfy 0 ≤ inner < outer ≤ π/2");
             }
+        }
+        if self.radius.is_some_and(|r| !(r > 0.0 && r.is_finite())) {
+            return bad("its radius must be finite and > 0");
         }
         Ok(())
     }

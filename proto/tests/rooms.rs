@@ -197,7 +197,6 @@ fn gltf_warnings_name_what_is_ignored() {
         "KHR_materials_clearcoat",
         "texture \"image 0\" could not be read: not a PNG or JPEG image; using the factor alone",
         "normal maps",
-        "1 punctual lights feed the point-light methods only",
         "orthographic",
     ] {
         assert!(has(s), "no warning on {s}: {:?}", a.warnings);

@@ -213,7 +213,7 @@ pub(crate) fn run(a: &AnimateArgs) -> Result<()> {
     full_at(&session, &mut report);
     // Only BSPVT frames need the trees; the other methods do not wait for them.
     let needs = session.method.needs();
-    if !a.progressive && needs.sky_trees {
+    if !a.progressive && needs.sky_trees_for(&connected.scene) {
         session.wait_sky();
         if !session.sky_ready() {
             bail!("the sky's trees could not be baked (see the warning above)");

@@ -145,7 +145,7 @@ pub(crate) fn run(a: &DemoArgs) -> Result<()> {
                 .unwrap_or("the stream ended early")
         );
     }
-    if session.method.needs().sky_trees {
+    if session.method.needs().sky_trees_for(session.scene()) {
         println!("baking the sky's trees (every direction above each vertex, once, cached)…");
         let t = Instant::now();
         session.wait_sky();

@@ -663,17 +663,11 @@ fn punctual_point_and_spot_lights() {
         "{cone:?}"
     );
     assert_eq!((cone.inner_cone_angle, cone.outer_cone_angle), (0.2, 0.4));
-    let has = |s: &str| a.warnings.iter().any(|w| w.contains(s));
-    assert!(
-        has("2 punctual lights feed the point-light methods only"),
-        "{:?}",
-        a.warnings
-    );
-    assert!(
-        has("directional light \"sun\" was ignored"),
-        "{:?}",
-        a.warnings
-    );
+    // The sun: its node's −Z (no rotation: −z), glTF's default intensity 1 (lux).
+    assert_eq!(a.suns.len(), 1, "{:?}", a.warnings);
+    assert_eq!(a.suns[0].direction, [0.0, 0.0, -1.0]);
+    assert_eq!(a.suns[0].illuminance, [1.0; 3]);
+    assert_eq!(a.suns[0].name, "sun");
     // The spot's falloff by the specification's formula, at hand-computed angles.
     let at = |angle: f32| spot.falloff(Vec3::new(2.0 * angle.tan(), 0.0, 0.0));
     assert!((at(0.0) - 1.0).abs() < 1e-6 && (at(0.19) - 1.0).abs() < 1e-6);
@@ -1127,8 +1121,9 @@ fn textured_asset_bspvt_against_monte_carlo() {
 }
 
 /// An asset whose only lights are punctual is still the whole scene (KHR_lights_punctual are
-/// its lights: no ground, no added quad light), says so loudly, and the point-light method
-/// lights it through the command line.
+/// its lights: no ground, no added quad light), and every method lights it through the
+/// command line: the point-light method with a point, the default method (BSPVT) and LTC with
+/// the bulb's sphere (issue 34).
 #[test]
 fn an_asset_with_punctual_lights_only_gets_no_ground_and_no_default_lamp() {
     let mats = json!([
@@ -1155,14 +1150,6 @@ fn an_asset_with_punctual_lights_only_gets_no_ground_and_no_default_lamp() {
     assert_eq!(scene.mesh.positions.len(), vertices, "a ground was added");
     assert!(scene.lights.is_empty(), "{:?}", scene.lights);
     assert_eq!(scene.punctual.len(), 1);
-    assert!(
-        scene
-            .warnings
-            .iter()
-            .any(|w| w.contains("only lights are 1 punctual light")),
-        "{:?}",
-        scene.warnings
-    );
 
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("bulb.glb");
@@ -1186,16 +1173,40 @@ fn an_asset_with_punctual_lights_only_gets_no_ground_and_no_default_lamp() {
     let img = image::open(&out).expect("png").to_rgb8();
     let lit = img.pixels().filter(|p| p.0.iter().any(|&c| c > 0)).count();
     assert!(lit > 32 * 32 / 10, "{lit} lit pixels of {}", 32 * 32);
-    // A polygon-light method has no light here: a clear error, not a black image.
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_bspvt"))
-        .args(["render", "--mesh"])
-        .arg(&path)
-        .args([
-            "--method", "ltc", "--width", "32", "--height", "32", "--out",
+    // The default method and unshadowed LTC shade the bulb as its sphere: lit where the
+    // point-light method lights, within a few per cent of its mean (the same I / d² far field).
+    let mean = |img: &image::RgbImage| {
+        img.pixels().map(|p| f64::from(p.0[0])).sum::<f64>() / f64::from(32 * 32)
+    };
+    let hard = mean(&img);
+    for method in [None, Some("ltc")] {
+        let png = dir
+            .path()
+            .join(format!("{}.png", method.unwrap_or("default")));
+        let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_bspvt"));
+        cmd.args(["render", "--mesh"]).arg(&path);
+        if let Some(m) = method {
+            cmd.args(["--method", m]);
+        }
+        cmd.args([
+            "--mode", "pixel", "--width", "32", "--height", "32", "--cache",
         ])
-        .arg(dir.path().join("ltc.png"))
-        .output()
-        .expect("bspvt runs");
-    let err = String::from_utf8_lossy(&run.stderr);
-    assert!(!run.status.success() && err.contains("no light"), "{err}");
+        .arg(dir.path().join("cache"))
+        .arg("--out")
+        .arg(&png);
+        let run = cmd.output().expect("bspvt runs");
+        assert!(
+            run.status.success(),
+            "{method:?}: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        let img = image::open(&png).expect("png").to_rgb8();
+        let lit = img.pixels().filter(|p| p.0.iter().any(|&c| c > 0)).count();
+        assert!(lit > 32 * 32 / 10, "{method:?}: {lit} lit pixels");
+        let m = mean(&img);
+        assert!(
+            (m - hard).abs() <= 0.1 * hard,
+            "{method:?}: mean {m} vs the point light's {hard}"
+        );
+    }
 }

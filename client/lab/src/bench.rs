@@ -250,7 +250,11 @@ pub(crate) fn median_ms<T>(frames: usize, mut f: impl FnMut() -> Result<T>) -> R
 
 /// Every vertex once, on one thread, with the light at the middle of its path.
 fn kernel(name: &str, scene: &Scene, trees: &Trees) -> KernelRow {
-    let light = LightPath::new(&scene.lights[0], Light::from_scene(&scene.lights[0])).at(0.125);
+    let light = LightPath::new(
+        scene.lights[0].motion(),
+        Light::from_scene(&scene.lights[0]),
+    )
+    .at(0.125);
     let table = LtcTable::builtin();
     let mesh = &scene.mesh;
     let eye = glam::Vec3::from(scene.camera.position).as_dvec3();

@@ -44,7 +44,7 @@ use bspvt_proto::scene::open_scene;
 use bspvt_proto::{Mesh, Scene};
 use glam::{DVec3, Vec3};
 
-use bspvt_client::light::Light;
+use bspvt_client::light::{Light, scene_lights};
 
 /// Arguments of `bspvt export-mitsuba`.
 #[derive(clap::Args, Debug)]
@@ -74,18 +74,15 @@ pub struct ExportArgs {
 /// Runs `bspvt export-mitsuba`.
 pub fn run(args: &ExportArgs) -> Result<()> {
     let scene = open_scene(args.scene.as_deref(), args.mesh.as_deref())?;
+    let all: Vec<Light> = scene_lights(&scene)?.into_iter().map(|l| l.0).collect();
     let lights: Vec<Light> = match args.light {
         Some(k) => {
-            let Some(l) = scene.lights.get(k) else {
-                bail!("--light {k}: the scene has {} light(s)", scene.lights.len());
+            let Some(l) = all.get(k) else {
+                bail!("--light {k}: the scene has {} light(s)", all.len());
             };
-            vec![Light::load(l)?]
+            vec![l.clone()]
         }
-        None => scene
-            .lights
-            .iter()
-            .map(Light::load)
-            .collect::<Result<_>>()?,
+        None => all,
     };
     let opts = ExportOptions {
         width: args.width,
@@ -143,7 +140,9 @@ pub fn export(
         bail!("no light to export");
     }
     for (k, light) in lights.iter().enumerate() {
-        if light.vertices.len() < 3 || !light.vertices.iter().all(|v| v.is_finite()) {
+        if light.is_polygon()
+            && (light.vertices.len() < 3 || !light.vertices.iter().all(|v| v.is_finite()))
+        {
             bail!("light {k} needs at least 3 finite vertices");
         }
     }
@@ -287,6 +286,10 @@ pub fn export(
 
     // The lights: emitting side = (v1 − v0) × (v2 − v0) in Mitsuba and here.
     for (k, light) in lights.iter().enumerate() {
+        if !light.is_polygon() {
+            round_light(&mut xml, &mut warnings, k, light);
+            continue;
+        }
         let mut verts = light.vertices.clone();
         if newell(&verts).dot(light.normal) < 0.0 {
             verts.reverse();
@@ -340,6 +343,86 @@ pub fn export(
         files,
         warnings,
     })
+}
+
+/// A sphere or a sun in Mitsuba's terms (radiances doubled as the polygon lights' are): a
+/// point light's sphere as a `sphere` with an area emitter (exactly ours); a spot as Mitsuba's
+/// `spot`, a point of the same intensity whose falloff is linear in angle between the cone
+/// angles (glTF's is quadratic in cos θ there); a sun as `directional` of the same
+/// irradiance (a delta: sharp where ours has the disk's 0.53° penumbra).
+fn round_light(xml: &mut String, warnings: &mut Vec<String>, k: usize, light: &Light) {
+    use bspvt_client::light::Shape;
+    match &light.shape {
+        Shape::Polygon => {}
+        Shape::Sphere(l) => {
+            if l.range.is_some() {
+                warnings.push(format!(
+                    "light {k}'s range window is not exported (Mitsuba's lights have none)"
+                ));
+            }
+            let c = Vec3::from(l.position).as_dvec3();
+            match &l.spot {
+                None => {
+                    let _ = writeln!(
+                        xml,
+                        r#"    <shape type="sphere">
+        <point name="center" value="{c}"/>
+        <float name="radius" value="{r}"/>
+        <bsdf type="diffuse">
+            <rgb name="reflectance" value="0, 0, 0"/>
+        </bsdf>
+        <emitter type="area">
+            <!-- 2 x light {k}'s radiance (a point light's sphere) -->
+            <rgb name="radiance" value="{l}"/>
+        </emitter>
+    </shape>"#,
+                        c = triple(c.to_array()),
+                        r = num(f64::from(l.sphere_radius())),
+                        l = triple((light.radiance * 2.0).to_array()),
+                    );
+                }
+                Some(s) => {
+                    warnings.push(format!(
+                        "light {k} (a spot) is exported as Mitsuba's point spot: no sphere,                          and its falloff linear in angle between the cone angles"
+                    ));
+                    let d = Vec3::from(s.direction).as_dvec3();
+                    let up = if d.y.abs() > 0.9 { DVec3::X } else { DVec3::Y };
+                    let _ = writeln!(
+                        xml,
+                        r#"    <emitter type="spot">
+        <!-- 2 x light {k}'s intensity -->
+        <rgb name="intensity" value="{i}"/>
+        <float name="cutoff_angle" value="{co}"/>
+        <float name="beam_width" value="{ci}"/>
+        <transform name="to_world">
+            <lookat origin="{o}" target="{t}" up="{u}"/>
+        </transform>
+    </emitter>"#,
+                        i = triple(l.intensity.map(|x| 2.0 * f64::from(x))),
+                        co = num(f64::from(s.outer_cone_angle.to_degrees())),
+                        ci = num(f64::from(s.inner_cone_angle.to_degrees())),
+                        o = triple(c.to_array()),
+                        t = triple((c + d).to_array()),
+                        u = triple(up.to_array()),
+                    );
+                }
+            }
+        }
+        Shape::Distant { toward, half_angle } => {
+            // Irradiance facing the sun: E = L π sin²(half) (SunLight::disk_radiance).
+            let omega = std::f64::consts::PI * half_angle.sin().powi(2);
+            let _ = writeln!(
+                xml,
+                r#"    <emitter type="directional">
+        <!-- 2 x light {k}'s irradiance (a sun) -->
+        <vector name="direction" value="{d}"/>
+        <rgb name="irradiance" value="{e}"/>
+    </emitter>"#,
+                d = triple((-*toward).to_array()),
+                e = triple((light.radiance * omega * 2.0).to_array()),
+            );
+        }
+    }
 }
 
 fn triple(v: [f64; 3]) -> String {

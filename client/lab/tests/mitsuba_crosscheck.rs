@@ -217,7 +217,11 @@ fn run_case(name: &str, scene: &Scene, dir: &Path) -> Stats {
     let seed = env_u32("BSPVT_XCHECK_SEED", 1);
     let case_dir = dir.join(name);
     // Every light of the scene, in both renderers.
-    let lights: Vec<Light> = scene.lights.iter().map(Light::from_scene).collect();
+    let lights: Vec<Light> = bspvt_client::light::scene_lights(scene)
+        .expect("lights")
+        .into_iter()
+        .map(|l| l.0)
+        .collect();
     let opts = ExportOptions {
         width: W,
         height: H,
@@ -337,6 +341,21 @@ fn ground_truth_agrees_with_mitsuba() {
         &Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/two-lamps.gltf"),
     )
     .expect("the project's two-lamp room");
+    // Point, spot and sun lights (issue 34). Exactly the same lights in both renderers: the
+    // spot as a point light's sphere, the sun's disk shrunk to Mitsuba's delta direction.
+    let punctual = Scene::from_mesh_path(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/punctual-room.gltf"),
+    )
+    .expect("the project's punctual room");
+    let mut punctual_exact = punctual.clone();
+    punctual_exact
+        .punctual
+        .iter_mut()
+        .for_each(|l| l.spot = None);
+    punctual_exact
+        .suns
+        .iter_mut()
+        .for_each(|s| s.angular_diameter = Some(1e-5));
     let cases = [
         ("plate-small", plate),
         ("specular-a0.3", specular_scene(0.3)),
@@ -347,8 +366,19 @@ fn ground_truth_agrees_with_mitsuba() {
         ("cornell-box", cornell),
         // Two lamps at different heights and a board between them (issue 34).
         ("two-lamps", two_lamps),
+        ("punctual-room-exact", punctual_exact),
     ];
     let mut failures = Vec::new();
+    // The room as exported: Mitsuba's spot (a point, falloff linear in angle) and its delta
+    // sun against our sphere, glTF falloff and 0.53° disk — the image means within 5 %.
+    let s = run_case("punctual-room", &punctual, &dir);
+    let rel = (s.mean_ours - s.mean_mitsuba) / s.mean_mitsuba;
+    if rel.abs() > 0.05 {
+        failures.push(format!(
+            "punctual-room: image means differ by {:+.2} %",
+            100.0 * rel
+        ));
+    }
     for (name, scene) in &cases {
         let s = run_case(name, scene, &dir);
         // Unbiased agreement: the image means agree within 4σ (plus 0.1 % for f32 rounding),

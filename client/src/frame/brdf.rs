@@ -125,11 +125,52 @@ pub struct Shadows<'a> {
 
 /// A lamp's polygon as a surface shadow rays cross (either side).
 #[derive(Clone, Debug)]
-pub struct LampSurface {
-    /// Convex polygon, counter-clockwise about `normal`.
-    pub vertices: Vec<DVec3>,
-    /// Unit normal.
-    pub normal: DVec3,
+pub enum LampSurface {
+    /// A polygon lamp.
+    Polygon {
+        /// Convex polygon, counter-clockwise about `normal`.
+        vertices: Vec<DVec3>,
+        /// Unit normal.
+        normal: DVec3,
+    },
+    /// A point or spot light's sphere.
+    Sphere {
+        /// Its centre.
+        centre: DVec3,
+        /// Its radius.
+        radius: f64,
+    },
+}
+
+impl LampSurface {
+    /// Where the ray from `o` along unit `d` first meets it.
+    fn distance(&self, o: DVec3, d: DVec3) -> Option<f64> {
+        match self {
+            LampSurface::Polygon { vertices, normal } => {
+                polygon_crossing(vertices, *normal, o, d).map(|x| x.0)
+            }
+            LampSurface::Sphere { centre, radius } => sphere_entry(*centre, *radius, o, d),
+        }
+    }
+}
+
+/// Where the ray from `o` along unit `d` enters the sphere (`None`: it misses, the sphere is
+/// behind, or `o` is inside). The near root as c/q (Press et al., "Numerical Recipes" §5.6):
+/// no cancellation for a far, small sphere.
+pub fn sphere_entry(centre: DVec3, radius: f64, o: DVec3, d: DVec3) -> Option<f64> {
+    let oc = o - centre;
+    let b = oc.dot(d);
+    let c = oc.length_squared() - radius * radius;
+    if !(c > 0.0) || !(b < 0.0) {
+        return None;
+    }
+    let disc = b * b - c;
+    if !(disc >= 0.0) {
+        return None;
+    }
+    let q = -b + disc.sqrt();
+    let t = c / q;
+    (t > 0.0 && t.is_finite()).then_some(t)
 }
 
 /// Where the ray from `o` along unit `d` crosses the convex polygon `v` (counter-clockwise
@@ -177,12 +218,17 @@ impl<'a> Shadows<'a> {
         if self
             .lamps
             .iter()
-            .any(|l| polygon_crossing(&l.vertices, l.normal, p, w).is_some_and(|x| x.0 < short))
+            .any(|l| l.distance(p, w).is_some_and(|t| t < short))
         {
             return false;
         }
         let side = if ng.dot(w) >= 0.0 { 1.0 } else { -1.0 };
         let origin = p + ng * (self.epsilon * side);
+        // A light at infinity (the sun): the ray runs to infinity.
+        if dist == f64::INFINITY {
+            return !origin.is_finite()
+                || !occ.occluded_segment(origin.as_vec3(), w.as_vec3(), f32::INFINITY);
+        }
         let d = (p + w * dist) - origin;
         let len = d.length();
         let t_max = len - self.epsilon;

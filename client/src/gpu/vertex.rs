@@ -113,8 +113,14 @@ struct Params {
     codec: [f32; 4],
 }
 
-/// Whether the GPU shades this light: at most 8 vertices.
+/// Whether the GPU shades this light: a polygon of at most 8 vertices.
 pub(crate) fn supports(light: &Light) -> Result<()> {
+    if !light.is_polygon() {
+        bail!(
+            "point, spot and sun lights are shaded on the CPU (the GPU's shaders take polygon \
+             lights)"
+        );
+    }
     if light.vertices.len() > 8 {
         bail!("lights of more than 8 vertices are shaded on the CPU");
     }

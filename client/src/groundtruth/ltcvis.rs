@@ -28,13 +28,13 @@ use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
 use super::rng::Pcg32;
-use super::sampling::PolygonSampler;
+use super::sampling::{ConeSampler, LightSampler, PolygonSampler};
 use super::{Brdf, Ctx, ShadingPoint, Shadows, cosine_hemisphere};
 use crate::frame::camera::View;
 use crate::frame::gbuffer::GBuffer;
 use crate::frame::image::Image;
 use crate::frame::shading::ShadingFrame;
-use crate::light::Light;
+use crate::light::{Light, Shape};
 use crate::ltc::polygon;
 
 /// One LTC lobe: what the LTC table's lookup gives for (α, cos θ).
@@ -97,21 +97,16 @@ fn stratified(n: u32, rng: &mut Pcg32, mut f: impl FnMut([f64; 2])) {
 }
 
 /// The mean visibilities ⟨V⟩_D (specular) and ⟨V⟩_cos (diffuse) over the polygon from `rays`
-/// shadow rays. `local`: light vertices minus the shading point, in the shading frame.
-#[allow(clippy::too_many_arguments)]
+/// shadow rays. `sampler`: the light seen from the shading point, in the shading frame.
 fn mean_visibility(
     sp: &ShadingPoint,
     frame: &ShadingFrame,
-    local: &[DVec3],
-    plane_n: DVec3,
+    sampler: &LightSampler,
     m_inv: &DMat3,
     shadows: &Shadows,
     rays: u32,
     rng: &mut Pcg32,
 ) -> (f64, f64) {
-    let Some(sampler) = PolygonSampler::new(local, plane_n, None) else {
-        return (1.0, 1.0);
-    };
     let m = m_inv.inverse();
     let lobe_ok = m.is_finite() && m_inv.determinant().abs() > 0.0;
     let n_d = if lobe_ok { rays / 4 } else { 0 };
@@ -186,28 +181,56 @@ pub fn shade_ltc_exact_visibility(
         && ok(sp.normal)
         && ok(sp.wo)
         && ok(sp.geometric)
-        && light.vertices.len() >= 3
         && light.faces(sp.position)
         && crate::shade::sees_viewer(sp.normal, sp.wo))
     {
         return DVec3::ZERO;
     }
     let frame = ShadingFrame::new(sp.normal.normalize(), sp.wo.normalize());
-    let local: Vec<DVec3> = light
-        .vertices
-        .iter()
-        .map(|&q| frame.to_local(q - sp.position))
-        .collect();
+    // A polygon's corners; a round light's spherical 12-gon of directions (Light::directions).
+    let local: Vec<DVec3> = match light.shape {
+        Shape::Polygon => light
+            .vertices
+            .iter()
+            .map(|&q| frame.to_local(q - sp.position))
+            .collect(),
+        _ => light
+            .directions(sp.position)
+            .into_iter()
+            .map(|d| frame.to_local(d))
+            .collect(),
+    };
+    if local.len() < 3 {
+        return DVec3::ZERO;
+    }
     let spec_int = polygon::integrate(&lobe.m_inv, &local);
     let diff_int = polygon::form_factor(&local);
     let (vis_s, vis_d) = if rays == 0 || (spec_int <= 0.0 && diff_int <= 0.0) {
         (1.0, 1.0)
     } else {
-        let plane_n = frame.to_local(light.normal);
-        mean_visibility(sp, &frame, &local, plane_n, &lobe.m_inv, shadows, rays, rng)
+        // Shadow rays toward the light itself: its polygon, a sphere's cap, the sun's cone.
+        let sampler = match &light.shape {
+            Shape::Polygon => PolygonSampler::new(&local, frame.to_local(light.normal), None)
+                .map(LightSampler::Polygon),
+            Shape::Sphere(l) => ConeSampler::sphere(
+                frame.to_local(glam::Vec3::from(l.position).as_dvec3() - sp.position),
+                f64::from(l.sphere_radius()),
+            )
+            .map(LightSampler::Cone),
+            Shape::Distant { toward, half_angle } => {
+                ConeSampler::distant(frame.to_local(*toward), *half_angle).map(LightSampler::Cone)
+            }
+        };
+        match sampler {
+            Some(s) => mean_visibility(sp, &frame, &s, &lobe.m_inv, shadows, rays, rng),
+            None => (1.0, 1.0),
+        }
     };
     let spec_colour = brdf.f0 * lobe.magnitude + (DVec3::ONE - brdf.f0) * lobe.fresnel;
-    let le = light.radiance_at(light.centroid());
+    let le = match light.shape {
+        Shape::Polygon => light.radiance_at(light.centroid()),
+        _ => light.radiance_toward(sp.position),
+    };
     let v = le * (brdf.albedo * (diff_int * vis_d) + spec_colour * (spec_int * vis_s));
     if v.is_finite() {
         v.max(DVec3::ZERO)

@@ -59,7 +59,7 @@ use crate::frame::camera::View;
 use crate::frame::gbuffer::{GBuffer, Surface};
 use crate::frame::image::Image;
 use crate::frame::shading::ShadingFrame;
-use crate::light::Light;
+use crate::light::{Light, Shape};
 
 pub use env::{EnvSampler, render_mc_env};
 pub use ltcvis::{
@@ -67,7 +67,7 @@ pub use ltcvis::{
 };
 pub use primary::Tracer;
 pub use rng::Pcg32;
-use sampling::PolygonSampler;
+use sampling::{ConeSampler, LightSampler, PolygonSampler};
 
 /// A point to shade.
 #[derive(Clone, Copy, Debug)]
@@ -159,7 +159,9 @@ pub(crate) struct McPoint {
     geometric: DVec3,
     frame: ShadingFrame,
     wo: DVec3,
-    sampler: PolygonSampler,
+    sampler: LightSampler,
+    /// A spot's cone and a range's window toward this point (1 for the others).
+    emission: f64,
 }
 
 impl McPoint {
@@ -171,18 +173,45 @@ impl McPoint {
         let n = sp.normal.normalize();
         let frame = ShadingFrame::new(n, sp.wo.normalize());
         let wo = frame.to_local(sp.wo.normalize());
-        if wo.z.is_nan() || wo.z <= 0.0 || light.vertices.len() < 3 || !light.faces(sp.position) {
+        if wo.z.is_nan() || wo.z <= 0.0 || !light.faces(sp.position) {
             return None;
         }
-        let offsets: Vec<DVec3> = light.vertices.iter().map(|&q| q - sp.position).collect();
-        let sampler = PolygonSampler::new(&offsets, light.normal, Some(n))?;
+        let sampler = match &light.shape {
+            Shape::Polygon => {
+                if light.vertices.len() < 3 {
+                    return None;
+                }
+                let offsets: Vec<DVec3> = light.vertices.iter().map(|&q| q - sp.position).collect();
+                LightSampler::Polygon(PolygonSampler::new(&offsets, light.normal, Some(n))?)
+            }
+            Shape::Sphere(l) => LightSampler::Cone(ConeSampler::sphere(
+                glam::Vec3::from(l.position).as_dvec3() - sp.position,
+                f64::from(l.sphere_radius()),
+            )?),
+            Shape::Distant { toward, half_angle } => {
+                LightSampler::Cone(ConeSampler::distant(*toward, *half_angle)?)
+            }
+        };
+        let emission = match &light.shape {
+            Shape::Sphere(l) => f64::from(l.falloff(sp.position.as_vec3())),
+            _ => 1.0,
+        };
         Some(McPoint {
             position: sp.position,
             geometric: sp.geometric.normalize(),
             frame,
             wo,
             sampler,
+            emission,
         })
+    }
+
+    /// The radiance `light` sends back along `dir` from distance `dist`.
+    fn emitted(&self, light: &Light, dir: DVec3, dist: f64) -> DVec3 {
+        match light.shape {
+            Shape::Polygon => light.radiance_at(self.position + dir * dist) * self.emission,
+            _ => light.radiance * self.emission,
+        }
     }
 
     /// One MIS sample: a light direction and a BRDF direction.
@@ -219,7 +248,7 @@ impl McPoint {
             if f != DVec3::ZERO {
                 let w = power_heuristic(ls.pdf, brdf.pdf(self.wo, wi));
                 if w > 0.0 {
-                    let le = light.radiance_at(self.position + ls.dir * ls.dist);
+                    let le = self.emitted(light, ls.dir, ls.dist);
                     add(ls.dir, ls.dist, le * f * (w / ls.pdf));
                 }
             }
@@ -234,7 +263,7 @@ impl McPoint {
                 if pb > 0.0 && f != DVec3::ZERO {
                     let w = power_heuristic(pb, pl);
                     if w > 0.0 {
-                        let le = light.radiance_at(self.position + dir * dist);
+                        let le = self.emitted(light, dir, dist);
                         add(dir, dist, le * f * (w / pb));
                     }
                 }
@@ -467,7 +496,7 @@ impl<'a> Ctx<'a> {
 
     /// Shadow rays also stopped by `lamps` (each a surface in the way of the others).
     pub(crate) fn with_lamps(mut self, lamps: &[Light]) -> Ctx<'a> {
-        self.shadows.lamps = lamps.iter().map(Light::surface).collect();
+        self.shadows.lamps = lamps.iter().filter_map(Light::surface).collect();
         self
     }
 

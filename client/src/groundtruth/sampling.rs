@@ -402,3 +402,103 @@ mod tests {
         }
     }
 }
+
+/// A round light seen from one shading point — a sphere's visible cap or the sun's disk —
+/// sampled uniformly in solid angle: cos θ = 1 − u k, k = 1 − cos θ_max = 2 sin²(θ_max/2)
+/// (exact for tiny cones), pdf 1 / (2π k) (Pharr, Jakob & Humphreys, PBRT-v4 §A.5.4
+/// `SampleUniformCone`). Directions below the horizon are drawn too (the BRDF is zero there).
+#[derive(Clone, Debug)]
+pub(crate) struct ConeSampler {
+    axis: DVec3,
+    cos_max: f64,
+    /// 1 − cos θ_max.
+    k: f64,
+    /// The sphere's centre and radius, as an offset from the point; `None`: at infinity.
+    sphere: Option<(DVec3, f64)>,
+}
+
+impl ConeSampler {
+    /// The cap a sphere of `radius` at offset `centre` subtends (`None` from inside it).
+    pub(crate) fn sphere(centre: DVec3, radius: f64) -> Option<ConeSampler> {
+        let d = centre.length();
+        if !(d > radius) || !d.is_finite() || !(radius > 0.0) {
+            return None;
+        }
+        let sin_a = radius / d;
+        let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
+        // 1 − cos α = sin²α / (1 + cos α).
+        let k = sin_a * sin_a / (1.0 + cos_a);
+        Some(ConeSampler {
+            axis: centre / d,
+            cos_max: cos_a,
+            k,
+            sphere: Some((centre, radius)),
+        })
+    }
+
+    /// A disk at infinity of angular radius `half_angle` around unit `axis`.
+    pub(crate) fn distant(axis: DVec3, half_angle: f64) -> Option<ConeSampler> {
+        let k = 2.0 * (0.5 * half_angle).sin().powi(2);
+        (k > 0.0 && axis.is_finite()).then(|| ConeSampler {
+            axis: axis.normalize(),
+            cos_max: half_angle.cos(),
+            k,
+            sphere: None,
+        })
+    }
+
+    fn distance(&self, w: DVec3) -> f64 {
+        match self.sphere {
+            None => f64::INFINITY,
+            Some((c, r)) => crate::frame::brdf::sphere_entry(c, r, DVec3::ZERO, w)
+                // A direction on the rim by rounding: its closest approach.
+                .unwrap_or_else(|| c.dot(w).max(0.0)),
+        }
+    }
+
+    pub(crate) fn sample(&self, u: [f64; 2]) -> Option<LightSample> {
+        let uk = u[0] * self.k;
+        let cos = 1.0 - uk;
+        let sin = (uk * (2.0 - uk)).max(0.0).sqrt();
+        let phi = 2.0 * PI * u[1];
+        let (a, b) = self.axis.any_orthonormal_pair();
+        let dir = (self.axis * cos + (a * phi.cos() + b * phi.sin()) * sin).normalize();
+        let pdf = 1.0 / (2.0 * PI * self.k);
+        (dir.is_finite() && pdf.is_finite()).then(|| LightSample {
+            dir,
+            dist: self.distance(dir),
+            pdf,
+        })
+    }
+
+    pub(crate) fn pdf(&self, w: DVec3) -> Option<(f64, f64)> {
+        if !(w.dot(self.axis) >= self.cos_max) {
+            return None;
+        }
+        Some((self.distance(w), 1.0 / (2.0 * PI * self.k)))
+    }
+}
+
+/// How a light is sampled from a point: a polygon, or a round light's cone.
+#[derive(Clone, Debug)]
+pub(crate) enum LightSampler {
+    Polygon(PolygonSampler),
+    Cone(ConeSampler),
+}
+
+impl LightSampler {
+    pub(crate) fn sample(&self, u: [f64; 2]) -> Option<LightSample> {
+        match self {
+            LightSampler::Polygon(s) => s.sample(u),
+            LightSampler::Cone(s) => s.sample(u),
+        }
+    }
+
+    /// (distance, pdf) of direction `w`, if it reaches the light.
+    pub(crate) fn pdf(&self, w: DVec3) -> Option<(f64, f64)> {
+        match self {
+            LightSampler::Polygon(s) => s.pdf(w),
+            LightSampler::Cone(s) => s.pdf(w),
+        }
+    }
+}

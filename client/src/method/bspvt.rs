@@ -48,10 +48,9 @@ impl MethodState for State {
         {
             return Ok(frame);
         }
-        let (image, counts) = match f.trees {
-            Some(trees) => f.renderer.bspvt(lights, trees, f.mode),
-            None => f.renderer.ltc(lights, f.mode),
-        };
+        let (image, counts) = f
+            .renderer
+            .bspvt_lights(lights, f.trees, f.sky_trees, f.mode);
         Ok(Frame::new(image, counts))
     }
 }

@@ -79,10 +79,9 @@ impl MethodState for State {
         };
         // The lamps, shadowed by their own trees (unshadowed until those arrive).
         if !f.lights.is_empty() {
-            let (lamps, c) = match f.trees {
-                Some(trees) => f.renderer.bspvt(f.lights, trees, f.mode),
-                None => f.renderer.ltc(f.lights, f.mode),
-            };
+            let (lamps, c) = f
+                .renderer
+                .bspvt_lights(f.lights, f.trees, f.sky_trees, f.mode);
             image.add(&lamps);
             counts = FrameCounts {
                 vertices_shaded: counts.vertices_shaded.max(c.vertices_shaded),

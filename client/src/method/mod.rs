@@ -54,7 +54,7 @@ pub struct Needs {
     pub rays: bool,
     /// An environment map (`--env`).
     pub env_map: bool,
-    /// A polygonal light of the scene.
+    /// A light of the scene: a polygon, a point or spot light's sphere, or a sun.
     pub polygon_light: bool,
     /// The scene's punctual lights (glTF `KHR_lights_punctual`) stand in for the polygonal
     /// light when it has them: a scene whose only lights are punctual is enough.
@@ -65,7 +65,14 @@ impl Needs {
     /// Whether the scene's own (lamp) trees are needed: for the method itself, or for the
     /// lamps a sky method draws beside the sky.
     pub fn lamp_trees(&self, scene: &Scene) -> bool {
-        self.trees || (self.sky_trees && !scene.lights.is_empty())
+        self.trees || (self.sky_trees && crate::light::light_count(scene) > 0)
+    }
+
+    /// Whether the sky's trees are needed for `scene`: for the method itself, or for the suns
+    /// of a method that needs trees where the scene bakes its suns apart
+    /// ([`Scene::suns_in_sky_bake`]).
+    pub fn sky_trees_for(&self, scene: &Scene) -> bool {
+        self.sky_trees || (self.trees && scene.suns_in_sky_bake())
     }
 
     /// The needs in words, e.g. `trees, polygon light`.
@@ -84,7 +91,7 @@ impl Needs {
             v.push("environment map");
         }
         if self.polygon_light {
-            v.push("polygon light");
+            v.push("a light");
         }
         if v.is_empty() {
             "nothing".into()
@@ -255,7 +262,7 @@ pub(crate) fn sum_over_lights(
             Some(s) => s.add(&image),
         }
     }
-    sum.ok_or_else(|| anyhow::anyhow!("this method needs a polygonal light; the scene has none"))
+    sum.ok_or_else(|| anyhow::anyhow!("this method needs a light the scene does not have"))
 }
 
 /// A drawn frame and what it cost.

@@ -58,8 +58,15 @@ impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
         let occ = self.technique.needs_rays().then(|| f.scene.occluder());
         let image = if f.renderer.scene.punctual.is_empty() {
-            // Each polygon light as a point light at its centroid, summed.
-            super::sum_over_lights(f.lights, |light| {
+            // Each polygon light as a point light at its centroid, summed (a sun has no
+            // point to cast from: it is left to the other methods).
+            let polygons: Vec<_> = f
+                .lights
+                .iter()
+                .filter(|l| l.is_polygon())
+                .cloned()
+                .collect();
+            super::sum_over_lights(&polygons, |light| {
                 penumbra::render(f.renderer, light, self.technique, occ, &self.params)
             })?
         } else {

@@ -11,7 +11,7 @@ use serde::Serialize;
 use super::{FrameInput, FrameMethod, SceneData, Settings};
 use crate::frame::image::Image;
 use crate::frame::stats::median;
-use crate::light::Light;
+use crate::light::{Light, light_count, scene_lights};
 use crate::render::path::LightPath;
 use crate::render::renderer::{FrameCounts, Mode, Renderer, Trees};
 
@@ -107,31 +107,33 @@ pub fn render_sequence(
 ) -> Result<Stats> {
     let method = opts.method;
     let needs = method.needs();
-    if needs.sky_trees && sky_trees.is_none() {
+    if needs.sky_trees_for(scene) && sky_trees.is_none() {
         bail!("--method {} needs the sky's baked trees", method.name());
     }
     // Polygon-light methods follow the light's path, and so do the lamps a sky method draws
     // beside the sky; the environment methods play the scene's motion (frame k at cycle time
     // k / frames).
-    // A point-light method on a scene whose only lights are punctual needs no polygon light.
+    // The point-light methods shade the scene's punctual lights as points where it has any
+    // (`penumbra::render_punctual`), else each polygon light from its centroid.
     let punctual_only = needs.punctual && !scene.punctual.is_empty() && scene.lights.is_empty();
     // The environment methods draw the lamps beside the sky (`sg` ignores them).
     let lamp = (needs.polygon_light && !punctual_only)
-        || ((needs.sky_trees || needs.env_map) && !scene.lights.is_empty());
+        || ((needs.sky_trees || needs.env_map) && light_count(scene) > 0);
     let lights: Vec<(LightPath, Light)> = if lamp {
+        let all = scene_lights(scene)?;
         let chosen: Vec<usize> = match opts.light {
-            Some(k) if k >= scene.lights.len() => {
+            Some(k) if k >= all.len() => {
                 bail!(
                     "--light {k}: the scene has {} light(s) (0 to {})",
-                    scene.lights.len(),
-                    scene.lights.len().saturating_sub(1)
+                    all.len(),
+                    all.len().saturating_sub(1)
                 )
             }
             Some(k) => vec![k],
-            None => (0..scene.lights.len()).collect(),
+            None => (0..all.len()).collect(),
         };
         if chosen.is_empty() {
-            bail!("the scene has no polygonal light");
+            bail!("the scene has no light (no lamp, no punctual light, no sun)");
         }
         if needs.lamp_trees(scene) && trees.is_none() {
             bail!("--method {} needs baked trees", method.name());
@@ -152,9 +154,8 @@ pub fn render_sequence(
                      (wind its vertices the other way round, or make it two_sided)"
                 );
             }
-            let light = &scene.lights[k];
-            let rest = Light::load(light)?;
-            out.push((LightPath::new(light, rest.clone()), rest));
+            let (rest, motion) = all[k].clone();
+            out.push((LightPath::new(motion, rest.clone()), rest));
         }
         out
     } else {

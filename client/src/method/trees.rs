@@ -65,7 +65,7 @@ pub fn file_stem(name: &str) -> String {
 
 /// The bake of `scene` in `cache` (`NAME-HASH.bspvt`, HASH over the bake's
 /// [`bspvt_bake::ALGORITHM_VERSION`], the mesh's content hash, the bake settings and the
-/// lights — their regions and planes decide which directions matter and where rays end; none:
+/// lights — their regions, planes, polygons and spheres, and whether a sun makes every direction matter, decide which directions matter and where rays end; none:
 /// the sky's), baking it first when absent. `progress(done, total)` follows the
 /// vertices while it bakes.
 pub fn cached_bake(
@@ -77,11 +77,13 @@ pub fn cached_bake(
     let mut h = bspvt_proto::hash::Fnv1a::default();
     h.write(
         format!(
-            "{}:{:x}{:?}{:?}",
+            "{}:{:x}{:?}{:?}{:?}{:?}",
             bspvt_bake::ALGORITHM_VERSION,
             scene.mesh.content_hash(),
             scene.bake,
-            scene.lights
+            scene.lights,
+            scene.punctual,
+            scene.suns
         )
         .as_bytes(),
     );
@@ -146,7 +148,7 @@ pub fn bakes_for(
         }
         None => None,
     };
-    let sky = if needs.sky_trees {
+    let sky = if needs.sky_trees_for(scene) {
         Some(cached_sky_bake(scene, cache, progress)?.1)
     } else {
         None

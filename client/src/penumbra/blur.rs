@@ -366,6 +366,7 @@ mod tests {
             radiance: DVec3::ONE,
             two_sided: false,
             texture: None,
+            shape: crate::light::Shape::Polygon,
         };
         let o = light_offsets(&square, 6);
         assert_eq!(o.len(), 36);

@@ -161,6 +161,7 @@ pub(crate) fn point_caster(
         radiance: DVec3::ZERO,
         two_sided: false,
         texture: None,
+        shape: crate::light::Shape::Polygon,
     }
 }
 

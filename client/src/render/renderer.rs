@@ -298,11 +298,11 @@ impl<'a> Renderer<'a> {
             let (mut pieces, mut dropped) = (0, 0);
             for light in lights {
                 if !trees.has(v) {
-                    sum += unshadowed(lobes, light, p, nrm).tinted(light.radiance);
+                    sum += unshadowed(lobes, light, p, nrm).tinted(light.radiance_toward(p));
                     continue;
                 }
                 let s = shade_vertex(lobes, light, p, nrm, &trees.trees[v as usize], &trees.codec);
-                sum += s.shadowed.tinted(light.radiance);
+                sum += s.shadowed.tinted(light.radiance_toward(p));
                 if ratios {
                     r.push(s.shadowed.ratio(&s.unshadowed));
                 }
@@ -399,7 +399,11 @@ impl<'a> Renderer<'a> {
                 if t > surface * (1.0 + 1e-6) {
                     return None;
                 }
-                let c = l.radiance_at(q);
+                let c = match l.shape {
+                    crate::light::Shape::Polygon => l.radiance_at(q),
+                    // A spot's bulb is seen lit from inside its cone only.
+                    _ => l.radiance_toward(view.eye),
+                };
                 c.is_finite().then(|| c.as_vec3().to_array())
             })
             .collect()
@@ -531,7 +535,7 @@ impl<'a> Renderer<'a> {
                     Some(r) => self.ratio_at(r, s),
                     None => UNSHADOWED,
                 };
-                c += lobes.radiance_scaled(light.radiance, &i, r);
+                c += lobes.radiance_scaled(light.radiance_toward(s.position), &i, r);
             }
             Some(c)
         })
@@ -571,6 +575,42 @@ impl<'a> Renderer<'a> {
             Mode::Pixel => {
                 counts.pixels_shaded = self.gbuffer.covered();
                 (self.shade_pixels(lights, Some(&ratios)), counts)
+            }
+        }
+    }
+
+    /// BSPVT of `lights`, each through the trees that hold it: where the scene bakes its suns
+    /// apart ([`Scene::suns_in_sky_bake`]) the suns through the sky's trees `sky`, the others
+    /// through `trees`; else all through `trees`. Lights whose trees have not arrived (`None`)
+    /// are shaded unshadowed.
+    pub fn bspvt_lights(
+        &self,
+        lights: &[Light],
+        trees: Option<&Trees>,
+        sky: Option<&Trees>,
+        mode: Mode,
+    ) -> (Image, FrameCounts) {
+        let one = |ls: &[Light], t: Option<&Trees>| match t {
+            Some(t) => self.bspvt(ls, t, mode),
+            None => self.ltc(ls, mode),
+        };
+        if !self.scene.suns_in_sky_bake() {
+            return one(lights, trees);
+        }
+        let (suns, rest): (Vec<Light>, Vec<Light>) = lights
+            .iter()
+            .cloned()
+            .partition(|l| matches!(l.shape, crate::light::Shape::Distant { .. }));
+        match (rest.is_empty(), suns.is_empty()) {
+            (_, true) => one(&rest, trees),
+            (true, false) => one(&suns, sky),
+            (false, false) => {
+                let (mut image, mut counts) = one(&rest, trees);
+                let (sun, c) = one(&suns, sky);
+                image.add(&sun);
+                counts.pieces += c.pieces;
+                counts.pieces_dropped += c.pieces_dropped;
+                (image, counts)
             }
         }
     }

@@ -179,11 +179,10 @@ impl<'a> Session<'a> {
                  its vertices the other way round, or make it two_sided)"
             );
         }
-        let mut rest = Vec::with_capacity(scene.lights.len());
-        for light in &scene.lights {
-            let r = Light::load(light)?;
-            rest.push((r.clone(), LightPath::new(light, r), light.motion()));
-        }
+        let rest: Vec<(Light, LightPath, LightMotion)> = crate::light::scene_lights(scene)?
+            .into_iter()
+            .map(|(r, motion)| (r.clone(), LightPath::new(motion, r), motion))
+            .collect();
         // A scene lit by its environment alone opens on the sky through the trees.
         let method = if rest.is_empty() {
             "bspvt-env"
@@ -299,6 +298,16 @@ impl<'a> Session<'a> {
         self.selected
     }
 
+    /// How many lights the scene has (polygons, points and spots, suns).
+    pub fn light_count(&self) -> usize {
+        self.rest.len()
+    }
+
+    /// Where light `k`'s bake lets it go.
+    pub fn light_motion(&self, k: usize) -> Option<LightMotion> {
+        self.rest.get(k).map(|r| r.2)
+    }
+
     /// Makes light `k` the one the mouse and keys move (each light keeps its own pose).
     pub fn select_light(&mut self, k: usize) {
         if k >= self.rest.len() || k == self.selected {
@@ -352,6 +361,18 @@ impl<'a> Session<'a> {
             LightMotion::Region(region) => self
                 .keep_light_in_region(region)
                 .then(|| format!("light {} kept inside its region (as baked)", self.selected)),
+            // A sun only turns (every direction is baked): moving it does nothing.
+            LightMotion::Turns => {
+                if self.pose.offset == DVec3::ZERO {
+                    return None;
+                }
+                self.pose.offset = DVec3::ZERO;
+                self.invalidate();
+                Some(format!(
+                    "light {} is a sun: it turns (every direction is baked), it does not move",
+                    self.selected
+                ))
+            }
         }
     }
 
@@ -568,7 +589,7 @@ impl<'a> Session<'a> {
     pub fn frame_to_show(&mut self, on_gpu: bool) -> Shown {
         let lights = self.lights();
         let m = self.method;
-        if m.needs().sky_trees {
+        if m.needs().sky_trees_for(self.scene) {
             self.sky_trees();
         }
         let state = self.states.entry(m.name()).or_insert_with(|| {

@@ -217,9 +217,18 @@ pub(crate) struct Emitter<'a> {
 
 impl<'a> Emitter<'a> {
     pub(crate) fn new(light: &'a Light, p: DVec3) -> Emitter<'a> {
+        // Only a polygon has a texture (and a frame to look it up in).
+        let textured = light.vertices.len() >= 3;
         Emitter {
-            frame: LightFrame::new(&light.vertices, p),
-            texture: light.texture.as_deref(),
+            frame: match textured {
+                true => LightFrame::new(&light.vertices, p),
+                false => LightFrame {
+                    origin: DVec3::ZERO,
+                    e1: DVec3::X,
+                    e2: DVec3::Y,
+                },
+            },
+            texture: light.texture.as_deref().filter(|_| textured),
             lookups: None,
         }
     }
@@ -263,20 +272,21 @@ pub(crate) fn sees_viewer(n: DVec3, wo: DVec3) -> bool {
     n.dot(wo) > 0.0
 }
 
-/// The light polygon as directions from `p`, clipped to the upper hemisphere of `n`; empty
-/// when the light is wholly below the horizon or `p` is behind a one-sided light.
+/// What the light subtends from `p` ([`Light::directions`]: a polygon, a sphere's or the
+/// sun's disk), clipped to the upper hemisphere of `n`; empty when the light is wholly below
+/// the horizon, `p` is behind a one-sided light, outside a spot's cone or inside a sphere.
 pub fn light_directions(light: &Light, p: DVec3, n: DVec3) -> SphPoly {
-    if !light.faces(p) || !p.is_finite() || !n.is_finite() {
+    if !p.is_finite() || !n.is_finite() || !light.faces(p) {
         return SphPoly::new();
     }
     let mut dirs = SphPoly::new();
-    for &q in &light.vertices {
-        let d = q - p;
-        // A vertex at the point itself (or a non-finite one): the light is seen edge-on or
-        // is garbage; either way it sends nothing.
-        if !(d.length_squared() > 0.0) || !d.is_finite() || dirs.try_push(d).is_err() {
+    for d in light.directions(p) {
+        if dirs.try_push(d).is_err() {
             return SphPoly::new();
         }
+    }
+    if dirs.len() < 3 {
+        return SphPoly::new();
     }
     sphere::clip(&dirs, n)
 }
@@ -295,7 +305,7 @@ pub fn unshadowed(lobes: &Lobes, light: &Light, p: DVec3, n: DVec3) -> Shaded {
 pub fn unshadowed_lights(lobes: &Lobes, lights: &[Light], p: DVec3, n: DVec3) -> Shaded {
     let mut sum = Shaded::default();
     for l in lights {
-        sum += unshadowed(lobes, l, p, n).tinted(l.radiance);
+        sum += unshadowed(lobes, l, p, n).tinted(l.radiance_toward(p));
     }
     sum
 }

@@ -430,7 +430,7 @@ impl App<'_, '_> {
                 }
                 KeyCode::KeyL => s.reset_light(),
                 KeyCode::KeyN => {
-                    let n = s.scene().lights.len().max(1);
+                    let n = s.light_count().max(1);
                     s.select_light((s.selected_light() + 1) % n);
                     let k = s.selected_light();
                     self.say(format!("the keys and mouse move light {k}"));
@@ -642,13 +642,14 @@ fn overlay_lines(s: &Session, fps: f64, opts: &ViewerOptions) -> Vec<String> {
     if let Some(n) = &opts.note {
         lines.push(n.clone());
     }
-    let lights = s.scene().lights.len();
+    let lights = s.light_count();
     if lights > 1 {
         let k = s.selected_light();
-        let how = match s.scene().lights[k].motion() {
-            bspvt_proto::scene::LightMotion::Fixed => "fixed",
-            bspvt_proto::scene::LightMotion::Plane => "moves in its plane",
-            bspvt_proto::scene::LightMotion::Region(_) => "moves in its region",
+        let how = match s.light_motion(k) {
+            Some(bspvt_proto::scene::LightMotion::Fixed) | None => "fixed",
+            Some(bspvt_proto::scene::LightMotion::Plane) => "moves in its plane",
+            Some(bspvt_proto::scene::LightMotion::Region(_)) => "moves in its region",
+            Some(bspvt_proto::scene::LightMotion::Turns) => "a sun: turns",
         };
         lines.push(format!(
             "{lights} lights; keys move light {k} ({how}; N next)"

@@ -103,6 +103,9 @@ pub(crate) fn view_file(
                 ground_material: 0,
                 materials: vec![Default::default()],
                 lights: Vec::new(),
+                punctual: Vec::new(),
+                suns: Vec::new(),
+                punctual_radius: None,
                 asset_lights: true,
                 camera: None,
                 bake: Default::default(),
@@ -124,7 +127,9 @@ pub(crate) fn view_file(
         aspect: None,
         ..camera
     });
-    if let Some((k, l)) = light {
+    // A point, spot or sun light stays as its scene has it (only polygon lights are saved
+    // posed).
+    if let Some((k, l)) = light.filter(|(k, l)| l.is_polygon() && *k < scene_lights.len()) {
         let posed = |base: &PolygonLight| PolygonLight {
             vertices: l.vertices.iter().map(|v| v.as_vec3().to_array()).collect(),
             radiance: l.radiance.as_vec3().to_array(),

@@ -70,6 +70,16 @@ pub enum GpuStop {
         /// Reached from both sides.
         two_sided: bool,
     },
+    /// Where the ray enters the sphere, or passes closest to its centre when it passes
+    /// within `radius + 2 t · spread` of it without entering (bspvt-bake's `SphereStop`).
+    Sphere {
+        /// The sphere's centre.
+        centre: glam::Vec3,
+        /// Its radius.
+        radius: f32,
+        /// How much the sphere grows per unit of distance.
+        spread: f32,
+    },
 }
 
 /// vec4 words per stop in the shader's table: a header of two, then up to eight edges.
@@ -269,6 +279,14 @@ impl GpuOccluder {
                         if *two_sided { 1.0 } else { 0.0 },
                     );
                     words[2..2 + n].copy_from_slice(&edges[..n]);
+                }
+                GpuStop::Sphere {
+                    centre,
+                    radius,
+                    spread,
+                } => {
+                    words[0] = centre.extend(3.0);
+                    words[1] = glam::Vec4::new(*radius, *spread, 0.0, 0.0);
                 }
             }
             stop_words.extend(words.iter().map(|v| v.to_array()));

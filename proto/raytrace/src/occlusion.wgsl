@@ -24,7 +24,8 @@
 @group(0) @binding(5) var<storage, read> mask: array<vec2<u32>>;
 // Where rays end (cubemap::LightStop), ten vec4 per stop: a region box (min.xyz, 0),
 // (max.xyz, 0); a plane (point.xyz, 1), (normal.xyz, 0); or a fixed lamp (normal.xyz, 2),
-// (offset, spread, edges, two-sided), then per edge (inward in-plane normal, offset).
+// (offset, spread, edges, two-sided), then per edge (inward in-plane normal, offset); or a
+// point or spot light's sphere (centre.xyz, 3), (radius, spread, 0, 0).
 @group(0) @binding(6) var<storage, read> stops: array<vec4<f32>>;
 // Per pixel that matters, in order, 16 bits (two per word): escaping sub-rays | cast sub-rays
 // << 8 (at most 64 each: supersampling ≤ 8).
@@ -205,7 +206,8 @@ fn fmax(a: f32, b: f32) -> f32 {
 
 // VertexRays::t_max: the distance at which the ray from o along unit d reaches its first stop
 // (LightStop::distance: Aabb::ray_entry for a region, the plane crossing for a light moving in
-// its plane, the crossing within the grown polygon for a fixed lamp); f32::MAX when it reaches
+// its plane, the crossing within the grown polygon for a fixed lamp, the entry into the grown
+// sphere of a point or spot light); f32::MAX when it reaches
 // none. Ten vec4 per stop (gpu_occluder.rs, STOP_WORDS).
 fn ray_end(o: vec3<f32>, d: vec3<f32>) -> f32 {
     var t = F32_MAX;
@@ -226,6 +228,22 @@ fn ray_end(o: vec3<f32>, d: vec3<f32>) -> f32 {
             let tp = dot(a.xyz - o, b.xyz) / den;
             if den != 0.0 && tp > 0.0 && tp <= F32_MAX {
                 t = min(t, tp);
+            }
+        } else if a.w == 3.0 {
+            // SphereStop::distance.
+            let oc = a.xyz - o;
+            let tc = dot(oc, d);
+            if !(tc > 0.0) {
+                continue;
+            }
+            let perp2 = max(dot(oc, oc) - tc * tc, 0.0);
+            let grown = b.x + 2.0 * tc * b.y;
+            if !(perp2 <= grown * grown) {
+                continue;
+            }
+            let ts = tc - sqrt(max(b.x * b.x - perp2, 0.0));
+            if ts > 0.0 && ts <= F32_MAX {
+                t = min(t, ts);
             }
         } else {
             // LampStop::distance.

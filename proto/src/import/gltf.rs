@@ -38,12 +38,12 @@
 //! `texture::MAX_*`; one that cannot be read is a warning and the factor is used alone. A
 //! material whose `emissiveFactor` × `KHR_materials_emissive_strength` is non-zero makes its
 //! triangles lamps (`lamps.rs`), two-sided when the material is `doubleSided`; its
-//! `emissiveTexture` becomes the lamp's texture. `KHR_lights_punctual` point and spot lights of
-//! the instanced nodes are placed by the node's world transform (spots point down its −Z). The
+//! `emissiveTexture` becomes the lamp's texture. `KHR_lights_punctual` point, spot and
+//! directional lights of the instanced nodes are placed by the node's world transform (spots
+//! and suns point down its −Z). The
 //! first perspective camera instanced by the scene becomes the scene's camera (looking down its
 //! node's −Z with +Y up). Normal and occlusion textures, other texture coordinate sets,
-//! `KHR_texture_transform` and other extensions, directional lights and orthographic cameras
-//! are not used; each kind is named in the warnings. Image and light JSON is read from the
+//! `KHR_texture_transform` and other extensions and orthographic cameras are not used; each kind is named in the warnings. Image and light JSON is read from the
 //! document's JSON, not through the `gltf` crate's accessors that `unwrap` (an image with a
 //! buffer view but no MIME type would panic there).
 
@@ -63,7 +63,7 @@ use super::mtl::MIN_ALPHA;
 use super::{FileMaterial, Limits, Raw, is_degenerate, usable_normals};
 use crate::camera::Camera;
 use crate::error::MeshError;
-use crate::light::{PunctualLight, Spot};
+use crate::light::{PunctualLight, Spot, SunLight};
 use crate::material::Material;
 use crate::material::MaterialMaps;
 use crate::mesh::Mesh;
@@ -106,6 +106,7 @@ pub(super) fn parse(
         untextured: HashMap::new(),
         camera: None,
         punctual: Vec::new(),
+        suns: Vec::new(),
         warnings: Vec::new(),
         sidecars,
         images: HashMap::new(),
@@ -115,18 +116,12 @@ pub(super) fn parse(
     reader.read_scenes(&doc)?;
     let mut warnings = unused_features(&doc);
     warnings.append(&mut reader.warnings);
-    if !reader.punctual.is_empty() {
-        warnings.push(format!(
-            "{} punctual lights feed the point-light methods only (the polygon-light methods \
-             ignore them)",
-            reader.punctual.len()
-        ));
-    }
     Ok(Raw {
         mesh: reader.mesh,
         materials: reader.materials,
         camera: reader.camera,
         punctual: reader.punctual,
+        suns: reader.suns,
         warnings,
     })
 }
@@ -513,6 +508,8 @@ struct Builder<'a> {
     camera: Option<Camera>,
     /// `KHR_lights_punctual` point and spot lights of the instanced nodes.
     punctual: Vec<PunctualLight>,
+    /// `KHR_lights_punctual` directional lights of the instanced nodes.
+    suns: Vec<SunLight>,
     warnings: Vec<String>,
     /// Where external image files are read from.
     sidecars: &'a Sidecars<'a>,
@@ -1210,9 +1207,19 @@ impl Builder<'_> {
             .map_or_else(|| format!("light {}", light.index()), short);
         let spot = match light.kind() {
             Kind::Directional => {
-                self.warnings.push(format!(
-                    "directional light {name:?} was ignored (only point and spot lights are read)"
-                ));
+                let dir = (Mat3::from_mat4(*world) * Vec3::NEG_Z).normalize_or_zero();
+                let sun = SunLight {
+                    name: name.clone(),
+                    direction: dir.to_array(),
+                    illuminance: light.color().map(|c| c * light.intensity()),
+                    angular_diameter: None,
+                };
+                match sun.validate(self.suns.len()) {
+                    Ok(()) => self.suns.push(sun),
+                    Err(e) => self
+                        .warnings
+                        .push(format!("directional light {name:?} was ignored: {e}")),
+                }
                 return;
             }
             Kind::Point => None,
@@ -1235,6 +1242,7 @@ impl Builder<'_> {
             intensity: colour.map(|c| c * light.intensity()),
             range: light.range(),
             spot,
+            radius: None,
         };
         match l.validate(self.punctual.len()) {
             Ok(()) => self.punctual.push(l),

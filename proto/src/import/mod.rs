@@ -32,7 +32,7 @@ use glam::Vec3;
 
 use crate::camera::Camera;
 use crate::error::MeshError;
-use crate::light::{PolygonLight, PunctualLight};
+use crate::light::{PolygonLight, PunctualLight, SunLight};
 use crate::material::Material;
 use crate::mesh::Mesh;
 use crate::texture::TextureRef;
@@ -58,6 +58,8 @@ pub struct Asset {
     pub lights: Vec<PolygonLight>,
     /// `KHR_lights_punctual` point and spot lights, placed by their nodes.
     pub punctual: Vec<PunctualLight>,
+    /// `KHR_lights_punctual` directional lights, turned by their nodes.
+    pub suns: Vec<SunLight>,
     /// The file's first perspective camera, placed by its node.
     pub camera: Option<Camera>,
     /// What the file holds that was not used (textures, extensions, punctual lights, …), one
@@ -89,6 +91,7 @@ pub(crate) struct Raw {
     pub materials: Vec<FileMaterial>,
     pub camera: Option<Camera>,
     pub punctual: Vec<PunctualLight>,
+    pub suns: Vec<SunLight>,
     pub warnings: Vec<String>,
 }
 
@@ -301,6 +304,7 @@ pub(crate) fn finish_asset(raw: Raw) -> Result<Asset, MeshError> {
         materials,
         camera,
         punctual,
+        suns,
         mut warnings,
     } = raw;
     check_indices(&mesh)?;
@@ -403,6 +407,7 @@ pub(crate) fn finish_asset(raw: Raw) -> Result<Asset, MeshError> {
         materials: materials.into_iter().map(|f| f.material).collect(),
         lights: lamps.lights,
         punctual,
+        suns,
         camera,
         warnings,
         files: Vec::new(),

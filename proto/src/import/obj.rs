@@ -340,6 +340,7 @@ pub(super) fn parse(
         materials,
         camera: None,
         punctual: Vec::new(),
+        suns: Vec::new(),
         warnings,
     })
 }

@@ -9,6 +9,9 @@
 //! `two-lamps`: the same shell lit by a ceiling lamp and a pendant lamp 1.2 m lower, with a
 //! board hung between them (`assets/rooms/two-lamps.gltf`, issue 34).
 //!
+//! `punctual-room`: the same shell with a window, lit only by `KHR_lights_punctual` lights — a
+//! point light, a spot light and a sun through the window (`assets/rooms/punctual-room.gltf`).
+//!
 //! `plate`: a 160×160 receiver grid (25,600 vertices) under a sphere and a tilted slab, lit by a
 //! quad light that may move in a declared box above them (28,258 vertices in all).
 
@@ -21,7 +24,14 @@ use crate::scene::{
 };
 
 /// Names accepted by [`scene`] and [`mesh`] (and by `builtin:NAME` in scene files).
-pub const NAMES: &[&str] = &["plate", "plate-small", "dynamic", "room", "two-lamps"];
+pub const NAMES: &[&str] = &[
+    "plate",
+    "plate-small",
+    "dynamic",
+    "room",
+    "two-lamps",
+    "punctual-room",
+];
 
 /// Single-object meshes for scene files to place (`builtin:NAME`, with a `transform`):
 /// `sphere` (unit radius, 2,562 vertices) and `cube` (unit side, 12 × 12 vertices a face).
@@ -36,6 +46,9 @@ const ROOM_GLTF: &[u8] = include_bytes!("../../../assets/rooms/room.gltf");
 
 /// `two-lamps`: the project's two-lamp glTF room (self-contained).
 const TWO_LAMPS_GLTF: &[u8] = include_bytes!("../../../assets/rooms/two-lamps.gltf");
+
+/// `punctual-room`: the project's glTF room lit by point, spot and sun lights (self-contained).
+const PUNCTUAL_ROOM_GLTF: &[u8] = include_bytes!("../../../assets/rooms/punctual-room.gltf");
 
 /// Every name [`mesh`] accepts.
 pub fn mesh_names() -> Vec<&'static str> {
@@ -60,6 +73,7 @@ pub fn scene(name: &str) -> Option<Scene> {
         "dynamic" => Scene::from_json(DYNAMIC_JSON, std::path::Path::new("")).ok(),
         "room" => gltf_scene(ROOM_GLTF),
         "two-lamps" => gltf_scene(TWO_LAMPS_GLTF),
+        "punctual-room" => gltf_scene(PUNCTUAL_ROOM_GLTF),
         _ => None,
     }
 }
@@ -89,6 +103,9 @@ pub fn scene_file(name: &str) -> Option<SceneFile> {
         ground_material: 0,
         materials: s.materials,
         lights: s.lights,
+        punctual: s.punctual,
+        suns: s.suns,
+        punctual_radius: None,
         asset_lights: true,
         camera: Some(s.camera),
         bake: s.bake,
@@ -167,6 +184,7 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
         motion: Vec::new(),
         warnings: Vec::new(),
         punctual: Vec::new(),
+        suns: Vec::new(),
     }
 }
 

@@ -18,7 +18,10 @@ pub mod builtin;
 
 pub use crate::camera::Camera;
 pub use crate::environment::Environment;
-pub use crate::light::{LightMotion, PolygonLight, PunctualLight, Region, Spot};
+pub use crate::light::{
+    DEFAULT_SPHERE_RADIUS, LightMotion, PolygonLight, PunctualLight, Region, SUN_ANGULAR_DIAMETER,
+    Spot, SunLight,
+};
 pub use crate::material::{Material, MaterialMaps};
 
 /// How the BSPVT builder chooses a split line.
@@ -254,7 +257,18 @@ pub struct SceneFile {
     /// The polygonal lights (added to the lamps of the mesh files, see `asset_lights`).
     #[serde(default)]
     pub lights: Vec<PolygonLight>,
-    /// Also light the scene with the mesh files' own lamps (emissive materials); default true.
+    /// Point and spot lights (added to the mesh files' `KHR_lights_punctual` ones).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub punctual: Vec<PunctualLight>,
+    /// Directional lights, the sun (added to the mesh files' own).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub suns: Vec<SunLight>,
+    /// The sphere radius of the point and spot lights that do not give one (default
+    /// [`DEFAULT_SPHERE_RADIUS`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub punctual_radius: Option<f32>,
+    /// Also light the scene with the mesh files' own lamps (emissive materials) and
+    /// `KHR_lights_punctual` lights; default true.
     #[serde(default = "default_true")]
     pub asset_lights: bool,
     /// Without a camera, the first mesh file's camera is used, else the scene is framed.
@@ -286,8 +300,11 @@ pub struct Scene {
     pub materials: Vec<Material>,
     /// The polygonal lights (none: a scene lit by its environment alone).
     pub lights: Vec<PolygonLight>,
-    /// The assets' `KHR_lights_punctual` lights, for the point-light methods only.
+    /// Point and spot lights (`KHR_lights_punctual`): points for the point-light methods,
+    /// small spheres for the others.
     pub punctual: Vec<PunctualLight>,
+    /// Directional lights: disks at infinity (the sun).
+    pub suns: Vec<SunLight>,
     /// The environment light, its path resolved (not part of the bake's identity: the
     /// service does not store it).
     pub environment: Option<Environment>,
@@ -327,6 +344,9 @@ impl Scene {
             l.validate(i)?;
         }
         for (i, l) in self.punctual.iter().enumerate() {
+            l.validate(i)?;
+        }
+        for (i, l) in self.suns.iter().enumerate() {
             l.validate(i)?;
         }
         if let Some(e) = &self.environment {
@@ -444,7 +464,8 @@ impl Scene {
         let mut motion = Vec::new();
         let mut warnings = Vec::new();
         let mut lights = std::mem::take(&mut file.lights);
-        let mut punctual = Vec::new();
+        let mut punctual = std::mem::take(&mut file.punctual);
+        let mut suns = std::mem::take(&mut file.suns);
         let mut asset_camera = None;
         let mut materials = std::mem::take(&mut file.materials);
         for (i, (m, asset)) in file.meshes.iter().zip(parts).enumerate() {
@@ -453,6 +474,7 @@ impl Scene {
                 materials: own,
                 lights: lamps,
                 punctual: points,
+                suns: asset_suns,
                 camera,
                 warnings: w,
                 files: _,
@@ -486,13 +508,22 @@ impl Scene {
                     }
                     punctual.push(l);
                 }
-            } else if !lamps.is_empty() || !points.is_empty() {
+                for mut l in asset_suns {
+                    if let Some(a) = &affine {
+                        l.direction = a
+                            .transform_vector3(Vec3::from(l.direction))
+                            .normalize_or_zero()
+                            .to_array();
+                    }
+                    suns.push(l);
+                }
+            } else if !lamps.is_empty() || !points.is_empty() || !asset_suns.is_empty() {
                 warnings.push(format!(
                     "{}: its {} lamps and {} punctual lights are not used (asset_lights is \
                      false)",
                     m.path,
                     lamps.len(),
-                    points.len()
+                    points.len() + asset_suns.len()
                 ));
             }
             if asset_camera.is_none() && affine.is_none() {
@@ -560,11 +591,22 @@ impl Scene {
         if materials.is_empty() {
             materials = default_materials();
         }
+        if let Some(r) = file.punctual_radius {
+            if !(r > 0.0 && r.is_finite()) {
+                return Err(SceneError::Invalid(
+                    "punctual_radius must be finite and > 0".into(),
+                ));
+            }
+            for l in punctual.iter_mut().filter(|l| l.radius.is_none()) {
+                l.radius = Some(r);
+            }
+        }
         let mut scene = Scene {
             mesh,
             materials,
             lights,
             punctual,
+            suns,
             environment: file.environment,
             camera,
             bake: file.bake,
@@ -585,9 +627,19 @@ impl Scene {
     pub fn sky(&self) -> Scene {
         let mut s = self.clone();
         s.lights.clear();
+        s.punctual.clear();
+        s.suns.clear();
         s.bake.refine = None;
         s.warnings.clear();
         s
+    }
+
+    /// Whether the suns are shaded through the sky's bake ([`Scene::sky`]): when the scene also
+    /// has lamps or point and spot lights, whose bake ends rays at them (a sun may turn to any
+    /// direction, rays to infinity; docs/bake.md). A scene lit by suns alone bakes the sky's
+    /// visibility as its own.
+    pub fn suns_in_sky_bake(&self) -> bool {
+        !self.suns.is_empty() && (!self.lights.is_empty() || !self.punctual.is_empty())
     }
 
     /// True when some mesh moves.
@@ -610,6 +662,7 @@ impl Scene {
             materials: self.materials.clone(),
             lights: self.lights.clone(),
             punctual: self.punctual.clone(),
+            suns: self.suns.clone(),
             environment: self.environment.clone(),
             camera: self.camera.clone(),
             bake: self.bake.clone(),
@@ -623,7 +676,7 @@ impl Scene {
     /// Whether [`Scene::from_asset`] puts a ground plane and a quad light around `asset`: it
     /// brings no light of its own, neither lamps nor punctual lights.
     pub fn adds_ground(asset: &Asset) -> bool {
-        asset.lights.is_empty() && asset.punctual.is_empty()
+        asset.lights.is_empty() && asset.punctual.is_empty() && asset.suns.is_empty()
     }
 
     /// The default scene for a bare mesh (an asset without lamps, materials or camera).
@@ -647,6 +700,7 @@ impl Scene {
             materials,
             lights,
             punctual,
+            suns,
             camera,
             mut warnings,
             files: _,
@@ -665,19 +719,7 @@ impl Scene {
             materials
         };
         let mut bake = BakeSettings::default();
-        let lights = if lights.is_empty() && !punctual.is_empty() {
-            // The asset brings its own lights, punctual ones only: it is still the whole
-            // scene (no ground, no added lamp), and the polygon-light methods have nothing
-            // to shade — said loudly, never a silent black image.
-            warnings.push(format!(
-                "the asset's only lights are {} punctual light(s): they light the point-light \
-                 methods (rt-hard, rt-penumbra, pcss, pcf, vsm); the polygon-light methods \
-                 (bspvt, ltc, …) have no light to shade here — add a polygon light in a scene \
-                 file",
-                punctual.len()
-            ));
-            lights
-        } else if adds_ground {
+        let lights = if adds_ground {
             let ground_id = materials.len() as u32;
             materials.push(Material {
                 name: "ground".into(),
@@ -695,8 +737,8 @@ impl Scene {
             );
             vec![light]
         } else {
-            // The asset's own scene (a room, a lamp over a table): its large flat polygons
-            // need refining where shadows cross them.
+            // The asset's own scene (a room, a lamp over a table, lit by lamps, points,
+            // spots or a sun): its large flat polygons need refining where shadows cross them.
             bake.refine = Some(Refinement::default());
             lights
         };
@@ -706,6 +748,7 @@ impl Scene {
             materials,
             lights,
             punctual,
+            suns,
             environment: None,
             bake,
             motion: Vec::new(),

@@ -135,6 +135,59 @@ pub enum LightStop {
     /// A fixed lamp: the ray ends where it crosses the lamp's polygon, grown by the cone of
     /// the cube-map pixel around it ([`LampStop`]).
     Lamp(LampStop),
+    /// A point or spot light's sphere: the ray ends where it enters the sphere, grown by the
+    /// pixel's cone ([`SphereStop`]).
+    Sphere(SphereStop),
+}
+
+/// A point or spot light's sphere as a ray stop (docs/scene-format.md). The pixel matters
+/// when its cone (tan θ ≤ `spread`, as for [`LampStop`]) meets the sphere: when its centre's
+/// ray passes within `r + t_c · spread` of the centre (t_c: the distance to the point of
+/// closest approach; [`SphereStop::reaches`]). A sphere is often smaller than a pixel, so
+/// every sub-ray of such a pixel must end at it, not run past it to the wall behind (which
+/// would darken a fully visible bulb by the share of the pixel it does not cover): a ray
+/// stops where it passes within `r + 2 t_c · spread` — where it enters the sphere, or at its
+/// closest approach when it only grazes the grown sphere ([`SphereStop::distance`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SphereStop {
+    /// The sphere's centre.
+    pub centre: Vec3,
+    /// Its radius.
+    pub radius: f32,
+    /// tan θ of the pixels' cones.
+    pub spread: f32,
+}
+
+impl SphereStop {
+    /// Where the ray from `origin` along unit `d` stops here, if it does (never from inside
+    /// the sphere: nothing there is lit by it).
+    #[inline]
+    pub(crate) fn distance(&self, origin: Vec3, d: Vec3) -> Option<f32> {
+        self.within(origin, d, 2.0)
+    }
+
+    /// Whether a pixel whose centre's ray is `d` can see the sphere.
+    #[inline]
+    pub(crate) fn reaches(&self, origin: Vec3, d: Vec3) -> bool {
+        self.within(origin, d, 1.0).is_some()
+    }
+
+    /// Where the ray stops if it passes within r + `cones` · t_c · spread of the centre.
+    #[inline]
+    fn within(&self, origin: Vec3, d: Vec3, cones: f32) -> Option<f32> {
+        let oc = self.centre - origin;
+        let tc = oc.dot(d);
+        if !(tc > 0.0) {
+            return None;
+        }
+        let perp2 = (oc.length_squared() - tc * tc).max(0.0);
+        let grown = self.radius + cones * tc * self.spread;
+        if !(perp2 <= grown * grown) {
+            return None;
+        }
+        let t = tc - (self.radius * self.radius - perp2).max(0.0).sqrt();
+        (t > 0.0 && t.is_finite()).then_some(t)
+    }
 }
 
 /// A fixed lamp's polygon as a ray stop. A pixel's rays lie in a cone of half-angle θ
@@ -295,14 +348,25 @@ impl LampStop {
 }
 
 impl LightStop {
-    /// The stops of a scene's lights, for its bake's cube maps
-    /// ([`LightStop::of_light`]).
+    /// The stops of a scene's lights, for its bake's cube maps: its polygon lights'
+    /// ([`LightStop::of_light`]) and its point and spot lights' spheres. Suns have none: they
+    /// are shaded through the sky's bake (`Scene::suns_in_sky_bake`), or, in a scene lit by
+    /// suns alone, this bake is the sky's (no stops: every direction, rays to infinity).
     pub fn of_scene(scene: &bspvt_proto::Scene) -> Vec<LightStop> {
-        scene
+        let res = scene.bake.face_res;
+        let mut stops: Vec<LightStop> = scene
             .lights
             .iter()
-            .filter_map(|l| LightStop::of_light(l, scene.bake.face_res))
-            .collect()
+            .filter_map(|l| LightStop::of_light(l, res))
+            .collect();
+        stops.extend(scene.punctual.iter().map(|l| {
+            LightStop::Sphere(SphereStop {
+                centre: Vec3::from(l.position),
+                radius: l.sphere_radius(),
+                spread: std::f32::consts::SQRT_2 / res.max(1) as f32,
+            })
+        }));
+        stops
     }
 
     /// The stop of one light, for cube maps of `res` pixels a side: its region where it
@@ -321,6 +385,8 @@ impl LightStop {
                 })
             }
             LightMotion::Fixed => LampStop::new(light, res).map(LightStop::Lamp),
+            // A polygon light does not turn freely (only a sun does, through the sky's bake).
+            LightMotion::Turns => None,
         }
     }
 
@@ -335,6 +401,7 @@ impl LightStop {
                 (den != 0.0 && t > 0.0 && t.is_finite()).then_some(t)
             }
             LightStop::Lamp(ref l) => l.distance(origin, d),
+            LightStop::Sphere(ref l) => l.distance(origin, d),
         }
     }
 }
@@ -348,6 +415,8 @@ enum Reach<'a> {
     /// The centre's ray reaches the lamp ([`LampStop::distance`]), tested where
     /// [`LampStop::candidates`] leaves it possible.
     Lamp(&'a LampStop, Vec<bool>),
+    /// The centre's ray reaches the sphere ([`SphereStop::reaches`]).
+    Sphere(&'a SphereStop),
 }
 
 /// Where a vertex's rays start and which directions can matter.
@@ -397,6 +466,7 @@ impl VertexRays<'_> {
     /// (every pixel above the horizon when there are none: the sky's bake):
     /// * a region: the centre's ray meets its box;
     /// * a fixed lamp: the pixel's cone meets the lamp ([`LampStop`]);
+    /// * a point or spot light: the pixel's cone meets its sphere ([`SphereStop`]);
     /// * a plane: some direction of the pixel crosses it ahead of the origin. A light without
     ///   a region moves in its plane (docs/bake.md, "Where a ray ends"), so a direction that
     ///   never meets the plane never meets the light: it is "don't care". With k the plane's
@@ -421,6 +491,7 @@ impl VertexRays<'_> {
                     l.candidates(self.origin, &fr, res, &mut may);
                     Reach::Lamp(l, may)
                 }
+                LightStop::Sphere(l) => Reach::Sphere(l),
                 &LightStop::Plane { point, normal } => {
                     let side = (point - self.origin).dot(normal);
                     let k = normal * side.signum();
@@ -445,6 +516,7 @@ impl VertexRays<'_> {
                         Reach::Region(b) => b.hit_by_ray(self.origin, d),
                         Reach::Plane(w, u, v) => w + u[i] + v[j] > 0.0,
                         Reach::Lamp(l, may) => may[p] && l.distance(self.origin, d).is_some(),
+                        Reach::Sphere(l) => l.reaches(self.origin, d),
                     }));
             any |= *m;
         }

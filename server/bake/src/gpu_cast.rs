@@ -66,6 +66,11 @@ impl Baker {
                     max: b.max,
                 },
                 LightStop::Plane { point, normal } => GpuStop::Plane { point, normal },
+                LightStop::Sphere(l) => GpuStop::Sphere {
+                    centre: l.centre,
+                    radius: l.radius,
+                    spread: l.spread,
+                },
                 LightStop::Lamp(l) => GpuStop::Lamp {
                     normal: l.normal,
                     offset: l.offset,

@@ -35,7 +35,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use bspvt_raytrace::Occluder;
-pub use cubemap::{CastCounts, CastMode, LampStop, LightStop};
+pub use cubemap::{CastCounts, CastMode, LampStop, LightStop, SphereStop};
 use cubemap::{RayTable, VertexRays};
 use fit::{FitStats, Fitter};
 
@@ -45,8 +45,9 @@ use fit::{FitStats, Fitter};
 /// from inside their own surface ([`origin`]). 3: the fit's coarse-to-fine angle schedule, and
 /// directions that cannot reach a light's plane are "don't care" (docs/bake.md). 4: a fixed
 /// lamp (no region, not moving in its plane) stops rays at its polygon, not its plane, and only
-/// the directions that reach it matter.
-pub const ALGORITHM_VERSION: u32 = 4;
+/// the directions that reach it matter. 5: a point or spot light stops rays at its sphere (before,
+/// they were not lights for the bake), and a sun makes every direction matter.
+pub const ALGORITHM_VERSION: u32 = 5;
 
 /// Ray origins are offset along the normal by this fraction of the scene's diagonal.
 pub(crate) const RAY_OFFSET_SCALE: f32 = 1e-4;

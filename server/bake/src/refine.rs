@@ -26,7 +26,7 @@ use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap, HashSet};
 use std::time::Instant;
 
-use bspvt_proto::scene::PolygonLight;
+use bspvt_proto::scene::{PolygonLight, PunctualLight, SunLight};
 use bspvt_proto::{Aabb, Mesh, MeshError};
 use bspvt_raytrace::Occluder;
 use glam::Vec3;
@@ -70,8 +70,16 @@ pub fn refine_scene(scene: &mut bspvt_proto::Scene) -> Result<Option<RefineStats
     if scene.is_dynamic() {
         return Ok(None);
     }
-    let sky = scene.environment.is_some();
-    let (mesh, stats) = refine_for(&scene.mesh, &scene.lights, sky, &settings)?;
+    // A sun turns freely: what it needs refined is what the sky does.
+    let sky = scene.environment.is_some() || !scene.suns.is_empty();
+    let (mesh, stats) = refine_for(
+        &scene.mesh,
+        &scene.lights,
+        &scene.punctual,
+        &scene.suns,
+        sky,
+        &settings,
+    )?;
     scene.mesh = mesh;
     Ok(Some(stats))
 }
@@ -134,6 +142,15 @@ fn fibonacci_sphere(n: usize) -> Vec<Vec3> {
 const REGION_SAMPLES: f32 = 48.0;
 const MAX_REGION_SAMPLES: usize = 64;
 
+/// Samples per point or spot light's sphere ([`Visibility::with_spheres`]).
+const SPHERE_SAMPLES: usize = 32;
+
+/// Directions per sun ([`Visibility::with_suns`]): its centre and a ring.
+const SUN_SAMPLES: usize = 7;
+
+/// How far a sun's sample points are, in scene diagonals.
+const SUN_DISTANCE: f32 = 1024.0;
+
 /// One light's sample points and their weights (area or volume they stand for).
 struct LightSamples {
     points: Vec<Vec3>,
@@ -141,14 +158,18 @@ struct LightSamples {
     total: f64,
     /// A light without a region: what its unshadowed irradiance needs.
     emitter: Option<Emitter>,
+    /// A spot's cone and a range's window scale a sphere's irradiance (in working units).
+    falloff: Option<PunctualLight>,
 }
 
-/// A fixed polygon light as [`Visibility::irradiance`] sees it.
+/// A fixed polygon light (or a sphere) as [`Visibility::irradiance`] sees it.
 #[derive(Clone, Copy)]
 struct Emitter {
     /// Unit normal of the emitting side.
     normal: Vec3,
     two_sided: bool,
+    /// A sphere: seen the same from every side (cos θₗ = 1; `power` is its intensity).
+    isotropic: bool,
     /// Area × the radiance's luminance.
     power: f64,
 }
@@ -181,6 +202,7 @@ impl LightSamples {
         let emitter = (power > 0.0 && power.is_finite()).then(|| Emitter {
             normal: n.normalize_or_zero(),
             two_sided: light.two_sided,
+            isotropic: false,
             power,
         });
         Some(LightSamples {
@@ -188,6 +210,7 @@ impl LightSamples {
             weights,
             total,
             emitter,
+            falloff: None,
         })
     }
 
@@ -196,6 +219,7 @@ impl LightSamples {
             weights: vec![1.0; points.len()],
             total: points.len() as f64,
             emitter: None,
+            falloff: None,
             points,
         }
     }
@@ -419,6 +443,83 @@ impl Visibility {
         }
     }
 
+    /// This measure with the point and spot lights `spheres` counted as lights too: each
+    /// sphere sampled at [`SPHERE_SAMPLES`] points of its surface (a spherical Fibonacci set,
+    /// equal weights), its rays ending where they enter it; its irradiance that of a point
+    /// of its intensity (the spot's cone left out).
+    pub fn with_spheres(mut self, spheres: &[PunctualLight]) -> Visibility {
+        for l in spheres {
+            let c = Vec3::from(l.position) * self.scale;
+            let r = l.sphere_radius() * self.scale;
+            if !(c.is_finite() && r > 0.0 && r.is_finite()) {
+                continue;
+            }
+            let points: Vec<Vec3> = fibonacci_sphere(SPHERE_SAMPLES)
+                .into_iter()
+                .map(|d| c + d * r)
+                .collect();
+            let [red, g, b] = l.intensity.map(f64::from);
+            let power = 0.2126 * red + 0.7152 * g + 0.0722 * b;
+            let mut samples = LightSamples::equal(points);
+            samples.emitter = (power > 0.0 && power.is_finite()).then_some(Emitter {
+                normal: Vec3::ZERO,
+                two_sided: true,
+                isotropic: true,
+                power,
+            });
+            let mut scaled = l.clone();
+            scaled.position = c.to_array();
+            scaled.range = l.range.map(|r| r * self.scale);
+            samples.falloff = Some(scaled);
+            self.lights.push(samples);
+            self.stops
+                .push(LightStop::Sphere(crate::cubemap::SphereStop {
+                    centre: c,
+                    radius: r,
+                    spread: 0.0,
+                }));
+        }
+        self
+    }
+
+    /// This measure with the suns at rest counted as lights too (a sun may turn, which the
+    /// sky's measure covers; at rest its patch's edges must be refined): each sampled at
+    /// [`SUN_SAMPLES`] directions across its disk, as points [`SUN_DISTANCE`] scene
+    /// diagonals away; its irradiance E max(0, n·d).
+    pub fn with_suns(mut self, suns: &[SunLight]) -> Visibility {
+        let far = SUN_DISTANCE * self.offset / RAY_OFFSET_SCALE;
+        if !(far > 0.0 && far.is_finite()) {
+            return self;
+        }
+        for sun in suns {
+            let d = sun.toward();
+            let h = sun.half_angle();
+            if d == Vec3::ZERO {
+                continue;
+            }
+            let (a, b) = d.any_orthonormal_pair();
+            let points: Vec<Vec3> = std::iter::once(d)
+                .chain((0..SUN_SAMPLES - 1).map(|k| {
+                    let phi = std::f32::consts::TAU * k as f32 / (SUN_SAMPLES - 1) as f32;
+                    (d + (a * phi.cos() + b * phi.sin()) * (0.7 * h.tan())).normalize()
+                }))
+                .map(|x| x * far)
+                .collect();
+            let [r, g, bl] = sun.illuminance.map(f64::from);
+            // E at the scene = P / far²: P = E far².
+            let power = (0.2126 * r + 0.7152 * g + 0.0722 * bl) * f64::from(far).powi(2);
+            let mut samples = LightSamples::equal(points);
+            samples.emitter = (power > 0.0 && power.is_finite()).then_some(Emitter {
+                normal: Vec3::ZERO,
+                two_sided: true,
+                isotropic: true,
+                power,
+            });
+            self.lights.push(samples);
+        }
+        self
+    }
+
     /// Number of light sample points (all lights together).
     pub fn sample_count(&self) -> usize {
         self.lights.iter().map(|l| l.points.len()).sum()
@@ -450,14 +551,20 @@ impl Visibility {
                     continue;
                 }
                 let d = v / r2.sqrt();
-                let cos_l = if em.two_sided {
+                let cos_l = if em.isotropic {
+                    1.0
+                } else if em.two_sided {
                     ln.dot(d).abs()
                 } else {
                     (-ln.dot(d)).max(0.0)
                 };
                 sum += w * n.dot(d).max(0.0) * cos_l / r2;
             }
-            e += em.power * sum / l.total;
+            let f = l
+                .falloff
+                .as_ref()
+                .map_or(1.0, |pl| f64::from(pl.falloff(position * self.scale)));
+            e += f * em.power * sum / l.total;
         }
         // Area / r² in the same (working) units: E does not depend on the working scale.
         if e.is_finite() { e } else { 0.0 }
@@ -617,13 +724,17 @@ pub fn try_refine(
     lights: &[PolygonLight],
     settings: &RefineSettings,
 ) -> Result<(Mesh, RefineStats), RefineError> {
-    refine_for(mesh, lights, false, settings)
+    refine_for(mesh, lights, &[], &[], false, settings)
 }
 
-/// [`try_refine`] for `lights` and, when `sky`, the sky's visibility ([`Visibility::with_sky`]).
+/// [`try_refine`] for `lights`, the point and spot lights' spheres `spheres`
+/// ([`Visibility::with_spheres`]), the suns at rest ([`Visibility::with_suns`]) and, when
+/// `sky`, the sky's visibility ([`Visibility::with_sky`]).
 pub fn refine_for(
     mesh: &Mesh,
     lights: &[PolygonLight],
+    spheres: &[PunctualLight],
+    suns: &[SunLight],
     sky: bool,
     settings: &RefineSettings,
 ) -> Result<(Mesh, RefineStats), RefineError> {
@@ -632,7 +743,9 @@ pub fn refine_for(
         .validate()
         .map_err(|e| RefineError::Settings(e.to_string()))?;
     mesh.validate()?;
-    let vis = Visibility::with_sky(mesh, lights, sky);
+    let vis = Visibility::with_sky(mesh, lights, sky)
+        .with_spheres(spheres)
+        .with_suns(suns);
     let mut r = Refiner::new(mesh, &vis, settings);
     r.run();
     Ok(r.finish(mesh, start))

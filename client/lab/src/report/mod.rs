@@ -28,7 +28,7 @@ use crate::bench::{file_stem, load_named_scene, named_scene_path};
 /// `bspvt report`: error against run time of every method on real scenes.
 #[derive(clap::Args, Clone, Debug)]
 pub struct ReportArgs {
-    /// Scenes: built-in names (plate, plate-small, room, two-lamps), shared meshes (teapot,
+    /// Scenes: built-in names (plate, plate-small, room, two-lamps, punctual-room), shared meshes (teapot,
     /// bunny, dragon, or a file name in the meshes folder such as bunny_res3.ply), or paths to
     /// a mesh or scene JSON [default: plate,teapot,bunny,room,two-lamps; with --quick:
     /// plate-small,teapot,bunny_res3.ply,room]
@@ -203,6 +203,7 @@ pub fn run(a: &ReportArgs) -> Result<Report> {
             "bunny".into(),
             "room".into(),
             "two-lamps".into(),
+            "punctual-room".into(),
         ]
     };
     let mut report = Report {

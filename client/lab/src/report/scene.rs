@@ -170,15 +170,14 @@ pub(crate) fn measure(
     cache: &Path,
     out: &Path,
 ) -> Result<SceneReport> {
-    if scene.lights.is_empty() {
+    // Every method and the ground truth are lit by all of the scene's lights.
+    let lights: Vec<Light> = bspvt_client::light::scene_lights(scene)?
+        .into_iter()
+        .map(|l| l.0)
+        .collect();
+    if lights.is_empty() {
         bail!("{name}: the scene has no light");
     }
-    // Every method and the ground truth are lit by all of the scene's lights.
-    let lights = scene
-        .lights
-        .iter()
-        .map(Light::load)
-        .collect::<Result<Vec<_>>>()?;
     let stem = file_stem(name);
     let dir = out.join(&stem);
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -228,7 +227,7 @@ pub(crate) fn measure(
     // Unshadowed LTC: the cost floor of every analytic method, and the budget's unit.
     let mut unshadowed_pixel = None;
     for mode in [Mode::Vertex, Mode::Pixel] {
-        let (ms, img) = draw.timed("ltc", &draw.settings(1), None, 0, mode)?;
+        let (ms, img) = draw.timed("ltc", &draw.settings(1), None, None, 0, mode)?;
         record(
             Entry {
                 mode: Some(mode),
@@ -277,6 +276,19 @@ pub(crate) fn measure(
             std::fs::read(&b.path).with_context(|| format!("cannot read {}", b.path.display()))?;
         let decoded = decode_bake(&bytes).with_context(|| format!("{}", b.path.display()))?;
         let trees = Trees::full(&decoded.trees, decoded.header.codec());
+        // The suns' trees, where the scene bakes them apart (Scene::suns_in_sky_bake).
+        let sky = match s.suns_in_sky_bake() {
+            true => {
+                let c = cached_bake(name, &s.sky(), &cache.join("bakes"), &|_, _| {})?;
+                let bytes = std::fs::read(&c.path)
+                    .with_context(|| format!("cannot read {}", c.path.display()))?;
+                Some(decode_bake(&bytes).with_context(|| format!("{}", c.path.display()))?)
+            }
+            false => None,
+        };
+        let sky = sky
+            .as_ref()
+            .map(|d| Trees::full(&d.trees, d.header.codec()));
         let v = b.vertices.max(1) as f64;
         bakes.push(BakeCost {
             face_res,
@@ -290,7 +302,14 @@ pub(crate) fn measure(
             from_cache: b.from_cache,
         });
         for mode in [Mode::Vertex, Mode::Pixel] {
-            let (ms, img) = draw.timed("bspvt", &draw.settings(1), Some(&trees), 0, mode)?;
+            let (ms, img) = draw.timed(
+                "bspvt",
+                &draw.settings(1),
+                Some(&trees),
+                sky.as_ref(),
+                0,
+                mode,
+            )?;
             budget.push(analysis::budget(
                 face_res,
                 epsilon,
@@ -318,7 +337,7 @@ pub(crate) fn measure(
         let seed = SEED_STOCHASTIC + 16 * k as u64;
         let mut settings = draw.settings(spp);
         settings.denoise_radius = st.denoise_radius;
-        let (ms, img) = draw.timed("mc", &settings, None, seed, Mode::Pixel)?;
+        let (ms, img) = draw.timed("mc", &settings, None, None, seed, Mode::Pixel)?;
         record(
             Entry {
                 spp: Some(spp),
@@ -327,7 +346,7 @@ pub(crate) fn measure(
             &img,
         )?;
         for method in ["ratio", "ratio-denoised"] {
-            let (ms, img) = draw.timed(method, &settings, None, seed + 1, Mode::Pixel)?;
+            let (ms, img) = draw.timed(method, &settings, None, None, seed + 1, Mode::Pixel)?;
             record(
                 Entry {
                     spp: Some(spp),
@@ -341,7 +360,7 @@ pub(crate) fn measure(
     // The point-light methods (paper 003 and the shadow-map baselines) against the area
     // light's ground truth: the light they stand in for.
     for method in ["rt-penumbra", "rt-hard", "pcf", "vsm", "pcss"] {
-        let (ms, img) = draw.timed(method, &draw.settings(1), None, 0, Mode::Pixel)?;
+        let (ms, img) = draw.timed(method, &draw.settings(1), None, None, 0, Mode::Pixel)?;
         record(entry(method, ms), &img)?;
     }
 
@@ -529,7 +548,9 @@ impl Draw<'_> {
         settings: &bspvt_client::method::Settings,
         index: u64,
     ) -> Result<Image> {
-        Ok(self.timed_n(name, settings, None, index, Mode::Pixel, 1)?.1)
+        Ok(self
+            .timed_n(name, settings, (None, None), index, Mode::Pixel, 1)?
+            .1)
     }
 
     /// The median time of `self.frames` frames of method `name` and the last image; the
@@ -539,17 +560,18 @@ impl Draw<'_> {
         name: &str,
         settings: &bspvt_client::method::Settings,
         trees: Option<&Trees>,
+        sky: Option<&Trees>,
         index: u64,
         mode: Mode,
     ) -> Result<(f64, Image)> {
-        self.timed_n(name, settings, trees, index, mode, self.frames)
+        self.timed_n(name, settings, (trees, sky), index, mode, self.frames)
     }
 
     fn timed_n(
         &self,
         name: &str,
         settings: &bspvt_client::method::Settings,
-        trees: Option<&Trees>,
+        (trees, sky): (Option<&Trees>, Option<&Trees>),
         index: u64,
         mode: Mode,
         frames: usize,
@@ -560,7 +582,7 @@ impl Draw<'_> {
             renderer: self.r,
             lights: self.lights,
             trees,
-            sky_trees: None,
+            sky_trees: sky,
             env_rotation_deg: 0.0,
             index,
             time: 0.0,

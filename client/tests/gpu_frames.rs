@@ -269,3 +269,82 @@ fn msaa_frames_are_finite_and_close() {
         "interior pixels differ by {worst} of the peak"
     );
 }
+
+/// A frame whose lights the GPU only partly takes (issue 34): the polygon lamp on the GPU, a
+/// point light's sphere on the CPU, added — the same frame as the CPU's, through the method.
+#[test]
+fn gpu_frames_add_the_lights_the_cpu_draws() {
+    let Some((_gpu, _guard)) = gpu() else { return };
+    let mut scene = bspvt_proto::builtin::scene("plate-small").unwrap();
+    scene.bake.face_res = 16;
+    scene.punctual.push(bspvt_proto::scene::PunctualLight {
+        name: "bulb".into(),
+        position: [0.6, 1.2, 0.4],
+        intensity: [2.0; 3],
+        range: None,
+        spot: None,
+        radius: Some(0.1),
+    });
+    scene.validate().unwrap();
+    let b = bake(&scene);
+    let trees = Trees::full(&b.trees, b.header.codec());
+    let frame = |backend: bspvt_client::gpu::Backend, mode: Mode, light: Option<usize>| {
+        let opts = bspvt_client::method::sequence::Options {
+            method: bspvt_client::method::registry::lookup("bspvt").unwrap(),
+            width: 96,
+            height: 72,
+            frames: 1,
+            light,
+            env_spin_deg: 0.0,
+            settings: bspvt_client::method::Settings {
+                backend,
+                mode,
+                ..Default::default()
+            },
+        };
+        let mut out = None;
+        bspvt_client::method::sequence::render_sequence(
+            &scene,
+            Some(&trees),
+            None,
+            &opts,
+            |_, i| {
+                out = Some(i.clone());
+                Ok(())
+            },
+        )
+        .unwrap();
+        out.unwrap()
+    };
+    let mean = |i: &Image| {
+        i.pixels
+            .iter()
+            .flatten()
+            .map(|&x| f64::from(x))
+            .sum::<f64>()
+    };
+    for mode in [Mode::Vertex, Mode::Pixel] {
+        use bspvt_client::gpu::Backend::{Cpu, Gpu};
+        let cpu = frame(Cpu, mode, None);
+        let gpu = frame(Gpu, mode, None);
+        // The method's GPU frames are 4× MSAA: the tolerance of `msaa_frames_are_finite_and_close`.
+        let (off, mean_diff, _) = differences(&cpu, &gpu);
+        eprintln!(
+            "lamp on the GPU + bulb on the CPU, {mode:?}: {:.2} % off, mean {mean_diff:.2e}",
+            off * 100.0
+        );
+        assert!(off < 0.1 && mean_diff < 1e-2, "{mode:?}: {off} {mean_diff}");
+        // The bulb is there: it adds light to the GPU's lamp.
+        let lamp = frame(Gpu, mode, Some(0));
+        let bulb = frame(Cpu, mode, Some(1));
+        let (all, lamp, bulb) = (mean(&gpu), mean(&lamp), mean(&bulb));
+        assert!(
+            bulb > 0.05 * lamp,
+            "{mode:?}: the bulb lights little: {bulb} vs {lamp}"
+        );
+        assert!(
+            (all - lamp - bulb).abs() <= 0.02 * all,
+            "{mode:?}: lamp {lamp} + bulb {bulb} vs both {all}"
+        );
+    }
+}

@@ -854,6 +854,48 @@ mod tests {
         }
     }
 
+    /// A version-6 stored scene with punctual lights (before their radii and the suns) reads
+    /// back with the default radius and no suns; the punctual room (point, spot, sun)
+    /// round-trips in version 7.
+    #[test]
+    fn version_6_punctual_lights_read_and_version_7_round_trips() {
+        let mut p = crate::builtin::scene("punctual-room").expect("builtin");
+        p.warnings.clear();
+        assert_eq!((p.punctual.len(), p.suns.len()), (2, 1));
+        assert_eq!(decode_scene(&encode_scene(&p)).as_ref(), Ok(&p));
+        let v6 = postcard::to_stdvec(&StoredSceneV6 {
+            version: 6,
+            mesh: p.mesh.clone(),
+            materials: p.materials.clone(),
+            lights: Vec::new(),
+            camera: StoredCamera::from(&p.camera),
+            bake: p.bake.clone(),
+            motion: Vec::new(),
+            uvs: Vec::new(),
+            textures: Vec::new(),
+            maps: Vec::new(),
+            light_images: Vec::new(),
+            punctual: p
+                .punctual
+                .iter()
+                .map(|l| PunctualV6 {
+                    name: l.name.clone(),
+                    position: l.position,
+                    intensity: l.intensity,
+                    range: l.range,
+                    spot: l.spot,
+                })
+                .collect(),
+            moves_in_plane: Vec::new(),
+        })
+        .expect("encode v6");
+        let back = decode_scene(&v6).expect("v6 reads");
+        assert!(back.suns.is_empty());
+        assert_eq!(back.punctual.len(), 2);
+        assert!(back.punctual.iter().all(|l| l.radius.is_none()));
+        assert_eq!(back.punctual[0].position, p.punctual[0].position);
+    }
+
     fn v3_camera(c: &Camera) -> CameraV3 {
         CameraV3 {
             position: c.position,
@@ -926,8 +968,8 @@ mod tests {
     }
 
     /// A version-4 stored scene (before textures and punctual lights) still reads, with
-    /// none; the version-6 encoding of an untextured scene without lights moving in their
-    /// planes is version 4's and six empty lists.
+    /// none; the version-7 encoding of an untextured scene without lights moving in their
+    /// planes, punctual lights or suns is version 4's and seven empty lists.
     #[test]
     fn version_4_reads() {
         let mut p = crate::builtin::scene("room").expect("builtin");
@@ -949,9 +991,9 @@ mod tests {
         }
         assert!(moving.lights.iter().any(|l| l.moves_in_plane));
         assert_eq!(decode_scene(&v4).as_ref(), Ok(&moving));
-        let v6 = encode_scene(&p);
-        assert_eq!(v6.len(), v4.len() + 6, "the six empty lists");
-        assert_eq!(decode_scene(&v6).as_ref(), Ok(&p));
+        let v7 = encode_scene(&p);
+        assert_eq!(v7.len(), v4.len() + 7, "the seven empty lists");
+        assert_eq!(decode_scene(&v7).as_ref(), Ok(&p));
         // A light that moves in its plane round-trips.
         assert_eq!(decode_scene(&encode_scene(&moving)).as_ref(), Ok(&moving));
     }

@@ -43,14 +43,14 @@ struct State {
 impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
         let lights = f.lights()?;
+        let cpu =
+            |ls: &[crate::light::Light]| f.renderer.bspvt_lights(ls, f.trees, f.sky_trees, f.mode);
         if let Some(g) = self.gpu.as_mut()
-            && let Some(frame) = g.frame(f, lights, f.trees)?
+            && let Some(frame) = g.frame(f, lights, f.trees, &cpu)?
         {
             return Ok(frame);
         }
-        let (image, counts) = f
-            .renderer
-            .bspvt_lights(lights, f.trees, f.sky_trees, f.mode);
+        let (image, counts) = cpu(lights);
         Ok(Frame::new(image, counts))
     }
 }

@@ -1,6 +1,7 @@
 //! The GPU path of the methods that have one (`bspvt`, `ltc`): frames drawn by
-//! [`crate::gpu::frame::GpuFrames`] when [`Settings::backend`] asks for the GPU, the CPU's
-//! frame where the GPU cannot draw this light (more than 8 vertices: said once).
+//! [`crate::gpu::frame::GpuFrames`] when [`Settings::backend`] asks for the GPU; the lights the
+//! GPU's shaders do not take (a point, spot or sun light; a polygon of more than 8 vertices:
+//! said once) are drawn by the CPU and added.
 
 use anyhow::Result;
 
@@ -9,7 +10,7 @@ use crate::frame::image::Image;
 use crate::gpu::frame::GpuFrames;
 use crate::gpu::{Backend, Gpu};
 use crate::light::Light;
-use crate::render::renderer::Trees;
+use crate::render::renderer::{FrameCounts, Trees};
 
 /// MSAA samples of the GPU's frames.
 pub(crate) const SAMPLES: u32 = 4;
@@ -20,6 +21,8 @@ pub(crate) struct GpuPath {
     frames: Option<GpuFrames>,
     /// Why the GPU does not draw this scene (said once; its frames are the CPU's).
     refused: Option<String>,
+    /// Some light was left to the CPU (said once).
+    said: bool,
 }
 
 impl GpuPath {
@@ -33,18 +36,21 @@ impl GpuPath {
             gpu,
             frames: None,
             refused: None,
+            said: false,
         }))
     }
 
     /// The GPU's frame of `lights` with `trees` (`None`: unshadowed), or `None` where the
     /// CPU must draw it. Several lights are drawn one GPU frame each and summed (read back:
     /// a window is then given the sum as a CPU image); each light's per-pixel frame has its
-    /// own shadow ratios, as on the CPU.
+    /// own shadow ratios, as on the CPU. The lights the GPU does not take are drawn by `cpu`
+    /// and added.
     pub(crate) fn frame(
         &mut self,
         f: &FrameInput,
         lights: &[Light],
         trees: Option<&Trees>,
+        cpu: &dyn Fn(&[Light]) -> (Image, FrameCounts),
     ) -> Result<Option<Frame>> {
         if self.refused.is_some() {
             return Ok(None);
@@ -55,15 +61,35 @@ impl GpuPath {
                 Err(e) => return Ok(self.refuse(format!("{e:#}"))),
             }
         }
-        if let Some(e) = lights
+        let (on_gpu, on_cpu): (Vec<Light>, Vec<Light>) = lights
+            .iter()
+            .cloned()
+            .partition(|l| crate::gpu::vertex::supports(l).is_ok());
+        if let Some(e) = on_cpu
             .iter()
             .find_map(|l| crate::gpu::vertex::supports(l).err())
+            && !self.said
         {
-            return Ok(self.refuse(format!("{e:#}")));
+            tracing::warn!("GPU backend: {e:#}");
+            self.said = true;
+        }
+        if on_gpu.is_empty() {
+            return Ok(None);
         }
         let Some(frames) = self.frames.as_mut() else {
             return Ok(None);
         };
+        if !on_cpu.is_empty() {
+            let (mut image, mut counts) = cpu(&on_cpu);
+            for l in &on_gpu {
+                let (i, c) = frames.frame(self.gpu, f.renderer, l, trees, f.mode)?;
+                image.add(&i);
+                counts.pieces += c.pieces;
+                counts.pieces_dropped += c.pieces_dropped;
+            }
+            return Ok(Some(Frame::new(image, counts)));
+        }
+        let lights = &on_gpu[..];
         let light = match lights {
             [one] => one,
             _ => {

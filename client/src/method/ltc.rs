@@ -16,7 +16,7 @@ impl FrameMethod for Ltc {
         "LTC (no shadows)"
     }
     fn description(&self) -> &'static str {
-        "unshadowed LTC GGX of the polygon lights (Heitz et al. 2016), no visibility"
+        "unshadowed LTC GGX of the lights (Heitz et al. 2016), no visibility"
     }
     fn needs(&self) -> Needs {
         Needs {
@@ -40,8 +40,9 @@ struct State {
 
 impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
+        let cpu = |ls: &[crate::light::Light]| f.renderer.ltc(ls, f.mode);
         if let Some(g) = self.gpu.as_mut()
-            && let Some(frame) = g.frame(f, f.lights()?, None)?
+            && let Some(frame) = g.frame(f, f.lights()?, None, &cpu)?
         {
             return Ok(frame);
         }

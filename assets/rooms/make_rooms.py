@@ -16,6 +16,9 @@
   lights, as Blender's glTF exporter writes a scene's lamps: a point light near the ceiling
   over a box, a spot light aimed at a ball, and a sun shining through the window onto the
   floor, where a post stands in its patch (issue 34).
+- canopy.gltf: a square lamp 2.5 m above a floor that is one 4 x 4 m quad, and a 1.2 m square
+  canopy (a single quad, double-sided) 1 m above the floor: its umbra on the floor is what
+  per-vertex shading must not leak light into (issue 35).
 """
 import base64, json, math, os, struct
 
@@ -362,8 +365,40 @@ def punctual_room():
     g.write(os.path.join(HERE, "punctual-room.gltf"))
 
 
+def canopy():
+    g = Gltf()
+    floor = g.material("floor", [0.6, 0.6, 0.6], 0.0, 0.8)
+    board = g.material("canopy", [0.5, 0.45, 0.4], 0.0, 0.8)
+    g.doc["materials"][board]["doubleSided"] = True
+    lamp = g.material("lamp", [1.0, 1.0, 1.0], 0.0, 1.0, [1.0, 1.0, 1.0], 10.0)
+    F = 2.0
+    floor_mesh = g.mesh("floor", [quad_prim(g, [(-F, 0, -F), (-F, 0, F), (F, 0, F), (F, 0, -F)],
+                                            (0, 1, 0), floor)])
+    c = 0.6
+    canopy_mesh = g.mesh("canopy", [quad_prim(g, [(-c, 0, -c), (-c, 0, c), (c, 0, c), (c, 0, -c)],
+                                              (0, 1, 0), board)])
+    s = 0.25
+    lamp_mesh = g.mesh("lamp", [quad_prim(g, [(-s, 0, -s), (s, 0, -s), (s, 0, s), (-s, 0, s)],
+                                          (0, -1, 0), lamp)])
+    g.doc["cameras"].append({"name": "view", "type": "perspective",
+                             "perspective": {"yfov": 0.8, "aspectRatio": 1.5,
+                                             "znear": 0.05, "zfar": 50.0}})
+    # Low, under the canopy's height, so that the floor beneath it is in view.
+    t = math.radians(-16) / 2
+    nodes = [
+        g.node("floor", mesh=floor_mesh),
+        g.node("canopy", mesh=canopy_mesh, translation=[0.0, 1.0, 0.0]),
+        g.node("lamp", mesh=lamp_mesh, translation=[0.0, 2.5, 0.0]),
+        g.node("camera", camera=0, translation=[0.0, 0.8, 3.0],
+               rotation=[math.sin(t), 0.0, 0.0, math.cos(t)]),
+    ]
+    g.doc["scenes"].append({"name": "canopy", "nodes": nodes})
+    g.write(os.path.join(HERE, "canopy.gltf"))
+
+
 if __name__ == "__main__":
     cornell()
     room()
     two_lamps()
     punctual_room()
+    canopy()

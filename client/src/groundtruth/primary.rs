@@ -53,10 +53,9 @@ impl Tracer {
             f32::INFINITY,
         );
         let mut hit = RayHit::none();
-        if !self
-            .bvh
-            .ray_traverse(ray, &mut hit, |r, id| self.tris[id].intersect(r))
-        {
+        if !self.bvh.ray_traverse(ray, &mut hit, |r, id| {
+            bspvt_raytrace::hit(&self.tris[id], r)
+        }) {
             return None;
         }
         let t = *self.ids.get(hit.primitive_id as usize)?;

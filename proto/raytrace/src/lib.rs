@@ -27,6 +27,35 @@ use obvhs::{
     triangle::Triangle,
 };
 
+/// How far outside a triangle, in barycentric units, [`hit`] still counts a hit.
+pub const EDGE_SLACK: f32 = 1.0 / 1_048_576.0; // 2⁻²⁰
+
+/// The ray–triangle test of every query: Möller–Trumbore (Möller & Trumbore 1997, "Fast,
+/// Minimum Storage Ray/Triangle Intersection") as obvhs's `RtTriangle::intersect`, but closed:
+/// barycentrics down to −[`EDGE_SLACK`] count. obvhs's test is open at the edges (a
+/// barycentric of −0.0 misses), so a ray through an edge that two triangles share could miss
+/// both by rounding — and the cube maps' dyadic pixel directions meet the shared edges of
+/// axis-aligned, bisected meshes exactly: light leaked through the diagonal of a canopy made
+/// of one quad into its umbra (issue 35). Returns the distance, or infinity for no hit in
+/// \[`ray.tmin`, `ray.tmax`\]. `occlusion.wgsl`'s `blocks` is the same test.
+#[inline]
+pub fn hit(tri: &RtTriangle, ray: &Ray) -> f32 {
+    let c = tri.v0 - ray.origin;
+    let r = ray.direction.cross(c);
+    let det = tri.ng.dot(ray.direction);
+    let inv_det = 1.0 / det;
+    let u = r.dot(tri.e2) * inv_det;
+    let v = r.dot(tri.e1) * inv_det;
+    let w = 1.0 - u - v;
+    if det != 0.0 && u >= -EDGE_SLACK && v >= -EDGE_SLACK && w >= -EDGE_SLACK {
+        let t = tri.ng.dot(c) * inv_det;
+        if t >= ray.tmin && t <= ray.tmax {
+            return t;
+        }
+    }
+    f32::INFINITY
+}
+
 /// A mesh prepared for occlusion queries: a CWBVH over its triangles [obvhs].
 pub struct Occluder {
     bvh: CwBvh,
@@ -123,7 +152,7 @@ impl Occluder {
             if self.indices[id].contains(&skip) {
                 f32::INFINITY
             } else {
-                self.tris[id].intersect(ray)
+                crate::hit(&self.tris[id], ray)
             }
         })
     }
@@ -148,7 +177,7 @@ impl Occluder {
             if self.indices[id].contains(&skip) {
                 return f32::INFINITY;
             }
-            let t = self.tris[id].intersect(ray);
+            let t = hit(&self.tris[id], ray);
             // The traversal's own acceptance test (`t < ray.tmax`), so the primitive named
             // is the one that ended it.
             if t < ray.tmax {
@@ -166,7 +195,7 @@ impl Occluder {
     /// also a leaf-box face (see docs/bake.md, "The adaptive cast").
     #[inline]
     pub fn primitive_blocks(&self, prim: u32, ray: &Ray) -> bool {
-        self.tris[prim as usize].intersect(ray) < ray.tmax
+        hit(&self.tris[prim as usize], ray) < ray.tmax
     }
 
     /// The mesh triangle index of each primitive, in this occluder's order.
@@ -181,7 +210,7 @@ impl Occluder {
         let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
         !self
             .bvh
-            .ray_traverse_miss(ray, |ray, id| self.tris[id].intersect(ray))
+            .ray_traverse_miss(ray, |ray, id| crate::hit(&self.tris[id], ray))
     }
 
     /// Distance to the closest triangle hit by the segment from `origin` along unit `dir` up to
@@ -195,7 +224,7 @@ impl Occluder {
         let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
         let mut hit = RayHit::none();
         self.bvh
-            .ray_traverse(ray, &mut hit, |ray, id| self.tris[id].intersect(ray))
+            .ray_traverse(ray, &mut hit, |ray, id| crate::hit(&self.tris[id], ray))
             .then_some(hit.t)
             .filter(|t| t.is_finite())
     }

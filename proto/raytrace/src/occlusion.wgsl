@@ -102,7 +102,9 @@ fn intersect_node(n: u32, o: vec3<f32>, inv_d: vec3<f32>, neg: vec3<bool>, t_max
     return hit_mask;
 }
 
-// RtTriangle::intersect, as a "blocks" test: a hit at t in [t_min, t_max).
+// bspvt_raytrace::hit (closed Möller–Trumbore: barycentrics down to -EDGE_SLACK count), as a
+// "blocks" test: a hit at t in [t_min, t_max).
+const EDGE_SLACK: f32 = 9.5367431640625e-7; // 2^-20
 fn blocks(id: u32, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
     let b = id * 12u;
     let v0 = vec3<f32>(tris[b], tris[b + 1u], tris[b + 2u]);
@@ -115,8 +117,7 @@ fn blocks(id: u32, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> bool {
     let u = dot(r, e2) * inv_det;
     let v = dot(r, e1) * inv_det;
     let w = 1.0 - u - v;
-    let signs = bitcast<u32>(u) | bitcast<u32>(v) | bitcast<u32>(w);
-    if inv_det == 0.0 || (signs & 0x80000000u) != 0u {
+    if !(inv_det != 0.0 && u >= -EDGE_SLACK && v >= -EDGE_SLACK && w >= -EDGE_SLACK) {
         return false;
     }
     let t = dot(ng, c) * inv_det;

@@ -149,7 +149,7 @@ impl FrustumCuller {
     ) -> bool {
         let ray = Ray::new(origin.into(), dir.into(), t_min, t_max);
         list.iter()
-            .any(|&p| self.rt[p as usize].intersect(&ray) < f32::INFINITY)
+            .any(|&p| bspvt_raytrace::hit(&self.rt[p as usize], &ray) < f32::INFINITY)
     }
 
     /// The first primitive of the list that `ray` hits between its `tmin` and `tmax` (the
@@ -157,7 +157,7 @@ impl FrustumCuller {
     #[inline]
     pub(crate) fn ray_first_hit(&self, ray: &Ray, list: &[u32]) -> Option<u32> {
         list.iter()
-            .find(|&&p| self.rt[p as usize].intersect(ray) < f32::INFINITY)
+            .find(|&&p| bspvt_raytrace::hit(&self.rt[p as usize], ray) < f32::INFINITY)
             .map(|&p| self.occ_prim[p as usize])
     }
 }

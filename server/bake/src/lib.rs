@@ -46,8 +46,10 @@ use fit::{FitStats, Fitter};
 /// directions that cannot reach a light's plane are "don't care" (docs/bake.md). 4: a fixed
 /// lamp (no region, not moving in its plane) stops rays at its polygon, not its plane, and only
 /// the directions that reach it matter. 5: a point or spot light stops rays at its sphere (before,
-/// they were not lights for the bake), and a sun makes every direction matter.
-pub const ALGORITHM_VERSION: u32 = 5;
+/// they were not lights for the bake). 6: the ray–triangle test is closed at the edges
+/// (`bspvt_raytrace::hit`): a ray through an edge two triangles share no longer slips between
+/// them.
+pub const ALGORITHM_VERSION: u32 = 6;
 
 /// Ray origins are offset along the normal by this fraction of the scene's diagonal.
 pub(crate) const RAY_OFFSET_SCALE: f32 = 1e-4;

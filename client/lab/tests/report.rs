@@ -88,6 +88,19 @@ fn quick_report_measures_every_method_and_reuses_its_cache() {
             .rmse
     };
     let unshadowed = rmse("ltc pixel");
+    // Where the ground truth is in an umbra (issue 35): unshadowed LTC puts all its light there
+    // (the lit level itself), BSPVT per pixel next to none.
+    let umbra = |label: &str| {
+        sc.entries
+            .iter()
+            .find(|e| e.label() == label)
+            .and_then(|e| e.umbra)
+            .unwrap_or_else(|| panic!("{label}: no umbra in view"))
+    };
+    let lit = umbra("ltc pixel");
+    assert!(lit.pixels > 0 && (lit.mean - 1.0).abs() < 1e-3, "{lit:?}");
+    let bspvt = umbra("bspvt 64² ε=1e-3 pixel");
+    assert!(bspvt.mean < 0.1 && bspvt.p99 <= 1.0, "{bspvt:?}");
     for l in [
         "bspvt 64² ε=1e-3 pixel",
         "bspvt 32² ε=1e-3 vertex",

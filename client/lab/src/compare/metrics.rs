@@ -35,6 +35,53 @@ pub struct Metrics {
     pub share_over_8: f64,
 }
 
+/// Below this share of the unshadowed light, a pixel of the reference is in an umbra.
+pub const UMBRA_BELOW: f64 = 0.02;
+
+/// How much light an image puts where the reference is in an umbra (issue 35: shadow error
+/// where the shadows are, not over the whole image), as shares of the unshadowed level.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct UmbraLeak {
+    /// Umbra pixels.
+    pub pixels: usize,
+    /// Mean of image / unshadowed over them.
+    pub mean: f64,
+    /// Its 99th percentile.
+    pub p99: f64,
+}
+
+/// The covered pixels where `reference` is below [`UMBRA_BELOW`] of `lit` (the unshadowed
+/// image) and `lit` is not black.
+pub fn umbra_pixels(reference: &Image, lit: &Image, covered: &[bool]) -> Vec<usize> {
+    let lum = |p: &[f32; 3]| (f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2])) / 3.0;
+    (0..reference.pixels.len())
+        .filter(|&i| {
+            let l = lum(&lit.pixels[i]);
+            covered.get(i) == Some(&true) && l > 0.0 && lum(&reference.pixels[i]) < UMBRA_BELOW * l
+        })
+        .collect()
+}
+
+/// [`UmbraLeak`] of `img` over `umbra` ([`umbra_pixels`]); `None` without umbra pixels.
+pub fn umbra_leak(img: &Image, lit: &Image, umbra: &[usize]) -> Option<UmbraLeak> {
+    let lum = |p: &[f32; 3]| (f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2])) / 3.0;
+    let mut share: Vec<f64> = umbra
+        .iter()
+        .map(|&i| lum(&img.pixels[i]) / lum(&lit.pixels[i]))
+        .filter(|x| x.is_finite())
+        .collect();
+    if share.is_empty() {
+        return None;
+    }
+    share.sort_by(f64::total_cmp);
+    let n = share.len();
+    Some(UmbraLeak {
+        pixels: n,
+        mean: share.iter().sum::<f64>() / n as f64,
+        p99: share[(n * 99 / 100).min(n - 1)],
+    })
+}
+
 /// The pixels that see a surface.
 pub fn covered(gbuffer: &GBuffer) -> Vec<bool> {
     gbuffer.tri.iter().map(|&t| t != NONE).collect()
@@ -166,6 +213,23 @@ mod tests {
             *p = [v; 3];
         }
         img
+    }
+
+    #[test]
+    fn umbra_leak_is_light_over_the_unshadowed_level_where_the_reference_is_dark() {
+        let lit = image(&[1.0, 2.0, 4.0, 1.0, 0.0]);
+        let reference = image(&[0.01, 0.0, 3.0, 0.5, 0.0]);
+        // Pixels 0 and 1 are below 2 % of the lit level; 2 and 3 are lit; 4 sees no light.
+        let umbra = umbra_pixels(&reference, &lit, &[true; 5]);
+        assert_eq!(umbra, vec![0, 1]);
+        let img = image(&[0.1, 0.0, 3.0, 0.5, 0.0]);
+        let u = umbra_leak(&img, &lit, &umbra).expect("an umbra");
+        assert_eq!(u.pixels, 2);
+        assert!(
+            (u.mean - 0.05).abs() < 1e-6 && (u.p99 - 0.1).abs() < 1e-6,
+            "{u:?}"
+        );
+        assert!(umbra_leak(&img, &lit, &[]).is_none());
     }
 
     #[test]

@@ -140,6 +140,7 @@ pub(crate) fn measure_env(
             spp,
             ms_per_frame: ms,
             metrics: Metrics::default(),
+            umbra: None,
             image: String::new(),
             heat_map: String::new(),
         };

@@ -14,7 +14,10 @@ use super::analysis::{self, Budget, EqualTime};
 use super::grid::{Grid, Tile};
 use crate::bench::{cached_bake, file_stem, median_ms};
 use crate::compare::heatmap::{error_scale, heat_map};
-use crate::compare::metrics::{Metrics, covered as covered_pixels, covered_mean, mean_image};
+use crate::compare::metrics::{
+    Metrics, UmbraLeak, covered as covered_pixels, covered_mean, mean_image, umbra_leak,
+    umbra_pixels,
+};
 use crate::compare::metrics::{measure as measure_metrics, rmse_mae};
 use bspvt_client::frame::image::Image;
 use bspvt_client::groundtruth::{Convergence, render_mc_until};
@@ -56,6 +59,9 @@ pub struct Entry {
     /// the trees' decoding, done once per stream, are not included).
     pub ms_per_frame: f64,
     pub metrics: Metrics,
+    /// Light where the ground truth is in an umbra (`None`: the scene has none in view).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub umbra: Option<UmbraLeak>,
     /// The image and its error heat map, relative to the output folder.
     pub image: String,
     pub heat_map: String,
@@ -200,8 +206,12 @@ pub(crate) fn measure(
     let mut grid = Grid::new(st.size);
     grid.push(Tile::new("ground truth", gt_img.to_srgb8(EXPOSURE), None));
 
+    // The umbrae: where the ground truth is below 2 % of the unshadowed light.
+    let (lit, _) = r.ltc(&lights, Mode::Pixel);
+    let umbra = umbra_pixels(&gt_img, &lit, &covered);
     let mut entries: Vec<Entry> = Vec::new();
-    let mut record = |e: Entry, img: &Image| -> Result<()> {
+    let mut record = |mut e: Entry, img: &Image| -> Result<()> {
+        e.umbra = umbra_leak(img, &lit, &umbra);
         let (e, map) = finish_entry(e, img, &gt_img, &covered, scale, out, &stem)?;
         if in_grid(&e, st) {
             grid.push(Tile::new(&e.label(), img.to_srgb8(EXPOSURE), Some(map)));
@@ -220,6 +230,7 @@ pub(crate) fn measure(
         spp: None,
         ms_per_frame: ms,
         metrics: Metrics::default(),
+        umbra: None,
         image: String::new(),
         heat_map: String::new(),
     };

@@ -28,7 +28,7 @@ fn opt<T: std::fmt::Display>(v: Option<T>) -> String {
 
 pub(crate) fn results_csv(report: &Report) -> String {
     let mut s = String::from(
-        "scene,method,mode,face_res,epsilon,lobes,spp,ms_per_frame,rmse,rel_mse,mae,flip,share_over_8,image\n",
+        "scene,method,mode,face_res,epsilon,lobes,spp,ms_per_frame,rmse,rel_mse,mae,flip,share_over_8,umbra_leak_mean,umbra_leak_p99,image\n",
     );
     for sc in &report.scenes {
         let env = sc.env.iter().flat_map(|v| &v.entries);
@@ -36,7 +36,7 @@ pub(crate) fn results_csv(report: &Report) -> String {
             let m = &e.metrics;
             let _ = writeln!(
                 s,
-                "{},{},{},{},{},{},{},{:.4},{:.6e},{:.6e},{:.6e},{:.6},{:.6},{}",
+                "{},{},{},{},{},{},{},{:.4},{:.6e},{:.6e},{:.6e},{:.6},{:.6},{},{},{}",
                 sc.name,
                 e.method,
                 opt(e.mode.map(|m| format!("{m:?}").to_lowercase())),
@@ -50,6 +50,8 @@ pub(crate) fn results_csv(report: &Report) -> String {
                 m.mae,
                 m.flip,
                 m.share_over_8,
+                opt(e.umbra.map(|u| format!("{:.6}", u.mean))),
+                opt(e.umbra.map(|u| format!("{:.6}", u.p99))),
                 e.image
             );
         }
@@ -217,7 +219,7 @@ fn scene_section(s: &mut String, sc: &SceneReport, report: &Report) {
     let _ = writeln!(
         s,
         "\n### Methods\n\nEach method's image and error map are `{}/<method>.png` and \
-         `<method>-error.png` in the report's folder (`results.csv` names them).\n\n| method | ms/frame | RMSE | rel. MSE | MAE | FLIP | > 8 % |\n|---|---:|---:|---:|---:|---:|---:|",
+         `<method>-error.png` in the report's folder (`results.csv` names them).\n\n| method | ms/frame | RMSE | rel. MSE | MAE | FLIP | > 8 % | umbra leak mean / p99 |\n|---|---:|---:|---:|---:|---:|---:|---:|",
         file_stem(&sc.name)
     );
     method_rows(s, &sc.entries);
@@ -296,14 +298,19 @@ fn method_rows(s: &mut String, entries: &[super::scene::Entry]) {
         let m = &e.metrics;
         let _ = writeln!(
             s,
-            "| {} | {:.2} | {:.3e} | {:.3e} | {:.3e} | {:.4} | {} |",
+            "| {} | {:.2} | {:.3e} | {:.3e} | {:.3e} | {:.4} | {} | {} |",
             e.label(),
             e.ms_per_frame,
             m.rmse,
             m.rel_mse,
             m.mae,
             m.flip,
-            pct(m.share_over_8)
+            pct(m.share_over_8),
+            e.umbra.map_or("–".into(), |u| format!(
+                "{} / {}",
+                pct(u.mean),
+                pct(u.p99)
+            ))
         );
     }
 }
@@ -337,7 +344,7 @@ fn env_section(s: &mut String, sc: &SceneReport, env: &super::env::EnvReport) {
     }
     let _ = writeln!(
         s,
-        "\n| method | ms/frame | RMSE | rel. MSE | MAE | FLIP | > 8 % |\n|---|---:|---:|---:|---:|---:|---:|"
+        "\n| method | ms/frame | RMSE | rel. MSE | MAE | FLIP | > 8 % | umbra leak mean / p99 |\n|---|---:|---:|---:|---:|---:|---:|---:|"
     );
     method_rows(s, &env.entries);
     let _ = writeln!(

@@ -247,6 +247,24 @@ fn gpu_equals_full_cpu_cast_on_the_room() {
     }
 }
 
+/// The punctual room's bulbs: rays end where they pass within two pixel cones of a sphere
+/// (`SphereStop`, the WGSL `ray_end`'s sphere), the same on both (issue 34).
+#[test]
+fn gpu_equals_full_cpu_cast_on_the_punctual_room() {
+    let Some(ctx) = gpu() else { return };
+    let mut scene = bspvt_proto::builtin::scene("punctual-room").expect("built-in room");
+    scene.bake.face_res = 16;
+    if let Some(r) = &mut scene.bake.refine {
+        r.max_vertices = 2000;
+    }
+    bspvt_bake::refine::refine_scene(&mut scene).expect("refinement");
+    let b = Baker::new(&scene);
+    let n = b.mesh().vertex_count() as u32;
+    let label = "punctual room at 16²".to_string();
+    let seen = compare(&ctx, &b, &label, n.div_ceil(5));
+    check_within(&seen, &label, MAX_ROOM_DIFFERING_PER_MILLION);
+}
+
 /// The GPU bake reports every chunk in order and stops between chunks when cancelled (the
 /// CPU bake's contract), with the GPU thread still busy on the next chunk.
 #[test]

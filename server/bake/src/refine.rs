@@ -196,9 +196,7 @@ impl LightSamples {
         let n: Vec3 = (0..pts.len())
             .map(|i| pts[i].cross(pts[(i + 1) % pts.len()]))
             .sum();
-        let [r, g, b] = light.radiance.map(f64::from);
-        // Rec. 709 luminance.
-        let power = 0.5 * f64::from(n.length()) * (0.2126 * r + 0.7152 * g + 0.0722 * b);
+        let power = 0.5 * f64::from(n.length()) * luminance(light.radiance);
         let emitter = (power > 0.0 && power.is_finite()).then(|| Emitter {
             normal: n.normalize_or_zero(),
             two_sided: light.two_sided,
@@ -214,6 +212,19 @@ impl LightSamples {
         })
     }
 
+    /// Equal-weight `points` of a light seen the same from every side, of intensity
+    /// (luminance) `power`: a sphere, or the sun's disk far away.
+    fn isotropic(points: Vec<Vec3>, power: f64) -> LightSamples {
+        let mut s = LightSamples::equal(points);
+        s.emitter = (power > 0.0 && power.is_finite()).then_some(Emitter {
+            normal: Vec3::ZERO,
+            two_sided: true,
+            isotropic: true,
+            power,
+        });
+        s
+    }
+
     fn equal(points: Vec<Vec3>) -> LightSamples {
         LightSamples {
             weights: vec![1.0; points.len()],
@@ -223,6 +234,12 @@ impl LightSamples {
             points,
         }
     }
+}
+
+/// Rec. 709 luminance of linear RGB.
+fn luminance(rgb: [f32; 3]) -> f64 {
+    let [r, g, b] = rgb.map(f64::from);
+    0.2126 * r + 0.7152 * g + 0.0722 * b
 }
 
 /// Stratified points on a convex polygon: each fan triangle (p0, pᵢ, pᵢ₊₁) is cut into k²
@@ -458,15 +475,7 @@ impl Visibility {
                 .into_iter()
                 .map(|d| c + d * r)
                 .collect();
-            let [red, g, b] = l.intensity.map(f64::from);
-            let power = 0.2126 * red + 0.7152 * g + 0.0722 * b;
-            let mut samples = LightSamples::equal(points);
-            samples.emitter = (power > 0.0 && power.is_finite()).then_some(Emitter {
-                normal: Vec3::ZERO,
-                two_sided: true,
-                isotropic: true,
-                power,
-            });
+            let mut samples = LightSamples::isotropic(points, luminance(l.intensity));
             let mut scaled = l.clone();
             scaled.position = c.to_array();
             scaled.range = l.range.map(|r| r * self.scale);
@@ -505,17 +514,9 @@ impl Visibility {
                 }))
                 .map(|x| x * far)
                 .collect();
-            let [r, g, bl] = sun.illuminance.map(f64::from);
             // E at the scene = P / far²: P = E far².
-            let power = (0.2126 * r + 0.7152 * g + 0.0722 * bl) * f64::from(far).powi(2);
-            let mut samples = LightSamples::equal(points);
-            samples.emitter = (power > 0.0 && power.is_finite()).then_some(Emitter {
-                normal: Vec3::ZERO,
-                two_sided: true,
-                isotropic: true,
-                power,
-            });
-            self.lights.push(samples);
+            let power = luminance(sun.illuminance) * f64::from(far).powi(2);
+            self.lights.push(LightSamples::isotropic(points, power));
         }
         self
     }

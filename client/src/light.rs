@@ -11,6 +11,7 @@ use std::sync::Arc;
 use anyhow::Result;
 use bspvt_proto::Scene;
 use bspvt_proto::scene::{LightMotion, PolygonLight, PunctualLight, SunLight};
+use bspvt_proto::sphere::SphPoly;
 use glam::{DAffine3, DVec3};
 
 use crate::texture::{LightFrame, LightTexture};
@@ -43,7 +44,7 @@ pub struct Light {
     pub vertices: Vec<DVec3>,
     /// Unit normal of a polygon's emitting side (zero for the others).
     pub normal: DVec3,
-    /// Linear RGB radiance (a sphere's: I / (π r²); the sun's: E / Ω).
+    /// Linear RGB radiance (a sphere's: I / (π r²); the sun's: E / (π sin² h)).
     pub radiance: DVec3,
     /// Emits from both sides.
     pub two_sided: bool,
@@ -118,7 +119,7 @@ impl Light {
         }
     }
 
-    /// A sun as its disk at infinity (radiance E / Ω).
+    /// A sun as its disk at infinity (radiance E / (π sin² h), h half its diameter).
     pub fn sun(l: &SunLight) -> Light {
         Light {
             vertices: Vec::new(),
@@ -140,20 +141,18 @@ impl Light {
 
     /// What the light subtends from `p`, as unit directions (polygon: its corners' directions,
     /// in order; sphere and sun: [`round_directions`]); empty when `p` sees none of it (inside
-    /// the sphere, or at a corner).
-    pub fn directions(&self, p: DVec3) -> Vec<DVec3> {
+    /// the sphere, or at a corner). No heap: this runs per vertex (or pixel) and light.
+    pub fn directions(&self, p: DVec3) -> SphPoly {
+        let mut out = SphPoly::new();
         match &self.shape {
             Shape::Polygon => {
-                let mut out = Vec::with_capacity(self.vertices.len());
                 for &q in &self.vertices {
                     let d = q - p;
                     let len = d.length();
-                    if !(len > 0.0) || !len.is_finite() {
-                        return Vec::new();
+                    if !(len > 0.0) || !len.is_finite() || out.try_push(d / len).is_err() {
+                        return SphPoly::new();
                     }
-                    out.push(d / len);
                 }
-                out
             }
             Shape::Sphere(l) => {
                 let c = glam::Vec3::from(l.position).as_dvec3();
@@ -161,19 +160,23 @@ impl Light {
                 let to = c - p;
                 let d = to.length();
                 if !(d > r) || !d.is_finite() {
-                    return Vec::new();
+                    return out;
                 }
                 // sin(α/2) from sin α = r / d, stable for tiny α.
                 let sin_a = r / d;
                 let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
                 let sin_half = (sin_a / (2.0 * (1.0 + cos_a)).sqrt()).min(1.0);
-                round_directions(to / d, sin_half).map_or_else(Vec::new, |a| a.to_vec())
+                out.extend(round_directions(to / d, sin_half).into_iter().flatten());
             }
             Shape::Distant { toward, half_angle } => {
-                round_directions(*toward, (0.5 * half_angle).sin())
-                    .map_or_else(Vec::new, |a| a.to_vec())
+                out.extend(
+                    round_directions(*toward, (0.5 * half_angle).sin())
+                        .into_iter()
+                        .flatten(),
+                );
             }
         }
+        out
     }
 
     /// The radiance that reaches `p` (per unit of what [`Self::directions`] subtends): a

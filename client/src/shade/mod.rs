@@ -279,12 +279,7 @@ pub fn light_directions(light: &Light, p: DVec3, n: DVec3) -> SphPoly {
     if !p.is_finite() || !n.is_finite() || !light.faces(p) {
         return SphPoly::new();
     }
-    let mut dirs = SphPoly::new();
-    for d in light.directions(p) {
-        if dirs.try_push(d).is_err() {
-            return SphPoly::new();
-        }
-    }
+    let dirs = light.directions(p);
     if dirs.len() < 3 {
         return SphPoly::new();
     }

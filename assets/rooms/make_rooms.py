@@ -19,8 +19,11 @@
 - canopy.gltf: a square lamp 2.5 m above a floor that is one 4 x 4 m quad, and a 1.2 m square
   canopy (a single quad, double-sided) 1 m above the floor: its umbra on the floor is what
   per-vertex shading must not leak light into (issue 35).
+- checker-canopy.gltf: the same canopy cut out, as leaves and grilles are modelled: alphaMode
+  MASK over an 8 x 8 base-colour texture whose alpha is a checker (half the board open), so
+  about half the lamp's light reaches the floor beneath it (issue 35).
 """
-import base64, json, math, os, struct
+import base64, json, math, os, struct, zlib
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 MM = 0.001
@@ -131,11 +134,30 @@ class Gltf:
         self.doc["accessors"].append(acc)
         return len(self.doc["accessors"]) - 1
 
-    def primitive(self, positions, normals, tris, material):
+    def primitive(self, positions, normals, tris, material, uvs=None):
         p = self.accessor(positions, "<3f", 5126, "VEC3", 34962, True)
         n = self.accessor(normals, "<3f", 5126, "VEC3", 34962)
         i = self.accessor([t for tri in tris for t in tri], "<H", 5123, "SCALAR", 34963)
-        return {"attributes": {"POSITION": p, "NORMAL": n}, "indices": i, "material": material}
+        attributes = {"POSITION": p, "NORMAL": n}
+        if uvs:
+            attributes["TEXCOORD_0"] = self.accessor(uvs, "<2f", 5126, "VEC2", 34962)
+        return {"attributes": attributes, "indices": i, "material": material}
+
+    def png_texture(self, w, h, texel, wrap=33071):
+        """An embedded RGBA PNG, `texel(x, y)` its (r, g, b, a) bytes; returns the texture."""
+        raw = b"".join(b"\x00" + b"".join(bytes(texel(x, y)) for x in range(w)) for y in range(h))
+
+        def chunk(t, d):
+            return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d))
+        data = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 6, 0, 0, 0))
+                + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+        for k in ("images", "samplers", "textures"):
+            self.doc.setdefault(k, [])
+        self.doc["images"].append({"uri": "data:image/png;base64," + base64.b64encode(data).decode()})
+        self.doc["samplers"].append({"wrapS": wrap, "wrapT": wrap})
+        self.doc["textures"].append({"source": len(self.doc["images"]) - 1,
+                                     "sampler": len(self.doc["samplers"]) - 1})
+        return len(self.doc["textures"]) - 1
 
     def material(self, name, base, metallic, roughness, emissive=None, strength=None):
         m = {"name": name, "pbrMetallicRoughness": {"baseColorFactor": base + [1.0],
@@ -365,18 +387,28 @@ def punctual_room():
     g.write(os.path.join(HERE, "punctual-room.gltf"))
 
 
-def canopy():
+def canopy(checker=False):
     g = Gltf()
     floor = g.material("floor", [0.6, 0.6, 0.6], 0.0, 0.8)
     board = g.material("canopy", [0.5, 0.45, 0.4], 0.0, 0.8)
     g.doc["materials"][board]["doubleSided"] = True
+    uvs = None
+    if checker:
+        # An 8 x 8 checker in alpha (clamped at the edges), cut out at glTF's default 0.5.
+        tex = g.png_texture(8, 8, lambda x, y: (200, 180, 150, 255 if (x + y) % 2 == 0 else 0))
+        m = g.doc["materials"][board]
+        m["name"] = "leaves"
+        m["alphaMode"] = "MASK"
+        m["pbrMetallicRoughness"]["baseColorTexture"] = {"index": tex}
+        uvs = [(0.0, 0.0), (0.0, 1.0), (1.0, 1.0), (1.0, 0.0)]
     lamp = g.material("lamp", [1.0, 1.0, 1.0], 0.0, 1.0, [1.0, 1.0, 1.0], 10.0)
     F = 2.0
     floor_mesh = g.mesh("floor", [quad_prim(g, [(-F, 0, -F), (-F, 0, F), (F, 0, F), (F, 0, -F)],
                                             (0, 1, 0), floor)])
     c = 0.6
-    canopy_mesh = g.mesh("canopy", [quad_prim(g, [(-c, 0, -c), (-c, 0, c), (c, 0, c), (c, 0, -c)],
-                                              (0, 1, 0), board)])
+    corners = [(-c, 0, -c), (-c, 0, c), (c, 0, c), (c, 0, -c)]
+    canopy_mesh = g.mesh("canopy", [g.primitive(corners, [(0, 1, 0)] * 4, [(0, 1, 2), (0, 2, 3)],
+                                                board, uvs)])
     s = 0.25
     lamp_mesh = g.mesh("lamp", [quad_prim(g, [(-s, 0, -s), (s, 0, -s), (s, 0, s), (-s, 0, s)],
                                           (0, -1, 0), lamp)])
@@ -392,8 +424,8 @@ def canopy():
         g.node("camera", camera=0, translation=[0.0, 0.8, 3.0],
                rotation=[math.sin(t), 0.0, 0.0, math.cos(t)]),
     ]
-    g.doc["scenes"].append({"name": "canopy", "nodes": nodes})
-    g.write(os.path.join(HERE, "canopy.gltf"))
+    g.doc["scenes"].append({"name": "checker canopy" if checker else "canopy", "nodes": nodes})
+    g.write(os.path.join(HERE, "checker-canopy.gltf" if checker else "canopy.gltf"))
 
 
 if __name__ == "__main__":
@@ -402,3 +434,4 @@ if __name__ == "__main__":
     two_lamps()
     punctual_room()
     canopy()
+    canopy(checker=True)

@@ -393,6 +393,7 @@ mod tests {
                 albedo: [0.5, 0.5, 0.5],
                 specular: [0.04; 3],
                 maps: None,
+                cutout: None,
             };
             let (scene, bake) = open_plane(m.clone());
             let trees = Trees::full(&bake.trees, bake.header.codec());
@@ -454,6 +455,7 @@ mod tests {
             albedo: [0.6, 0.5, 0.4],
             specular: [0.04; 3],
             maps: None,
+            cutout: None,
         };
         let (scene, bake) = open_plane(m);
         let trees = Trees::full(&bake.trees, bake.header.codec());

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use std::sync::Arc;
 
-use crate::material::MaterialMaps;
+use crate::material::{Cutout, MaterialMaps};
 use crate::motion::MovingPart;
 use crate::scene::{Camera, Material, PolygonLight, PunctualLight, Region, Spot, SunLight};
 use crate::texture::{LightImage, Texture, TextureRef, Wrap};
@@ -195,9 +195,9 @@ pub struct SceneStatus {
 /// camera's `aspect`; 5: adds the mesh's UVs, the materials' textures (each image once, as the
 /// PNG or JPEG it came from), the lamps' texture images and the punctual lights; 6 adds which
 /// lights move in their plane (before it, every light without a region did; without one now,
-/// a lamp is fixed); 7 adds the point and spot lights' sphere radii and the suns. Versions 1
-/// to 6 still read.
-const STORED_VERSION: u16 = 7;
+/// a lamp is fixed); 7 adds the point and spot lights' sphere radii and the suns; 8 the
+/// materials' alpha cut-outs. Versions 1 to 7 still read.
+const STORED_VERSION: u16 = 8;
 
 #[derive(Serialize, Deserialize)]
 struct StoredScene {
@@ -219,6 +219,58 @@ struct StoredScene {
     /// One per light (or empty: none moves in its plane).
     moves_in_plane: Vec<bool>,
     suns: Vec<SunLight>,
+    /// One per material (or empty: every surface is opaque).
+    cutouts: Vec<Option<StoredCutout>>,
+}
+
+/// A material's [`Cutout`], its texture an index into `StoredScene::textures`.
+#[derive(Serialize, Deserialize)]
+struct StoredCutout {
+    alpha: f32,
+    cutoff: f32,
+    texture: Option<StoredTextureRef>,
+    blend: bool,
+}
+
+/// Version 7: version 8 without the cut-outs.
+#[derive(Serialize, Deserialize)]
+struct StoredSceneV7 {
+    version: u16,
+    mesh: Mesh,
+    materials: Vec<Material>,
+    lights: Vec<StoredLight>,
+    camera: StoredCamera,
+    bake: BakeSettings,
+    motion: Vec<MovingPart>,
+    uvs: Vec<[f32; 2]>,
+    textures: Vec<StoredTexture>,
+    maps: Vec<Option<StoredMaps>>,
+    light_images: Vec<Option<StoredLightImage>>,
+    punctual: Vec<PunctualLight>,
+    moves_in_plane: Vec<bool>,
+    suns: Vec<SunLight>,
+}
+
+impl From<StoredSceneV7> for StoredScene {
+    fn from(v: StoredSceneV7) -> StoredScene {
+        StoredScene {
+            version: v.version,
+            mesh: v.mesh,
+            materials: v.materials,
+            lights: v.lights,
+            camera: v.camera,
+            bake: v.bake,
+            motion: v.motion,
+            uvs: v.uvs,
+            textures: v.textures,
+            maps: v.maps,
+            light_images: v.light_images,
+            punctual: v.punctual,
+            moves_in_plane: v.moves_in_plane,
+            suns: v.suns,
+            cutouts: Vec::new(),
+        }
+    }
 }
 
 /// Version 6: version 7 with punctual lights without a radius and no suns.
@@ -264,7 +316,7 @@ impl From<PunctualV6> for PunctualLight {
 
 impl From<StoredSceneV6> for StoredScene {
     fn from(v: StoredSceneV6) -> StoredScene {
-        StoredScene {
+        StoredSceneV7 {
             version: v.version,
             mesh: v.mesh,
             materials: v.materials,
@@ -280,6 +332,7 @@ impl From<StoredSceneV6> for StoredScene {
             moves_in_plane: v.moves_in_plane,
             suns: Vec::new(),
         }
+        .into()
     }
 }
 
@@ -481,17 +534,19 @@ fn load_texture(t: StoredTexture) -> Result<Arc<Texture>, String> {
     }))
 }
 
+fn texture_ref(r: StoredTextureRef, textures: &[Arc<Texture>]) -> Result<TextureRef, String> {
+    let texture = textures
+        .get(r.texture as usize)
+        .cloned()
+        .ok_or_else(|| format!("stored material names texture {}", r.texture))?;
+    Ok(TextureRef {
+        texture,
+        wrap: r.wrap,
+    })
+}
+
 fn load_maps(m: StoredMaps, textures: &[Arc<Texture>]) -> Result<MaterialMaps, String> {
-    let get = |r: StoredTextureRef| -> Result<TextureRef, String> {
-        let texture = textures
-            .get(r.texture as usize)
-            .cloned()
-            .ok_or_else(|| format!("stored material names texture {}", r.texture))?;
-        Ok(TextureRef {
-            texture,
-            wrap: r.wrap,
-        })
-    };
+    let get = |r: StoredTextureRef| texture_ref(r, textures);
     Ok(match m {
         StoredMaps::MetallicRoughness {
             base_color,
@@ -659,6 +714,21 @@ pub fn encode_scene(s: &Scene) -> Vec<u8> {
     } else {
         Vec::new()
     };
+    let cutouts: Vec<Option<StoredCutout>> = if s.materials.iter().any(|m| m.cutout.is_some()) {
+        s.materials
+            .iter()
+            .map(|m| {
+                m.cutout.as_ref().map(|c| StoredCutout {
+                    alpha: c.alpha,
+                    cutoff: c.cutoff,
+                    texture: c.texture.as_ref().map(|t| table.index(t)),
+                    blend: c.blend,
+                })
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let light_images = if s.lights.iter().any(|l| l.image.is_some()) {
         s.lights
             .iter()
@@ -691,6 +761,7 @@ pub fn encode_scene(s: &Scene) -> Vec<u8> {
             false => Vec::new(),
         },
         suns: s.suns.clone(),
+        cutouts,
     };
     postcard::to_stdvec(&stored).unwrap_or_default()
 }
@@ -762,6 +833,9 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
         6 => postcard::from_bytes::<StoredSceneV6>(bytes)
             .map_err(bad)?
             .into(),
+        7 => postcard::from_bytes::<StoredSceneV7>(bytes)
+            .map_err(bad)?
+            .into(),
         STORED_VERSION => postcard::from_bytes(bytes).map_err(bad)?,
         v => return Err(format!("stored scene has version {v}")),
     };
@@ -777,6 +851,23 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
         }
         for (m, maps) in materials.iter_mut().zip(s.maps) {
             m.maps = maps.map(|x| load_maps(x, &textures)).transpose()?;
+        }
+    }
+    if !s.cutouts.is_empty() {
+        if s.cutouts.len() != materials.len() {
+            return Err("stored scene: cut-outs do not match the materials".into());
+        }
+        for (m, c) in materials.iter_mut().zip(s.cutouts) {
+            m.cutout = c
+                .map(|c| -> Result<Cutout, String> {
+                    Ok(Cutout {
+                        alpha: c.alpha,
+                        cutoff: c.cutoff,
+                        texture: c.texture.map(|r| texture_ref(r, &textures)).transpose()?,
+                        blend: c.blend,
+                    })
+                })
+                .transpose()?;
         }
     }
     if !s.light_images.is_empty() && s.light_images.len() != s.lights.len() {

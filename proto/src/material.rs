@@ -28,6 +28,50 @@ pub struct Material {
     /// textures' means ([`MaterialMaps::at_mean`]).
     #[serde(skip)]
     pub maps: Option<MaterialMaps>,
+    /// Where the surface is cut out, letting every ray through (an asset's glTF `alphaMode`
+    /// MASK, or BLEND; not written in scene files). `None`: opaque everywhere.
+    #[serde(skip)]
+    pub cutout: Option<Cutout>,
+}
+
+/// An alpha cut-out (glTF 2.0 §3.9.4 `alphaMode`): the surface is absent where its alpha —
+/// `alpha` (`baseColorFactor`'s fourth component) × the texture's alpha at the point — is below
+/// `cutoff`. Rays of every kind (the bake's, the Monte Carlo's, the penumbrae's) pass through
+/// it there; nothing is absorbed where it is present.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cutout {
+    /// The constant alpha factor, in [0, 1].
+    pub alpha: f32,
+    /// The cut-off: alpha below it is a hole.
+    pub cutoff: f32,
+    /// The base-colour texture whose alpha channel modulates `alpha` (`None`: constant).
+    pub texture: Option<TextureRef>,
+    /// Whether the asset asked for BLEND: partial coverage, which shadows take as the mask
+    /// at [`Cutout::BLEND_CUTOFF`] (a documented choice: no partial transmission).
+    pub blend: bool,
+}
+
+impl Cutout {
+    /// The cut-off a BLEND material's shadows use: coverage of at least half is a blocker.
+    pub const BLEND_CUTOFF: f32 = 0.5;
+
+    /// glTF's default `alphaCutoff`.
+    pub const DEFAULT_CUTOFF: f32 = 0.5;
+
+    /// Whether it cuts nothing out (constant alpha at or above the cut-off): opaque.
+    pub fn is_opaque(&self) -> bool {
+        self.texture.is_none() && self.alpha >= self.cutoff
+    }
+
+    /// Whether the surface is present at `uv` (bilinear alpha, as the material's colour).
+    pub fn covers(&self, uv: Option<Vec2>) -> bool {
+        let a = match (&self.texture, uv) {
+            (Some(t), Some(uv)) => t.texture.sample(uv, t.wrap, false)[3],
+            (Some(t), None) => t.texture.mean(false)[3],
+            (None, _) => 1.0,
+        };
+        self.alpha * a >= self.cutoff
+    }
 }
 
 fn default_roughness() -> f32 {
@@ -48,6 +92,7 @@ impl Default for Material {
             albedo: default_albedo(),
             specular: default_specular(),
             maps: None,
+            cutout: None,
         }
     }
 }
@@ -64,6 +109,11 @@ impl Material {
         }
         if !unit(&self.specular) {
             return bad("specular must be in [0, 1]".into());
+        }
+        if let Some(c) = &self.cutout
+            && !unit(&[c.alpha, c.cutoff, 0.0])
+        {
+            return bad("a cut-out's alpha and cut-off must be in [0, 1]".into());
         }
         Ok(())
     }
@@ -149,6 +199,7 @@ impl MaterialMaps {
                     albedo: c.map(|x| x * (1.0 - m)),
                     specular: c.map(|x| 0.04 + (x - 0.04) * m),
                     maps: None,
+                    cutout: None,
                 }
             }
             MaterialMaps::Diffuse { kd, texture } => {
@@ -159,6 +210,7 @@ impl MaterialMaps {
                     albedo: std::array::from_fn(|k| unit(kd[k] * t[k])),
                     specular: base.specular,
                     maps: None,
+                    cutout: None,
                 }
             }
         }

@@ -206,3 +206,38 @@ fn gltf_warnings_name_what_is_ignored() {
     assert_eq!(a.punctual.len(), 1, "the light its node instances");
     assert_eq!(a.punctual[0].position, [0.0, 1.0, 0.0]);
 }
+
+/// The checker canopy's board (`alphaMode` MASK, default cut-off, an 8 × 8 texture whose alpha
+/// is a checker) becomes a cut-out: factor 1, cut-off 0.5, the texture kept, half its texels
+/// open; nothing is warned about it; and the stored scene (version 8) keeps it.
+#[test]
+fn alpha_mask_is_a_cutout_and_is_stored() {
+    let s = Scene::from_mesh_path(&rooms().join("checker-canopy.gltf")).expect("checker canopy");
+    assert!(
+        !s.warnings.iter().any(|w| w.contains("alpha")),
+        "{:?}",
+        s.warnings
+    );
+    let leaves = s
+        .materials
+        .iter()
+        .find(|m| m.name == "leaves")
+        .expect("the board's material");
+    let c = leaves.cutout.as_ref().expect("a cut-out");
+    assert_eq!((c.alpha, c.cutoff, c.blend), (1.0, 0.5, false));
+    let t = c.texture.as_ref().expect("its alpha texture");
+    assert_eq!((t.texture.width, t.texture.height), (8, 8));
+    let open = t.texture.rgba.chunks_exact(4).filter(|p| p[3] == 0).count();
+    assert_eq!(open, 32);
+    // The floor and the lamp are opaque.
+    assert_eq!(s.materials.iter().filter(|m| m.cutout.is_some()).count(), 1);
+    // Open texel (1, 0) and solid texel (0, 0), at their centres.
+    assert!(!c.covers(Some(glam::Vec2::new(1.5 / 8.0, 0.5 / 8.0))));
+    assert!(c.covers(Some(glam::Vec2::new(0.5 / 8.0, 0.5 / 8.0))));
+    let back = bspvt_proto::api::decode_scene(&bspvt_proto::api::encode_scene(&s)).expect("decode");
+    assert_eq!(back.materials, s.materials);
+    assert_eq!(back.mesh.uvs, s.mesh.uvs);
+    // The opaque canopy has none.
+    let opaque = Scene::from_mesh_path(&rooms().join("canopy.gltf")).expect("canopy");
+    assert!(opaque.materials.iter().all(|m| m.cutout.is_none()));
+}

@@ -275,6 +275,7 @@ fn constant(albedo: [f32; 3], specular: [f32; 3], roughness: f32) -> Material {
         albedo,
         specular,
         maps: None,
+        cutout: None,
     }
 }
 

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use bspvt_proto::Scene;
-use bspvt_raytrace::{Occluder, mesh_triangles};
+use bspvt_raytrace::Occluder;
 use glam::Vec3;
 use serde::Serialize;
 
@@ -342,7 +342,7 @@ fn measure_case(scene_name: &str, case: &Case, st: &Settings, out: &Path) -> Res
     };
     let light = Light::load(pl)?;
     let r = Renderer::new(scene, st.size, st.size);
-    let occ = Occluder::new(&scene.mesh, &mesh_triangles(&scene.mesh));
+    let occ = Occluder::of_surfaces(&scene.mesh, &scene.materials);
     let covered = covered_pixels(&r.gbuffer);
     let dir = out.join(format!("{}-{}", file_stem(scene_name), case.name));
     let ltc_exact = |spp: u32, seed: u64| {

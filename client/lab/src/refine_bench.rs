@@ -30,7 +30,7 @@ use bspvt_client::light::Light;
 use bspvt_client::render::renderer::{Mode, Renderer, Trees};
 use bspvt_proto::encoding::decode_bake;
 use bspvt_proto::{Mesh, Scene};
-use bspvt_raytrace::{Occluder, mesh_triangles};
+use bspvt_raytrace::Occluder;
 use serde::Serialize;
 
 use crate::compare::metrics::{covered, rmse_mae};
@@ -174,7 +174,7 @@ fn bench_scene(path: &Path, a: &BenchRefineArgs) -> Result<SceneResult> {
 
     let r = Renderer::new(&given, w, h);
     let cov = covered(&r.gbuffer);
-    let occ = Occluder::new(&given.mesh, &mesh_triangles(&given.mesh));
+    let occ = Occluder::of_surfaces(&given.mesh, &given.materials);
     let t = Instant::now();
     let (ref_a, _) = render_mc(&given, &r.view, &r.gbuffer, &lights, &occ, a.spp, 1);
     let (ref_b, _) = render_mc(&given, &r.view, &r.gbuffer, &lights, &occ, a.spp, 2);

@@ -148,7 +148,8 @@ pub fn run(a: &BenchSgArgs) -> Result<Report> {
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;
     let tris = mesh_triangles(&scene.mesh);
-    let occ = Occluder::new(&scene.mesh, &tris);
+    let occ = Occluder::new(&scene.mesh, &tris)
+        .cut_out(bspvt_raytrace::Cutouts::of(&scene.mesh, &scene.materials));
     sg::halfspace::warm_up();
     let mut report = Report {
         scene: a

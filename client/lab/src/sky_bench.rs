@@ -11,7 +11,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use bspvt_proto::Scene;
 use bspvt_proto::scene::open_scene;
-use bspvt_raytrace::{Occluder, mesh_triangles};
+use bspvt_raytrace::Occluder;
 use serde::Serialize;
 
 use bspvt_client::envmap::EnvLight;
@@ -174,7 +174,7 @@ pub fn run(a: &BenchSkyArgs) -> Result<Report> {
     );
 
     let r = Renderer::new(&scene, a.size, a.size);
-    let occ = Occluder::new(&scene.mesh, &mesh_triangles(&scene.mesh));
+    let occ = Occluder::of_surfaces(&scene.mesh, &scene.materials);
     let t = Instant::now();
     let (reference, noise) = render_mc_env(&scene, &r.view, &r.gbuffer, &env, &occ, a.spp, 1);
     let reference_seconds = t.elapsed().as_secs_f64();

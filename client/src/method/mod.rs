@@ -32,7 +32,7 @@ use std::sync::OnceLock;
 
 use anyhow::Result;
 use bspvt_proto::Scene;
-use bspvt_raytrace::{Occluder, mesh_triangles};
+use bspvt_raytrace::Occluder;
 use serde::Serialize;
 
 use crate::frame::image::Image;
@@ -208,7 +208,7 @@ impl<'a> SceneData<'a> {
     /// The scene's BVH for rays (built on first use: the highest-quality build).
     pub fn occluder(&self) -> &Occluder {
         self.occluder
-            .get_or_init(|| Occluder::new(&self.scene.mesh, &mesh_triangles(&self.scene.mesh)))
+            .get_or_init(|| Occluder::of_surfaces(&self.scene.mesh, &self.scene.materials))
     }
 }
 

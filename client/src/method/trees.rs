@@ -63,8 +63,14 @@ pub fn file_stem(name: &str) -> String {
         .collect()
 }
 
+/// What the rays see of the scene's alpha cut-outs (0: none), beside the mesh's content hash
+/// in the keys of bakes and references ([`bspvt_raytrace::Cutouts::content_hash`]).
+pub fn cutout_hash(scene: &Scene) -> u64 {
+    bspvt_raytrace::Cutouts::of(&scene.mesh, &scene.materials).map_or(0, |c| c.content_hash())
+}
+
 /// The bake of `scene` in `cache` (`NAME-HASH.bspvt`, HASH over the bake's
-/// [`bspvt_bake::ALGORITHM_VERSION`], the mesh's content hash, the bake settings and the
+/// [`bspvt_bake::ALGORITHM_VERSION`], the mesh's content hash, its cut-outs, the bake settings and the
 /// lights — their regions, planes, polygons and spheres, and whether a sun makes every direction matter, decide which directions matter and where rays end; none:
 /// the sky's), baking it first when absent. `progress(done, total)` follows the
 /// vertices while it bakes.
@@ -77,9 +83,10 @@ pub fn cached_bake(
     let mut h = bspvt_proto::hash::Fnv1a::default();
     h.write(
         format!(
-            "{}:{:x}{:?}{:?}{:?}{:?}",
+            "{}:{:x}:{:x}{:?}{:?}{:?}{:?}",
             bspvt_bake::ALGORITHM_VERSION,
             scene.mesh.content_hash(),
+            cutout_hash(scene),
             scene.bake,
             scene.lights,
             scene.punctual,

@@ -3,7 +3,7 @@
 //! view, and, when rays are needed, a BVH rebuilt for the pose.
 
 use bspvt_proto::Scene;
-use bspvt_raytrace::{Occluder, mesh_triangles};
+use bspvt_raytrace::{Cutouts, Occluder, mesh_triangles};
 
 use crate::frame::camera::View;
 use crate::frame::gbuffer::GBuffer;
@@ -25,7 +25,10 @@ impl Posed {
     pub fn new(base: &Scene, t: f32, view: &View, rays: bool) -> Posed {
         let scene = base.at(t);
         let gbuffer = GBuffer::rasterize(&scene.mesh, view);
-        let occluder = rays.then(|| Occluder::new_fast(&scene.mesh, &mesh_triangles(&scene.mesh)));
+        let occluder = rays.then(|| {
+            Occluder::new_fast(&scene.mesh, &mesh_triangles(&scene.mesh))
+                .cut_out(Cutouts::of(&scene.mesh, &scene.materials))
+        });
         Posed {
             scene,
             gbuffer,
@@ -40,7 +43,10 @@ impl Posed {
         base.pose_into(t, &mut self.scene.mesh);
         if self.occluder.is_some() {
             let tris = mesh_triangles(&self.scene.mesh);
-            self.occluder = Some(Occluder::new_fast(&self.scene.mesh, &tris));
+            self.occluder = Some(
+                Occluder::new_fast(&self.scene.mesh, &tris)
+                    .cut_out(Cutouts::of(&self.scene.mesh, &self.scene.materials)),
+            );
         }
         self.gbuffer = GBuffer::rasterize(&self.scene.mesh, view);
         self.t = t;

@@ -8,6 +8,7 @@
 
 #![warn(unreachable_pub, missing_docs)]
 
+mod cutout;
 #[cfg(feature = "gpu")]
 pub mod gpu;
 #[cfg(feature = "gpu")]
@@ -15,7 +16,10 @@ mod gpu_occluder;
 #[cfg(feature = "gpu")]
 pub use gpu_occluder::{CubeSource, GpuCubeTable, GpuOccluder, GpuStop};
 
+use std::sync::Arc;
 use std::time::Duration;
+
+pub use cutout::Cutouts;
 
 use bspvt_proto::Mesh;
 use glam::{Vec3, Vec3A};
@@ -40,20 +44,29 @@ pub const EDGE_SLACK: f32 = 1.0 / 1_048_576.0; // 2⁻²⁰
 /// \[`ray.tmin`, `ray.tmax`\]. `occlusion.wgsl`'s `blocks` is the same test.
 #[inline]
 pub fn hit(tri: &RtTriangle, ray: &Ray) -> f32 {
+    intersect(tri, ray).map_or(f32::INFINITY, |(t, _)| t)
+}
+
+/// [`hit`] with the hit's barycentric weights of the triangle's corners (v0, v1, v2), or
+/// `None` for no hit.
+#[inline]
+pub fn intersect(tri: &RtTriangle, ray: &Ray) -> Option<(f32, [f32; 3])> {
     let c = tri.v0 - ray.origin;
     let r = ray.direction.cross(c);
     let det = tri.ng.dot(ray.direction);
     let inv_det = 1.0 / det;
+    // With e1 = v0 − v1 and e2 = v2 − v0 (obvhs's layout, after madmann91's bvh), u weighs v1
+    // and v the corner v2.
     let u = r.dot(tri.e2) * inv_det;
     let v = r.dot(tri.e1) * inv_det;
     let w = 1.0 - u - v;
     if det != 0.0 && u >= -EDGE_SLACK && v >= -EDGE_SLACK && w >= -EDGE_SLACK {
         let t = tri.ng.dot(c) * inv_det;
         if t >= ray.tmin && t <= ray.tmax {
-            return t;
+            return Some((t, [w, u, v]));
         }
     }
-    f32::INFINITY
+    None
 }
 
 /// A mesh prepared for occlusion queries: a CWBVH over its triangles [obvhs].
@@ -65,6 +78,9 @@ pub struct Occluder {
     indices: Vec<[u32; 3]>,
     /// Mesh triangle index of each triangle, in BVH primitive order.
     order: Vec<u32>,
+    /// The scene's cut-outs and, per primitive, its entry there (0: opaque); `None` when
+    /// every surface is opaque.
+    cut: Option<(Arc<Cutouts>, Vec<u32>)>,
 }
 
 /// The mesh's triangles as obvhs primitives, in mesh order.
@@ -120,6 +136,43 @@ impl Occluder {
             tris: rt,
             indices,
             order: order.iter().map(|&i| i as u32).collect(),
+            cut: None,
+        }
+    }
+
+    /// This occluder with the scene's alpha cut-outs ([`Cutouts::of`]): a cut-out triangle
+    /// blocks a ray only where its alpha at the hit reaches the cut-off.
+    pub fn cut_out(mut self, cutouts: Option<Arc<Cutouts>>) -> Occluder {
+        self.cut = cutouts.map(|c| {
+            let slots = self.order.iter().map(|&t| c.slot(t)).collect();
+            (c, slots)
+        });
+        self
+    }
+
+    /// The occluder of a scene's surfaces: [`Occluder::new`] with its cut-outs.
+    pub fn of_surfaces(mesh: &Mesh, materials: &[bspvt_proto::scene::Material]) -> Occluder {
+        Occluder::new(mesh, &mesh_triangles(mesh)).cut_out(Cutouts::of(mesh, materials))
+    }
+
+    /// Whether any surface is cut out.
+    pub fn has_cutouts(&self) -> bool {
+        self.cut.is_some()
+    }
+
+    /// [`hit`] against primitive `id`, through its cut-out: infinity where the ray meets a
+    /// hole. The one triangle test of every query.
+    #[inline]
+    pub fn primitive_hit(&self, id: usize, ray: &Ray) -> f32 {
+        match &self.cut {
+            None => hit(&self.tris[id], ray),
+            Some((c, slots)) => match slots[id] {
+                0 => hit(&self.tris[id], ray),
+                s => match intersect(&self.tris[id], ray) {
+                    Some((t, w)) if c.covers(s, w) => t,
+                    _ => f32::INFINITY,
+                },
+            },
         }
     }
 
@@ -152,7 +205,7 @@ impl Occluder {
             if self.indices[id].contains(&skip) {
                 f32::INFINITY
             } else {
-                crate::hit(&self.tris[id], ray)
+                self.primitive_hit(id, ray)
             }
         })
     }
@@ -177,7 +230,7 @@ impl Occluder {
             if self.indices[id].contains(&skip) {
                 return f32::INFINITY;
             }
-            let t = hit(&self.tris[id], ray);
+            let t = self.primitive_hit(id, ray);
             // The traversal's own acceptance test (`t < ray.tmax`), so the primitive named
             // is the one that ended it.
             if t < ray.tmax {
@@ -195,7 +248,7 @@ impl Occluder {
     /// also a leaf-box face (see docs/bake.md, "The adaptive cast").
     #[inline]
     pub fn primitive_blocks(&self, prim: u32, ray: &Ray) -> bool {
-        hit(&self.tris[prim as usize], ray) < ray.tmax
+        self.primitive_hit(prim as usize, ray) < ray.tmax
     }
 
     /// The mesh triangle index of each primitive, in this occluder's order.
@@ -210,7 +263,7 @@ impl Occluder {
         let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
         !self
             .bvh
-            .ray_traverse_miss(ray, |ray, id| crate::hit(&self.tris[id], ray))
+            .ray_traverse_miss(ray, |ray, id| self.primitive_hit(id, ray))
     }
 
     /// Distance to the closest triangle hit by the segment from `origin` along unit `dir` up to
@@ -224,7 +277,7 @@ impl Occluder {
         let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
         let mut hit = RayHit::none();
         self.bvh
-            .ray_traverse(ray, &mut hit, |ray, id| crate::hit(&self.tris[id], ray))
+            .ray_traverse(ray, &mut hit, |ray, id| self.primitive_hit(id, ray))
             .then_some(hit.t)
             .filter(|t| t.is_finite())
     }

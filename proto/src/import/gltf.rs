@@ -64,8 +64,8 @@ use super::{FileMaterial, Limits, Raw, is_degenerate, usable_normals};
 use crate::camera::Camera;
 use crate::error::MeshError;
 use crate::light::{PunctualLight, Spot, SunLight};
-use crate::material::Material;
 use crate::material::MaterialMaps;
+use crate::material::{Cutout, Material};
 use crate::mesh::Mesh;
 use crate::texture::{MAX_ASSET_TEXELS, Texture, TextureRef, Wrap};
 
@@ -161,17 +161,49 @@ fn unused_features(doc: &Document) -> Vec<String> {
             count(&|m| m.occlusion_texture().is_some()),
             "occlusion textures",
         ),
-        (
-            count(&|m| m.alpha_mode() != ::gltf::material::AlphaMode::Opaque),
-            "alpha modes MASK and BLEND (surfaces are opaque)",
-        ),
     ];
     for (n, what) in textures {
         if n > 0 {
             w.push(format!("{n} materials have {what}: ignored"));
         }
     }
+    let blend = count(&|m| m.alpha_mode() == ::gltf::material::AlphaMode::Blend);
+    if blend > 0 {
+        w.push(format!(
+            "{blend} materials have alpha mode BLEND: shadows take them as a mask at alpha {} \
+             (no partial transmission)",
+            Cutout::BLEND_CUTOFF
+        ));
+    }
     w
+}
+
+/// The cut-out of material `m` (glTF 2.0 §3.9.4): MASK cuts at its `alphaCutoff`, BLEND at
+/// [`Cutout::BLEND_CUTOFF`]; `alpha`: `baseColorFactor`'s alpha; the base-colour texture's
+/// alpha modulates it when the texture has any texel below 255. `None` when nothing is cut
+/// out.
+fn cutout(m: &::gltf::Material<'_>, alpha: f32, texture: Option<&TextureRef>) -> Option<Cutout> {
+    use ::gltf::material::AlphaMode;
+    let (cutoff, blend) = match m.alpha_mode() {
+        AlphaMode::Opaque => return None,
+        AlphaMode::Mask => (
+            m.alpha_cutoff()
+                .filter(|c| c.is_finite())
+                .map_or(Cutout::DEFAULT_CUTOFF, |c| c.clamp(0.0, 1.0)),
+            false,
+        ),
+        AlphaMode::Blend => (Cutout::BLEND_CUTOFF, true),
+    };
+    let texture = texture
+        .filter(|t| t.texture.rgba.chunks_exact(4).any(|p| p[3] < 255))
+        .cloned();
+    Some(Cutout {
+        alpha,
+        cutoff,
+        texture,
+        blend,
+    })
+    .filter(|c| !c.is_opaque())
 }
 
 /// The camera a node's world transform places: at its origin, looking down its −Z, +Y up.
@@ -680,6 +712,7 @@ impl Builder<'_> {
                     albedo: [0.0; 3],
                     specular: [1.0; 3],
                     maps: None,
+                    cutout: None,
                 },
                 emission: [0.0; 3],
                 two_sided: false,
@@ -995,7 +1028,7 @@ impl Builder<'_> {
     /// with its textures (decoded here; one that cannot be read is warned about and left out).
     fn material(&mut self, doc: &Document, m: &::gltf::Material<'_>) -> FileMaterial {
         let pbr = m.pbr_metallic_roughness();
-        let [r, g, b, _] = pbr.base_color_factor();
+        let [r, g, b, a] = pbr.base_color_factor();
         let fin = |x: f32, d: f32| if x.is_finite() { x.clamp(0.0, 1.0) } else { d };
         let base = [r, g, b].map(|x| fin(x, 0.0));
         let metallic = fin(pbr.metallic_factor(), 1.0);
@@ -1027,6 +1060,7 @@ impl Builder<'_> {
         } else {
             None
         };
+        let cutout = cutout(m, fin(a, 1.0), base_color_texture.as_ref());
         let maps = (base_color_texture.is_some() || metallic_roughness_texture.is_some())
             .then_some(MaterialMaps::MetallicRoughness {
                 base_color: base,
@@ -1041,6 +1075,7 @@ impl Builder<'_> {
             albedo: base.map(|c| c * (1.0 - metallic)),
             specular: base.map(|c| 0.04 + (c - 0.04) * metallic),
             maps: None,
+            cutout,
         };
         if let Some(maps) = maps {
             // The constant fields: the material at the textures' means (module docs).
@@ -1180,6 +1215,7 @@ impl Builder<'_> {
             copy.material.albedo = base_color.map(|c| c * (1.0 - metallic));
             copy.material.specular = base_color.map(|c| 0.04 + (c - 0.04) * metallic);
         }
+        // Without UVs a cut-out's texture is read at its mean alpha (`Cutout::covers`).
         copy.emissive_texture = None;
         copy.material.name = format!("{name} (no TEXCOORD_0)");
         self.warnings.push(format!(
@@ -1194,8 +1230,14 @@ impl Builder<'_> {
 
     /// Whether material `m` samples a texture through the mesh's UVs.
     fn textured(&self, m: Option<usize>) -> bool {
-        m.and_then(|i| self.materials.get(i))
-            .is_some_and(|f| f.material.maps.is_some() || f.emissive_texture.is_some())
+        m.and_then(|i| self.materials.get(i)).is_some_and(|f| {
+            f.material.maps.is_some()
+                || f.emissive_texture.is_some()
+                || f.material
+                    .cutout
+                    .as_ref()
+                    .is_some_and(|c| c.texture.is_some())
+        })
     }
 
     /// A `KHR_lights_punctual` light placed by its node's world transform (position: the

@@ -152,6 +152,7 @@ impl Library {
                 albedo: e.kd.map_or(Material::default().albedo, unit),
                 specular: e.ks.map_or([0.04; 3], unit),
                 maps: None,
+                cutout: None,
             },
             emission: e.ke.map_or([0.0; 3], |c| c.map(|x| x.max(0.0))),
             two_sided: false,

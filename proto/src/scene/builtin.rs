@@ -155,6 +155,7 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
                 albedo: [0.55, 0.55, 0.52],
                 specular: [0.04; 3],
                 maps: None,
+                cutout: None,
             },
             Material {
                 name: "sphere".into(),
@@ -162,6 +163,7 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
                 albedo: [0.6, 0.15, 0.1],
                 specular: [0.05; 3],
                 maps: None,
+                cutout: None,
             },
             Material {
                 name: "slab".into(),
@@ -169,6 +171,7 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
                 albedo: [0.2, 0.35, 0.6],
                 specular: [0.04; 3],
                 maps: None,
+                cutout: None,
             },
         ],
         lights: vec![light],

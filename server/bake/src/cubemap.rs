@@ -724,7 +724,7 @@ impl BlockWalk<'_> {
             } else if kept {
                 self.rays.escaping(subs, |d| {
                     let t = [self.rays.t_min, self.rays.t_max(self.origin, d)];
-                    self.culler.ray_hits_any(self.origin, d, t, &list)
+                    self.culler.ray_hits_any(self.occ, self.origin, d, t, &list)
                 })
             } else {
                 let above = subs
@@ -797,7 +797,7 @@ impl BlockWalk<'_> {
             }
             if hit.is_none() {
                 hit = match list {
-                    Some(l) => self.culler.ray_first_hit(&ray, l),
+                    Some(l) => self.culler.ray_first_hit(self.occ, &ray, l),
                     None => {
                         self.counts.traversals += 1;
                         self.occ.blocker(ray, self.rays.vertex)

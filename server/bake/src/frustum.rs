@@ -12,15 +12,13 @@
 use bspvt_proto::Mesh;
 use bspvt_raytrace::Occluder;
 use glam::Vec3;
-use obvhs::{BvhBuildParams, bvh2::Bvh2, ray::Ray, rt_triangle::RtTriangle, triangle::Triangle};
+use obvhs::{BvhBuildParams, bvh2::Bvh2, ray::Ray, triangle::Triangle};
 
 /// A BVH2 (obvhs) over the triangles, for pyramid queries.
 pub(crate) struct FrustumCuller {
     bvh: Bvh2,
     /// Per primitive (BVH order): vertices and vertex indices.
     prims: Vec<([Vec3; 3], [u32; 3])>,
-    /// Per primitive (BVH order), for direct ray tests against a candidate list.
-    rt: Vec<RtTriangle>,
     /// Per primitive (BVH order), the same triangle's primitive in the [`Occluder`].
     occ_prim: Vec<u32>,
 }
@@ -73,7 +71,6 @@ impl FrustumCuller {
                 (t.map(|v| mesh.positions[v as usize]), t)
             })
             .collect();
-        let rt = order.iter().map(|&i| RtTriangle::from(&tris[i])).collect();
         // Both BVHs hold the same distinct triangles (`distinct_triangles`).
         let mut of_triangle = vec![u32::MAX; mesh.triangles.len()];
         for (p, &t) in occ.primitive_triangles().iter().enumerate() {
@@ -83,7 +80,6 @@ impl FrustumCuller {
         FrustumCuller {
             bvh,
             prims,
-            rt,
             occ_prim,
         }
     }
@@ -138,10 +134,12 @@ impl FrustumCuller {
         );
     }
 
-    /// Whether the ray hits any primitive of the list between `t_min` and `t_max`.
+    /// Whether the ray hits any primitive of the list between `t_min` and `t_max` (by the
+    /// occluder's test: through cut-outs).
     #[inline]
     pub(crate) fn ray_hits_any(
         &self,
+        occ: &Occluder,
         origin: Vec3,
         dir: Vec3,
         [t_min, t_max]: [f32; 2],
@@ -149,15 +147,15 @@ impl FrustumCuller {
     ) -> bool {
         let ray = Ray::new(origin.into(), dir.into(), t_min, t_max);
         list.iter()
-            .any(|&p| bspvt_raytrace::hit(&self.rt[p as usize], &ray) < f32::INFINITY)
+            .any(|&p| occ.primitive_hit(self.occ_prim[p as usize] as usize, &ray) < f32::INFINITY)
     }
 
     /// The first primitive of the list that `ray` hits between its `tmin` and `tmax` (the
     /// test of [`Self::ray_hits_any`]), as its primitive in the [`Occluder`].
     #[inline]
-    pub(crate) fn ray_first_hit(&self, ray: &Ray, list: &[u32]) -> Option<u32> {
+    pub(crate) fn ray_first_hit(&self, occ: &Occluder, ray: &Ray, list: &[u32]) -> Option<u32> {
         list.iter()
-            .find(|&&p| bspvt_raytrace::hit(&self.rt[p as usize], ray) < f32::INFINITY)
             .map(|&p| self.occ_prim[p as usize])
+            .find(|&q| occ.primitive_hit(q as usize, ray) < f32::INFINITY)
     }
 }

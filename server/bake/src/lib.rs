@@ -25,6 +25,7 @@ pub mod stats;
 mod walk;
 
 use std::ops::Range;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
@@ -34,7 +35,7 @@ use bspvt_proto::{Aabb, BakeSettings, Mesh, Scene, SplitMethod};
 use glam::Vec3;
 use rayon::prelude::*;
 
-use bspvt_raytrace::Occluder;
+use bspvt_raytrace::{Cutouts, Occluder};
 pub use cubemap::{CastCounts, CastMode, LampStop, LightStop, SphereStop};
 use cubemap::{RayTable, VertexRays};
 use fit::{FitStats, Fitter};
@@ -171,23 +172,30 @@ impl Baker {
             scene.mesh.clone(),
             scene.bake.clone(),
             LightStop::of_scene(scene),
+            Cutouts::of(&scene.mesh, &scene.materials),
         )
     }
 
     /// Prepares the bake of `mesh` with `settings`; `regions`: the boxes the lights may occupy
     /// (`None`: anywhere), which decide the pixels that matter; rays end where they enter one.
+    /// Every surface is opaque (no materials: no cut-outs).
     pub fn with_settings(mesh: Mesh, settings: BakeSettings, regions: Option<Vec<Aabb>>) -> Baker {
         let stops = regions
             .iter()
             .flatten()
             .map(|&r| LightStop::Region(r))
             .collect();
-        Baker::build(mesh, settings, stops)
+        Baker::build(mesh, settings, stops, None)
     }
 
-    fn build(mesh: Mesh, settings: BakeSettings, stops: Vec<LightStop>) -> Baker {
+    fn build(
+        mesh: Mesh,
+        settings: BakeSettings,
+        stops: Vec<LightStop>,
+        cutouts: Option<Arc<Cutouts>>,
+    ) -> Baker {
         let tris = bspvt_raytrace::mesh_triangles(&mesh);
-        let occluder = Occluder::new(&mesh, &tris);
+        let occluder = Occluder::new(&mesh, &tris).cut_out(cutouts);
         let culler = frustum::FrustumCuller::new(&mesh, &tris, &occluder);
         let walk = walk::SurfaceWalk::new(&mesh, &occluder);
         let table = RayTable::new(settings.face_res, settings.supersampling);

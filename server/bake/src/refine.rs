@@ -26,9 +26,9 @@ use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap, HashSet};
 use std::time::Instant;
 
-use bspvt_proto::scene::{PolygonLight, PunctualLight, SunLight};
+use bspvt_proto::scene::{Material, PolygonLight, PunctualLight, SunLight};
 use bspvt_proto::{Aabb, Mesh, MeshError};
-use bspvt_raytrace::Occluder;
+use bspvt_raytrace::{Cutouts, Occluder};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -74,6 +74,7 @@ pub fn refine_scene(scene: &mut bspvt_proto::Scene) -> Result<Option<RefineStats
     let sky = scene.environment.is_some() || !scene.suns.is_empty();
     let (mesh, stats) = refine_for(
         &scene.mesh,
+        &scene.materials,
         &scene.lights,
         &scene.punctual,
         &scene.suns,
@@ -416,22 +417,39 @@ impl Visibility {
     /// Fibonacci set) above the horizon, rays to infinity — the cosine-weighted share of the
     /// sky a point sees, whatever the map (it turns at run time).
     pub fn with_sky(mesh: &Mesh, lights: &[PolygonLight], sky: bool) -> Visibility {
+        Visibility::with_cutouts(mesh, &[], lights, sky)
+    }
+
+    /// [`Visibility::with_sky`], its rays passing through the cut-outs of `materials`
+    /// (`bspvt_raytrace::Cutouts`).
+    pub fn with_cutouts(
+        mesh: &Mesh,
+        materials: &[Material],
+        lights: &[PolygonLight],
+        sky: bool,
+    ) -> Visibility {
         let scale = working_scale(mesh, lights);
         let n = mesh.positions.len();
         let usable = |t: &[u32; 3]| {
             t.iter()
                 .all(|&i| (i as usize) < n && mesh.positions[i as usize].is_finite())
         };
+        let kept: Vec<usize> = (0..mesh.triangles.len())
+            .filter(|&t| usable(&mesh.triangles[t]))
+            .collect();
         let occ_mesh = Mesh {
             positions: mesh.positions.iter().map(|&p| p * scale).collect(),
             normals: Vec::new(),
-            triangles: mesh.triangles.iter().copied().filter(usable).collect(),
-            material_ids: Vec::new(),
-            uvs: Vec::new(),
+            triangles: kept.iter().map(|&t| mesh.triangles[t]).collect(),
+            material_ids: kept
+                .iter()
+                .map(|&t| mesh.material_ids.get(t).copied().unwrap_or(0))
+                .collect(),
+            uvs: mesh.uvs.clone(),
         };
         let occluder = (!occ_mesh.triangles.is_empty()).then(|| {
             let tris = bspvt_raytrace::mesh_triangles(&occ_mesh);
-            Occluder::new(&occ_mesh, &tris)
+            Occluder::new(&occ_mesh, &tris).cut_out(Cutouts::of(&occ_mesh, materials))
         });
         let sampled: Vec<(LightSamples, LightStop)> = lights
             .iter()
@@ -725,14 +743,16 @@ pub fn try_refine(
     lights: &[PolygonLight],
     settings: &RefineSettings,
 ) -> Result<(Mesh, RefineStats), RefineError> {
-    refine_for(mesh, lights, &[], &[], false, settings)
+    refine_for(mesh, &[], lights, &[], &[], false, settings)
 }
 
 /// [`try_refine`] for `lights`, the point and spot lights' spheres `spheres`
 /// ([`Visibility::with_spheres`]), the suns at rest ([`Visibility::with_suns`]) and, when
-/// `sky`, the sky's visibility ([`Visibility::with_sky`]).
+/// `sky`, the sky's visibility ([`Visibility::with_sky`]); rays pass through the cut-outs of
+/// `materials` ([`Visibility::with_cutouts`]; empty: every surface opaque).
 pub fn refine_for(
     mesh: &Mesh,
+    materials: &[Material],
     lights: &[PolygonLight],
     spheres: &[PunctualLight],
     suns: &[SunLight],
@@ -744,7 +764,7 @@ pub fn refine_for(
         .validate()
         .map_err(|e| RefineError::Settings(e.to_string()))?;
     mesh.validate()?;
-    let vis = Visibility::with_sky(mesh, lights, sky)
+    let vis = Visibility::with_cutouts(mesh, materials, lights, sky)
         .with_spheres(spheres)
         .with_suns(suns);
     let mut r = Refiner::new(mesh, &vis, settings);

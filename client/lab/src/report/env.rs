@@ -73,8 +73,9 @@ pub(crate) fn measure_env(
     let mut h = bspvt_proto::hash::Fnv1a::default();
     h.write(
         format!(
-            "env1 {:x} {:?} {:?} {} {} {} {SEED_GT}",
+            "env1 {:x} {:x} {:?} {:?} {} {} {} {SEED_GT}",
             scene.mesh.content_hash(),
+            bspvt_client::method::trees::cutout_hash(scene),
             scene.materials,
             scene.camera,
             map.display(),

@@ -6,7 +6,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use bspvt_proto::Scene;
 use bspvt_proto::encoding::decode_bake;
-use bspvt_raytrace::{Occluder, mesh_triangles};
+use bspvt_raytrace::Occluder;
 use serde::{Deserialize, Serialize};
 
 use super::Settings;
@@ -189,7 +189,7 @@ pub(crate) fn measure(
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let r = Renderer::new(scene, st.size, st.size);
     let covered = covered_pixels(&r.gbuffer);
-    let occ = Occluder::new(&scene.mesh, &mesh_triangles(&scene.mesh));
+    let occ = Occluder::of_surfaces(&scene.mesh, &scene.materials);
     // Every method draws through the registry's interface, on one shared BVH.
     let data = SceneData::new(scene);
     let draw = Draw {
@@ -473,8 +473,9 @@ fn ground_truth(
     let mut h = bspvt_proto::hash::Fnv1a::default();
     h.write(
         format!(
-            "gt2 {:x} {:?} {:?} {:?} {} {:?} {SEED_GT}",
+            "gt2 {:x} {:x} {:?} {:?} {:?} {} {:?} {SEED_GT}",
             scene.mesh.content_hash(),
+            bspvt_client::method::trees::cutout_hash(scene),
             scene.lights,
             scene.materials,
             scene.camera,

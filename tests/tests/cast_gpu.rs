@@ -305,3 +305,41 @@ fn gpu_bake_reports_progress_and_cancels() {
         "{err}"
     );
 }
+
+/// The checker canopy's cut-out (alphaMode MASK over an 8 × 8 alpha checker): the GPU's
+/// `covers` samples the mask as `Cutout::covers` does, so the floor's cube maps see the same
+/// holes on both; and more than the opaque canopy's rays escape (issue 35).
+#[test]
+fn gpu_equals_full_cpu_cast_through_cutouts() {
+    let Some(ctx) = gpu() else { return };
+    let rooms = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/rooms");
+    let mut scene = bspvt_proto::Scene::from_mesh_path(&rooms.join("checker-canopy.gltf"))
+        .expect("checker canopy");
+    scene.bake.face_res = 16;
+    if let Some(r) = &mut scene.bake.refine {
+        r.max_vertices = 1500;
+    }
+    bspvt_bake::refine::refine_scene(&mut scene).expect("refinement");
+    let b = Baker::new(&scene);
+    let n = b.mesh().vertex_count() as u32;
+    let label = "checker canopy at 16²".to_string();
+    let seen = compare(&ctx, &b, &label, n.div_ceil(5));
+    check_within(&seen, &label, MAX_ROOM_DIFFERING_PER_MILLION);
+    // The same vertices with the board opaque: the cut-out lets rays through.
+    let mut opaque = scene.clone();
+    for m in &mut opaque.materials {
+        m.cutout = None;
+    }
+    let o = compare(
+        &ctx,
+        &Baker::new(&opaque),
+        "the same canopy opaque",
+        n.div_ceil(5),
+    );
+    assert!(
+        seen.occluded < o.occluded,
+        "the holes let rays through: {} vs {} occluded pixels",
+        seen.occluded,
+        o.occluded
+    );
+}

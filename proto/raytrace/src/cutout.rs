@@ -101,6 +101,63 @@ impl Cutouts {
         h.finish()
     }
 
+    /// The cut-outs as `occlusion.wgsl`'s `cut` buffer, for primitives whose entries are
+    /// `slots` (in BVH order): a header (1, where the entries start, where the masks start, 0),
+    /// the slot of each primitive, 8 words per entry (mask, has UVs, the corners' UVs as f32
+    /// bits), 8 words per mask (width, height — 0 without a texture —, the word its alpha
+    /// bytes start at, the wrap modes along u and v — 0 repeat, 1 clamp, 2 mirror —, alpha,
+    /// cut-off, the texture's mean alpha), then the masks' alpha bytes, four to a word.
+    #[cfg(feature = "gpu")]
+    pub(crate) fn gpu_words(&self, slots: &[u32]) -> Vec<u32> {
+        use bspvt_proto::texture::Wrap;
+        let entries = 4 + slots.len();
+        let masks = entries + 8 * self.corners.len();
+        let mut w = vec![1, entries as u32, masks as u32, 0];
+        w.extend_from_slice(slots);
+        for (mask, uv) in &self.corners {
+            w.push(*mask);
+            w.push(u32::from(uv.is_some()));
+            for p in uv.unwrap_or([Vec2::ZERO; 3]) {
+                w.extend([p.x.to_bits(), p.y.to_bits()]);
+            }
+        }
+        let mut texels = masks + 8 * self.masks.len();
+        let mut bytes: Vec<&[u8]> = Vec::new();
+        let wrap = |m: Wrap| match m {
+            Wrap::Repeat => 0,
+            Wrap::Clamp => 1,
+            Wrap::Mirror => 2,
+        };
+        for m in &self.masks {
+            let (size, wraps, mean) = match &m.texture {
+                Some(t) => (
+                    [t.texture.width, t.texture.height],
+                    [wrap(t.wrap[0]), wrap(t.wrap[1])],
+                    t.texture.mean(false)[3],
+                ),
+                None => ([0, 0], [0, 0], 1.0),
+            };
+            w.extend(size);
+            w.push(texels as u32);
+            w.extend(wraps);
+            w.extend([m.alpha.to_bits(), m.cutoff.to_bits(), mean.to_bits()]);
+            if let Some(t) = &m.texture {
+                let n = (t.texture.width * t.texture.height) as usize;
+                texels += n.div_ceil(4);
+                bytes.push(&t.texture.rgba);
+            }
+        }
+        for rgba in bytes {
+            let alpha: Vec<u8> = rgba.chunks_exact(4).map(|p| p[3]).collect();
+            w.extend(alpha.chunks(4).map(|c| {
+                c.iter()
+                    .enumerate()
+                    .fold(0u32, |acc, (k, &a)| acc | u32::from(a) << (8 * k))
+            }));
+        }
+        w
+    }
+
     /// Entry of mesh triangle `t` (0: opaque).
     pub(crate) fn slot(&self, t: u32) -> u32 {
         self.slot.get(t as usize).copied().unwrap_or(0)

@@ -118,6 +118,8 @@ pub struct GpuOccluder {
     nodes: wgpu::Buffer,
     tris: wgpu::Buffer,
     prim_verts: wgpu::Buffer,
+    /// The cut-outs ([`Cutouts::gpu_words`]; one zero word: none).
+    cut: wgpu::Buffer,
     /// Invocations (vertex × pixel) per dispatch: buffer and dispatch-size limits.
     max_items: usize,
 }
@@ -154,6 +156,11 @@ impl GpuOccluder {
             .collect();
         let tris = storage("triangles", bytemuck::cast_slice(&tri_words));
         let prim_verts = storage("triangle vertices", bytemuck::cast_slice(&occ.indices));
+        let cut_words = match &occ.cut {
+            Some((c, slots)) => c.gpu_words(slots),
+            None => vec![0u32],
+        };
+        let cut = storage("cut-outs", bytemuck::cast_slice(&cut_words));
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("occlusion.wgsl"),
             source: wgpu::ShaderSource::Wgsl(include_str!("occlusion.wgsl").into()),
@@ -181,6 +188,7 @@ impl GpuOccluder {
                 entry(6, read),
                 entry(7, wgpu::BufferBindingType::Storage { read_only: false }),
                 entry(8, wgpu::BufferBindingType::Uniform),
+                entry(9, read),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -212,6 +220,7 @@ impl GpuOccluder {
             nodes,
             tris,
             prim_verts,
+            cut,
             max_items,
         })
     }
@@ -436,6 +445,7 @@ impl GpuOccluder {
             &table.stops,
             &result,
             &uniform,
+            &self.cut,
         ];
         let entries: Vec<wgpu::BindGroupEntry> = buffers
             .iter()

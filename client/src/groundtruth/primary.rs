@@ -6,7 +6,9 @@
 use std::time::Duration;
 
 use bspvt_proto::Mesh;
-use bspvt_raytrace::mesh_triangles;
+use std::sync::Arc;
+
+use bspvt_raytrace::{Cutouts, mesh_triangles};
 use glam::{DVec3, Vec3A};
 use obvhs::{
     BvhBuildParams,
@@ -24,6 +26,8 @@ pub struct Tracer {
     tris: Vec<RtTriangle>,
     /// Mesh triangle index of each BVH primitive.
     ids: Vec<u32>,
+    /// The scene's alpha cut-outs: the camera sees through their holes.
+    cut: Option<Arc<Cutouts>>,
 }
 
 impl Tracer {
@@ -40,7 +44,18 @@ impl Tracer {
             .iter()
             .map(|&i| RtTriangle::from(&tris[i as usize]))
             .collect();
-        Tracer { bvh, tris: rt, ids }
+        Tracer {
+            bvh,
+            tris: rt,
+            ids,
+            cut: None,
+        }
+    }
+
+    /// This tracer seeing through the scene's cut-outs ([`Cutouts::of`]).
+    pub fn cut_out(mut self, cutouts: Option<Arc<Cutouts>>) -> Tracer {
+        self.cut = cutouts;
+        self
     }
 
     /// The surface hit first by the ray from `eye` along unit `dir`, shaded like
@@ -53,9 +68,16 @@ impl Tracer {
             f32::INFINITY,
         );
         let mut hit = RayHit::none();
-        if !self.bvh.ray_traverse(ray, &mut hit, |r, id| {
-            bspvt_raytrace::hit(&self.tris[id], r)
-        }) {
+        if !self
+            .bvh
+            .ray_traverse(ray, &mut hit, |r, id| match &self.cut {
+                None => bspvt_raytrace::hit(&self.tris[id], r),
+                Some(c) => match bspvt_raytrace::intersect(&self.tris[id], r) {
+                    Some((t, w)) if c.covers_triangle(self.ids[id], w) => t,
+                    _ => f32::INFINITY,
+                },
+            })
+        {
             return None;
         }
         let t = *self.ids.get(hit.primitive_id as usize)?;

@@ -158,6 +158,15 @@ impl Cutouts {
         w
     }
 
+    /// Whether mesh triangle `t` is present at barycentric `weights` of its corners (an
+    /// opaque triangle always is): the test for closest-hit tracers built on their own BVH.
+    pub fn covers_triangle(&self, t: u32, weights: [f32; 3]) -> bool {
+        match self.slot(t) {
+            0 => true,
+            s => self.covers(s, weights),
+        }
+    }
+
     /// Entry of mesh triangle `t` (0: opaque).
     pub(crate) fn slot(&self, t: u32) -> u32 {
         self.slot.get(t as usize).copied().unwrap_or(0)

@@ -12,7 +12,7 @@ use std::sync::Arc;
 use crate::material::{Cutout, MaterialMaps};
 use crate::motion::MovingPart;
 use crate::scene::{Camera, Material, PolygonLight, PunctualLight, Region, Spot, SunLight};
-use crate::texture::{LightImage, Texture, TextureRef, Wrap};
+use crate::texture::{LightImage, Texture, TextureRef, UvTransform, Wrap};
 use crate::{BakeSettings, Mesh, Scene};
 
 /// The body of every error answer: `{"error": CODE, "detail": TEXT}`.
@@ -196,7 +196,7 @@ pub struct SceneStatus {
 /// PNG or JPEG it came from), the lamps' texture images and the punctual lights; 6 adds which
 /// lights move in their plane (before it, every light without a region did; without one now,
 /// a lamp is fixed); 7 adds the point and spot lights' sphere radii and the suns; 8 the
-/// materials' alpha cut-outs. Versions 1 to 7 still read.
+/// materials' alpha cut-outs and their textures' UV transforms. Versions 1 to 7 still read.
 const STORED_VERSION: u16 = 8;
 
 #[derive(Serialize, Deserialize)]
@@ -221,6 +221,9 @@ struct StoredScene {
     suns: Vec<SunLight>,
     /// One per material (or empty: every surface is opaque).
     cutouts: Vec<Option<StoredCutout>>,
+    /// One per material (or empty: no texture is transformed): the UV transforms of its
+    /// maps' textures — the base colour's (or `map_Kd`'s), the metallic-roughness one's.
+    map_transforms: Vec<[Option<UvTransform>; 2]>,
 }
 
 /// A material's [`Cutout`], its texture an index into `StoredScene::textures`.
@@ -229,6 +232,7 @@ struct StoredCutout {
     alpha: f32,
     cutoff: f32,
     texture: Option<StoredTextureRef>,
+    transform: Option<UvTransform>,
     blend: bool,
 }
 
@@ -269,6 +273,7 @@ impl From<StoredSceneV7> for StoredScene {
             moves_in_plane: v.moves_in_plane,
             suns: v.suns,
             cutouts: Vec::new(),
+            map_transforms: Vec::new(),
         }
     }
 }
@@ -542,6 +547,7 @@ fn texture_ref(r: StoredTextureRef, textures: &[Arc<Texture>]) -> Result<Texture
     Ok(TextureRef {
         texture,
         wrap: r.wrap,
+        transform: None,
     })
 }
 
@@ -722,10 +728,32 @@ pub fn encode_scene(s: &Scene) -> Vec<u8> {
                     alpha: c.alpha,
                     cutoff: c.cutoff,
                     texture: c.texture.as_ref().map(|t| table.index(t)),
+                    transform: c.texture.as_ref().and_then(|t| t.transform),
                     blend: c.blend,
                 })
             })
             .collect()
+    } else {
+        Vec::new()
+    };
+    let transforms = |m: &Material| -> [Option<UvTransform>; 2] {
+        match &m.maps {
+            Some(MaterialMaps::MetallicRoughness {
+                base_color_texture,
+                metallic_roughness_texture,
+                ..
+            }) => [
+                base_color_texture.as_ref().and_then(|t| t.transform),
+                metallic_roughness_texture
+                    .as_ref()
+                    .and_then(|t| t.transform),
+            ],
+            Some(MaterialMaps::Diffuse { texture, .. }) => [texture.transform, None],
+            None => [None, None],
+        }
+    };
+    let map_transforms = if s.materials.iter().any(|m| transforms(m) != [None, None]) {
+        s.materials.iter().map(transforms).collect()
     } else {
         Vec::new()
     };
@@ -762,6 +790,7 @@ pub fn encode_scene(s: &Scene) -> Vec<u8> {
         },
         suns: s.suns.clone(),
         cutouts,
+        map_transforms,
     };
     postcard::to_stdvec(&stored).unwrap_or_default()
 }
@@ -853,6 +882,29 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
             m.maps = maps.map(|x| load_maps(x, &textures)).transpose()?;
         }
     }
+    if !s.map_transforms.is_empty() {
+        if s.map_transforms.len() != materials.len() {
+            return Err("stored scene: texture transforms do not match the materials".into());
+        }
+        for (m, [first, second]) in materials.iter_mut().zip(s.map_transforms) {
+            match &mut m.maps {
+                Some(MaterialMaps::MetallicRoughness {
+                    base_color_texture,
+                    metallic_roughness_texture,
+                    ..
+                }) => {
+                    if let Some(t) = base_color_texture {
+                        t.transform = first;
+                    }
+                    if let Some(t) = metallic_roughness_texture {
+                        t.transform = second;
+                    }
+                }
+                Some(MaterialMaps::Diffuse { texture, .. }) => texture.transform = first,
+                None => {}
+            }
+        }
+    }
     if !s.cutouts.is_empty() {
         if s.cutouts.len() != materials.len() {
             return Err("stored scene: cut-outs do not match the materials".into());
@@ -863,7 +915,14 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
                     Ok(Cutout {
                         alpha: c.alpha,
                         cutoff: c.cutoff,
-                        texture: c.texture.map(|r| texture_ref(r, &textures)).transpose()?,
+                        texture: c
+                            .texture
+                            .map(|r| texture_ref(r, &textures))
+                            .transpose()?
+                            .map(|t| TextureRef {
+                                transform: c.transform,
+                                ..t
+                            }),
                         blend: c.blend,
                     })
                 })
@@ -1059,8 +1118,9 @@ mod tests {
     }
 
     /// A version-4 stored scene (before textures and punctual lights) still reads, with
-    /// none; the version-7 encoding of an untextured scene without lights moving in their
-    /// planes, punctual lights or suns is version 4's and seven empty lists.
+    /// none; the version-8 encoding of an untextured scene without lights moving in their
+    /// planes, punctual lights, suns, cut-outs or texture transforms is version 4's and nine
+    /// empty lists.
     #[test]
     fn version_4_reads() {
         let mut p = crate::builtin::scene("room").expect("builtin");
@@ -1082,9 +1142,9 @@ mod tests {
         }
         assert!(moving.lights.iter().any(|l| l.moves_in_plane));
         assert_eq!(decode_scene(&v4).as_ref(), Ok(&moving));
-        let v7 = encode_scene(&p);
-        assert_eq!(v7.len(), v4.len() + 7, "the seven empty lists");
-        assert_eq!(decode_scene(&v7).as_ref(), Ok(&p));
+        let v8 = encode_scene(&p);
+        assert_eq!(v8.len(), v4.len() + 9, "the nine empty lists");
+        assert_eq!(decode_scene(&v8).as_ref(), Ok(&p));
         // A light that moves in its plane round-trips.
         assert_eq!(decode_scene(&encode_scene(&moving)).as_ref(), Ok(&moving));
     }

@@ -66,7 +66,7 @@ impl Cutout {
     /// Whether the surface is present at `uv` (bilinear alpha, as the material's colour).
     pub fn covers(&self, uv: Option<Vec2>) -> bool {
         let a = match (&self.texture, uv) {
-            (Some(t), Some(uv)) => t.texture.sample(uv, t.wrap, false)[3],
+            (Some(t), Some(uv)) => t.sample(uv, false)[3],
             (Some(t), None) => t.texture.mean(false)[3],
             (None, _) => 1.0,
         };
@@ -218,7 +218,7 @@ impl MaterialMaps {
 
     /// The material at `uv` (bilinear texels).
     pub fn at(&self, base: &Material, uv: Vec2) -> Material {
-        self.eval(base, |t, srgb| t.texture.sample(uv, t.wrap, srgb))
+        self.eval(base, |t, srgb| t.sample(uv, srgb))
     }
 
     /// The material at each texture's mean texel: the constant the material's own fields

@@ -78,13 +78,65 @@ impl Wrap {
     }
 }
 
-/// A texture as a material uses it: the image and its sampler's wrap modes (u, v).
+/// A texture as a material uses it: the image, its sampler's wrap modes (u, v) and the
+/// transform of the mesh's UVs into it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TextureRef {
     /// The image (shared by every material and light that uses it).
     pub texture: Arc<Texture>,
     /// Wrap modes along u and v.
     pub wrap: [Wrap; 2],
+    /// `KHR_texture_transform` (`None`: the UVs as they are).
+    pub transform: Option<UvTransform>,
+}
+
+impl TextureRef {
+    /// The texture's coordinates of the mesh's `uv`.
+    #[inline]
+    pub fn uv(&self, uv: Vec2) -> Vec2 {
+        self.transform.map_or(uv, |t| t.apply(uv))
+    }
+
+    /// [`Texture::sample`] at the mesh's `uv`, through the transform.
+    pub fn sample(&self, uv: Vec2, srgb: bool) -> [f32; 4] {
+        self.texture.sample(self.uv(uv), self.wrap, srgb)
+    }
+}
+
+/// glTF's `KHR_texture_transform`: uv′ = T(offset) · R(rotation) · S(scale) · uv, with R the
+/// matrix of the extension's README, columns (cos r, sin r) and (−sin r, cos r).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct UvTransform {
+    /// `offset`.
+    pub offset: [f32; 2],
+    /// `rotation`, radians.
+    pub rotation: f32,
+    /// `scale`.
+    pub scale: [f32; 2],
+}
+
+impl UvTransform {
+    /// The affine map as (a, b, c, d, tx, ty): uv′ = (a u + b v + tx, c u + d v + ty). Non-finite
+    /// parameters give the identity's.
+    pub fn matrix(&self) -> [f32; 6] {
+        let f = |x: f32, d: f32| if x.is_finite() { x } else { d };
+        let (s, c) = f(self.rotation, 0.0).sin_cos();
+        let [sx, sy] = [f(self.scale[0], 1.0), f(self.scale[1], 1.0)];
+        [
+            c * sx,
+            -s * sy,
+            s * sx,
+            c * sy,
+            f(self.offset[0], 0.0),
+            f(self.offset[1], 0.0),
+        ]
+    }
+
+    /// The transformed coordinates of `uv`.
+    pub fn apply(&self, uv: Vec2) -> Vec2 {
+        let [a, b, c, d, tx, ty] = self.matrix();
+        Vec2::new(a * uv.x + b * uv.y + tx, c * uv.x + d * uv.y + ty)
+    }
 }
 
 /// The sRGB → linear table for 8-bit values (IEC 61966-2-1).

@@ -250,3 +250,57 @@ fn alpha_mask_is_a_cutout_and_is_stored() {
     let opaque = Scene::from_mesh_path(&rooms().join("canopy.gltf")).expect("canopy");
     assert!(opaque.materials.iter().all(|m| m.cutout.is_none()));
 }
+
+/// `KHR_texture_transform` is read: the checker canopy with its board's texture offset by one
+/// texel along u (`offset` [0.125, 0]) is open where it was solid, no warning names the
+/// extension, and the stored scene keeps the transform. The transform is the extension's
+/// T · R · S: a quarter turn takes u to v.
+#[test]
+fn texture_transform_moves_the_texture() {
+    let text = std::fs::read_to_string(rooms().join("checker-canopy.gltf")).expect("read");
+    let mut doc: serde_json::Value = serde_json::from_str(&text).expect("json");
+    doc["extensionsUsed"]
+        .as_array_mut()
+        .expect("extensionsUsed")
+        .push("KHR_texture_transform".into());
+    let leaves = doc["materials"]
+        .as_array_mut()
+        .expect("materials")
+        .iter_mut()
+        .find(|m| m["name"] == "leaves")
+        .expect("the board");
+    leaves["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] =
+        serde_json::json!({"KHR_texture_transform": {"offset": [0.125, 0.0]}});
+    let dir = std::env::temp_dir().join(format!("bspvt-uvt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let path = dir.join("moved.gltf");
+    std::fs::write(&path, serde_json::to_string(&doc).expect("json")).expect("write");
+    let s = Scene::from_mesh_path(&path).expect("moved canopy");
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(
+        !s.warnings
+            .iter()
+            .any(|w| w.contains("KHR_texture_transform")),
+        "{:?}",
+        s.warnings
+    );
+    let c = s
+        .materials
+        .iter()
+        .find_map(|m| m.cutout.as_ref())
+        .expect("the cut-out");
+    let t = c.texture.as_ref().expect("its texture");
+    assert!(t.transform.is_some());
+    // Texel (0, 0) was solid; one texel on, its centre reads texel (1, 0): open.
+    assert!(!c.covers(Some(glam::Vec2::new(0.5 / 8.0, 0.5 / 8.0))));
+    assert!(c.covers(Some(glam::Vec2::new(1.5 / 8.0, 0.5 / 8.0))));
+    let back = bspvt_proto::api::decode_scene(&bspvt_proto::api::encode_scene(&s)).expect("decode");
+    assert_eq!(back.materials, s.materials);
+    let quarter = bspvt_proto::texture::UvTransform {
+        offset: [0.0, 0.0],
+        rotation: std::f32::consts::FRAC_PI_2,
+        scale: [2.0, 1.0],
+    };
+    let uv = quarter.apply(glam::Vec2::new(1.0, 0.0));
+    assert!((uv - glam::Vec2::new(0.0, 2.0)).length() < 1e-6, "{uv}");
+}

@@ -401,3 +401,37 @@ fn checker_canopy_lets_half_the_light_through() {
     assert!((0.3..=0.7).contains(&b), "BSPVT: {b}");
     assert!(pixel_err <= 0.05, "BSPVT per pixel vs MC: {pixel_err}");
 }
+
+/// The camera sees through the checker canopy's holes (the G-buffer's alpha test): looking
+/// straight down on the board, about half its pixels show the floor beneath; the opaque board
+/// covers them all.
+#[test]
+fn the_gbuffer_sees_through_the_holes() {
+    let camera = bspvt_proto::scene::Camera {
+        position: [0.0, 2.0, 0.0],
+        target: [0.0, 0.0, 0.0],
+        up: [0.0, 0.0, -1.0],
+        fov_y_deg: 30.0,
+        aspect: None,
+    };
+    let board_share = |name: &str| {
+        let s = Scene::from_mesh_path(&room(name)).expect(name);
+        let r = Renderer::with_camera(&s, &camera, 64, 64);
+        let board = |t: u32| {
+            s.mesh
+                .material_ids
+                .get(t as usize)
+                .and_then(|&m| s.materials.get(m as usize))
+                .is_some_and(|m| m.name == "canopy" || m.name == "leaves")
+        };
+        let n = r.gbuffer.tri.iter().filter(|&&t| board(t)).count();
+        n as f64 / r.gbuffer.tri.len() as f64
+    };
+    let (opaque, cut) = (
+        board_share("canopy.gltf"),
+        board_share("checker-canopy.gltf"),
+    );
+    println!("board seen from above: opaque {opaque:.3}, cut out {cut:.3} of the pixels");
+    assert!(opaque > 0.99, "the opaque board fills the view: {opaque}");
+    assert!((0.4..=0.6).contains(&cut), "half the board is holes: {cut}");
+}

@@ -869,7 +869,8 @@ fn hostile_textures_are_warnings() {
     );
 }
 
-/// Normal maps, occlusion, KHR_texture_transform and other extensions are named.
+/// Normal maps, occlusion and other extensions are named; KHR_texture_transform is read (its
+/// scale is the base-colour texture's), so it is not.
 #[test]
 fn unsupported_texture_features_are_warned() {
     let mats = json!([
@@ -893,17 +894,21 @@ fn unsupported_texture_features_are_warned() {
     );
     let a = asset(&bytes);
     let has = |s: &str| a.warnings.iter().any(|w| w.contains(s));
-    for s in [
-        "normal maps",
-        "occlusion textures",
-        "KHR_texture_transform",
-        "KHR_materials_sheen",
-    ] {
+    for s in ["normal maps", "occlusion textures", "KHR_materials_sheen"] {
         assert!(has(s), "no warning on {s}: {:?}", a.warnings);
     }
-    assert!(
-        a.materials[0].maps.is_some(),
-        "the base colour is still read"
+    assert!(!has("KHR_texture_transform"), "{:?}", a.warnings);
+    let Some(bspvt_proto::scene::MaterialMaps::MetallicRoughness {
+        base_color_texture: Some(t),
+        ..
+    }) = &a.materials[0].maps
+    else {
+        panic!("the base colour is still read: {:?}", a.materials[0].maps);
+    };
+    assert_eq!(
+        t.transform.map(|x| x.scale),
+        Some([2.0, 2.0]),
+        "the transform is the base colour's"
     );
 }
 

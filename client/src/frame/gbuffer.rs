@@ -7,6 +7,7 @@
 //! bands of rows. Computed once per camera; every frame while the light moves reuses it.
 
 use bspvt_proto::Mesh;
+use bspvt_raytrace::Cutouts;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
@@ -51,6 +52,13 @@ pub(crate) struct Surface {
 impl GBuffer {
     /// Rasterises `mesh` as seen by `view`.
     pub fn rasterize(mesh: &Mesh, view: &View) -> GBuffer {
+        GBuffer::rasterize_cut(mesh, view, None)
+    }
+
+    /// [`GBuffer::rasterize`], seeing through the holes of `cut`: a fragment of a cut-out
+    /// triangle is kept only where its alpha at the pixel's exact hit reaches the cut-off (the
+    /// rasteriser's alpha test, [`Cutouts::covers_triangle`]).
+    pub fn rasterize_cut(mesh: &Mesh, view: &View, cut: Option<&Cutouts>) -> GBuffer {
         let (w, h) = (view.width as usize, view.height as usize);
         let near = 1e-4 * f64::from(mesh.bounds().diagonal()).max(1e-12);
         // Camera-space vertices once.
@@ -109,6 +117,16 @@ impl GBuffer {
                 let row0 = band * BAND;
                 let rows = ids.len() / w;
                 let mut depth = vec![0.0f64; ids.len()];
+                // The alpha test: the fragment's exact barycentrics of its mesh triangle.
+                let covers = |t: u32, x: usize, y: usize| {
+                    cut.is_none_or(|c| {
+                        let d = view.ray_dir(x as f64 + 0.5, y as f64 + 0.5);
+                        let p = mesh.triangles[t as usize]
+                            .map(|v| mesh.positions[v as usize].as_dvec3());
+                        let (b1, b2) = ray_plane_barycentrics(view.eye, d, p);
+                        c.covers_triangle(t, [(1.0 - b1 - b2) as f32, b1 as f32, b2 as f32])
+                    })
+                };
                 for (t, pts, [x0, y0, x1, y1]) in &polys {
                     let (ya, yb) = ((*y0).max(row0), (*y1).min(row0 + rows - 1));
                     if ya > yb {
@@ -119,11 +137,11 @@ impl GBuffer {
                         raster_triangle(
                             [pts[0], pts[k], pts[k + 1]],
                             (*x0, *x1, ya, yb),
-                            row0,
-                            w,
+                            (row0, w),
                             *t,
                             ids,
                             &mut depth,
+                            &covers,
                         );
                     }
                 }
@@ -229,11 +247,11 @@ fn clip_near(c: &[DVec3; 3], near: f64) -> Vec<DVec3> {
 fn raster_triangle(
     v: [(DVec2, f64); 3],
     (x0, x1, ya, yb): (usize, usize, usize, usize),
-    row0: usize,
-    w: usize,
+    (row0, w): (usize, usize),
     t: u32,
     ids: &mut [u32],
     depth: &mut [f64],
+    covers: &dyn Fn(u32, usize, usize) -> bool,
 ) {
     let [(a, za), (b, zb), (c, zc)] = v;
     let area = (b - a).perp_dot(c - a);
@@ -253,7 +271,7 @@ fn raster_triangle(
             }
             let z = w0 * za + w1 * zb + w2 * zc;
             let k = (y - row0) * w + x;
-            if z > depth[k] {
+            if z > depth[k] && covers(t, x, y) {
                 depth[k] = z;
                 ids[k] = t;
             }

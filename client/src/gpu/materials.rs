@@ -18,23 +18,30 @@ fn wrap_bits(w: [Wrap; 2]) -> u32 {
     one(w[0]) | one(w[1]) << 4
 }
 
+/// A texture use: the image, its wrap modes and its UV transform.
+type TextureKey = (usize, u32, Option<[u32; 6]>);
+
 /// The index + 1 of texture use `t` (the image and its wrap modes), added on first use; 0 for
 /// none.
 fn use_of<'m>(
     t: Option<&'m TextureRef>,
     uses: &mut Vec<&'m TextureRef>,
-    index: &mut HashMap<(usize, u32), u32>,
+    index: &mut HashMap<TextureKey, u32>,
 ) -> u32 {
     let Some(t) = t else { return 0 };
     let key = (
         std::sync::Arc::as_ptr(&t.texture) as usize,
         wrap_bits(t.wrap),
+        t.transform.map(|x| x.matrix().map(f32::to_bits)),
     );
     *index.entry(key).or_insert_with(|| {
         uses.push(t);
         uses.len() as u32
     })
 }
+
+/// Words per texture use's header (`resolve.wgsl`'s `surface_sample`).
+const HEADER: usize = 12;
 
 /// `resolve.wgsl`'s material kinds.
 const CONSTANT: f32 = 0.0;
@@ -44,15 +51,17 @@ const DIFFUSE_MAP: f32 = 2.0;
 /// The material records and the texture words. Per material: (albedo, α), (F0, kind),
 /// then for metallic-roughness (base colour factor), (metallic, roughness, base colour
 /// texture + 1, metallic-roughness texture + 1), for `map_Kd` (Kd, 0), (0, 0, texture + 1, 0);
-/// texture indices as u32 bits, 0 for none. Texture words: a (width, height, offset, wrap u
-/// | wrap v << 4) header per texture use, then the texels (R | G << 8 | B << 16 | A << 24).
+/// texture indices as u32 bits, 0 for none. Texture words: a header of [`HEADER`] words per
+/// texture use — width, height, offset, wrap u | wrap v << 4, then the UV transform
+/// (`UvTransform::matrix`: a, b, c, d, tx, ty as f32 bits; the identity's when none) and two
+/// unused —, then the texels (R | G << 8 | B << 16 | A << 24).
 /// `uvs`: whether the mesh has texture coordinates (without, every material is its constant
 /// fields, as on the CPU); `texels`: whether to build the texture words (the records alone
 /// when only the materials' constants changed: the texture indices do not depend on them).
 pub(crate) fn tables(materials: &[Material], uvs: bool, texels: bool) -> (Vec<[f32; 4]>, Vec<u32>) {
     let bits = |x: u32| f32::from_bits(x);
     let mut uses: Vec<&TextureRef> = Vec::new();
-    let mut index: HashMap<(usize, u32), u32> = HashMap::new();
+    let mut index: HashMap<TextureKey, u32> = HashMap::new();
     let mut records = Vec::with_capacity(4 * materials.len().max(1));
     for m in materials {
         let c = |k: f32| {
@@ -93,15 +102,27 @@ pub(crate) fn tables(materials: &[Material], uvs: bool, texels: bool) -> (Vec<[f
     if records.is_empty() {
         records.extend([[0.0; 4]; 4]);
     }
-    let mut words = vec![0u32; 4 * uses.len()];
+    let mut words = vec![0u32; HEADER * uses.len()];
     for (k, t) in uses.iter().enumerate().filter(|_| texels) {
         let tex = &t.texture;
         let offset = words.len() as u32;
-        words[4 * k..4 * k + 4].copy_from_slice(&[
+        let m = t
+            .transform
+            .map_or([1.0, 0.0, 0.0, 1.0, 0.0, 0.0], |x| x.matrix())
+            .map(f32::to_bits);
+        words[HEADER * k..HEADER * (k + 1)].copy_from_slice(&[
             tex.width,
             tex.height,
             offset,
             wrap_bits(t.wrap),
+            m[0],
+            m[1],
+            m[2],
+            m[3],
+            m[4],
+            m[5],
+            0,
+            0,
         ]);
         words.extend(
             tex.rgba

@@ -54,8 +54,9 @@ struct VertexOut {
 @group(0) @binding(7) var<storage, read_write> image: array<vec4f>;
 // The light's texture (LightTexture::gpu_words; a placeholder when untextured).
 @group(0) @binding(9) var<storage, read> light_texture: array<vec4f>;
-// The textures the materials sample: a (width, height, offset, wrap u | wrap v << 4) header
-// per texture use, then RGBA8 texels.
+// The textures the materials sample: a 12-word header per texture use (width, height,
+// offset, wrap u | wrap v << 4, the UV transform a, b, c, d, tx, ty as f32 bits, two unused),
+// then RGBA8 texels (gpu/materials.rs).
 @group(0) @binding(10) var<storage, read> surface_tex: array<u32>;
 
 fn light_count() -> u32 {
@@ -161,12 +162,18 @@ fn wrap_index(mode: u32, i: i32, n: i32) -> u32 {
 // Texture::sample: bilinear between the four nearest texel centres, wrapped per axis; colour
 // textures linearised before filtering. The UV is first brought into one period of its wrap
 // mode (exact in f32), so a large UV keeps the texel's fraction.
-fn surface_sample(t: u32, uv_in: vec2f, srgb: bool) -> vec4f {
-    let h = vec4u(surface_tex[4u * t], surface_tex[4u * t + 1u], surface_tex[4u * t + 2u],
-        surface_tex[4u * t + 3u]);
+fn surface_sample(t: u32, uv_mesh: vec2f, srgb: bool) -> vec4f {
+    let hb = 12u * t;
+    let h = vec4u(surface_tex[hb], surface_tex[hb + 1u], surface_tex[hb + 2u], surface_tex[hb + 3u]);
     if h.x == 0u || h.y == 0u {
         return vec4f(0.0);
     }
+    // UvTransform::apply: (a u + b v + tx, c u + d v + ty).
+    let m = array<f32, 6>(bitcast<f32>(surface_tex[hb + 4u]), bitcast<f32>(surface_tex[hb + 5u]),
+        bitcast<f32>(surface_tex[hb + 6u]), bitcast<f32>(surface_tex[hb + 7u]),
+        bitcast<f32>(surface_tex[hb + 8u]), bitcast<f32>(surface_tex[hb + 9u]));
+    let uv_in = vec2f(m[0] * uv_mesh.x + m[1] * uv_mesh.y + m[4],
+        m[2] * uv_mesh.x + m[3] * uv_mesh.y + m[5]);
     var uv = select(vec2f(0.0), uv_in, finite(uv_in.x) && finite(uv_in.y));
     let modes = vec2u(h.w & 15u, (h.w >> 4u) & 15u);
     for (var k = 0; k < 2; k++) {

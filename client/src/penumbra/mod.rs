@@ -83,6 +83,7 @@ pub fn shadow_factor(
     Ok(shadowmap::shadow_factor(
         guide,
         &r.scene.mesh,
+        r.cut.as_deref(),
         light,
         filter,
         params,

@@ -50,7 +50,12 @@ impl LightMap {
     /// Renders the depth of `mesh` from `light`'s centroid looking along its normal, with a
     /// square field of view that covers the mesh's bounds in front of the light (at most
     /// ±75°). `None` when nothing lies in front of the light.
-    pub(crate) fn render(mesh: &Mesh, light: &Light, res: u32) -> Option<LightMap> {
+    pub(crate) fn render(
+        mesh: &Mesh,
+        cut: Option<&bspvt_raytrace::Cutouts>,
+        light: &Light,
+        res: u32,
+    ) -> Option<LightMap> {
         let eye = light.centroid();
         let forward = light.normal.normalize_or(DVec3::NEG_Y);
         if !eye.is_finite() || !forward.is_finite() {
@@ -85,7 +90,7 @@ impl LightMap {
             width: res,
             height: res,
         };
-        let g = GBuffer::rasterize(mesh, &view);
+        let g = GBuffer::rasterize_cut(mesh, &view, cut);
         let depth: Vec<f64> = (0..g.tri.len())
             .into_par_iter()
             .map(|i| {
@@ -243,11 +248,12 @@ pub(crate) fn chebyshev(m: [f64; 2], z: f64, min_var: f64, bleed: f64) -> f64 {
 pub(crate) fn shadow_factor(
     guide: &Guide,
     mesh: &Mesh,
+    cut: Option<&bspvt_raytrace::Cutouts>,
     light: &Light,
     filter: Filter,
     params: &Params,
 ) -> Vec<f32> {
-    let Some(map) = LightMap::render(mesh, light, params.map_res) else {
+    let Some(map) = LightMap::render(mesh, cut, light, params.map_res) else {
         return vec![1.0; guide.pixels.len()];
     };
     let k = f64::from(params.pcf_radius);

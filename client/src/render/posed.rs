@@ -24,10 +24,10 @@ impl Posed {
     /// `base` at cycle time `t`, seen through `view`; `rays`: build the BVH too.
     pub fn new(base: &Scene, t: f32, view: &View, rays: bool) -> Posed {
         let scene = base.at(t);
-        let gbuffer = GBuffer::rasterize(&scene.mesh, view);
+        let cut = Cutouts::of(&scene.mesh, &scene.materials);
+        let gbuffer = GBuffer::rasterize_cut(&scene.mesh, view, cut.as_deref());
         let occluder = rays.then(|| {
-            Occluder::new_fast(&scene.mesh, &mesh_triangles(&scene.mesh))
-                .cut_out(Cutouts::of(&scene.mesh, &scene.materials))
+            Occluder::new_fast(&scene.mesh, &mesh_triangles(&scene.mesh)).cut_out(cut.clone())
         });
         Posed {
             scene,
@@ -41,14 +41,12 @@ impl Posed {
     /// rebuilds the BVH if there is one.
     pub fn update(&mut self, base: &Scene, t: f32, view: &View) {
         base.pose_into(t, &mut self.scene.mesh);
+        let cut = Cutouts::of(&self.scene.mesh, &self.scene.materials);
         if self.occluder.is_some() {
             let tris = mesh_triangles(&self.scene.mesh);
-            self.occluder = Some(
-                Occluder::new_fast(&self.scene.mesh, &tris)
-                    .cut_out(Cutouts::of(&self.scene.mesh, &self.scene.materials)),
-            );
+            self.occluder = Some(Occluder::new_fast(&self.scene.mesh, &tris).cut_out(cut.clone()));
         }
-        self.gbuffer = GBuffer::rasterize(&self.scene.mesh, view);
+        self.gbuffer = GBuffer::rasterize_cut(&self.scene.mesh, view, cut.as_deref());
         self.t = t;
     }
 }

@@ -108,6 +108,8 @@ pub struct Renderer<'a> {
     materials: Vec<Material>,
     /// The roughness override (applied again after a texture lookup).
     roughness: Option<f32>,
+    /// The scene's alpha cut-outs, which the G-buffer sees through.
+    pub(crate) cut: Option<std::sync::Arc<bspvt_raytrace::Cutouts>>,
 }
 
 impl<'a> Renderer<'a> {
@@ -119,7 +121,8 @@ impl<'a> Renderer<'a> {
     /// A renderer looking through `camera` instead of the scene's.
     pub fn with_camera(scene: &'a Scene, camera: &Camera, width: u32, height: u32) -> Renderer<'a> {
         let view = View::new(camera, width, height);
-        let gbuffer = GBuffer::rasterize(&scene.mesh, &view);
+        let cut = bspvt_raytrace::Cutouts::of(&scene.mesh, &scene.materials);
+        let gbuffer = GBuffer::rasterize_cut(&scene.mesh, &view, cut.as_deref());
         let visible_vertices = gbuffer
             .visible_vertices(&scene.mesh)
             .iter()
@@ -145,6 +148,7 @@ impl<'a> Renderer<'a> {
             table: LtcTable::builtin(),
             materials: scene.materials.clone(),
             roughness: None,
+            cut,
         }
     }
 
@@ -152,7 +156,7 @@ impl<'a> Renderer<'a> {
     pub(crate) fn set_camera(&mut self, camera: &Camera) {
         let (w, h) = (self.gbuffer.width, self.gbuffer.height);
         self.view = View::new(camera, w, h);
-        self.gbuffer = GBuffer::rasterize(&self.scene.mesh, &self.view);
+        self.gbuffer = GBuffer::rasterize_cut(&self.scene.mesh, &self.view, self.cut.as_deref());
         self.visible_vertices = self
             .gbuffer
             .visible_vertices(&self.scene.mesh)

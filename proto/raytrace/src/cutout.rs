@@ -104,9 +104,10 @@ impl Cutouts {
     /// The cut-outs as `occlusion.wgsl`'s `cut` buffer, for primitives whose entries are
     /// `slots` (in BVH order): a header (1, where the entries start, where the masks start, 0),
     /// the slot of each primitive, 8 words per entry (mask, has UVs, the corners' UVs as f32
-    /// bits), 8 words per mask (width, height — 0 without a texture —, the word its alpha
+    /// bits), 16 words per mask (width, height — 0 without a texture —, the word its alpha
     /// bytes start at, the wrap modes along u and v — 0 repeat, 1 clamp, 2 mirror —, alpha,
-    /// cut-off, the texture's mean alpha), then the masks' alpha bytes, four to a word.
+    /// cut-off, the texture's mean alpha, its UV transform's a, b, c, d, tx, ty, two unused),
+    /// then the masks' alpha bytes, four to a word.
     #[cfg(feature = "gpu")]
     pub(crate) fn gpu_words(&self, slots: &[u32]) -> Vec<u32> {
         use bspvt_proto::texture::Wrap;
@@ -121,7 +122,7 @@ impl Cutouts {
                 w.extend([p.x.to_bits(), p.y.to_bits()]);
             }
         }
-        let mut texels = masks + 8 * self.masks.len();
+        let mut texels = masks + 16 * self.masks.len();
         let mut bytes: Vec<&[u8]> = Vec::new();
         let wrap = |m: Wrap| match m {
             Wrap::Repeat => 0,
@@ -141,6 +142,13 @@ impl Cutouts {
             w.push(texels as u32);
             w.extend(wraps);
             w.extend([m.alpha.to_bits(), m.cutoff.to_bits(), mean.to_bits()]);
+            let uv = m
+                .texture
+                .as_ref()
+                .and_then(|t| t.transform)
+                .map_or([1.0, 0.0, 0.0, 1.0, 0.0, 0.0], |x| x.matrix());
+            w.extend(uv.map(f32::to_bits));
+            w.extend([0, 0]);
             if let Some(t) = &m.texture {
                 let n = (t.texture.width * t.texture.height) as usize;
                 texels += n.div_ceil(4);
@@ -261,6 +269,7 @@ mod tests {
                 source: Vec::new(),
             }),
             wrap: [Wrap::Clamp; 2],
+            transform: None,
         };
         let material = Material {
             cutout: Some(Cutout {

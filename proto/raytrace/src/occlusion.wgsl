@@ -39,8 +39,9 @@ struct CubeParams {
 @group(0) @binding(8) var<uniform> cp: CubeParams;
 // The alpha cut-outs (Cutouts::gpu_words): a header (1, first entry word, first mask word, 0) —
 // a single 0 word when every surface is opaque —, each primitive's entry (0: opaque), 8 words
-// per entry (mask, has UVs, the corners' UVs), 8 per mask (width, height, first texel word,
-// wrap u, wrap v, alpha, cut-off, mean alpha), the masks' alpha bytes four to a word.
+// per entry (mask, has UVs, the corners' UVs), 16 per mask (width, height, first texel word,
+// wrap u, wrap v, alpha, cut-off, mean alpha, the UV transform's a, b, c, d, tx, ty, 2 unused),
+// the masks' alpha bytes four to a word.
 @group(0) @binding(9) var<storage, read> cut: array<u32>;
 
 // obvhs's cwbvh::node::EPSILON: a child box is entered no nearer than this.
@@ -157,7 +158,7 @@ fn covers(id: u32, bw: vec3<f32>) -> bool {
         return true;
     }
     let e = cut[1] + 8u * (slot - 1u);
-    let m = cut[2] + 8u * cut[e];
+    let m = cut[2] + 16u * cut[e];
     let alpha = bitcast<f32>(cut[m + 5u]);
     let cutoff = bitcast<f32>(cut[m + 6u]);
     let width = cut[m];
@@ -171,7 +172,14 @@ fn covers(id: u32, bw: vec3<f32>) -> bool {
     let uv0 = vec2<f32>(bitcast<f32>(cut[e + 2u]), bitcast<f32>(cut[e + 3u]));
     let uv1 = vec2<f32>(bitcast<f32>(cut[e + 4u]), bitcast<f32>(cut[e + 5u]));
     let uv2 = vec2<f32>(bitcast<f32>(cut[e + 6u]), bitcast<f32>(cut[e + 7u]));
-    var uv = uv0 * bw.x + uv1 * bw.y + uv2 * bw.z;
+    let uv_mesh = uv0 * bw.x + uv1 * bw.y + uv2 * bw.z;
+    // UvTransform::apply.
+    let ta = bitcast<f32>(cut[m + 8u]);
+    let tb = bitcast<f32>(cut[m + 9u]);
+    let tc = bitcast<f32>(cut[m + 10u]);
+    let td = bitcast<f32>(cut[m + 11u]);
+    var uv = vec2<f32>(ta * uv_mesh.x + tb * uv_mesh.y + bitcast<f32>(cut[m + 12u]),
+        tc * uv_mesh.x + td * uv_mesh.y + bitcast<f32>(cut[m + 13u]));
     if !(abs(uv.x) < 1e30 && abs(uv.y) < 1e30) {
         uv = vec2<f32>(0.0);
     }

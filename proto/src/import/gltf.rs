@@ -67,7 +67,7 @@ use crate::light::{PunctualLight, Spot, SunLight};
 use crate::material::MaterialMaps;
 use crate::material::{Cutout, Material};
 use crate::mesh::Mesh;
-use crate::texture::{MAX_ASSET_TEXELS, Texture, TextureRef, Wrap};
+use crate::texture::{MAX_ASSET_TEXELS, Texture, TextureRef, UvTransform, Wrap};
 
 fn malformed(message: impl Into<String>) -> MeshError {
     MeshError::Malformed {
@@ -143,6 +143,7 @@ fn wrap_modes(t: &::gltf::texture::Texture) -> [Wrap; 2] {
 fn unused_features(doc: &Document) -> Vec<String> {
     const READ: &[&str] = &[
         "KHR_materials_emissive_strength",
+        "KHR_texture_transform",
         "KHR_mesh_quantization",
         "KHR_lights_punctual",
     ];
@@ -171,7 +172,7 @@ fn unused_features(doc: &Document) -> Vec<String> {
     if cut > 0 {
         w.push(format!(
             "{cut} materials are cut out (alphaMode MASK or BLEND): their holes are in every \
-             shadow, but rasterised views (the G-buffer, the GPU) draw the surfaces whole"
+             shadow and CPU view, but GPU frames draw the surfaces whole"
         ));
     }
     let blend = count(&|m| m.alpha_mode() == ::gltf::material::AlphaMode::Blend);
@@ -1108,20 +1109,36 @@ impl Builder<'_> {
         what: &str,
         info: &::gltf::texture::Info<'_>,
     ) -> Option<TextureRef> {
-        if info.tex_coord() != 0 {
+        // KHR_texture_transform's `texCoord` overrides the textureInfo's.
+        let ext = info.texture_transform();
+        let set = ext
+            .as_ref()
+            .and_then(|x| x.tex_coord())
+            .unwrap_or(info.tex_coord());
+        if set != 0 {
             self.warnings.push(format!(
-                "material {material:?}: its {what} texture uses TEXCOORD_{}; only TEXCOORD_0 \
-                 is read: using the factor alone",
-                info.tex_coord()
+                "material {material:?}: its {what} texture uses TEXCOORD_{set}; only TEXCOORD_0 \
+                 is read: using the factor alone"
             ));
             return None;
         }
+        let transform = ext
+            .map(|x| UvTransform {
+                offset: x.offset(),
+                rotation: x.rotation(),
+                scale: x.scale(),
+            })
+            .filter(|t| {
+                t.matrix() != [1.0, 0.0, 0.0, 1.0, 0.0, 0.0]
+                    && t.matrix() != [1.0, -0.0, 0.0, 1.0, 0.0, 0.0]
+            });
         let t = info.texture();
         let image = t.source().index();
         let texture = self.image(doc, image)?;
         Some(TextureRef {
             texture,
             wrap: wrap_modes(&t),
+            transform,
         })
     }
 

@@ -84,7 +84,9 @@ pub(crate) fn merge(emitters: &[Emitter]) -> Lamps {
             && match (&e.texture, &f.texture) {
                 (None, None) => true,
                 (Some((a, _)), Some((b, _))) => {
-                    std::sync::Arc::ptr_eq(&a.texture, &b.texture) && a.wrap == b.wrap
+                    std::sync::Arc::ptr_eq(&a.texture, &b.texture)
+                        && a.wrap == b.wrap
+                        && a.transform == b.transform
                 }
                 _ => false,
             }
@@ -258,7 +260,7 @@ pub(crate) fn lamp_image(
         for i in 0..w {
             let (u, v) = ((i as f64 + 0.5) / w as f64, (j as f64 + 0.5) / h as f64);
             let uv = uv_of(p0 + u * l1 + v * l2).as_vec2();
-            let t = tex.texture.sample(uv, tex.wrap, true);
+            let t = tex.sample(uv, true);
             texels.push([t[0], t[1], t[2]].map(|x| if x.is_finite() { x.max(0.0) } else { 0.0 }));
         }
     }

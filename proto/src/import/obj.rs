@@ -418,6 +418,7 @@ fn resolve_materials(
                     texture: crate::texture::TextureRef {
                         texture,
                         wrap: [crate::texture::Wrap::Repeat; 2],
+                        transform: None,
                     },
                 };
                 m.material.albedo = maps.at_mean(&m.material).albedo;

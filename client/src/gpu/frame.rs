@@ -60,6 +60,8 @@ pub struct GpuFrames {
     raster_params: wgpu::Buffer,
     resolve_params: wgpu::Buffer,
     indices: wgpu::Buffer,
+    /// The scene's cut-outs by triangle, for the raster pass's alpha test.
+    cut: wgpu::Buffer,
     tri_material: wgpu::Buffer,
     materials: wgpu::Buffer,
     /// The textures the materials sample (`materials::tables`).
@@ -110,7 +112,7 @@ fn pipelines(gpu: &Gpu, samples: u32) -> Result<(wgpu::RenderPipeline, wgpu::Com
     };
     let raster_module = module(
         "visibility.wgsl",
-        include_str!("visibility.wgsl").to_string(),
+        [include_str!("visibility.wgsl"), bspvt_raytrace::CUTOUT_WGSL].concat(),
     )?;
     let resolve_module = module(
         "resolve.wgsl",
@@ -212,6 +214,14 @@ impl GpuFrames {
                 U::UNIFORM,
             ),
             indices: init("indices", bytemuck::cast_slice(&indices), U::STORAGE),
+            cut: init(
+                "cut-outs",
+                bytemuck::cast_slice(
+                    &bspvt_raytrace::Cutouts::of(mesh, &scene.materials)
+                        .map_or(vec![0u32], |c| c.gpu_words_by_triangle()),
+                ),
+                U::STORAGE,
+            ),
             tri_material: init(
                 "triangle materials",
                 bytemuck::cast_slice(&tri_material),
@@ -416,7 +426,12 @@ impl GpuFrames {
         let raster_group = gpu.bind_buffers(
             "bspvt visibility",
             &self.raster.get_bind_group_layout(0),
-            &[&self.raster_params, &self.shader.verts, &self.indices],
+            &[
+                &self.raster_params,
+                &self.shader.verts,
+                &self.indices,
+                &self.cut,
+            ],
         );
         let triangles = self.triangles;
         let (raster, resolve) = (self.raster.clone(), self.resolve.clone());

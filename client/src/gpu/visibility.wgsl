@@ -16,9 +16,15 @@ struct Raster {
 // Three per triangle.
 @group(0) @binding(2) var<storage, read> indices: array<u32>;
 
+// The scene's alpha cut-outs by mesh triangle (Cutouts::gpu_words_by_triangle; one 0 word:
+// none), tested by `covers` (bspvt_raytrace::CUTOUT_WGSL, appended).
+@group(0) @binding(3) var<storage, read> cut: array<u32>;
+
 struct Varyings {
     @builtin(position) clip: vec4f,
     @location(0) @interpolate(flat) id: u32,
+    // The fragment's barycentrics of its triangle's corners (perspective-correct).
+    @location(1) bary: vec3f,
 }
 
 @vertex
@@ -26,10 +32,17 @@ fn vs(@builtin(vertex_index) i: u32) -> Varyings {
     var out: Varyings;
     out.clip = rp.view_proj * vec4f(verts[4u * indices[i]].xyz, 1.0);
     out.id = i / 3u + 1u;
+    let corner = i % 3u;
+    out.bary = vec3f(f32(corner == 0u), f32(corner == 1u), f32(corner == 2u));
     return out;
 }
 
+// The alpha test: a fragment where its triangle is cut out is not drawn (the CPU G-buffer's
+// `rasterize_cut`).
 @fragment
 fn fs(in: Varyings) -> @location(0) vec2u {
+    if !covers(in.id - 1u, in.bary) {
+        discard;
+    }
     return vec2u(in.id & 0xffffu, in.id >> 16u);
 }

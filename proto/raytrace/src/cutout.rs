@@ -166,6 +166,13 @@ impl Cutouts {
         w
     }
 
+    /// [`Cutouts::gpu_words`] with each mesh triangle's entry in mesh order (a raster pass's
+    /// triangle index).
+    #[cfg(feature = "gpu")]
+    pub fn gpu_words_by_triangle(&self) -> Vec<u32> {
+        self.gpu_words(&self.slot)
+    }
+
     /// Whether mesh triangle `t` is present at barycentric `weights` of its corners (an
     /// opaque triangle always is): the test for closest-hit tracers built on their own BVH.
     pub fn covers_triangle(&self, t: u32, weights: [f32; 3]) -> bool {

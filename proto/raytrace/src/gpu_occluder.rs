@@ -163,7 +163,11 @@ impl GpuOccluder {
         let cut = storage("cut-outs", bytemuck::cast_slice(&cut_words));
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("occlusion.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("occlusion.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(
+                [include_str!("occlusion.wgsl"), crate::CUTOUT_WGSL]
+                    .concat()
+                    .into(),
+            ),
         });
         let entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
             binding,

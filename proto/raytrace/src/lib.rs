@@ -21,6 +21,11 @@ use std::time::Duration;
 
 pub use cutout::Cutouts;
 
+/// `covers`, the cut-out test of [`Cutouts::gpu_words`] in WGSL, for shaders that declare the
+/// `cut` buffer (`occlusion.wgsl`; the client's raster pass).
+#[cfg(feature = "gpu")]
+pub const CUTOUT_WGSL: &str = include_str!("cutout.wgsl");
+
 use bspvt_proto::Mesh;
 use glam::{Vec3, Vec3A};
 use obvhs::{

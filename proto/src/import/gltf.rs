@@ -168,13 +168,6 @@ fn unused_features(doc: &Document) -> Vec<String> {
             w.push(format!("{n} materials have {what}: ignored"));
         }
     }
-    let cut = count(&|m| m.alpha_mode() != ::gltf::material::AlphaMode::Opaque);
-    if cut > 0 {
-        w.push(format!(
-            "{cut} materials are cut out (alphaMode MASK or BLEND): their holes are in every \
-             shadow and CPU view, but GPU frames draw the surfaces whole"
-        ));
-    }
     let blend = count(&|m| m.alpha_mode() == ::gltf::material::AlphaMode::Blend);
     if blend > 0 {
         w.push(format!(

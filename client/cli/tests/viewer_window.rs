@@ -56,6 +56,20 @@ fn grab(display: &str) -> Option<Vec<[u8; 3]>> {
     grab_sized(display, W, H)
 }
 
+/// Mean |Δ| (8-bit) between a screenshot and a window's pixels below the overlay's text
+/// (rows 120 and down: fps and messages change from frame to frame).
+fn below_overlay_diff(img: &image::RgbImage, window: &[[u8; 3]], w: u32, h: u32) -> f64 {
+    let (mut diff, mut n) = (0u64, 0u64);
+    for y in 120..h {
+        for x in 0..w {
+            let (a, b) = (img.get_pixel(x, y).0, window[(y * w + x) as usize]);
+            diff += (0..3).map(|k| u64::from(a[k].abs_diff(b[k]))).sum::<u64>();
+            n += 3;
+        }
+    }
+    diff as f64 / n.max(1) as f64
+}
+
 fn grab_sized(display: &str, width: u32, height: u32) -> Option<Vec<[u8; 3]>> {
     let (conn, screen) = x11rb::connect(Some(display)).ok()?;
     let root = conn.setup().roots[screen].root;
@@ -400,8 +414,32 @@ fn viewport(backend: Option<&str>) {
     key(0x76 /* v */, KEY_PRESS_EVENT);
     key(0x76, KEY_RELEASE_EVENT);
     conn.sync().unwrap();
-    std::thread::sleep(Duration::from_millis(800));
-    let window = grab_sized(&display, w2, h2).expect("the resized window's pixels");
+    // The window as it shows the screenshot's frame: polled until it matches (below the
+    // overlay's text), since on a loaded 2-core machine with a software GPU the frame after
+    // the screenshot may take longer than any fixed wait to reach the screen.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let png = loop {
+        let found = std::fs::read_dir(&shots).ok().and_then(|d| {
+            d.filter_map(Result::ok)
+                .map(|e| e.path())
+                .find(|p| p.extension().is_some_and(|x| x == "png"))
+        });
+        if let Some(p) = found.filter(|p| image::open(p).is_ok()) {
+            break image::open(&p).expect("screenshot PNG").to_rgb8();
+        }
+        assert!(Instant::now() < deadline, "no screenshot was written");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let window = loop {
+        std::thread::sleep(Duration::from_millis(200));
+        let grab = grab_sized(&display, w2, h2).expect("the resized window's pixels");
+        if png.dimensions() != (w2, h2) || below_overlay_diff(&png, &grab, w2, h2) < 0.5 {
+            break grab;
+        }
+        if Instant::now() >= deadline {
+            break grab;
+        }
+    };
     key(0xff1b /* Escape */, KEY_PRESS_EVENT);
     key(0xff1b, KEY_RELEASE_EVENT);
     conn.sync().unwrap();
@@ -499,15 +537,7 @@ fn viewport(backend: Option<&str>) {
     );
     // The screenshot is what the window shows (below the overlay's text, which changes
     // from frame to frame: fps, messages).
-    let (mut diff, mut n) = (0u64, 0u64);
-    for y in 120..h2 {
-        for x in 0..w2 {
-            let (a, b) = (img.get_pixel(x, y).0, window[(y * w2 + x) as usize]);
-            diff += (0..3).map(|k| u64::from(a[k].abs_diff(b[k]))).sum::<u64>();
-            n += 3;
-        }
-    }
-    let mean = diff as f64 / n as f64;
+    let mean = below_overlay_diff(&img, &window, w2, h2);
     assert!(
         mean < 0.5,
         "screenshot against the window: mean |Δ| = {mean:.3} (8-bit)"

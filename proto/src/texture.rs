@@ -116,6 +116,13 @@ pub struct UvTransform {
 }
 
 impl UvTransform {
+    /// The UVs as they are.
+    pub const IDENTITY: UvTransform = UvTransform {
+        offset: [0.0, 0.0],
+        rotation: 0.0,
+        scale: [1.0, 1.0],
+    };
+
     /// The affine map as (a, b, c, d, tx, ty): uv′ = (a u + b v + tx, c u + d v + ty). Non-finite
     /// parameters give the identity's.
     pub fn matrix(&self) -> [f32; 6] {

@@ -6,7 +6,7 @@
 use std::collections::HashMap;
 
 use bspvt_proto::scene::{Material, MaterialMaps};
-use bspvt_proto::texture::{TextureRef, Wrap};
+use bspvt_proto::texture::{TextureRef, UvTransform, Wrap};
 
 /// `resolve.wgsl`'s wrap modes: u in bits 0–3, v in bits 4–7.
 fn wrap_bits(w: [Wrap; 2]) -> u32 {
@@ -108,7 +108,8 @@ pub(crate) fn tables(materials: &[Material], uvs: bool, texels: bool) -> (Vec<[f
         let offset = words.len() as u32;
         let m = t
             .transform
-            .map_or([1.0, 0.0, 0.0, 1.0, 0.0, 0.0], |x| x.matrix())
+            .unwrap_or(UvTransform::IDENTITY)
+            .matrix()
             .map(f32::to_bits);
         words[HEADER * k..HEADER * (k + 1)].copy_from_slice(&[
             tex.width,

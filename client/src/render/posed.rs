@@ -18,6 +18,9 @@ pub struct Posed {
     pub(crate) occluder: Option<Occluder>,
     /// The cycle time of this pose.
     pub(crate) t: f32,
+    /// The scene's cut-outs: posing moves vertices, not UVs or materials, so one set serves
+    /// every pose.
+    cut: Option<std::sync::Arc<Cutouts>>,
 }
 
 impl Posed {
@@ -34,6 +37,7 @@ impl Posed {
             gbuffer,
             occluder,
             t,
+            cut,
         }
     }
 
@@ -41,12 +45,12 @@ impl Posed {
     /// rebuilds the BVH if there is one.
     pub fn update(&mut self, base: &Scene, t: f32, view: &View) {
         base.pose_into(t, &mut self.scene.mesh);
-        let cut = Cutouts::of(&self.scene.mesh, &self.scene.materials);
         if self.occluder.is_some() {
             let tris = mesh_triangles(&self.scene.mesh);
-            self.occluder = Some(Occluder::new_fast(&self.scene.mesh, &tris).cut_out(cut.clone()));
+            self.occluder =
+                Some(Occluder::new_fast(&self.scene.mesh, &tris).cut_out(self.cut.clone()));
         }
-        self.gbuffer = GBuffer::rasterize_cut(&self.scene.mesh, view, cut.as_deref());
+        self.gbuffer = GBuffer::rasterize_cut(&self.scene.mesh, view, self.cut.as_deref());
         self.t = t;
     }
 }

@@ -146,7 +146,8 @@ impl Cutouts {
                 .texture
                 .as_ref()
                 .and_then(|t| t.transform)
-                .map_or([1.0, 0.0, 0.0, 1.0, 0.0, 0.0], |x| x.matrix());
+                .unwrap_or(bspvt_proto::texture::UvTransform::IDENTITY)
+                .matrix();
             w.extend(uv.map(f32::to_bits));
             w.extend([0, 0]);
             if let Some(t) = &m.texture {

@@ -1121,10 +1121,7 @@ impl Builder<'_> {
                 rotation: x.rotation(),
                 scale: x.scale(),
             })
-            .filter(|t| {
-                t.matrix() != [1.0, 0.0, 0.0, 1.0, 0.0, 0.0]
-                    && t.matrix() != [1.0, -0.0, 0.0, 1.0, 0.0, 0.0]
-            });
+            .filter(|t| *t != UvTransform::IDENTITY);
         let t = info.texture();
         let image = t.source().index();
         let texture = self.image(doc, image)?;

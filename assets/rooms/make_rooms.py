@@ -22,6 +22,11 @@
 - checker-canopy.gltf: the same canopy cut out, as leaves and grilles are modelled: alphaMode
   MASK over an 8 x 8 base-colour texture whose alpha is a checker (half the board open), so
   about half the lamp's light reaches the floor beneath it (issue 35).
+- normal-floor.gltf: a 4 x 4 m floor that is one quad, its relief only in a tangent-space normal
+  map (normalTexture, scale 1, repeated once a metre: ridges along u, finer ones along v; no
+  TANGENT attribute, as exporters often leave it to the client), a 0.4 m box standing on it and
+  a square lamp 1.5 m up, off to one side: the ridges facing the lamp are lit, the others dim,
+  and the box's shadow falls across them (issue 35).
 """
 import base64, json, math, os, struct, zlib
 
@@ -428,6 +433,47 @@ def canopy(checker=False):
     g.write(os.path.join(HERE, "checker-canopy.gltf" if checker else "canopy.gltf"))
 
 
+def normal_floor():
+    g = Gltf()
+    floor = g.material("floor", [0.6, 0.6, 0.6], 0.0, 0.5)
+    block = g.material("block", [0.5, 0.45, 0.4], 0.0, 0.8)
+    lamp = g.material("lamp", [1.0, 1.0, 1.0], 0.0, 1.0, [1.0, 1.0, 1.0], 10.0)
+    # Height h(u, v) = a sin(2 pi u) + b sin(4 pi v) per unit of UV (1 m): the tangent-space
+    # normal is (-dh/du, -dh/dy, 1) with y up the image (decreasing v): (-h_u, h_v, 1).
+    N, a, b = 64, 0.06, 0.03
+
+    def texel(x, y):
+        u, v = (x + 0.5) / N, (y + 0.5) / N
+        hu = a * 2 * math.pi * math.cos(2 * math.pi * u)
+        hv = b * 4 * math.pi * math.cos(4 * math.pi * v)
+        n = normalized((-hu, hv, 1.0))
+        return tuple(round((c + 1) * 0.5 * 255) for c in n) + (255,)
+    tex = g.png_texture(N, N, texel, wrap=10497)
+    g.doc["materials"][floor]["normalTexture"] = {"index": tex, "scale": 1.0}
+    F = 2.0
+    corners = [(-F, 0, -F), (-F, 0, F), (F, 0, F), (F, 0, -F)]
+    uvs = [(c[0] + F, c[2] + F) for c in corners]
+    floor_mesh = g.mesh("floor", [g.primitive(corners, [(0, 1, 0)] * 4, [(0, 1, 2), (0, 2, 3)],
+                                              floor, uvs)])
+    block_mesh = g.mesh("block", [box(g, (0.2, 0.2, 0.2), block)])
+    s = 0.25
+    lamp_mesh = g.mesh("lamp", [quad_prim(g, [(-s, 0, -s), (s, 0, -s), (s, 0, s), (-s, 0, s)],
+                                          (0, -1, 0), lamp)])
+    g.doc["cameras"].append({"name": "view", "type": "perspective",
+                             "perspective": {"yfov": 0.8, "aspectRatio": 1.5,
+                                             "znear": 0.05, "zfar": 50.0}})
+    t = math.radians(-30) / 2
+    nodes = [
+        g.node("floor", mesh=floor_mesh),
+        g.node("block", mesh=block_mesh, translation=[-0.3, 0.2, 0.2]),
+        g.node("lamp", mesh=lamp_mesh, translation=[0.8, 1.5, -0.3]),
+        g.node("camera", camera=0, translation=[0.0, 1.6, 3.0],
+               rotation=[math.sin(t), 0.0, 0.0, math.cos(t)]),
+    ]
+    g.doc["scenes"].append({"name": "normal-mapped floor", "nodes": nodes})
+    g.write(os.path.join(HERE, "normal-floor.gltf"))
+
+
 if __name__ == "__main__":
     cornell()
     room()
@@ -435,3 +481,4 @@ if __name__ == "__main__":
     punctual_room()
     canopy()
     canopy(checker=True)
+    normal_floor()

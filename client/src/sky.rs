@@ -394,6 +394,7 @@ mod tests {
                 specular: [0.04; 3],
                 maps: None,
                 cutout: None,
+                normal_map: None,
             };
             let (scene, bake) = open_plane(m.clone());
             let trees = Trees::full(&bake.trees, bake.header.codec());
@@ -456,6 +457,7 @@ mod tests {
             specular: [0.04; 3],
             maps: None,
             cutout: None,
+            normal_map: None,
         };
         let (scene, bake) = open_plane(m);
         let trees = Trees::full(&bake.trees, bake.header.codec());

@@ -418,3 +418,30 @@ fn gpu_frames_equal_cpu_frames_through_cutouts() {
     );
     check_scene(gpu, "checker-canopy.gltf", &scene, 96, 96, true);
 }
+
+/// A normal-mapped floor (`normal-floor.gltf`: the relief only in its normal texture): the GPU
+/// bends the shading normal as the CPU does, per pixel (the map read at the pixel's UV in the
+/// MikkTSpace frame) and per vertex (at the vertex's UV); the map's effect is asserted.
+#[test]
+fn gpu_frames_equal_cpu_frames_with_a_normal_map() {
+    let Some((gpu, _one)) = gpu() else { return };
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/rooms/normal-floor.gltf");
+    let mut scene = Scene::from_mesh_path(&path).unwrap();
+    assert!(scene.materials.iter().any(|m| m.normal_map.is_some()));
+    scene.bake.face_res = 16;
+    if let Some(r) = &mut scene.bake.refine {
+        r.max_vertices = 1500;
+    }
+    bspvt_bake::refine::refine_scene(&mut scene).unwrap();
+    let mut flat = scene.clone();
+    for m in &mut flat.materials {
+        m.normal_map = None;
+    }
+    let light = Light::load(&scene.lights[0]).unwrap();
+    let (mapped, plain) = (Renderer::new(&scene, 96, 64), Renderer::new(&flat, 96, 64));
+    let (a, _) = mapped.ltc(std::slice::from_ref(&light), Mode::Pixel);
+    let (b, _) = plain.ltc(std::slice::from_ref(&light), Mode::Pixel);
+    assert!(differences(&a, &b).1 > 1e-3, "the map bends the shading");
+    check_scene(gpu, "normal-floor.gltf", &scene, 96, 64, true);
+}

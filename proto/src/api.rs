@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use std::sync::Arc;
 
-use crate::material::{Cutout, MaterialMaps};
+use crate::material::{Cutout, MaterialMaps, NormalMap};
 use crate::motion::MovingPart;
 use crate::scene::{Camera, Material, PolygonLight, PunctualLight, Region, Spot, SunLight};
 use crate::texture::{LightImage, Texture, TextureRef, UvTransform, Wrap};
@@ -196,8 +196,9 @@ pub struct SceneStatus {
 /// PNG or JPEG it came from), the lamps' texture images and the punctual lights; 6 adds which
 /// lights move in their plane (before it, every light without a region did; without one now,
 /// a lamp is fixed); 7 adds the point and spot lights' sphere radii and the suns; 8 the
-/// materials' alpha cut-outs and their textures' UV transforms. Versions 1 to 7 still read.
-const STORED_VERSION: u16 = 8;
+/// materials' alpha cut-outs and their textures' UV transforms; 9 their normal maps.
+/// Versions 1 to 8 still read.
+const STORED_VERSION: u16 = 9;
 
 #[derive(Serialize, Deserialize)]
 struct StoredScene {
@@ -224,6 +225,61 @@ struct StoredScene {
     /// One per material (or empty: no texture is transformed): the UV transforms of its
     /// maps' textures — the base colour's (or `map_Kd`'s), the metallic-roughness one's.
     map_transforms: Vec<[Option<UvTransform>; 2]>,
+    /// One per material (or empty: none is normal-mapped).
+    normal_maps: Vec<Option<StoredNormalMap>>,
+}
+
+/// A material's [`NormalMap`], its texture an index into `StoredScene::textures`.
+#[derive(Serialize, Deserialize)]
+struct StoredNormalMap {
+    texture: StoredTextureRef,
+    transform: Option<UvTransform>,
+    scale: f32,
+}
+
+/// Version 8: version 9 without the normal maps.
+#[derive(Serialize, Deserialize)]
+struct StoredSceneV8 {
+    version: u16,
+    mesh: Mesh,
+    materials: Vec<Material>,
+    lights: Vec<StoredLight>,
+    camera: StoredCamera,
+    bake: BakeSettings,
+    motion: Vec<MovingPart>,
+    uvs: Vec<[f32; 2]>,
+    textures: Vec<StoredTexture>,
+    maps: Vec<Option<StoredMaps>>,
+    light_images: Vec<Option<StoredLightImage>>,
+    punctual: Vec<PunctualLight>,
+    moves_in_plane: Vec<bool>,
+    suns: Vec<SunLight>,
+    cutouts: Vec<Option<StoredCutout>>,
+    map_transforms: Vec<[Option<UvTransform>; 2]>,
+}
+
+impl From<StoredSceneV8> for StoredScene {
+    fn from(v: StoredSceneV8) -> StoredScene {
+        StoredScene {
+            version: v.version,
+            mesh: v.mesh,
+            materials: v.materials,
+            lights: v.lights,
+            camera: v.camera,
+            bake: v.bake,
+            motion: v.motion,
+            uvs: v.uvs,
+            textures: v.textures,
+            maps: v.maps,
+            light_images: v.light_images,
+            punctual: v.punctual,
+            moves_in_plane: v.moves_in_plane,
+            suns: v.suns,
+            cutouts: v.cutouts,
+            map_transforms: v.map_transforms,
+            normal_maps: Vec::new(),
+        }
+    }
 }
 
 /// A material's [`Cutout`], its texture an index into `StoredScene::textures`.
@@ -274,6 +330,7 @@ impl From<StoredSceneV7> for StoredScene {
             suns: v.suns,
             cutouts: Vec::new(),
             map_transforms: Vec::new(),
+            normal_maps: Vec::new(),
         }
     }
 }
@@ -757,6 +814,21 @@ pub fn encode_scene(s: &Scene) -> Vec<u8> {
     } else {
         Vec::new()
     };
+    let normal_maps: Vec<Option<StoredNormalMap>> =
+        if s.materials.iter().any(|m| m.normal_map.is_some()) {
+            s.materials
+                .iter()
+                .map(|m| {
+                    m.normal_map.as_ref().map(|n| StoredNormalMap {
+                        texture: table.index(&n.texture),
+                        transform: n.texture.transform,
+                        scale: n.scale,
+                    })
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
     let light_images = if s.lights.iter().any(|l| l.image.is_some()) {
         s.lights
             .iter()
@@ -791,6 +863,7 @@ pub fn encode_scene(s: &Scene) -> Vec<u8> {
         suns: s.suns.clone(),
         cutouts,
         map_transforms,
+        normal_maps,
     };
     postcard::to_stdvec(&stored).unwrap_or_default()
 }
@@ -865,6 +938,9 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
         7 => postcard::from_bytes::<StoredSceneV7>(bytes)
             .map_err(bad)?
             .into(),
+        8 => postcard::from_bytes::<StoredSceneV8>(bytes)
+            .map_err(bad)?
+            .into(),
         STORED_VERSION => postcard::from_bytes(bytes).map_err(bad)?,
         v => return Err(format!("stored scene has version {v}")),
     };
@@ -924,6 +1000,24 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
                                 ..t
                             }),
                         blend: c.blend,
+                    })
+                })
+                .transpose()?;
+        }
+    }
+    if !s.normal_maps.is_empty() {
+        if s.normal_maps.len() != materials.len() {
+            return Err("stored scene: normal maps do not match the materials".into());
+        }
+        for (m, n) in materials.iter_mut().zip(s.normal_maps) {
+            m.normal_map = n
+                .map(|n| -> Result<NormalMap, String> {
+                    Ok(NormalMap {
+                        texture: TextureRef {
+                            transform: n.transform,
+                            ..texture_ref(n.texture, &textures)?
+                        },
+                        scale: n.scale,
                     })
                 })
                 .transpose()?;
@@ -1118,9 +1212,9 @@ mod tests {
     }
 
     /// A version-4 stored scene (before textures and punctual lights) still reads, with
-    /// none; the version-8 encoding of an untextured scene without lights moving in their
-    /// planes, punctual lights, suns, cut-outs or texture transforms is version 4's and nine
-    /// empty lists.
+    /// none; the version-9 encoding of an untextured scene without lights moving in their
+    /// planes, punctual lights, suns, cut-outs, texture transforms or normal maps is version
+    /// 4's and ten empty lists.
     #[test]
     fn version_4_reads() {
         let mut p = crate::builtin::scene("room").expect("builtin");
@@ -1142,9 +1236,9 @@ mod tests {
         }
         assert!(moving.lights.iter().any(|l| l.moves_in_plane));
         assert_eq!(decode_scene(&v4).as_ref(), Ok(&moving));
-        let v8 = encode_scene(&p);
-        assert_eq!(v8.len(), v4.len() + 9, "the nine empty lists");
-        assert_eq!(decode_scene(&v8).as_ref(), Ok(&p));
+        let v9 = encode_scene(&p);
+        assert_eq!(v9.len(), v4.len() + 10, "the ten empty lists");
+        assert_eq!(decode_scene(&v9).as_ref(), Ok(&p));
         // A light that moves in its plane round-trips.
         assert_eq!(decode_scene(&encode_scene(&moving)).as_ref(), Ok(&moving));
     }

@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::SceneError;
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 
 use crate::texture::TextureRef;
 
@@ -32,6 +32,41 @@ pub struct Material {
     /// MASK, or BLEND; not written in scene files). `None`: opaque everywhere.
     #[serde(skip)]
     pub cutout: Option<Cutout>,
+    /// The tangent-space normal map that bends the shading normal (an asset's glTF
+    /// `normalTexture`; not written in scene files).
+    #[serde(skip)]
+    pub normal_map: Option<NormalMap>,
+}
+
+/// A tangent-space normal map (glTF 2.0 §3.9.3 `normalTexture`): each texel is a unit normal
+/// in the frame (T, B, N) of the surface — T along increasing u, B along the image's up
+/// (decreasing v), N the interpolated normal —, stored as (n + 1) / 2 in linear RGB; `scale`
+/// multiplies its x and y.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NormalMap {
+    /// The image.
+    pub texture: TextureRef,
+    /// `scale`.
+    pub scale: f32,
+}
+
+impl NormalMap {
+    /// The unit tangent-space normal at `uv`: normalize((2c − 1) ⊙ (scale, scale, 1)),
+    /// bilinear texels; (0, 0, 1) — no bending — where the texel is degenerate.
+    pub fn at(&self, uv: Vec2) -> Vec3 {
+        let c = self.texture.sample(uv, false);
+        let s = if self.scale.is_finite() {
+            self.scale
+        } else {
+            1.0
+        };
+        let n = Vec3::new(
+            (2.0 * c[0] - 1.0) * s,
+            (2.0 * c[1] - 1.0) * s,
+            2.0 * c[2] - 1.0,
+        );
+        n.try_normalize().unwrap_or(Vec3::Z)
+    }
 }
 
 /// An alpha cut-out (glTF 2.0 §3.9.4 `alphaMode`): the surface is absent where its alpha —
@@ -93,6 +128,7 @@ impl Default for Material {
             specular: default_specular(),
             maps: None,
             cutout: None,
+            normal_map: None,
         }
     }
 }
@@ -200,6 +236,7 @@ impl MaterialMaps {
                     specular: c.map(|x| 0.04 + (x - 0.04) * m),
                     maps: None,
                     cutout: None,
+                    normal_map: None,
                 }
             }
             MaterialMaps::Diffuse { kd, texture } => {
@@ -211,6 +248,7 @@ impl MaterialMaps {
                     specular: base.specular,
                     maps: None,
                     cutout: None,
+                    normal_map: None,
                 }
             }
         }

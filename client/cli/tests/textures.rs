@@ -276,6 +276,7 @@ fn constant(albedo: [f32; 3], specular: [f32; 3], roughness: f32) -> Material {
         specular,
         maps: None,
         cutout: None,
+        normal_map: None,
     }
 }
 
@@ -869,12 +870,15 @@ fn hostile_textures_are_warnings() {
     );
 }
 
-/// Normal maps, occlusion and other extensions are named; KHR_texture_transform is read (its
-/// scale is the base-colour texture's), so it is not.
+/// Occlusion maps and other extensions are named; normal maps (with their own
+/// KHR_texture_transform, read from the extension's JSON) and KHR_texture_transform are read
+/// (the base colour's scale is its own), so they are not.
 #[test]
 fn unsupported_texture_features_are_warned() {
     let mats = json!([
-        {"name": "floor", "normalTexture": {"index": 0}, "occlusionTexture": {"index": 0},
+        {"name": "floor", "normalTexture": {"index": 0, "scale": 0.5, "extensions":
+            {"KHR_texture_transform": {"offset": [0.25, 0], "rotation": 0.5}}},
+         "occlusionTexture": {"index": 0},
          "pbrMetallicRoughness": {"baseColorTexture": {"index": 0, "extensions":
             {"KHR_texture_transform": {"scale": [2, 2]}}}}},
         lamp_material(None)
@@ -894,10 +898,22 @@ fn unsupported_texture_features_are_warned() {
     );
     let a = asset(&bytes);
     let has = |s: &str| a.warnings.iter().any(|w| w.contains(s));
-    for s in ["normal maps", "occlusion textures", "KHR_materials_sheen"] {
+    for s in ["occlusion textures", "KHR_materials_sheen"] {
         assert!(has(s), "no warning on {s}: {:?}", a.warnings);
     }
     assert!(!has("KHR_texture_transform"), "{:?}", a.warnings);
+    assert!(!has("normal"), "{:?}", a.warnings);
+    let n = a.materials[0].normal_map.as_ref().expect("the normal map is read");
+    assert_eq!(n.scale, 0.5);
+    assert_eq!(
+        n.texture.transform,
+        Some(bspvt_proto::texture::UvTransform {
+            offset: [0.25, 0.0],
+            rotation: 0.5,
+            scale: [1.0, 1.0],
+        }),
+        "the normal map's own transform"
+    );
     let Some(bspvt_proto::scene::MaterialMaps::MetallicRoughness {
         base_color_texture: Some(t),
         ..

@@ -43,6 +43,8 @@
 //!   Such a scene renders with `volpath` (same `max_depth`): `path`'s shadow rays stop at any
 //!   surface, masks included, where `volpath`'s pass through null BSDFs (measured on the
 //!   checker canopy: `path` 18 % darker than our Monte Carlo, `volpath` within 0.1 %).
+//! - Normal maps are not exported (warned): Mitsuba's `normalmap` builds its frame from
+//!   ∂p/∂u, not MikkTSpace's, and has no rule for a bent normal that turns from the viewer.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -286,6 +288,13 @@ pub fn export(
             f = triple(f0),
             al = num(alpha),
         );
+        if mat.normal_map.is_some() {
+            warnings.push(format!(
+                "material {:?}'s normal map is not exported (Mitsuba's `normalmap` has no \
+                 MikkTSpace frame and no silhouette rule): it renders with the mesh normals",
+                mat.name
+            ));
+        }
         let cut = mat.cutout.as_ref().filter(|c| !c.is_opaque());
         if let Some(c) = cut {
             let (opacity, wrap) = mask_image(c, !mesh.uvs.is_empty());

@@ -261,8 +261,7 @@ fn run_case(name: &str, scene: &Scene, dir: &Path) -> Stats {
 
     let t = std::time::Instant::now();
     let view = View::new(&scene.camera, W, H);
-    let tracer = Tracer::new(&scene.mesh)
-        .cut_out(bspvt_raytrace::Cutouts::of(&scene.mesh, &scene.materials));
+    let tracer = Tracer::of_scene(scene);
     let occluder = Occluder::of_surfaces(&scene.mesh, &scene.materials);
     let (ours, noise) = render_mc_box(
         scene,

@@ -12,6 +12,8 @@ use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
 use super::camera::View;
+use super::normal_map::NormalMaps;
+use std::sync::Arc;
 
 /// No triangle at this pixel.
 pub const NONE: u32 = u32::MAX;
@@ -30,6 +32,8 @@ pub struct GBuffer {
     pub tri: Vec<u32>,
     /// Barycentrics (of vertices 1 and 2) of the primary-ray hit per pixel.
     pub(crate) bary: Vec<[f32; 2]>,
+    /// The scene's normal maps, which bend every surface's shading normal.
+    pub(crate) normal_maps: Option<Arc<NormalMaps>>,
 }
 
 /// A near-clipped triangle in screen space: its index, vertices (pixels, 1/z) and the pixel
@@ -166,7 +170,15 @@ impl GBuffer {
             height: h as u32,
             tri,
             bary,
+            normal_maps: None,
         }
+    }
+
+    /// This G-buffer's surfaces with their shading normals bent by `maps`
+    /// ([`NormalMaps::of`] the scene).
+    pub(crate) fn with_normal_maps(mut self, maps: Option<Arc<NormalMaps>>) -> GBuffer {
+        self.normal_maps = maps;
+        self
     }
 
     /// The surface seen through pixel `i` (row-major), if any.
@@ -185,12 +197,14 @@ impl GBuffer {
         if geometric.dot(to_eye) < 0.0 {
             geometric = -geometric;
         }
-        let n = idx.map(|v| mesh.normals[v as usize].as_dvec3());
-        let mut normal =
-            (weights[0] * n[0] + weights[1] * n[1] + weights[2] * n[2]).normalize_or(geometric);
-        if normal.dot(geometric) < 0.0 {
-            normal = -normal;
-        }
+        let normal = shading_normal(
+            mesh,
+            t,
+            weights,
+            geometric,
+            to_eye.normalize_or(geometric),
+            self.normal_maps.as_deref(),
+        );
         Some(Surface {
             tri: t,
             weights,
@@ -298,6 +312,42 @@ fn ray_plane_barycentrics(o: DVec3, d: DVec3, p: [DVec3; 3]) -> (f64, f64) {
     let (u, v) = (u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
     let s = u + v;
     if s > 1.0 { (u / s, v / s) } else { (u, v) }
+}
+
+/// The shading normal at the point of triangle `t` with barycentric `weights`, seen along
+/// unit `wo` (toward the eye): the interpolated vertex normal (the geometric one where that is
+/// degenerate), bent by the material's normal map, on the side of `geometric` (the viewer's).
+/// *The* shading normal of every per-pixel method and of the Monte Carlo's camera rays.
+/// A bent normal is kept facing the viewer ([`NormalMaps::facing`]).
+pub(crate) fn shading_normal(
+    mesh: &Mesh,
+    t: u32,
+    weights: [f64; 3],
+    geometric: DVec3,
+    wo: DVec3,
+    maps: Option<&NormalMaps>,
+) -> DVec3 {
+    let Some(idx) = mesh.triangles.get(t as usize) else {
+        return geometric;
+    };
+    let n = idx.map(|v| {
+        mesh.normals
+            .get(v as usize)
+            .map_or(DVec3::ZERO, |n| n.as_dvec3())
+    });
+    let interpolated =
+        (weights[0] * n[0] + weights[1] * n[1] + weights[2] * n[2]).normalize_or(geometric);
+    // A back face seen: its whole tangent frame turns over with it (glTF 2.0 §3.9.3).
+    let flip = interpolated.dot(geometric) < 0.0;
+    let side = |v: DVec3| if flip { -v } else { v };
+    match maps {
+        None => side(interpolated),
+        Some(m) => NormalMaps::facing(
+            side(m.bend(mesh, t, weights, interpolated)),
+            side(interpolated),
+            wo,
+        ),
+    }
 }
 
 #[cfg(test)]

@@ -1,5 +1,6 @@
 //! What every rendering method shares: the [`image::Image`] it returns, the camera
-//! ([`camera::View`]), primary visibility ([`gbuffer::GBuffer`]), the LTC shading frame
+//! ([`camera::View`]), primary visibility ([`gbuffer::GBuffer`]), normal maps ([`normal_map`]), the LTC shading
+//! frame
 //! ([`shading::ShadingFrame`]), the material's BRDF and the shadow-ray policy ([`brdf`]),
 //! image statistics ([`stats`]) and text drawn into a framebuffer ([`canvas`]).
 
@@ -8,5 +9,6 @@ pub mod camera;
 pub mod canvas;
 pub mod gbuffer;
 pub mod image;
+pub(crate) mod normal_map;
 pub(crate) mod shading;
 pub mod stats;

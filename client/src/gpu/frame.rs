@@ -66,6 +66,9 @@ pub struct GpuFrames {
     materials: wgpu::Buffer,
     /// The textures the materials sample (`materials::tables`).
     surface_textures: wgpu::Buffer,
+    /// Per vertex, where a material is normal-mapped: the unbent normal and the tangent
+    /// ([`tangent_frames`]); one zero vec4 otherwise.
+    frames: wgpu::Buffer,
     materials_key: Option<u64>,
     ltc: wgpu::Buffer,
     triangles: u32,
@@ -229,7 +232,12 @@ impl GpuFrames {
             ),
             materials: init(
                 "materials",
-                &vec![0; 64 * scene.materials.len().max(1)],
+                &vec![0; 16 * super::materials::RECORDS * scene.materials.len().max(1)],
+                U::STORAGE,
+            ),
+            frames: init(
+                "tangent frames",
+                bytemuck::cast_slice(&tangent_frames(mesh, &scene.materials)),
                 U::STORAGE,
             ),
             surface_textures: init(
@@ -447,6 +455,7 @@ impl GpuFrames {
         .map(|b| b.clone());
         let light_texture = self.shader.light_texture.clone();
         let surface_textures = self.surface_textures.clone();
+        let frames = self.frames.clone();
         let t = self.target(gpu, w, h);
         let vis_view = t.visibility.create_view(&Default::default());
         let depth_view = t.depth.create_view(&Default::default());
@@ -490,6 +499,10 @@ impl GpuFrames {
         entries.push(wgpu::BindGroupEntry {
             binding: 10,
             resource: surface_textures.as_entire_binding(),
+        });
+        entries.push(wgpu::BindGroupEntry {
+            binding: 11,
+            resource: frames.as_entire_binding(),
         });
         let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("bspvt resolve"),
@@ -537,6 +550,23 @@ impl GpuImage {
 }
 
 /// An image from the resolve pass's little-endian `vec4<f32>` texels.
+/// The resolve pass's tangent frames: per vertex (unbent unit normal, 0) and (MikkTSpace
+/// tangent, bitangent sign) — `frame::normal_map`'s — where a material is normal-mapped;
+/// empty (so the pass bends nothing) otherwise.
+fn tangent_frames(
+    mesh: &bspvt_proto::Mesh,
+    materials: &[bspvt_proto::scene::Material],
+) -> Vec<[f32; 4]> {
+    let Some(maps) = crate::frame::normal_map::NormalMaps::of(mesh, materials) else {
+        return Vec::new();
+    };
+    mesh.normals
+        .iter()
+        .zip(maps.tangents())
+        .flat_map(|(n, t)| [n.extend(0.0).to_array(), t.to_array()])
+        .collect()
+}
+
 fn image_from_bytes((w, h): (u32, u32), bytes: &[u8]) -> Image {
     let mut img = Image::new(w, h);
     for (px, texel) in img.pixels.iter_mut().zip(bytes.chunks_exact(16)) {

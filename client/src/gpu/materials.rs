@@ -1,7 +1,8 @@
-//! Materials as the resolve pass reads them (`resolve.wgsl`, `surface_material`): four vec4
+//! Materials as the resolve pass reads them (`resolve.wgsl`, `surface_material`): five vec4
 //! per material and the textures they sample (RGBA8, one `u32` per texel), so per-pixel frames
 //! evaluate a textured material at the pixel's UV as the CPU does
-//! ([`bspvt_proto::material::MaterialMaps`]: glTF metallic-roughness, OBJ `map_Kd`).
+//! ([`bspvt_proto::material::MaterialMaps`]: glTF metallic-roughness, OBJ `map_Kd`; a normal
+//! map, [`bspvt_proto::scene::NormalMap`]).
 
 use std::collections::HashMap;
 
@@ -48,10 +49,13 @@ const CONSTANT: f32 = 0.0;
 const METALLIC_ROUGHNESS: f32 = 1.0;
 const DIFFUSE_MAP: f32 = 2.0;
 
+/// Vec4 records per material.
+pub(crate) const RECORDS: usize = 5;
+
 /// The material records and the texture words. Per material: (albedo, α), (F0, kind),
 /// then for metallic-roughness (base colour factor), (metallic, roughness, base colour
 /// texture + 1, metallic-roughness texture + 1), for `map_Kd` (Kd, 0), (0, 0, texture + 1, 0);
-/// texture indices as u32 bits, 0 for none. Texture words: a header of [`HEADER`] words per
+/// last (normal map texture + 1, its scale, 0, 0); texture indices as u32 bits, 0 for none. Texture words: a header of [`HEADER`] words per
 /// texture use — width, height, offset, wrap u | wrap v << 4, then the UV transform
 /// (`UvTransform::matrix`: a, b, c, d, tx, ty as f32 bits; the identity's when none) and two
 /// unused —, then the texels (R | G << 8 | B << 16 | A << 24).
@@ -62,7 +66,7 @@ pub(crate) fn tables(materials: &[Material], uvs: bool, texels: bool) -> (Vec<[f
     let bits = |x: u32| f32::from_bits(x);
     let mut uses: Vec<&TextureRef> = Vec::new();
     let mut index: HashMap<TextureKey, u32> = HashMap::new();
-    let mut records = Vec::with_capacity(4 * materials.len().max(1));
+    let mut records = Vec::with_capacity(RECORDS * materials.len().max(1));
     for m in materials {
         let c = |k: f32| {
             [
@@ -98,9 +102,16 @@ pub(crate) fn tables(materials: &[Material], uvs: bool, texels: bool) -> (Vec<[f
                 records.extend([[0.0; 4]; 2]);
             }
         }
+        match (&m.normal_map, uvs) {
+            (Some(n), true) => {
+                let t = use_of(Some(&n.texture), &mut uses, &mut index);
+                records.push([bits(t), n.scale, 0.0, 0.0]);
+            }
+            _ => records.push([0.0; 4]),
+        }
     }
     if records.is_empty() {
-        records.extend([[0.0; 4]; 4]);
+        records.extend([[0.0; 4]; RECORDS]);
     }
     let mut words = vec![0u32; HEADER * uses.len()];
     for (k, t) in uses.iter().enumerate().filter(|_| texels) {

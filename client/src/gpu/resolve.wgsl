@@ -58,6 +58,9 @@ struct VertexOut {
 // offset, wrap u | wrap v << 4, the UV transform a, b, c, d, tx, ty as f32 bits, two unused),
 // then RGBA8 texels (gpu/materials.rs).
 @group(0) @binding(10) var<storage, read> surface_tex: array<u32>;
+// Two per vertex where a material is normal-mapped — (unbent normal, 0), (tangent, bitangent
+// sign) —, a single zero vec4 otherwise (frame.rs `tangent_frames`).
+@group(0) @binding(11) var<storage, read> frames: array<vec4f>;
 
 fn light_count() -> u32 {
     return fp.counts.x;
@@ -216,13 +219,13 @@ struct SurfaceMaterial {
 
 fn surface_material(m: u32, uv: vec2f) -> SurfaceMaterial {
     var out: SurfaceMaterial;
-    out.albedo = materials[4u * m];
-    let r1 = materials[4u * m + 1u];
+    out.albedo = materials[5u * m];
+    let r1 = materials[5u * m + 1u];
     out.f0 = r1.xyz;
     let kind = u32(r1.w);
     if kind == 1u {
-        let factor = materials[4u * m + 2u];
-        let r3 = materials[4u * m + 3u];
+        let factor = materials[5u * m + 2u];
+        let r3 = materials[5u * m + 3u];
         let bt = bitcast<u32>(r3.z);
         let mt = bitcast<u32>(r3.w);
         var bc = vec4f(1.0);
@@ -239,8 +242,8 @@ fn surface_material(m: u32, uv: vec2f) -> SurfaceMaterial {
         out.albedo = vec4f(c * (1.0 - metal), clamp(rough * rough, 1e-3, 1.0));
         out.f0 = vec3f(0.04) + (c - vec3f(0.04)) * metal;
     } else if kind == 2u {
-        let kd = materials[4u * m + 2u];
-        let t = bitcast<u32>(materials[4u * m + 3u].z);
+        let kd = materials[5u * m + 2u];
+        let t = bitcast<u32>(materials[5u * m + 3u].z);
         if t != 0u {
             let tex = surface_sample(t - 1u, uv, true);
             out.albedo = vec4f(unit3(kd.xyz * tex.xyz), out.albedo.w);
@@ -250,6 +253,41 @@ fn surface_material(m: u32, uv: vec2f) -> SurfaceMaterial {
         out.albedo.w = bitcast<f32>(fp.size.w);
     }
     return out;
+}
+
+// NormalMap::at: the unit tangent-space normal of texel c, normalize((2c − 1) ⊙ (s, s, 1)).
+fn normal_texel(c: vec4f, scale: f32) -> vec3f {
+    let s = select(1.0, scale, finite(scale));
+    let v = vec3f((2.0 * c.x - 1.0) * s, (2.0 * c.y - 1.0) * s, 2.0 * c.z - 1.0);
+    let l = length(v);
+    return select(vec3f(0.0, 0.0, 1.0), v / l, l > 0.0 && finite(l));
+}
+
+// normal_map::bend: normalize(x T + y B + z N), T made orthogonal to the unit normal n,
+// B = sign · n × T; n where T or the result is degenerate.
+fn bend(n: vec3f, t_in: vec3f, sign: f32, m: vec3f) -> vec3f {
+    let t0 = t_in - n * dot(n, t_in);
+    let tl = length(t0);
+    if !(tl > 1e-12) || !finite(tl) {
+        return n;
+    }
+    let t = t0 / tl;
+    let b = sign * cross(n, t);
+    let r = m.x * t + m.y * b + m.z * n;
+    let rl = length(r);
+    return select(n, r / rl, rl > 0.0 && finite(rl));
+}
+
+// NormalMaps::facing: a bent normal kept just this side of the silhouette.
+fn keep_facing(bent: vec3f, n: vec3f, wo: vec3f) -> vec3f {
+    let eps = 0.02;
+    let d = dot(bent, wo);
+    if d < eps && dot(n, wo) > eps {
+        let r = bent + (eps - d) * wo;
+        let rl = length(r);
+        return select(n, r / rl, rl > 0.0 && finite(rl));
+    }
+    return bent;
 }
 
 // The radiance of triangle t seen along the ray through image point (x, y).
@@ -275,22 +313,38 @@ fn shade(t: u32, x: f32, y: f32) -> vec3f {
     if dot(g, to_eye) < 0.0 {
         g = -g;
     }
-    let ni = w.x * verts[4u * i0 + 1u].xyz + w.y * verts[4u * i1 + 1u].xyz
+    // The vertex records hold the (per-vertex) bent normals; a normal-mapped scene's unbent
+    // ones are in `frames`.
+    let mapped = arrayLength(&frames) > 1u;
+    var ni = w.x * verts[4u * i0 + 1u].xyz + w.y * verts[4u * i1 + 1u].xyz
         + w.z * verts[4u * i2 + 1u].xyz;
+    if mapped {
+        ni = w.x * frames[2u * i0].xyz + w.y * frames[2u * i1].xyz + w.z * frames[2u * i2].xyz;
+    }
     let nl = length(ni);
     var n = select(g, ni / nl, nl > 0.0 && finite(nl));
-    if dot(n, g) < 0.0 {
-        n = -n;
-    }
+    let side = select(1.0, -1.0, dot(n, g) < 0.0);
     let el = length(to_eye);
     let wo = select(n, to_eye / el, el > 0.0 && finite(el));
-    if !(dot(n, wo) > 0.0) {
-        return vec3f(0.0);
-    }
     let m = min(tri_material[t], max(fp.counts.w, 1u) - 1u);
     let uv = w.x * vec2f(verts[4u * i0 + 1u].w, verts[4u * i0 + 3u].w)
         + w.y * vec2f(verts[4u * i1 + 1u].w, verts[4u * i1 + 3u].w)
         + w.z * vec2f(verts[4u * i2 + 1u].w, verts[4u * i2 + 3u].w);
+    let nm = materials[5u * m + 4u];
+    let nt = bitcast<u32>(nm.x);
+    if mapped && nt != 0u {
+        let tv = w.x * frames[2u * i0 + 1u] + w.y * frames[2u * i1 + 1u]
+            + w.z * frames[2u * i2 + 1u];
+        let facing = side * n;
+        n = side * bend(n, tv.xyz, select(1.0, -1.0, tv.w < 0.0),
+            normal_texel(surface_sample(nt - 1u, uv, false), nm.y));
+        n = keep_facing(n, facing, wo);
+    } else {
+        n = side * n;
+    }
+    if !(dot(n, wo) > 0.0) {
+        return vec3f(0.0);
+    }
     let mat = surface_material(m, uv);
     let albedo = mat.albedo;
     let f0 = mat.f0;

@@ -28,6 +28,8 @@ pub struct Tracer {
     ids: Vec<u32>,
     /// The scene's alpha cut-outs: the camera sees through their holes.
     cut: Option<Arc<Cutouts>>,
+    /// The scene's normal maps, which bend the surfaces' shading normals.
+    normal_maps: Option<Arc<crate::frame::normal_map::NormalMaps>>,
 }
 
 impl Tracer {
@@ -49,7 +51,16 @@ impl Tracer {
             tris: rt,
             ids,
             cut: None,
+            normal_maps: None,
         }
+    }
+
+    /// The tracer of `scene`'s surfaces as every method sees them: through its cut-outs, with
+    /// its normal maps.
+    pub fn of_scene(scene: &bspvt_proto::Scene) -> Tracer {
+        let mut t = Tracer::new(&scene.mesh).cut_out(Cutouts::of(&scene.mesh, &scene.materials));
+        t.normal_maps = crate::frame::normal_map::NormalMaps::of(&scene.mesh, &scene.materials);
+        t
     }
 
     /// This tracer seeing through the scene's cut-outs ([`Cutouts::of`]).
@@ -90,12 +101,14 @@ impl Tracer {
         if geometric.dot(eye - position) < 0.0 {
             geometric = -geometric;
         }
-        let n = idx.map(|v| mesh.normals[v as usize].as_dvec3());
-        let mut normal =
-            (weights[0] * n[0] + weights[1] * n[1] + weights[2] * n[2]).normalize_or(geometric);
-        if normal.dot(geometric) < 0.0 {
-            normal = -normal;
-        }
+        let normal = crate::frame::gbuffer::shading_normal(
+            mesh,
+            t,
+            weights,
+            geometric,
+            (eye - position).normalize_or(geometric),
+            self.normal_maps.as_deref(),
+        );
         Some(Surface {
             tri: t,
             weights,

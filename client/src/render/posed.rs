@@ -2,6 +2,7 @@
 //! precompute): the meshes at cycle time t ([`bspvt_proto::motion`]), the G-buffer through the
 //! view, and, when rays are needed, a BVH rebuilt for the pose.
 
+use crate::frame::normal_map::NormalMaps;
 use bspvt_proto::Scene;
 use bspvt_raytrace::{Cutouts, Occluder, mesh_triangles};
 
@@ -28,7 +29,8 @@ impl Posed {
     pub fn new(base: &Scene, t: f32, view: &View, rays: bool) -> Posed {
         let scene = base.at(t);
         let cut = Cutouts::of(&scene.mesh, &scene.materials);
-        let gbuffer = GBuffer::rasterize_cut(&scene.mesh, view, cut.as_deref());
+        let gbuffer = GBuffer::rasterize_cut(&scene.mesh, view, cut.as_deref())
+            .with_normal_maps(NormalMaps::of(&scene.mesh, &scene.materials));
         let occluder = rays.then(|| {
             Occluder::new_fast(&scene.mesh, &mesh_triangles(&scene.mesh)).cut_out(cut.clone())
         });
@@ -50,7 +52,10 @@ impl Posed {
             self.occluder =
                 Some(Occluder::new_fast(&self.scene.mesh, &tris).cut_out(self.cut.clone()));
         }
-        self.gbuffer = GBuffer::rasterize_cut(&self.scene.mesh, view, self.cut.as_deref());
+        // The tangent frames turn with the pose (normal-mapped scenes only).
+        let normal_maps = NormalMaps::of(&self.scene.mesh, &self.scene.materials);
+        self.gbuffer = GBuffer::rasterize_cut(&self.scene.mesh, view, self.cut.as_deref())
+            .with_normal_maps(normal_maps);
         self.t = t;
     }
 }

@@ -17,6 +17,7 @@ use rayon::prelude::*;
 use crate::frame::camera::View;
 use crate::frame::gbuffer::{GBuffer, NONE, Surface};
 use crate::frame::image::Image;
+use crate::frame::normal_map::NormalMaps;
 use crate::light::Light;
 use crate::ltc::table::LtcTable;
 use crate::shade::bspvt::shade_vertex;
@@ -110,6 +111,8 @@ pub struct Renderer<'a> {
     roughness: Option<f32>,
     /// The scene's alpha cut-outs, which the G-buffer sees through.
     pub(crate) cut: Option<std::sync::Arc<bspvt_raytrace::Cutouts>>,
+    /// The scene's normal maps, which bend the shading normals of pixels and vertices.
+    pub(crate) normal_maps: Option<std::sync::Arc<NormalMaps>>,
 }
 
 impl<'a> Renderer<'a> {
@@ -122,7 +125,9 @@ impl<'a> Renderer<'a> {
     pub fn with_camera(scene: &'a Scene, camera: &Camera, width: u32, height: u32) -> Renderer<'a> {
         let view = View::new(camera, width, height);
         let cut = bspvt_raytrace::Cutouts::of(&scene.mesh, &scene.materials);
-        let gbuffer = GBuffer::rasterize_cut(&scene.mesh, &view, cut.as_deref());
+        let normal_maps = NormalMaps::of(&scene.mesh, &scene.materials);
+        let gbuffer = GBuffer::rasterize_cut(&scene.mesh, &view, cut.as_deref())
+            .with_normal_maps(normal_maps.clone());
         let visible_vertices = gbuffer
             .visible_vertices(&scene.mesh)
             .iter()
@@ -149,6 +154,7 @@ impl<'a> Renderer<'a> {
             materials: scene.materials.clone(),
             roughness: None,
             cut,
+            normal_maps,
         }
     }
 
@@ -156,7 +162,8 @@ impl<'a> Renderer<'a> {
     pub(crate) fn set_camera(&mut self, camera: &Camera) {
         let (w, h) = (self.gbuffer.width, self.gbuffer.height);
         self.view = View::new(camera, w, h);
-        self.gbuffer = GBuffer::rasterize_cut(&self.scene.mesh, &self.view, self.cut.as_deref());
+        self.gbuffer = GBuffer::rasterize_cut(&self.scene.mesh, &self.view, self.cut.as_deref())
+            .with_normal_maps(self.normal_maps.clone());
         self.visible_vertices = self
             .gbuffer
             .visible_vertices(&self.scene.mesh)
@@ -236,8 +243,16 @@ impl<'a> Renderer<'a> {
         let n = self.scene.mesh.normals[v as usize]
             .as_dvec3()
             .normalize_or(DVec3::Y);
+        let id = self.vertex_material[v as usize];
+        let n = self.normal_maps.as_ref().map_or(n, |m| {
+            let wo = (self.view.eye - p).normalize_or(n);
+            // Seen from behind, the whole frame turns over (as `gbuffer::shading_normal`).
+            let side = if n.dot(wo) < 0.0 { -1.0 } else { 1.0 };
+            let bent = side * m.bend_vertex(&self.scene.mesh, v, id, n);
+            NormalMaps::facing(bent, side * n, wo)
+        });
         let uv = self.scene.mesh.uvs.get(v as usize).copied();
-        (p, n, self.material_at(self.vertex_material[v as usize], uv))
+        (p, n, self.material_at(id, uv))
     }
 
     fn vertex_lobes(&self, v: u32) -> (Lobes, DVec3, DVec3) {

@@ -42,8 +42,12 @@
 //! directional lights of the instanced nodes are placed by the node's world transform (spots
 //! and suns point down its −Z). The
 //! first perspective camera instanced by the scene becomes the scene's camera (looking down its
-//! node's −Z with +Y up). Normal and occlusion textures, other texture coordinate sets,
-//! `KHR_texture_transform` and other extensions and orthographic cameras are not used; each kind is named in the warnings. Image and light JSON is read from the
+//! node's −Z with +Y up). Every texture may carry `KHR_texture_transform`. `normalTexture`
+//! becomes the material's [`NormalMap`] (tangents: MikkTSpace's, computed by the client from
+//! the positions, normals and UVs; an asset's `TANGENT` attribute is not read). Occlusion
+//! textures (no method has an ambient term: each computes its own shadowing), texture
+//! coordinate sets other than 0, other extensions and orthographic cameras are not used;
+//! each kind is named in the warnings. Image and light JSON is read from the
 //! document's JSON, not through the `gltf` crate's accessors that `unwrap` (an image with a
 //! buffer view but no MIME type would panic there).
 
@@ -65,7 +69,7 @@ use crate::camera::Camera;
 use crate::error::MeshError;
 use crate::light::{PunctualLight, Spot, SunLight};
 use crate::material::MaterialMaps;
-use crate::material::{Cutout, Material};
+use crate::material::{Cutout, Material, NormalMap};
 use crate::mesh::Mesh;
 use crate::texture::{MAX_ASSET_TEXELS, Texture, TextureRef, UvTransform, Wrap};
 
@@ -153,16 +157,11 @@ fn unused_features(doc: &Document) -> Vec<String> {
         .map(|e| format!("extension {e} is not supported and was ignored"))
         .collect();
     let count = |f: &dyn Fn(&::gltf::Material) -> bool| doc.materials().filter(|m| f(m)).count();
-    let textures = [
-        (
-            count(&|m| m.normal_texture().is_some()),
-            "normal maps (the mesh normals are used)",
-        ),
-        (
-            count(&|m| m.occlusion_texture().is_some()),
-            "occlusion textures",
-        ),
-    ];
+    let textures = [(
+        count(&|m| m.occlusion_texture().is_some()),
+        "occlusion textures (no method has an ambient term to darken: each computes its own \
+             shadowing)",
+    )];
     for (n, what) in textures {
         if n > 0 {
             w.push(format!("{n} materials have {what}: ignored"));
@@ -177,6 +176,30 @@ fn unused_features(doc: &Document) -> Vec<String> {
         ));
     }
     w
+}
+
+/// A `KHR_texture_transform` object read from its JSON (where the gltf crate offers no typed
+/// accessor: a `normalTexture`'s), with its `texCoord` override; absent or malformed fields
+/// take the extension's defaults.
+fn texture_transform_json(v: &serde_json::Value) -> (Option<UvTransform>, Option<u32>) {
+    let num = |x: &serde_json::Value| x.as_f64().map(|f| f as f32).filter(|f| f.is_finite());
+    let pair = |key: &str, d: [f32; 2]| {
+        v.get(key)
+            .and_then(|a| a.as_array())
+            .filter(|a| a.len() == 2)
+            .and_then(|a| Some([num(&a[0])?, num(&a[1])?]))
+            .unwrap_or(d)
+    };
+    let t = UvTransform {
+        offset: pair("offset", [0.0, 0.0]),
+        rotation: v.get("rotation").and_then(num).unwrap_or(0.0),
+        scale: pair("scale", [1.0, 1.0]),
+    };
+    let set = v
+        .get("texCoord")
+        .and_then(|x| x.as_u64())
+        .map(|x| u32::try_from(x).unwrap_or(u32::MAX));
+    (Some(t), set)
 }
 
 /// The cut-out of material `m` (glTF 2.0 §3.9.4): MASK cuts at its `alphaCutoff`, BLEND at
@@ -714,6 +737,7 @@ impl Builder<'_> {
                     specular: [1.0; 3],
                     maps: None,
                     cutout: None,
+                    normal_map: None,
                 },
                 emission: [0.0; 3],
                 two_sided: false,
@@ -1062,6 +1086,25 @@ impl Builder<'_> {
             None
         };
         let cutout = cutout(m, fin(a, 1.0), base_color_texture.as_ref());
+        let normal_map = m.normal_texture().and_then(|n| {
+            // NormalTextureInfo carries KHR_texture_transform as raw JSON.
+            let ext = n
+                .extension_value("KHR_texture_transform")
+                .map(texture_transform_json);
+            let set = ext.and_then(|(_, set)| set).unwrap_or(n.tex_coord());
+            let texture = self.texture_of(
+                doc,
+                &name,
+                "normal",
+                set,
+                ext.and_then(|e| e.0),
+                &n.texture(),
+            )?;
+            Some(NormalMap {
+                texture,
+                scale: Some(n.scale()).filter(|s| s.is_finite()).unwrap_or(1.0),
+            })
+        });
         let maps = (base_color_texture.is_some() || metallic_roughness_texture.is_some())
             .then_some(MaterialMaps::MetallicRoughness {
                 base_color: base,
@@ -1077,6 +1120,7 @@ impl Builder<'_> {
             specular: base.map(|c| 0.04 + (c - 0.04) * metallic),
             maps: None,
             cutout,
+            normal_map,
         };
         if let Some(maps) = maps {
             // The constant fields: the material at the textures' means (module docs).
@@ -1108,6 +1152,25 @@ impl Builder<'_> {
             .as_ref()
             .and_then(|x| x.tex_coord())
             .unwrap_or(info.tex_coord());
+        let transform = ext.map(|x| UvTransform {
+            offset: x.offset(),
+            rotation: x.rotation(),
+            scale: x.scale(),
+        });
+        self.texture_of(doc, material, what, set, transform, &info.texture())
+    }
+
+    /// Texture `t` read through texture coordinate set `set` and `transform`, decoded; `None`
+    /// (with a warning) when it cannot be used.
+    fn texture_of(
+        &mut self,
+        doc: &Document,
+        material: &str,
+        what: &str,
+        set: u32,
+        transform: Option<UvTransform>,
+        t: &::gltf::texture::Texture<'_>,
+    ) -> Option<TextureRef> {
         if set != 0 {
             self.warnings.push(format!(
                 "material {material:?}: its {what} texture uses TEXCOORD_{set}; only TEXCOORD_0 \
@@ -1115,19 +1178,12 @@ impl Builder<'_> {
             ));
             return None;
         }
-        let transform = ext
-            .map(|x| UvTransform {
-                offset: x.offset(),
-                rotation: x.rotation(),
-                scale: x.scale(),
-            })
-            .filter(|t| *t != UvTransform::IDENTITY);
-        let t = info.texture();
+        let transform = transform.filter(|t| *t != UvTransform::IDENTITY);
         let image = t.source().index();
         let texture = self.image(doc, image)?;
         Some(TextureRef {
             texture,
-            wrap: wrap_modes(&t),
+            wrap: wrap_modes(t),
             transform,
         })
     }
@@ -1229,8 +1285,10 @@ impl Builder<'_> {
             copy.material.albedo = base_color.map(|c| c * (1.0 - metallic));
             copy.material.specular = base_color.map(|c| 0.04 + (c - 0.04) * metallic);
         }
-        // Without UVs a cut-out's texture is read at its mean alpha (`Cutout::covers`).
+        // Without UVs a cut-out's texture is read at its mean alpha (`Cutout::covers`), and
+        // there is no tangent frame to bend a normal in.
         copy.emissive_texture = None;
+        copy.material.normal_map = None;
         copy.material.name = format!("{name} (no TEXCOORD_0)");
         self.warnings.push(format!(
             "material {name:?} is textured but a primitive using it has no TEXCOORD_0: the \
@@ -1246,6 +1304,7 @@ impl Builder<'_> {
     fn textured(&self, m: Option<usize>) -> bool {
         m.and_then(|i| self.materials.get(i)).is_some_and(|f| {
             f.material.maps.is_some()
+                || f.material.normal_map.is_some()
                 || f.emissive_texture.is_some()
                 || f.material
                     .cutout

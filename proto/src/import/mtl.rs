@@ -153,6 +153,7 @@ impl Library {
                 specular: e.ks.map_or([0.04; 3], unit),
                 maps: None,
                 cutout: None,
+                normal_map: None,
             },
             emission: e.ke.map_or([0.0; 3], |c| c.map(|x| x.max(0.0))),
             two_sided: false,

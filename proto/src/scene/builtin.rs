@@ -156,6 +156,7 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
                 specular: [0.04; 3],
                 maps: None,
                 cutout: None,
+                normal_map: None,
             },
             Material {
                 name: "sphere".into(),
@@ -164,6 +165,7 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
                 specular: [0.05; 3],
                 maps: None,
                 cutout: None,
+                normal_map: None,
             },
             Material {
                 name: "slab".into(),
@@ -172,6 +174,7 @@ fn plate(grid: u32, sphere_subdiv: u32) -> Scene {
                 specular: [0.04; 3],
                 maps: None,
                 cutout: None,
+                normal_map: None,
             },
         ],
         lights: vec![light],

@@ -22,7 +22,7 @@ pub use crate::light::{
     DEFAULT_SPHERE_RADIUS, LightMotion, PolygonLight, PunctualLight, Region, SUN_ANGULAR_DIAMETER,
     Spot, SunLight,
 };
-pub use crate::material::{Cutout, Material, MaterialMaps};
+pub use crate::material::{Cutout, Material, MaterialMaps, NormalMap};
 
 /// How the BSPVT builder chooses a split line.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -728,6 +728,7 @@ impl Scene {
                 specular: [0.04; 3],
                 maps: None,
                 cutout: None,
+                normal_map: None,
             });
             mesh.append(&builtin::ground_under(&bounds, ground_id), 0);
             let light = builtin::quad_light_above(&bounds, [8.0, 8.0, 8.0]);

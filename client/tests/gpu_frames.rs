@@ -242,6 +242,39 @@ fn gpu_frames_equal_cpu_frames_with_textured_materials() {
     // Mean |Δ| 0.041 of the peak measured on lavapipe (6 % of the pixels off by more than
     // PIXEL: much of the floor is dim, far from the lamp).
     assert!(d.1 > 0.01, "the transform moves the checker: {d:?}");
+    // Mipmaps: the checker repeated 24 times a side (384 texels across the floor) seen at a
+    // grazing angle, where most pixels span several texels: the GPU picks the levels and
+    // blends them as the CPU does (the footprint from the neighbouring pixels' rays).
+    let mut fine = moved.clone();
+    for m in &mut fine.materials {
+        if let Some(bspvt_proto::scene::MaterialMaps::MetallicRoughness {
+            base_color_texture: Some(t),
+            ..
+        }) = &mut m.maps
+        {
+            t.transform = Some(bspvt_proto::texture::UvTransform {
+                offset: [0.0, 0.0],
+                rotation: 0.3,
+                scale: [24.0, 24.0],
+            });
+        }
+    }
+    fine.camera = bspvt_proto::scene::Camera {
+        position: [0.0, 0.4, 1.6],
+        target: [0.0, 0.0, -0.5],
+        up: [0.0, 1.0, 0.0],
+        fov_y_deg: 45.0,
+        aspect: None,
+    };
+    // (A GPU that read the finest level only would differ by the checker's contrast there.)
+    check_scene(
+        gpu,
+        "textured-floor.gltf, fine and grazing",
+        &fine,
+        128,
+        96,
+        false,
+    );
 }
 
 #[test]

@@ -593,6 +593,7 @@ fn load_texture(t: StoredTexture) -> Result<Arc<Texture>, String> {
         height,
         rgba,
         source: Vec::new(),
+        mips: Default::default(),
     }))
 }
 

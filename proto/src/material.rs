@@ -54,7 +54,13 @@ impl NormalMap {
     /// The unit tangent-space normal at `uv`: normalize((2c − 1) ⊙ (scale, scale, 1)),
     /// bilinear texels; (0, 0, 1) — no bending — where the texel is degenerate.
     pub fn at(&self, uv: Vec2) -> Vec3 {
-        let c = self.texture.sample(uv, false);
+        self.at_footprint(uv, None)
+    }
+
+    /// [`NormalMap::at`] as a pixel with UV footprint `duv` sees it (the texels mipmapped,
+    /// [`TextureRef::sample_footprint`]).
+    pub fn at_footprint(&self, uv: Vec2, duv: Option<[Vec2; 2]>) -> Vec3 {
+        let c = self.texture.sample_footprint(uv, duv, false);
         let s = if self.scale.is_finite() {
             self.scale
         } else {
@@ -256,7 +262,13 @@ impl MaterialMaps {
 
     /// The material at `uv` (bilinear texels).
     pub fn at(&self, base: &Material, uv: Vec2) -> Material {
-        self.eval(base, |t, srgb| t.sample(uv, srgb))
+        self.at_footprint(base, uv, None)
+    }
+
+    /// The material at `uv` as a pixel with UV footprint `duv` sees it (the textures
+    /// mipmapped, [`TextureRef::sample_footprint`]; `None`: bilinear texels).
+    pub fn at_footprint(&self, base: &Material, uv: Vec2, duv: Option<[Vec2; 2]>) -> Material {
+        self.eval(base, |t, srgb| t.sample_footprint(uv, duv, srgb))
     }
 
     /// The material at each texture's mean texel: the constant the material's own fields
@@ -271,8 +283,18 @@ impl Material {
     /// The material at a surface point with texture coordinates `uv` (`None`: a mesh without
     /// UVs, the material's constant fields). Untextured materials are returned as they are.
     pub fn at(&self, uv: Option<Vec2>) -> std::borrow::Cow<'_, Material> {
+        self.at_footprint(uv, None)
+    }
+
+    /// [`Material::at`] as a pixel with UV footprint `duv` = [∂uv/∂x, ∂uv/∂y] sees it: the
+    /// textures mipmapped ([`MaterialMaps::at_footprint`]).
+    pub fn at_footprint(
+        &self,
+        uv: Option<Vec2>,
+        duv: Option<[Vec2; 2]>,
+    ) -> std::borrow::Cow<'_, Material> {
         match (&self.maps, uv) {
-            (Some(m), Some(uv)) => std::borrow::Cow::Owned(m.at(self, uv)),
+            (Some(m), Some(uv)) => std::borrow::Cow::Owned(m.at_footprint(self, uv, duv)),
             _ => std::borrow::Cow::Borrowed(self),
         }
     }

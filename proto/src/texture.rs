@@ -6,10 +6,14 @@
 //! right, v down the rows. OBJ `vt` (v up) is flipped to this convention on import.
 //!
 //! **Sampling**: bilinear between the four nearest texel centres, wrapped per axis as the
-//! glTF sampler says (repeat, the default; clamp to edge; mirrored repeat); no mipmaps (a
-//! pixel or a vertex takes the finest level). Colour textures (base colour, `map_Kd`,
-//! emissive) are sRGB-encoded and converted to linear before filtering (IEC 61966-2-1);
-//! data textures (metallic-roughness) are read as they are.
+//! glTF sampler says (repeat, the default; clamp to edge; mirrored repeat). Colour textures
+//! (base colour, `map_Kd`, emissive) are sRGB-encoded and converted to linear before filtering
+//! (IEC 61966-2-1); data textures (metallic-roughness, normal maps, alpha) are read as they
+//! are. **Mipmaps**: a pixel whose footprint on the texture spans more than a texel reads a
+//! box-filtered pyramid (each level half the one before, 2 × 2 texels averaged — in linear for
+//! colour textures, then re-encoded to 8-bit sRGB), trilinearly: the level of detail is
+//! log₂ of the footprint's longer side in texels, the OpenGL rule (isotropic) [Williams83].
+//! Vertices, cut-out tests and lamps read the finest level.
 //!
 //! **Limits**: a texture has at most [`MAX_TEXTURE_SIDE`] texels per side and
 //! [`MAX_TEXTURE_TEXELS`] texels; an asset's textures at most [`MAX_ASSET_TEXELS`] texels in
@@ -40,6 +44,132 @@ pub struct Texture {
     /// The encoded image (PNG or JPEG) it was decoded from, which is what a stored scene
     /// keeps (empty: made in memory; stored as compressed texels).
     pub source: Vec<u8>,
+    /// The mip pyramid, built on first use (derived from the texels: no part of equality).
+    pub mips: Mips,
+}
+
+/// A texture's mip levels below the finest (level 1 first), built once per encoding the
+/// texture is read with (colour textures filter in linear).
+#[derive(Clone, Default)]
+pub struct Mips {
+    data: OnceLock<Arc<Vec<Level>>>,
+    srgb: OnceLock<Arc<Vec<Level>>>,
+}
+
+impl PartialEq for Mips {
+    /// Mips are derived from the texels, which the texture compares.
+    fn eq(&self, _: &Mips) -> bool {
+        true
+    }
+}
+
+impl Eq for Mips {}
+
+/// One mip level: RGBA8 texels, row-major from the top row.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Level {
+    /// Texels per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// `width × height × 4` bytes.
+    pub rgba: Vec<u8>,
+}
+
+/// The next coarser level of RGBA8 `rgba` (`width` × `height`): each texel the mean of the
+/// 2 × 2 below it (the last row or column repeated where the size is odd), colour averaged in
+/// linear when `srgb`.
+fn half(width: u32, height: u32, rgba: &[u8], srgb: bool) -> Level {
+    let (w, h) = ((width / 2).max(1), (height / 2).max(1));
+    let mut out = Vec::with_capacity(4 * w as usize * h as usize);
+    let (sw, sh) = (width as usize, height as usize);
+    for y in 0..h as usize {
+        for x in 0..w as usize {
+            let mut sum = [0.0f32; 4];
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let (tx, ty) = ((2 * x + dx).min(sw - 1), (2 * y + dy).min(sh - 1));
+                let t = texel_of(rgba, width, tx, ty, srgb);
+                for k in 0..4 {
+                    sum[k] += 0.25 * t[k];
+                }
+            }
+            for (k, v) in sum.iter().enumerate() {
+                out.push(if srgb && k < 3 {
+                    linear_to_srgb8(*v)
+                } else {
+                    (v * 255.0).round().clamp(0.0, 255.0) as u8
+                });
+            }
+        }
+    }
+    Level {
+        width: w,
+        height: h,
+        rgba: out,
+    }
+}
+
+/// Bilinear lookup at `uv` in RGBA8 `rgba` (`width` × `height`), wrapped per axis: see the
+/// module documentation. Non-finite UVs read the texel at (0, 0).
+fn bilinear(
+    width: u32,
+    height: u32,
+    rgba: &[u8],
+    uv: Vec2,
+    wrap: [Wrap; 2],
+    srgb: bool,
+) -> [f32; 4] {
+    let (w, h) = (i64::from(width), i64::from(height));
+    if w == 0 || h == 0 {
+        return [0.0; 4];
+    }
+    let uv = if uv.is_finite() { uv } else { Vec2::ZERO };
+    let x = f64::from(uv.x) * w as f64 - 0.5;
+    let y = f64::from(uv.y) * h as f64 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+    // `as` saturates: a huge UV stays a (wrapped) valid index.
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let xs = [wrap[0].index(x0, w), wrap[0].index(x0.saturating_add(1), w)];
+    let ys = [wrap[1].index(y0, h), wrap[1].index(y0.saturating_add(1), h)];
+    let t = |i: usize, j: usize| texel_of(rgba, width, xs[i], ys[j], srgb);
+    let (a, b, c, d) = (t(0, 0), t(1, 0), t(0, 1), t(1, 1));
+    std::array::from_fn(|k| {
+        let top = a[k] + (b[k] - a[k]) * fx;
+        let bottom = c[k] + (d[k] - c[k]) * fx;
+        top + (bottom - top) * fy
+    })
+}
+
+/// The 8-bit sRGB encoding of linear `c` (IEC 61966-2-1), the nearest code.
+fn linear_to_srgb8(c: f32) -> u8 {
+    let c = if c.is_finite() {
+        c.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let e = if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    };
+    (e * 255.0).round().clamp(0.0, 255.0) as u8
+}
+
+/// Texel (x, y) of RGBA8 `rgba` `width` texels wide.
+fn texel_of(rgba: &[u8], width: u32, x: usize, y: usize, srgb: bool) -> [f32; 4] {
+    let i = 4 * (y * width as usize + x);
+    let Some(t) = rgba.get(i..i + 4) else {
+        return [0.0; 4];
+    };
+    let lin = |b: u8| {
+        if srgb {
+            srgb_table()[b as usize]
+        } else {
+            f32::from(b) / 255.0
+        }
+    };
+    [lin(t[0]), lin(t[1]), lin(t[2]), f32::from(t[3]) / 255.0]
 }
 
 impl std::fmt::Debug for Texture {
@@ -100,6 +230,28 @@ impl TextureRef {
     /// [`Texture::sample`] at the mesh's `uv`, through the transform.
     pub fn sample(&self, uv: Vec2, srgb: bool) -> [f32; 4] {
         self.texture.sample(self.uv(uv), self.wrap, srgb)
+    }
+
+    /// The level of detail of a pixel whose mesh UV changes by `duv` = [∂uv/∂x, ∂uv/∂y] per
+    /// pixel: log₂ of the longer of the two in this texture's texels (through the transform's
+    /// linear part), 0 where it is under a texel [Williams83].
+    pub fn lod(&self, duv: [Vec2; 2]) -> f32 {
+        let [a, b, c, d, _, _] = self.transform.unwrap_or(UvTransform::IDENTITY).matrix();
+        let size = Vec2::new(self.texture.width as f32, self.texture.height as f32);
+        let texels = |v: Vec2| (Vec2::new(a * v.x + b * v.y, c * v.x + d * v.y) * size).length();
+        let rho = texels(duv[0]).max(texels(duv[1]));
+        if rho > 1.0 { rho.log2() } else { 0.0 }
+    }
+
+    /// The texture at the mesh's `uv` as a pixel with UV footprint `duv` sees it
+    /// ([`TextureRef::lod`], trilinear); `None`: a point (the finest level, bilinear).
+    pub fn sample_footprint(&self, uv: Vec2, duv: Option<[Vec2; 2]>, srgb: bool) -> [f32; 4] {
+        match duv {
+            None => self.sample(uv, srgb),
+            Some(d) => self
+                .texture
+                .sample_lod(self.uv(uv), self.wrap, srgb, self.lod(d)),
+        }
     }
 }
 
@@ -164,43 +316,72 @@ fn srgb_table() -> &'static [f32; 256] {
 impl Texture {
     /// The texel at (x, y) in [0, 1]: RGB through the sRGB curve when `srgb`, alpha linear.
     fn texel(&self, x: usize, y: usize, srgb: bool) -> [f32; 4] {
-        let i = 4 * (y * self.width as usize + x);
-        let Some(t) = self.rgba.get(i..i + 4) else {
-            return [0.0; 4];
-        };
-        let lin = |b: u8| {
-            if srgb {
-                srgb_table()[b as usize]
-            } else {
-                f32::from(b) / 255.0
-            }
-        };
-        [lin(t[0]), lin(t[1]), lin(t[2]), f32::from(t[3]) / 255.0]
+        texel_of(&self.rgba, self.width, x, y, srgb)
+    }
+
+    /// A texture made in memory from RGBA8 texels (`rgba`: `width × height × 4` bytes).
+    pub fn from_rgba8(name: &str, width: u32, height: u32, rgba: Vec<u8>) -> Texture {
+        Texture {
+            name: name.to_string(),
+            width,
+            height,
+            rgba,
+            source: Vec::new(),
+            mips: Mips::default(),
+        }
     }
 
     /// Bilinear lookup at `uv` (see the module documentation); `srgb`: a colour texture,
     /// linearised before filtering. Non-finite UVs read the texel at (0, 0).
     pub fn sample(&self, uv: Vec2, wrap: [Wrap; 2], srgb: bool) -> [f32; 4] {
-        let (w, h) = (i64::from(self.width), i64::from(self.height));
-        if w == 0 || h == 0 {
-            return [0.0; 4];
-        }
-        let uv = if uv.is_finite() { uv } else { Vec2::ZERO };
-        let x = f64::from(uv.x) * w as f64 - 0.5;
-        let y = f64::from(uv.y) * h as f64 - 0.5;
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
-        // `as` saturates: a huge UV stays a (wrapped) valid index.
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let xs = [wrap[0].index(x0, w), wrap[0].index(x0.saturating_add(1), w)];
-        let ys = [wrap[1].index(y0, h), wrap[1].index(y0.saturating_add(1), h)];
-        let t = |i: usize, j: usize| self.texel(xs[i], ys[j], srgb);
-        let (a, b, c, d) = (t(0, 0), t(1, 0), t(0, 1), t(1, 1));
-        std::array::from_fn(|k| {
-            let top = a[k] + (b[k] - a[k]) * fx;
-            let bottom = c[k] + (d[k] - c[k]) * fx;
-            top + (bottom - top) * fy
+        bilinear(self.width, self.height, &self.rgba, uv, wrap, srgb)
+    }
+
+    /// The levels below the finest (level 1 first, down to 1 × 1), built on first use.
+    pub fn mip_levels(&self, srgb: bool) -> &[Level] {
+        let cell = if srgb {
+            &self.mips.srgb
+        } else {
+            &self.mips.data
+        };
+        cell.get_or_init(|| {
+            let mut levels: Vec<Level> = Vec::new();
+            let (mut w, mut h) = (self.width, self.height);
+            while w > 0 && h > 0 && (w > 1 || h > 1) {
+                let next = match levels.last() {
+                    Some(l) => half(l.width, l.height, &l.rgba, srgb),
+                    None => half(w, h, &self.rgba, srgb),
+                };
+                (w, h) = (next.width, next.height);
+                levels.push(next);
+            }
+            Arc::new(levels)
         })
+    }
+
+    /// Trilinear lookup at level of detail `lod` (0: the finest level, bilinear; k: level k;
+    /// between: the two levels blended), clamped to the pyramid.
+    pub fn sample_lod(&self, uv: Vec2, wrap: [Wrap; 2], srgb: bool, lod: f32) -> [f32; 4] {
+        if !(lod > 0.0) {
+            return self.sample(uv, wrap, srgb);
+        }
+        let levels = self.mip_levels(srgb);
+        let top = levels.len() as f32;
+        let lod = lod.min(top);
+        let k = lod.floor() as usize;
+        let f = lod - k as f32;
+        let at = |k: usize| match k {
+            0 => self.sample(uv, wrap, srgb),
+            k => levels.get(k - 1).map_or([0.0; 4], |l| {
+                bilinear(l.width, l.height, &l.rgba, uv, wrap, srgb)
+            }),
+        };
+        let a = at(k);
+        if f <= 0.0 || k >= levels.len() {
+            return a;
+        }
+        let b = at(k + 1);
+        std::array::from_fn(|c| a[c] + (b[c] - a[c]) * f)
     }
 
     /// The mean texel (RGB linearised when `srgb`).
@@ -268,6 +449,7 @@ impl Texture {
             height: rgba.height(),
             rgba: rgba.into_raw(),
             source: bytes.to_vec(),
+            mips: Default::default(),
         })
     }
 }
@@ -400,6 +582,7 @@ mod tests {
                 0, 0, 255, 255, 255, 255, 255, 255,
             ],
             source: Vec::new(),
+            mips: Default::default(),
         }
     }
 
@@ -443,9 +626,80 @@ mod tests {
             height: 1,
             rgba: vec![188, 188, 188, 255],
             source: Vec::new(),
+            mips: Default::default(),
         };
         // sRGB 188/255 ≈ 0.5029 linear; the data path reads 188/255 ≈ 0.737.
         assert!((t.sample(Vec2::ZERO, [Wrap::Repeat; 2], true)[0] - 0.5029).abs() < 1e-3);
         assert!((t.sample(Vec2::ZERO, [Wrap::Repeat; 2], false)[0] - 0.7373).abs() < 1e-3);
+    }
+
+    #[test]
+    fn mip_levels_halve_down_to_one_texel_averaging_in_linear() {
+        let t = checker();
+        let srgb = t.mip_levels(true);
+        assert_eq!(srgb.len(), 1);
+        assert_eq!((srgb[0].width, srgb[0].height), (1, 1));
+        // Red, green, blue, white averaged in linear: (0.5, 0.5, 0.5) → sRGB 188.
+        assert_eq!(&srgb[0].rgba[..3], &[188, 188, 188]);
+        // As data, the bytes' mean.
+        assert_eq!(&t.mip_levels(false)[0].rgba[..3], &[128, 128, 128]);
+        // A 5 × 3 image: 2 × 1, then 1 × 1.
+        let odd = Texture::from_rgba8("odd", 5, 3, vec![200; 5 * 3 * 4]);
+        let l = odd.mip_levels(false);
+        assert_eq!(
+            l.iter().map(|l| (l.width, l.height)).collect::<Vec<_>>(),
+            vec![(2, 1), (1, 1)]
+        );
+        assert!(l.iter().all(|l| l.rgba.iter().all(|&b| b == 200)));
+    }
+
+    #[test]
+    fn the_footprint_picks_the_level_trilinearly() {
+        let t = Arc::new(checker());
+        let r = TextureRef {
+            texture: t.clone(),
+            wrap: [Wrap::Repeat; 2],
+            transform: None,
+        };
+        let uv = Vec2::new(0.25, 0.25);
+        // Under a texel: the finest level (red).
+        let small = [Vec2::new(0.1, 0.0), Vec2::new(0.0, 0.1)];
+        assert_eq!(r.lod(small), 0.0);
+        assert_eq!(
+            r.sample_footprint(uv, Some(small), true),
+            [1.0, 0.0, 0.0, 1.0]
+        );
+        // Two texels (the whole 2 × 2 image): level 1, the mean.
+        let whole = [Vec2::new(1.0, 0.0), Vec2::new(0.0, 0.5)];
+        assert!((r.lod(whole) - 1.0).abs() < 1e-6);
+        let m = r.sample_footprint(uv, Some(whole), true);
+        assert!(
+            (m[0] - 0.5029).abs() < 2e-3 && (m[1] - 0.5029).abs() < 2e-3,
+            "{m:?}"
+        );
+        // Half-way (√2 texels): half red, half the mean.
+        let mid = [Vec2::new(std::f32::consts::SQRT_2 / 2.0, 0.0), Vec2::ZERO];
+        let c = r.sample_footprint(uv, Some(mid), true);
+        assert!((c[0] - 0.5 * (1.0 + 0.5029)).abs() < 2e-3, "{c:?}");
+        // A transform that scales the UVs 4× makes the same footprint 4× longer in texels.
+        let scaled = TextureRef {
+            transform: Some(UvTransform {
+                offset: [0.0, 0.0],
+                rotation: 0.0,
+                scale: [4.0, 4.0],
+            }),
+            ..r.clone()
+        };
+        assert_eq!(scaled.lod(small), 0.0, "0.8 texels: the finest level");
+        assert!((scaled.lod(whole) - 3.0).abs() < 1e-6);
+        // Beyond the coarsest level, and non-finite footprints: finite, the coarsest.
+        for d in [
+            [Vec2::new(1e30, 0.0), Vec2::ZERO],
+            [Vec2::new(f32::INFINITY, 0.0), Vec2::ZERO],
+            [Vec2::NAN, Vec2::NAN],
+        ] {
+            let c = r.sample_footprint(uv, Some(d), true);
+            assert!(c.iter().all(|x| x.is_finite()), "{d:?}: {c:?}");
+        }
     }
 }

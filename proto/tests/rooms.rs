@@ -324,12 +324,25 @@ fn normal_map_is_read_and_stored() {
     assert!(floor.maps.is_none(), "the floor has no other texture");
     let n = floor.normal_map.as_ref().expect("a normal map");
     assert_eq!(n.scale, 1.0);
-    assert_eq!((n.texture.texture.width, n.texture.texture.height), (64, 64));
-    assert_eq!(s.mesh.uvs.len(), s.mesh.positions.len(), "UVs kept for the map");
+    assert_eq!(
+        (n.texture.texture.width, n.texture.texture.height),
+        (64, 64)
+    );
+    assert_eq!(
+        s.mesh.uvs.len(),
+        s.mesh.positions.len(),
+        "UVs kept for the map"
+    );
     // The ridges: at u = 0 the texel leans toward −u (the height rises along u there).
     let t = n.at(glam::Vec2::new(0.0, 0.25));
     assert!(t.x < -0.3 && t.z > 0.8, "{t}");
-    assert_eq!(s.materials.iter().filter(|m| m.normal_map.is_some()).count(), 1);
+    assert_eq!(
+        s.materials
+            .iter()
+            .filter(|m| m.normal_map.is_some())
+            .count(),
+        1
+    );
     let back = bspvt_proto::api::decode_scene(&bspvt_proto::api::encode_scene(&s)).expect("decode");
     assert_eq!(back.materials, s.materials);
     assert_eq!(back.mesh.uvs, s.mesh.uvs);

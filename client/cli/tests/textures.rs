@@ -903,7 +903,10 @@ fn unsupported_texture_features_are_warned() {
     }
     assert!(!has("KHR_texture_transform"), "{:?}", a.warnings);
     assert!(!has("normal"), "{:?}", a.warnings);
-    let n = a.materials[0].normal_map.as_ref().expect("the normal map is read");
+    let n = a.materials[0]
+        .normal_map
+        .as_ref()
+        .expect("the normal map is read");
     assert_eq!(n.scale, 0.5);
     assert_eq!(
         n.texture.transform,
@@ -1231,4 +1234,113 @@ fn an_asset_with_punctual_lights_only_gets_no_ground_and_no_default_lamp() {
             "{method:?}: mean {m} vs the point light's {hard}"
         );
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Mipmaps.
+
+/// A finely patterned floor seen at a grazing angle (a one-texel black-and-white checker of
+/// 64² texels repeated 4 times a side through KHR_texture_transform: 256 cells across the
+/// floor, many per pixel far away): per pixel, the mipmapped texture (trilinear, the level of
+/// the pixel's footprint) agrees with the Monte Carlo whose camera rays are spread over each
+/// pixel (a box filter over the finest texels, `render_mc_box`) — what the pixel really
+/// averages. Point sampling the finest level instead aliases: far pixels read one cell,
+/// black or white.
+#[test]
+fn mipmapped_texture_matches_the_box_filtered_reference() {
+    let mats = json!([
+        {"name": "floor", "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0],
+            "metallicFactor": 0.0, "roughnessFactor": 0.9, "baseColorTexture": {"index": 0,
+            "extensions": {"KHR_texture_transform": {"scale": [4, 4]}}}}},
+        lamp_material(None)
+    ]);
+    let fine = png(64, 64, |x, y| {
+        if (x + y) % 2 == 0 {
+            [255, 255, 255, 255]
+        } else {
+            [0, 0, 0, 255]
+        }
+    });
+    let bytes = gltf(
+        &[floor(0), lamp(1, false)],
+        mats,
+        &[fine],
+        json!({"wrapS": 10497, "wrapT": 10497}),
+        |d| {
+            with_emissive_strength(d);
+            d["extensionsUsed"] =
+                json!(["KHR_materials_emissive_strength", "KHR_texture_transform"]);
+        },
+    );
+    let mut scene = Scene::from_asset(asset(&bytes)).expect("scene");
+    scene.camera = Camera {
+        position: [0.0, 0.35, 1.5],
+        target: [0.0, 0.0, -0.6],
+        up: [0.0, 1.0, 0.0],
+        fov_y_deg: 40.0,
+        aspect: None,
+    };
+    let (w, h) = (96, 64);
+    let r = Renderer::new(&scene, w, h);
+    let light = Light::load(&scene.lights[0]).expect("light");
+    let (ltc, _) = r.ltc(std::slice::from_ref(&light), Mode::Pixel);
+    let tracer = bspvt_client::groundtruth::Tracer::of_scene(&scene);
+    let occ = bspvt_raytrace::Occluder::of_surfaces(&scene.mesh, &scene.materials);
+    let (mc, _) = bspvt_client::groundtruth::render_mc_box(
+        &scene,
+        &r.view,
+        &tracer,
+        std::slice::from_ref(&light),
+        &occ,
+        256,
+        3,
+    );
+    // Pixels wholly on the floor (the box reference's edge pixels are partly empty).
+    let lum = |p: &[f32; 3]| f64::from(p[0] + p[1] + p[2]) / 3.0;
+    let inner: Vec<usize> = (0..(w * h) as usize)
+        .filter(|&i| {
+            let (x, y) = (i % w as usize, i / w as usize);
+            x > 0
+                && y > 0
+                && x + 1 < w as usize
+                && y + 1 < h as usize
+                && [i - 1, i + 1, i - w as usize, i + w as usize, i]
+                    .iter()
+                    .all(|&j| r.gbuffer.tri[j] != bspvt_client::frame::gbuffer::NONE)
+        })
+        .collect();
+    assert!(inner.len() > 2000, "{} floor pixels", inner.len());
+    let mean = inner.iter().map(|&i| lum(&mc.pixels[i])).sum::<f64>() / inner.len() as f64;
+    let err = inner
+        .iter()
+        .map(|&i| (lum(&ltc.pixels[i]) - lum(&mc.pixels[i])).abs())
+        .sum::<f64>()
+        / inner.len() as f64
+        / mean;
+    // The far third of the floor's rows: where cells are smallest against pixels.
+    let rows = |i: &usize| i / w as usize;
+    let (top, bottom) = (
+        inner.iter().map(rows).min().unwrap_or(0),
+        inner.iter().map(rows).max().unwrap_or(0),
+    );
+    let far: Vec<usize> = inner
+        .iter()
+        .copied()
+        .filter(|i| rows(i) < top + (bottom - top) / 3)
+        .collect();
+    let far_err = far
+        .iter()
+        .map(|&i| (lum(&ltc.pixels[i]) - lum(&mc.pixels[i])).abs())
+        .sum::<f64>()
+        / far.iter().map(|&i| lum(&mc.pixels[i])).sum::<f64>();
+    println!(
+        "mipmaps: {} floor pixels, per-pixel LTC vs box-filtered MC (256 spp): mean |Δ| {:.2} % \
+         of the mean; the far third ({} px) {:.2} %",
+        inner.len(),
+        100.0 * err,
+        far.len(),
+        100.0 * far_err
+    );
+    assert!(err < 0.08, "mipmapped vs box-filtered: {err}");
+    assert!(far_err < 0.08, "far third: {far_err}");
 }

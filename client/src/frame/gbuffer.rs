@@ -8,7 +8,7 @@
 
 use bspvt_proto::Mesh;
 use bspvt_raytrace::Cutouts;
-use glam::{DVec2, DVec3};
+use glam::{DVec2, DVec3, Vec2};
 use rayon::prelude::*;
 
 use super::camera::View;
@@ -51,6 +51,9 @@ pub(crate) struct Surface {
     pub(crate) normal: DVec3,
     /// Unit geometric normal, facing the viewer.
     pub(crate) geometric: DVec3,
+    /// The UV's change to the next pixel right and down, [∂uv/∂x, ∂uv/∂y] (the texture
+    /// footprint that picks a mip level), where the mesh has UVs and the point is a pixel's.
+    pub(crate) duv: Option<[Vec2; 2]>,
 }
 
 impl GBuffer {
@@ -197,12 +200,21 @@ impl GBuffer {
         if geometric.dot(to_eye) < 0.0 {
             geometric = -geometric;
         }
+        let w = self.width as usize;
+        let duv = uv_footprint(
+            mesh,
+            view,
+            t,
+            p,
+            ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5),
+        );
         let normal = shading_normal(
             mesh,
             t,
             weights,
             geometric,
             to_eye.normalize_or(geometric),
+            duv,
             self.normal_maps.as_deref(),
         );
         Some(Surface {
@@ -211,6 +223,7 @@ impl GBuffer {
             position,
             normal,
             geometric,
+            duv,
         })
     }
 
@@ -314,6 +327,50 @@ fn ray_plane_barycentrics(o: DVec3, d: DVec3, p: [DVec3; 3]) -> (f64, f64) {
     if s > 1.0 { (u / s, v / s) } else { (u, v) }
 }
 
+/// The texture footprint of the pixel at image point `(x, y)` on triangle `t` (corners `p`):
+/// the UV where the rays through the next pixel right and down meet the triangle's plane (its
+/// barycentrics unclamped: a plane, not a triangle, is what the footprint lies on), less the
+/// UV here — a ray differential [Igehy99] by finite differences. `None` without UVs or where a
+/// ray runs along the plane.
+pub(crate) fn uv_footprint(
+    mesh: &Mesh,
+    view: &View,
+    t: u32,
+    p: [DVec3; 3],
+    (x, y): (f64, f64),
+) -> Option<[Vec2; 2]> {
+    let idx = mesh.triangles.get(t as usize)?;
+    let uv = idx.map(|v| mesh.uvs.get(v as usize).map(|u| u.as_dvec2()));
+    let [Some(u0), Some(u1), Some(u2)] = uv else {
+        return None;
+    };
+    let at = |x: f64, y: f64| -> Option<DVec2> {
+        let (b1, b2) = plane_barycentrics(view.eye, view.ray_dir(x, y), p)?;
+        Some((1.0 - b1 - b2) * u0 + b1 * u1 + b2 * u2)
+    };
+    let here = at(x, y)?;
+    let dx = at(x + 1.0, y)? - here;
+    let dy = at(x, y + 1.0)? - here;
+    (dx.is_finite() && dy.is_finite()).then(|| [dx.as_vec2(), dy.as_vec2()])
+}
+
+/// Barycentrics (b1, b2) where the ray `o + t d` meets the plane of `p` (unclamped), if it
+/// meets it in front.
+fn plane_barycentrics(o: DVec3, d: DVec3, p: [DVec3; 3]) -> Option<(f64, f64)> {
+    let e1 = p[1] - p[0];
+    let e2 = p[2] - p[0];
+    let pv = d.cross(e2);
+    let det = e1.dot(pv);
+    if !(det.abs() > 1e-300) {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let tv = o - p[0];
+    let qv = tv.cross(e1);
+    let t = e2.dot(qv) * inv;
+    (t > 0.0).then(|| (tv.dot(pv) * inv, d.dot(qv) * inv))
+}
+
 /// The shading normal at the point of triangle `t` with barycentric `weights`, seen along
 /// unit `wo` (toward the eye): the interpolated vertex normal (the geometric one where that is
 /// degenerate), bent by the material's normal map, on the side of `geometric` (the viewer's).
@@ -325,6 +382,7 @@ pub(crate) fn shading_normal(
     weights: [f64; 3],
     geometric: DVec3,
     wo: DVec3,
+    duv: Option<[Vec2; 2]>,
     maps: Option<&NormalMaps>,
 ) -> DVec3 {
     let Some(idx) = mesh.triangles.get(t as usize) else {
@@ -343,7 +401,7 @@ pub(crate) fn shading_normal(
     match maps {
         None => side(interpolated),
         Some(m) => NormalMaps::facing(
-            side(m.bend(mesh, t, weights, interpolated)),
+            side(m.bend(mesh, t, weights, interpolated, duv)),
             side(interpolated),
             wo,
         ),

@@ -51,7 +51,15 @@ impl NormalMaps {
     /// The shading normal at the point of triangle `tri` with barycentric `weights`, whose
     /// interpolated unit normal is `n`: the triangle's material's map read at the point's UV
     /// in the interpolated tangent frame; `n` itself where there is no map.
-    pub(crate) fn bend(&self, mesh: &Mesh, tri: u32, weights: [f64; 3], n: DVec3) -> DVec3 {
+    /// `duv`: the pixel's texture footprint (the map mipmapped), `None` for a point.
+    pub(crate) fn bend(
+        &self,
+        mesh: &Mesh,
+        tri: u32,
+        weights: [f64; 3],
+        n: DVec3,
+        duv: Option<[glam::Vec2; 2]>,
+    ) -> DVec3 {
         let id = mesh.material_ids.get(tri as usize).copied().unwrap_or(0);
         let (Some(map), Some(idx), Some(uv)) = (
             self.map(id),
@@ -67,7 +75,12 @@ impl NormalMaps {
             t += weights[k] * tv.truncate().as_dvec3();
             sign += weights[k] * f64::from(tv.w);
         }
-        bend(n, t, if sign < 0.0 { -1.0 } else { 1.0 }, map.at(uv))
+        bend(
+            n,
+            t,
+            if sign < 0.0 { -1.0 } else { 1.0 },
+            map.at_footprint(uv, duv),
+        )
     }
 
     /// `bent`, the bent normal of a surface whose unbent normal `n` faces the viewer along
@@ -203,6 +216,7 @@ mod tests {
             height: 1,
             rgba: vec![rgb[0], rgb[1], rgb[2], 255],
             source: Vec::new(),
+            mips: Default::default(),
         });
         Material {
             normal_map: Some(NormalMap {
@@ -241,9 +255,9 @@ mod tests {
         let up =
             NormalMaps::of(&mesh, &[mapped([enc(0.0), enc(0.6), enc(0.8)], 1.0)]).expect("mapped");
         let w = [1.0 / 3.0; 3];
-        let n = right.bend(&mesh, 0, w, DVec3::Y);
+        let n = right.bend(&mesh, 0, w, DVec3::Y, None);
         assert!(n.x > 0.55 && n.y > 0.75 && n.z.abs() < 0.02, "{n}");
-        let n = up.bend(&mesh, 1, w, DVec3::Y);
+        let n = up.bend(&mesh, 1, w, DVec3::Y, None);
         assert!(n.z < -0.55 && n.y > 0.75 && n.x.abs() < 0.02, "{n}");
         // The vertex path reads the same frame.
         let nv = up.bend_vertex(&mesh, 2, 0, DVec3::Y);
@@ -254,10 +268,10 @@ mod tests {
     fn flat_texels_and_zero_scale_leave_the_normal() {
         let mesh = quad();
         let flat = NormalMaps::of(&mesh, &[mapped([128, 128, 255], 1.0)]).expect("mapped");
-        let n = flat.bend(&mesh, 0, [0.2, 0.3, 0.5], DVec3::Y);
+        let n = flat.bend(&mesh, 0, [0.2, 0.3, 0.5], DVec3::Y, None);
         assert!((n - DVec3::Y).length() < 0.01, "{n}");
         let tilted = NormalMaps::of(&mesh, &[mapped([255, 128, 128], 0.0)]).expect("mapped");
-        let n = tilted.bend(&mesh, 0, [0.2, 0.3, 0.5], DVec3::Y);
+        let n = tilted.bend(&mesh, 0, [0.2, 0.3, 0.5], DVec3::Y, None);
         assert!((n - DVec3::Y).length() < 0.01, "scale 0 bends nothing: {n}");
     }
 
@@ -285,7 +299,7 @@ mod tests {
         let t = mikktspace(&mesh);
         assert!(t.iter().all(|v| v.is_finite()), "{t:?}");
         let nm = NormalMaps::of(&mesh, &[mapped([255, 0, 128], 2.0)]).expect("mapped");
-        let b = nm.bend(&mesh, 0, [0.5, 0.25, 0.25], DVec3::Y);
+        let b = nm.bend(&mesh, 0, [0.5, 0.25, 0.25], DVec3::Y, None);
         assert!(b.is_finite(), "{b}");
     }
 

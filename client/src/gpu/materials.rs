@@ -19,14 +19,16 @@ fn wrap_bits(w: [Wrap; 2]) -> u32 {
     one(w[0]) | one(w[1]) << 4
 }
 
-/// A texture use: the image, its wrap modes and its UV transform.
-type TextureKey = (usize, u32, Option<[u32; 6]>);
+/// A texture use: the image, its wrap modes, its UV transform and whether it is a colour
+/// texture (its mip levels are filtered in linear).
+type TextureKey = (usize, u32, Option<[u32; 6]>, bool);
 
 /// The index + 1 of texture use `t` (the image and its wrap modes), added on first use; 0 for
 /// none.
 fn use_of<'m>(
     t: Option<&'m TextureRef>,
-    uses: &mut Vec<&'m TextureRef>,
+    srgb: bool,
+    uses: &mut Vec<(&'m TextureRef, bool)>,
     index: &mut HashMap<TextureKey, u32>,
 ) -> u32 {
     let Some(t) = t else { return 0 };
@@ -34,9 +36,10 @@ fn use_of<'m>(
         std::sync::Arc::as_ptr(&t.texture) as usize,
         wrap_bits(t.wrap),
         t.transform.map(|x| x.matrix().map(f32::to_bits)),
+        srgb,
     );
     *index.entry(key).or_insert_with(|| {
-        uses.push(t);
+        uses.push((t, srgb));
         uses.len() as u32
     })
 }
@@ -57,14 +60,16 @@ pub(crate) const RECORDS: usize = 5;
 /// texture + 1, metallic-roughness texture + 1), for `map_Kd` (Kd, 0), (0, 0, texture + 1, 0);
 /// last (normal map texture + 1, its scale, 0, 0); texture indices as u32 bits, 0 for none. Texture words: a header of [`HEADER`] words per
 /// texture use — width, height, offset, wrap u | wrap v << 4, then the UV transform
-/// (`UvTransform::matrix`: a, b, c, d, tx, ty as f32 bits; the identity's when none) and two
-/// unused —, then the texels (R | G << 8 | B << 16 | A << 24).
+/// (`UvTransform::matrix`: a, b, c, d, tx, ty as f32 bits; the identity's when none), the
+/// number n of mip levels below the finest, one unused —, then the texels (R | G << 8 |
+/// B << 16 | A << 24) of the finest level and of the n levels below it (`Texture::mip_levels`
+/// for the use's encoding: colour textures filter in linear), each half the one before.
 /// `uvs`: whether the mesh has texture coordinates (without, every material is its constant
 /// fields, as on the CPU); `texels`: whether to build the texture words (the records alone
 /// when only the materials' constants changed: the texture indices do not depend on them).
 pub(crate) fn tables(materials: &[Material], uvs: bool, texels: bool) -> (Vec<[f32; 4]>, Vec<u32>) {
     let bits = |x: u32| f32::from_bits(x);
-    let mut uses: Vec<&TextureRef> = Vec::new();
+    let mut uses: Vec<(&TextureRef, bool)> = Vec::new();
     let mut index: HashMap<TextureKey, u32> = HashMap::new();
     let mut records = Vec::with_capacity(RECORDS * materials.len().max(1));
     for m in materials {
@@ -87,14 +92,19 @@ pub(crate) fn tables(materials: &[Material], uvs: bool, texels: bool) -> (Vec<[f
             ) => {
                 records.extend(c(METALLIC_ROUGHNESS));
                 records.push([base_color[0], base_color[1], base_color[2], 0.0]);
-                let bc = use_of(base_color_texture.as_ref(), &mut uses, &mut index);
-                let mr = use_of(metallic_roughness_texture.as_ref(), &mut uses, &mut index);
+                let bc = use_of(base_color_texture.as_ref(), true, &mut uses, &mut index);
+                let mr = use_of(
+                    metallic_roughness_texture.as_ref(),
+                    false,
+                    &mut uses,
+                    &mut index,
+                );
                 records.push([*metallic, *roughness, bits(bc), bits(mr)]);
             }
             (Some(MaterialMaps::Diffuse { kd, texture }), true) => {
                 records.extend(c(DIFFUSE_MAP));
                 records.push([kd[0], kd[1], kd[2], 0.0]);
-                let t = use_of(Some(texture), &mut uses, &mut index);
+                let t = use_of(Some(texture), true, &mut uses, &mut index);
                 records.push([0.0, 0.0, bits(t), 0.0]);
             }
             _ => {
@@ -104,7 +114,7 @@ pub(crate) fn tables(materials: &[Material], uvs: bool, texels: bool) -> (Vec<[f
         }
         match (&m.normal_map, uvs) {
             (Some(n), true) => {
-                let t = use_of(Some(&n.texture), &mut uses, &mut index);
+                let t = use_of(Some(&n.texture), false, &mut uses, &mut index);
                 records.push([bits(t), n.scale, 0.0, 0.0]);
             }
             _ => records.push([0.0; 4]),
@@ -114,8 +124,9 @@ pub(crate) fn tables(materials: &[Material], uvs: bool, texels: bool) -> (Vec<[f
         records.extend([[0.0; 4]; RECORDS]);
     }
     let mut words = vec![0u32; HEADER * uses.len()];
-    for (k, t) in uses.iter().enumerate().filter(|_| texels) {
+    for (k, &(t, srgb)) in uses.iter().enumerate().filter(|_| texels) {
         let tex = &t.texture;
+        let levels = tex.mip_levels(srgb);
         let offset = words.len() as u32;
         let m = t
             .transform
@@ -133,14 +144,18 @@ pub(crate) fn tables(materials: &[Material], uvs: bool, texels: bool) -> (Vec<[f
             m[3],
             m[4],
             m[5],
-            0,
+            levels.len() as u32,
             0,
         ]);
-        words.extend(
-            tex.rgba
-                .chunks_exact(4)
-                .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])),
-        );
+        let texels = |rgba: &[u8]| {
+            rgba.chunks_exact(4)
+                .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect::<Vec<_>>()
+        };
+        words.extend(texels(&tex.rgba));
+        for l in levels {
+            words.extend(texels(&l.rgba));
+        }
     }
     if words.is_empty() {
         words.extend([0; 4]);

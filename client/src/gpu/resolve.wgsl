@@ -132,6 +132,25 @@ fn weights(d: vec3f, p0: vec3f, p1: vec3f, p2: vec3f) -> vec3f {
     return vec3f(1.0 - u - v, u, v);
 }
 
+// gbuffer::plane_barycentrics: the weights (xyz) where the ray meets the plane of
+// (p0, p1, p2), unclamped; w: 1 where it meets it in front, 0 where it does not.
+fn plane_weights(d: vec3f, p0: vec3f, p1: vec3f, p2: vec3f) -> vec4f {
+    let e1 = p1 - p0;
+    let e2 = p2 - p0;
+    let pv = cross(d, e2);
+    let det = dot(e1, pv);
+    if !(abs(det) > 0.0) || !finite(det) {
+        return vec4f(0.0);
+    }
+    let inv = 1.0 / det;
+    let tv = fp.eye.xyz - p0;
+    let qv = cross(tv, e1);
+    let u = dot(tv, pv) * inv;
+    let v = dot(d, qv) * inv;
+    let front = dot(e2, qv) * inv > 0.0 && finite(u) && finite(v);
+    return vec4f(1.0 - u - v, u, v, select(0.0, 1.0, front));
+}
+
 // IEC 61966-2-1 sRGB → linear (texture::srgb_table).
 fn srgb_linear(c: f32) -> f32 {
     if c <= 0.04045 {
@@ -140,8 +159,9 @@ fn srgb_linear(c: f32) -> f32 {
     return pow((c + 0.055) / 1.055, 2.4);
 }
 
-fn surface_texel(h: vec4u, x: u32, y: u32, srgb: bool) -> vec4f {
-    let w = surface_tex[h.z + y * h.x + x];
+// Texel (x, y) of the level at word `offset`, `width` texels wide.
+fn surface_texel(offset: u32, width: u32, x: u32, y: u32, srgb: bool) -> vec4f {
+    let w = surface_tex[offset + y * width + x];
     let c = vec4f(f32(w & 255u), f32((w >> 8u) & 255u), f32((w >> 16u) & 255u),
         f32(w >> 24u)) / 255.0;
     if srgb {
@@ -162,10 +182,29 @@ fn wrap_index(mode: u32, i: i32, n: i32) -> u32 {
     return u32(((i % n) + n) % n);
 }
 
-// Texture::sample: bilinear between the four nearest texel centres, wrapped per axis; colour
-// textures linearised before filtering. The UV is first brought into one period of its wrap
-// mode (exact in f32), so a large UV keeps the texel's fraction.
-fn surface_sample(t: u32, uv_mesh: vec2f, srgb: bool) -> vec4f {
+// texture::bilinear on one level (size `n`, texels at word `offset`): between the four
+// nearest texel centres, wrapped per axis; `uv` already in one period of its wrap modes.
+fn level_bilinear(offset: u32, n: vec2u, modes: vec2u, uv: vec2f, srgb: bool) -> vec4f {
+    let tap = bilinear_taps(uv, n.x, n.y);
+    let ni = vec2i(i32(n.x), i32(n.y));
+    let xs = vec2u(wrap_index(modes.x, tap.x0, ni.x), wrap_index(modes.x, tap.x0 + 1, ni.x));
+    let ys = vec2u(wrap_index(modes.y, tap.y0, ni.y), wrap_index(modes.y, tap.y0 + 1, ni.y));
+    let a = surface_texel(offset, n.x, xs.x, ys.x, srgb);
+    let b = surface_texel(offset, n.x, xs.y, ys.x, srgb);
+    let c = surface_texel(offset, n.x, xs.x, ys.y, srgb);
+    let d = surface_texel(offset, n.x, xs.y, ys.y, srgb);
+    let top = a + (b - a) * tap.f.x;
+    let bottom = c + (d - c) * tap.f.x;
+    return top + (bottom - top) * tap.f.y;
+}
+
+// TextureRef::sample_footprint: the texture use t at the mesh's `uv_mesh`, as a pixel whose
+// UV changes by duv (columns: to the next pixel right, down) per pixel sees it — trilinear
+// between the mip levels around log2 of the footprint's longer side in texels (lod 0: the
+// finest level, bilinear). Colour textures are linearised before filtering. The UV is first
+// brought into one period of its wrap mode (exact in f32), so a large UV keeps the texel's
+// fraction.
+fn surface_sample(t: u32, uv_mesh: vec2f, srgb: bool, duv: mat2x2f) -> vec4f {
     let hb = 12u * t;
     let h = vec4u(surface_tex[hb], surface_tex[hb + 1u], surface_tex[hb + 2u], surface_tex[hb + 3u]);
     if h.x == 0u || h.y == 0u {
@@ -188,17 +227,33 @@ fn surface_sample(t: u32, uv_mesh: vec2f, srgb: bool) -> vec4f {
             uv[k] = clamp(uv[k], -1.0, 2.0);
         }
     }
-    let tap = bilinear_taps(uv, h.x, h.y);
-    let n = vec2i(i32(h.x), i32(h.y));
-    let xs = vec2u(wrap_index(modes.x, tap.x0, n.x), wrap_index(modes.x, tap.x0 + 1, n.x));
-    let ys = vec2u(wrap_index(modes.y, tap.y0, n.y), wrap_index(modes.y, tap.y0 + 1, n.y));
-    let a = surface_texel(h, xs.x, ys.x, srgb);
-    let b = surface_texel(h, xs.y, ys.x, srgb);
-    let c = surface_texel(h, xs.x, ys.y, srgb);
-    let d = surface_texel(h, xs.y, ys.y, srgb);
-    let top = a + (b - a) * tap.f.x;
-    let bottom = c + (d - c) * tap.f.x;
-    return top + (bottom - top) * tap.f.y;
+    // TextureRef::lod: the footprint through the transform's linear part, in texels.
+    let size = vec2f(f32(h.x), f32(h.y));
+    let lin = mat2x2f(vec2f(m[0], m[2]), vec2f(m[1], m[3]));
+    let rho = max(length((lin * duv[0]) * size), length((lin * duv[1]) * size));
+    let levels = surface_tex[hb + 10u];
+    var lod = 0.0;
+    if rho > 1.0 {
+        lod = min(log2(rho), f32(levels));
+    }
+    if !(lod > 0.0) {
+        return level_bilinear(h.z, h.xy, modes, uv, srgb);
+    }
+    // Texture::sample_lod: levels k and k + 1 blended by the fraction.
+    let k = u32(floor(lod));
+    let f = lod - f32(k);
+    var offset = h.z;
+    var n = h.xy;
+    for (var j = 0u; j < k; j++) {
+        offset += n.x * n.y;
+        n = max(n / 2u, vec2u(1u));
+    }
+    let a = level_bilinear(offset, n, modes, uv, srgb);
+    if f <= 0.0 || k >= levels {
+        return a;
+    }
+    let b = level_bilinear(offset + n.x * n.y, max(n / 2u, vec2u(1u)), modes, uv, srgb);
+    return a + (b - a) * f;
 }
 
 fn unit3(v: vec3f) -> vec3f {
@@ -217,7 +272,7 @@ struct SurfaceMaterial {
     f0: vec3f,
 }
 
-fn surface_material(m: u32, uv: vec2f) -> SurfaceMaterial {
+fn surface_material(m: u32, uv: vec2f, duv: mat2x2f) -> SurfaceMaterial {
     var out: SurfaceMaterial;
     out.albedo = materials[5u * m];
     let r1 = materials[5u * m + 1u];
@@ -231,10 +286,10 @@ fn surface_material(m: u32, uv: vec2f) -> SurfaceMaterial {
         var bc = vec4f(1.0);
         var mr = vec4f(1.0);
         if bt != 0u {
-            bc = surface_sample(bt - 1u, uv, true);
+            bc = surface_sample(bt - 1u, uv, true, duv);
         }
         if mt != 0u {
-            mr = surface_sample(mt - 1u, uv, false);
+            mr = surface_sample(mt - 1u, uv, false, duv);
         }
         let c = unit3(factor.xyz * bc.xyz);
         let metal = unit1(r3.x * mr.z);
@@ -245,7 +300,7 @@ fn surface_material(m: u32, uv: vec2f) -> SurfaceMaterial {
         let kd = materials[5u * m + 2u];
         let t = bitcast<u32>(materials[5u * m + 3u].z);
         if t != 0u {
-            let tex = surface_sample(t - 1u, uv, true);
+            let tex = surface_sample(t - 1u, uv, true, duv);
             out.albedo = vec4f(unit3(kd.xyz * tex.xyz), out.albedo.w);
         }
     }
@@ -330,6 +385,20 @@ fn shade(t: u32, x: f32, y: f32) -> vec3f {
     let uv = w.x * vec2f(verts[4u * i0 + 1u].w, verts[4u * i0 + 3u].w)
         + w.y * vec2f(verts[4u * i1 + 1u].w, verts[4u * i1 + 3u].w)
         + w.z * vec2f(verts[4u * i2 + 1u].w, verts[4u * i2 + 3u].w);
+    // gbuffer::uv_footprint: the UV where the rays through the next pixel right and down meet
+    // the triangle's plane, less the UV here.
+    let uv_at = array<vec2f, 3>(vec2f(verts[4u * i0 + 1u].w, verts[4u * i0 + 3u].w),
+        vec2f(verts[4u * i1 + 1u].w, verts[4u * i1 + 3u].w),
+        vec2f(verts[4u * i2 + 1u].w, verts[4u * i2 + 3u].w));
+    let w0 = plane_weights(ray_dir(x, y), p0, p1, p2);
+    let wx = plane_weights(ray_dir(x + 1.0, y), p0, p1, p2);
+    let wy = plane_weights(ray_dir(x, y + 1.0), p0, p1, p2);
+    var duv = mat2x2f(vec2f(0.0), vec2f(0.0));
+    if w0.w > 0.0 && wx.w > 0.0 && wy.w > 0.0 {
+        let here = w0.x * uv_at[0] + w0.y * uv_at[1] + w0.z * uv_at[2];
+        duv = mat2x2f(wx.x * uv_at[0] + wx.y * uv_at[1] + wx.z * uv_at[2] - here,
+            wy.x * uv_at[0] + wy.y * uv_at[1] + wy.z * uv_at[2] - here);
+    }
     let nm = materials[5u * m + 4u];
     let nt = bitcast<u32>(nm.x);
     if mapped && nt != 0u {
@@ -337,7 +406,7 @@ fn shade(t: u32, x: f32, y: f32) -> vec3f {
             + w.z * frames[2u * i2 + 1u];
         let facing = side * n;
         n = side * bend(n, tv.xyz, select(1.0, -1.0, tv.w < 0.0),
-            normal_texel(surface_sample(nt - 1u, uv, false), nm.y));
+            normal_texel(surface_sample(nt - 1u, uv, false, duv), nm.y));
         n = keep_facing(n, facing, wo);
     } else {
         n = side * n;
@@ -345,7 +414,7 @@ fn shade(t: u32, x: f32, y: f32) -> vec3f {
     if !(dot(n, wo) > 0.0) {
         return vec3f(0.0);
     }
-    let mat = surface_material(m, uv);
+    let mat = surface_material(m, uv, duv);
     let albedo = mat.albedo;
     let f0 = mat.f0;
     let frame = to_local(n, wo);

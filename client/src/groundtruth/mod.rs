@@ -501,7 +501,8 @@ impl<'a> Ctx<'a> {
     }
 
     /// The BRDF at a shading point: its triangle's material, evaluated through the mesh's
-    /// UVs where the material is textured (the same texel the per-pixel LTC shades with).
+    /// UVs where the material is textured (the same texels, mipmapped alike, the per-pixel
+    /// LTC shades with).
     pub(crate) fn brdf(&self, s: &crate::frame::gbuffer::Surface) -> Brdf {
         let mesh = &self.scene.mesh;
         let id = mesh.material_ids.get(s.tri as usize).copied();
@@ -511,7 +512,7 @@ impl<'a> Ctx<'a> {
         if let Some(m) = textured
             && let Some(uv) = mesh.uv_at(s.tri as usize, s.weights)
         {
-            return Brdf::from_material(&m.at(Some(uv)));
+            return Brdf::from_material(&m.at_footprint(Some(uv), s.duv));
         }
         id.and_then(|m| self.brdfs.get(m as usize))
             .copied()

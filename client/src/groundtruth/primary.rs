@@ -107,6 +107,7 @@ impl Tracer {
             weights,
             geometric,
             (eye - position).normalize_or(geometric),
+            None,
             self.normal_maps.as_deref(),
         );
         Some(Surface {
@@ -115,6 +116,9 @@ impl Tracer {
             position,
             normal,
             geometric,
+            // A camera ray is a point sample: the Monte Carlo's pixel filter averages the
+            // texels itself, at the finest level.
+            duv: None,
         })
     }
 }

@@ -223,8 +223,19 @@ impl<'a> Renderer<'a> {
     /// Material `id` at texture coordinates `uv`: its textures looked up there (bilinear, the
     /// finest level), the roughness override applied after (`Material::at`).
     fn material_at(&self, id: u32, uv: Option<glam::Vec2>) -> std::borrow::Cow<'_, Material> {
+        self.material_footprint(id, uv, None)
+    }
+
+    /// [`Self::material_at`] as a pixel with UV footprint `duv` sees it (the textures
+    /// mipmapped, `Material::at_footprint`).
+    fn material_footprint(
+        &self,
+        id: u32,
+        uv: Option<glam::Vec2>,
+        duv: Option<[glam::Vec2; 2]>,
+    ) -> std::borrow::Cow<'_, Material> {
         let m = self.material(id);
-        match m.at(uv) {
+        match m.at_footprint(uv, duv) {
             std::borrow::Cow::Owned(mut x) => {
                 if let Some(a) = self.roughness {
                     x.roughness = a;
@@ -480,7 +491,7 @@ impl<'a> Renderer<'a> {
                 return;
             }
             let id = mesh.material_ids.get(s.tri as usize).copied().unwrap_or(0);
-            let m = self.material_at(id, mesh.uv_at(s.tri as usize, s.weights));
+            let m = self.material_footprint(id, mesh.uv_at(s.tri as usize, s.weights), s.duv);
             if let Some(c) = shade(&s, wo, &m) {
                 *px = c.as_vec3().to_array();
             }

@@ -275,6 +275,7 @@ mod tests {
                 height: 2,
                 rgba,
                 source: Vec::new(),
+                mips: Default::default(),
             }),
             wrap: [Wrap::Clamp; 2],
             transform: None,

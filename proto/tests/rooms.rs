@@ -160,7 +160,7 @@ fn gltf_room_materials_lamp_camera_and_node_hierarchy() {
     assert!(s.warnings.is_empty(), "{:?}", s.warnings);
 }
 
-/// What the importer leaves out is named: unreadable textures, normal maps, unsupported
+/// What the importer leaves out is named: unreadable textures, occlusion maps, unsupported
 /// extensions, orthographic cameras; punctual lights are said to feed the point-light methods
 /// only.
 #[test]
@@ -187,7 +187,7 @@ fn gltf_warnings_name_what_is_ignored() {
     doc["textures"] = serde_json::json!([{"source": 0}]);
     doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] =
         serde_json::json!({"index": 0});
-    doc["materials"][1]["normalTexture"] = serde_json::json!({"index": 0});
+    doc["materials"][1]["occlusionTexture"] = serde_json::json!({"index": 0});
     doc["cameras"][0] = serde_json::json!({"type": "orthographic", "orthographic":
         {"xmag": 1.0, "ymag": 1.0, "znear": 0.1, "zfar": 10.0}});
     let bytes = serde_json::to_vec(&doc).expect("json");
@@ -196,7 +196,7 @@ fn gltf_warnings_name_what_is_ignored() {
     for s in [
         "KHR_materials_clearcoat",
         "texture \"image 0\" could not be read: not a PNG or JPEG image; using the factor alone",
-        "normal maps",
+        "occlusion textures",
         "orthographic",
     ] {
         assert!(has(s), "no warning on {s}: {:?}", a.warnings);

@@ -1344,3 +1344,71 @@ fn mipmapped_texture_matches_the_box_filtered_reference() {
     assert!(err < 0.08, "mipmapped vs box-filtered: {err}");
     assert!(far_err < 0.08, "far third: {far_err}");
 }
+
+/// A material whose textures are read through `TEXCOORD_1` (a primitive whose only UVs are
+/// that set, as lightmapped assets export them) shows its checker exactly as the same asset
+/// through `TEXCOORD_0`; a material that mixes sets reads the first texture's set and names
+/// the texture it leaves out.
+#[test]
+fn a_material_on_texcoord_1_reads_that_set() {
+    let mats = |set: u32, mr: Option<u32>| {
+        let mut m = json!({"name": "floor", "pbrMetallicRoughness": {
+            "baseColorFactor": [0.8, 0.6, 1.0, 1.0], "metallicFactor": 0.0,
+            "roughnessFactor": 0.7, "baseColorTexture": {"index": 0, "texCoord": set}}});
+        if let Some(s) = mr {
+            m["pbrMetallicRoughness"]["metallicRoughnessTexture"] =
+                json!({"index": 0, "texCoord": s});
+        }
+        json!([m, lamp_material(None)])
+    };
+    let on_set_1 = |d: &mut Value| {
+        with_emissive_strength(d);
+        let a = &mut d["meshes"][0]["primitives"][0]["attributes"];
+        let uv = a["TEXCOORD_0"].take();
+        a["TEXCOORD_1"] = uv;
+        if let Some(o) = a.as_object_mut() {
+            o.remove("TEXCOORD_0");
+        }
+    };
+    let zero = gltf(
+        &[floor(0), lamp(1, false)],
+        mats(0, None),
+        &[checker()],
+        CLAMP(),
+        with_emissive_strength,
+    );
+    let one = gltf(
+        &[floor(0), lamp(1, false)],
+        mats(1, None),
+        &[checker()],
+        CLAMP(),
+        on_set_1,
+    );
+    let (a0, a1) = (asset(&zero), asset(&one));
+    assert!(
+        !a1.warnings.iter().any(|w| w.contains("TEXCOORD")),
+        "{:?}",
+        a1.warnings
+    );
+    assert_eq!(a1.mesh.uvs, a0.mesh.uvs, "TEXCOORD_1 is the floor's UVs");
+    let (s0, s1) = (scene_of(a0), scene_of(a1));
+    let (i0, i1) = (ltc(&s0, Mode::Pixel), ltc(&s1, Mode::Pixel));
+    assert_eq!(i0.pixels, i1.pixels);
+    // Mixed: base colour on 1, metallic-roughness on 0 — set 1 is read, the other named.
+    let mixed = gltf(
+        &[floor(0), lamp(1, false)],
+        mats(1, Some(0)),
+        &[checker()],
+        CLAMP(),
+        on_set_1,
+    );
+    let a = asset(&mixed);
+    assert!(
+        a.warnings.iter().any(|w| w.contains("metallic-roughness")
+            && w.contains("TEXCOORD_0")
+            && w.contains("one set per material")),
+        "{:?}",
+        a.warnings
+    );
+    assert_eq!(a.mesh.uvs.len(), a.mesh.positions.len());
+}

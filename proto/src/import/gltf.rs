@@ -31,7 +31,9 @@
 //! Materials (metallic-roughness, per primitive): GGX α = roughness², diffuse albedo =
 //! baseColor · (1 − metallic), F0 = mix(0.04, baseColor, metallic) (the glTF 2.0
 //! specification's appendix B BRDF), each factor times its texture (`baseColorTexture` RGB,
-//! sRGB; `metallicRoughnessTexture` B = metallic, G = roughness) through `TEXCOORD_0`, which
+//! sRGB; `metallicRoughnessTexture` B = metallic, G = roughness) through the material's
+//! texture coordinate set (its first texture's, usually `TEXCOORD_0`; one set per material),
+//! which
 //! is read only for primitives whose material is textured; a primitive without a material
 //! gets the specification's default material. Images are decoded once each, when a material
 //! first uses them (buffer view, `data:` URI, or a file beside the glTF), bounded by
@@ -45,8 +47,8 @@
 //! node's −Z with +Y up). Every texture may carry `KHR_texture_transform`. `normalTexture`
 //! becomes the material's [`NormalMap`] (tangents: MikkTSpace's, computed by the client from
 //! the positions, normals and UVs; an asset's `TANGENT` attribute is not read). Occlusion
-//! textures (no method has an ambient term: each computes its own shadowing), texture
-//! coordinate sets other than 0, other extensions and orthographic cameras are not used;
+//! textures (no method has an ambient term: each computes its own shadowing), a texture on a
+//! set other than its material's, other extensions and orthographic cameras are not used;
 //! each kind is named in the warnings. Image and light JSON is read from the
 //! document's JSON, not through the `gltf` crate's accessors that `unwrap` (an image with a
 //! buffer view but no MIME type would panic there).
@@ -106,6 +108,7 @@ pub(super) fn parse(
             .saturating_add(limits.max_triangles.saturating_mul(3))
             .saturating_mul(2),
         materials: Vec::new(),
+        uv_sets: doc.materials().map(|m| uv_set(&m)).collect(),
         default_material: None,
         untextured: HashMap::new(),
         camera: None,
@@ -176,6 +179,36 @@ fn unused_features(doc: &Document) -> Vec<String> {
         ));
     }
     w
+}
+
+/// The texture coordinate set a textureInfo reads (`KHR_texture_transform`'s `texCoord`
+/// overrides its own).
+fn info_set(info: &::gltf::texture::Info<'_>) -> u32 {
+    info.texture_transform()
+        .and_then(|x| x.tex_coord())
+        .unwrap_or(info.tex_coord())
+}
+
+/// [`info_set`] of a `normalTexture` (its transform is raw JSON).
+fn normal_set(n: &::gltf::material::NormalTexture<'_>) -> u32 {
+    n.extension_value("KHR_texture_transform")
+        .and_then(|v| texture_transform_json(v).1)
+        .unwrap_or(n.tex_coord())
+}
+
+/// The one texture coordinate set a material's textures are read through: the set of its
+/// first texture that bspvt reads (base colour, metallic-roughness, normal, then emissive when
+/// it emits); 0 without one. A texture on another set is left out, with a warning
+/// (`Builder::texture_of`); occlusion textures, which are not read, do not count.
+fn uv_set(m: &::gltf::Material<'_>) -> u32 {
+    let pbr = m.pbr_metallic_roughness();
+    let emits = m.emissive_factor().iter().any(|&e| e > 0.0);
+    pbr.base_color_texture()
+        .map(|t| info_set(&t))
+        .or_else(|| pbr.metallic_roughness_texture().map(|t| info_set(&t)))
+        .or_else(|| m.normal_texture().map(|n| normal_set(&n)))
+        .or_else(|| m.emissive_texture().filter(|_| emits).map(|t| info_set(&t)))
+        .unwrap_or(0)
 }
 
 /// A `KHR_texture_transform` object read from its JSON (where the gltf crate offers no typed
@@ -556,8 +589,11 @@ struct Builder<'a> {
     indices: HashMap<usize, Rc<Vec<u32>>>,
     primitives: HashMap<(usize, usize), Option<Rc<Primitive>>>,
     /// The file's materials, then (when a primitive has none) the default material, then
-    /// untextured copies of textured materials for primitives without `TEXCOORD_0`.
+    /// untextured copies of textured materials for primitives without their UV set.
     materials: Vec<FileMaterial>,
+    /// The texture coordinate set each glTF material's textures are read through
+    /// ([`uv_set`]).
+    uv_sets: Vec<u32>,
     default_material: Option<u32>,
     untextured: HashMap<u32, u32>,
     /// The first valid perspective camera met.
@@ -584,7 +620,7 @@ struct Builder<'a> {
 struct Primitive {
     positions: Rc<Vec<Vec3>>,
     normals: Option<Rc<Vec<Vec3>>>,
-    /// `TEXCOORD_0`, read only when the primitive's material is textured.
+    /// The material's UV set (`uv_set`), read only when the primitive's material is textured.
     uvs: Option<Rc<Vec<Vec2>>>,
     /// Checked against `positions`, degenerate ones removed; never empty.
     triangles: Vec<[u32; 3]>,
@@ -811,13 +847,16 @@ impl Builder<'_> {
             }
             None => None,
         };
-        let uvs = match prim.get(&Semantic::TexCoords(0)) {
+        // The set the material's textures are read through (usually 0).
+        let set = self.uv_set_of(prim.material().index());
+        let uvs = match prim.get(&Semantic::TexCoords(set)) {
             Some(acc) if self.textured(prim.material().index()) => {
-                let uvs = self.read_uvs(&acc, &what("TEXCOORD_0"))?;
+                let name = format!("TEXCOORD_{set}");
+                let uvs = self.read_uvs(&acc, &what(&name))?;
                 if uvs.len() != n {
                     return Err(malformed(format!(
                         "{} has {} elements but POSITION has {n}",
-                        what("TEXCOORD_0"),
+                        what(&name),
                         uvs.len()
                     )));
                 }
@@ -1073,15 +1112,16 @@ impl Builder<'_> {
             || format!("material {}", m.index().unwrap_or(0)),
             str::to_string,
         );
+        let index = m.index().unwrap_or(usize::MAX);
         let base_color_texture = pbr
             .base_color_texture()
-            .and_then(|t| self.texture(doc, &name, "base-colour", &t));
+            .and_then(|t| self.texture(doc, (index, &name), "base-colour", &t));
         let metallic_roughness_texture = pbr
             .metallic_roughness_texture()
-            .and_then(|t| self.texture(doc, &name, "metallic-roughness", &t));
+            .and_then(|t| self.texture(doc, (index, &name), "metallic-roughness", &t));
         let emissive_texture = if emission.iter().any(|&e| e > 0.0) {
             m.emissive_texture()
-                .and_then(|t| self.texture(doc, &name, "emissive", &t))
+                .and_then(|t| self.texture(doc, (index, &name), "emissive", &t))
         } else {
             None
         };
@@ -1091,12 +1131,11 @@ impl Builder<'_> {
             let ext = n
                 .extension_value("KHR_texture_transform")
                 .map(texture_transform_json);
-            let set = ext.and_then(|(_, set)| set).unwrap_or(n.tex_coord());
             let texture = self.texture_of(
                 doc,
-                &name,
+                (index, &name),
                 "normal",
-                set,
+                normal_set(&n),
                 ext.and_then(|e| e.0),
                 &n.texture(),
             )?;
@@ -1142,16 +1181,12 @@ impl Builder<'_> {
     fn texture(
         &mut self,
         doc: &Document,
-        material: &str,
+        material: (usize, &str),
         what: &str,
         info: &::gltf::texture::Info<'_>,
     ) -> Option<TextureRef> {
-        // KHR_texture_transform's `texCoord` overrides the textureInfo's.
         let ext = info.texture_transform();
-        let set = ext
-            .as_ref()
-            .and_then(|x| x.tex_coord())
-            .unwrap_or(info.tex_coord());
+        let set = info_set(info);
         let transform = ext.map(|x| UvTransform {
             offset: x.offset(),
             rotation: x.rotation(),
@@ -1165,16 +1200,18 @@ impl Builder<'_> {
     fn texture_of(
         &mut self,
         doc: &Document,
-        material: &str,
+        material: (usize, &str),
         what: &str,
         set: u32,
         transform: Option<UvTransform>,
         t: &::gltf::texture::Texture<'_>,
     ) -> Option<TextureRef> {
-        if set != 0 {
+        let (index, material) = material;
+        let read = self.uv_set_of(Some(index));
+        if set != read {
             self.warnings.push(format!(
-                "material {material:?}: its {what} texture uses TEXCOORD_{set}; only TEXCOORD_0 \
-                 is read: using the factor alone"
+                "material {material:?}: its {what} texture uses TEXCOORD_{set} but its others \
+                 TEXCOORD_{read}; one set per material is read: using the factor alone"
             ));
             return None;
         }
@@ -1262,7 +1299,7 @@ impl Builder<'_> {
         Ok(bytes)
     }
 
-    /// The material a primitive without `TEXCOORD_0` uses instead of textured material `m`:
+    /// The material a primitive without its UV set uses instead of textured material `m`:
     /// a copy without its textures (the factors alone), made once, with a warning.
     fn untextured_material(&mut self, m: u32) -> u32 {
         if let Some(&u) = self.untextured.get(&m) {
@@ -1289,15 +1326,21 @@ impl Builder<'_> {
         // there is no tangent frame to bend a normal in.
         copy.emissive_texture = None;
         copy.material.normal_map = None;
-        copy.material.name = format!("{name} (no TEXCOORD_0)");
+        let set = self.uv_set_of(Some(m as usize));
+        copy.material.name = format!("{name} (no TEXCOORD_{set})");
         self.warnings.push(format!(
-            "material {name:?} is textured but a primitive using it has no TEXCOORD_0: the \
+            "material {name:?} is textured but a primitive using it has no TEXCOORD_{set}: the \
              factors alone are used there"
         ));
         self.materials.push(copy);
         let u = self.materials.len() as u32 - 1;
         self.untextured.insert(m, u);
         u
+    }
+
+    /// The texture coordinate set material `m` (a glTF material index) is read through.
+    fn uv_set_of(&self, m: Option<usize>) -> u32 {
+        m.and_then(|i| self.uv_sets.get(i)).copied().unwrap_or(0)
     }
 
     /// Whether material `m` samples a texture through the mesh's UVs.

@@ -8,16 +8,6 @@ set -u
 nvidia-smi -L | tee "$OUT/gpu.txt"
 nproc | tee -a "$OUT/gpu.txt"
 
-step() { # name timeout command...
-  local name=$1 t=$2; shift 2
-  local s=$(date +%s.%N)
-  timeout "$t" "$@" > "$OUT/$name.log" 2>&1
-  local rc=$?
-  local e=$(python3 -c "import time;print(f'{time.time()-$s:.1f}')")
-  echo "== $name rc=$rc ${e}s" | tee -a "$OUT/summary.txt"
-  tail -n "${TAILN:-6}" "$OUT/$name.log" | tee -a "$OUT/summary.txt"
-}
-
 # Correctness on a real GPU: per-vertex shading against the f64 kernels, frames against the
 # CPU's frames, GPU cube maps against the full CPU cast.
 (cd client && TAILN=12 step t_gpu_shading 45 "$D/t_gpu_shading" --nocapture --test-threads 1)

@@ -2,13 +2,18 @@
 # Fills .dev/ (ignored; carried to the device machine) for tools/device/gpu-check.sh: the
 # stripped release binaries, the GPU test binaries and the shared meshes, gzipped; and .gl/
 # with the Vulkan loader's Debian packages (the device image has no Vulkan loader).
+# `prepare.sh --tests`: the GPU test binaries alone (no release build, ~14 min less), for
+# tools/device/gpu-surfaces.sh.
 set -euo pipefail
+TESTS_ONLY=${1:-}
 cd "$(dirname "$0")/../.."
 grep -qx '/.dev/' .git/info/exclude 2>/dev/null || echo /.dev/ >> .git/info/exclude
 grep -qx '/.gl/' .git/info/exclude 2>/dev/null || echo /.gl/ >> .git/info/exclude
 rm -rf .dev && mkdir -p .dev/assets/meshes .gl
-cargo build --release --locked -p bspvt -p bspvt-server
-for b in bspvt bspvt-server; do strip -o .dev/$b target/release/$b; gzip -9 .dev/$b; done
+if [ "$TESTS_ONLY" != --tests ]; then
+  cargo build --release --locked -p bspvt -p bspvt-server
+  for b in bspvt bspvt-server; do strip -o .dev/$b target/release/$b; gzip -9 .dev/$b; done
+fi
 test_bin() { # package test → path of its test binary
   cargo test --locked -p "$1" --test "$2" --no-run --message-format=json 2>/dev/null \
     | python3 -c "import json,sys

@@ -307,24 +307,33 @@ fn raster_triangle(
 }
 
 /// Barycentrics (b1, b2) of the intersection of a ray with the plane of triangle `p`
-/// (Möller–Trumbore without the inside test: the rasteriser already chose the triangle).
-fn ray_plane_barycentrics(o: DVec3, d: DVec3, p: [DVec3; 3]) -> (f64, f64) {
+/// (Möller–Trumbore without the inside test: the rasteriser, or a traversal, already chose the
+/// triangle), clamped into it; the centroid where the ray runs along the plane. Shared with
+/// the Monte Carlo's camera rays (`groundtruth::primary`).
+pub(crate) fn ray_plane_barycentrics(o: DVec3, d: DVec3, p: [DVec3; 3]) -> (f64, f64) {
+    let Some((_, u, v)) = plane_hit(o, d, p) else {
+        return (1.0 / 3.0, 1.0 / 3.0);
+    };
+    // Pixel centres on a triangle's edge may land a hair outside: clamp into the triangle.
+    let (u, v) = (u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
+    let s = u + v;
+    if s > 1.0 { (u / s, v / s) } else { (u, v) }
+}
+
+/// Where the line `o + t d` meets the plane of `p`: (t, b1, b2), barycentrics unclamped;
+/// `None` where it runs along the plane (or the input is not finite).
+fn plane_hit(o: DVec3, d: DVec3, p: [DVec3; 3]) -> Option<(f64, f64, f64)> {
     let e1 = p[1] - p[0];
     let e2 = p[2] - p[0];
     let pv = d.cross(e2);
     let det = e1.dot(pv);
     if !(det.abs() > 1e-300) {
-        return (1.0 / 3.0, 1.0 / 3.0);
+        return None;
     }
     let inv = 1.0 / det;
     let tv = o - p[0];
-    let u = tv.dot(pv) * inv;
     let q = tv.cross(e1);
-    let v = d.dot(q) * inv;
-    // Pixel centres on a triangle's edge may land a hair outside: clamp into the triangle.
-    let (u, v) = (u.clamp(0.0, 1.0), v.clamp(0.0, 1.0));
-    let s = u + v;
-    if s > 1.0 { (u / s, v / s) } else { (u, v) }
+    Some((e2.dot(q) * inv, tv.dot(pv) * inv, d.dot(q) * inv))
 }
 
 /// The texture footprint of the pixel at image point `(x, y)` on triangle `t` (corners `p`):
@@ -345,30 +354,13 @@ pub(crate) fn uv_footprint(
         return None;
     };
     let at = |x: f64, y: f64| -> Option<DVec2> {
-        let (b1, b2) = plane_barycentrics(view.eye, view.ray_dir(x, y), p)?;
-        Some((1.0 - b1 - b2) * u0 + b1 * u1 + b2 * u2)
+        let (t, b1, b2) = plane_hit(view.eye, view.ray_dir(x, y), p)?;
+        (t > 0.0).then(|| (1.0 - b1 - b2) * u0 + b1 * u1 + b2 * u2)
     };
     let here = at(x, y)?;
     let dx = at(x + 1.0, y)? - here;
     let dy = at(x, y + 1.0)? - here;
     (dx.is_finite() && dy.is_finite()).then(|| [dx.as_vec2(), dy.as_vec2()])
-}
-
-/// Barycentrics (b1, b2) where the ray `o + t d` meets the plane of `p` (unclamped), if it
-/// meets it in front.
-fn plane_barycentrics(o: DVec3, d: DVec3, p: [DVec3; 3]) -> Option<(f64, f64)> {
-    let e1 = p[1] - p[0];
-    let e2 = p[2] - p[0];
-    let pv = d.cross(e2);
-    let det = e1.dot(pv);
-    if !(det.abs() > 1e-300) {
-        return None;
-    }
-    let inv = 1.0 / det;
-    let tv = o - p[0];
-    let qv = tv.cross(e1);
-    let t = e2.dot(qv) * inv;
-    (t > 0.0).then(|| (tv.dot(pv) * inv, d.dot(qv) * inv))
 }
 
 /// The shading normal at the point of triangle `t` with barycentric `weights`, seen along

@@ -94,7 +94,7 @@ impl Tracer {
         let t = *self.ids.get(hit.primitive_id as usize)?;
         let idx = *mesh.triangles.get(t as usize)?;
         let p = idx.map(|v| mesh.positions[v as usize].as_dvec3());
-        let (b1, b2) = barycentrics(eye, dir, p);
+        let (b1, b2) = crate::frame::gbuffer::ray_plane_barycentrics(eye, dir, p);
         let weights = [1.0 - b1 - b2, b1, b2];
         let position = weights[0] * p[0] + weights[1] * p[1] + weights[2] * p[2];
         let mut geometric = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or(DVec3::Z);
@@ -121,22 +121,4 @@ impl Tracer {
             duv: None,
         })
     }
-}
-
-/// Barycentrics (b1, b2) of the ray's intersection with the plane of `p`, in f64, clamped into
-/// the triangle (the f32 traversal already chose it).
-fn barycentrics(o: DVec3, d: DVec3, p: [DVec3; 3]) -> (f64, f64) {
-    let e1 = p[1] - p[0];
-    let e2 = p[2] - p[0];
-    let pv = d.cross(e2);
-    let det = e1.dot(pv);
-    if det.is_nan() || det.abs() <= 1e-300 {
-        return (1.0 / 3.0, 1.0 / 3.0);
-    }
-    let inv = 1.0 / det;
-    let tv = o - p[0];
-    let u = (tv.dot(pv) * inv).clamp(0.0, 1.0);
-    let v = (d.dot(tv.cross(e1)) * inv).clamp(0.0, 1.0);
-    let s = u + v;
-    if s > 1.0 { (u / s, v / s) } else { (u, v) }
 }

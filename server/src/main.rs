@@ -90,7 +90,13 @@ struct BakeArgs {
     stats: Option<PathBuf>,
 }
 
+#[allow(unsafe_code)]
 fn main() -> std::process::ExitCode {
+    // SAFETY: the first statement of `main`: no other thread exists yet.
+    #[cfg(feature = "gpu")]
+    unsafe {
+        bspvt_raytrace::gpu::quiet_headless_vulkan()
+    };
     let result = match Cli::parse().command {
         Command::Bake(a) => bake(a),
         Command::Bench(a) => bench::run(&a),

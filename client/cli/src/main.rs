@@ -77,7 +77,10 @@ enum Command {
     ExportMitsuba(bspvt_lab::mitsuba::ExportArgs),
 }
 
+#[allow(unsafe_code)]
 fn main() -> std::process::ExitCode {
+    // SAFETY: the first statement of `main`: no other thread exists yet.
+    unsafe { bspvt_client::gpu::quiet_headless_vulkan() };
     let command = Cli::parse().command;
     #[cfg(feature = "service")]
     let serving = matches!(command, Command::Serve(_));

@@ -12,4 +12,5 @@ pub(crate) mod trees;
 pub mod vertex;
 
 pub use backend::Backend;
+pub use bspvt_raytrace::gpu::quiet_headless_vulkan;
 pub use context::Gpu;

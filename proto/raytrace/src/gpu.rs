@@ -36,6 +36,28 @@ impl std::fmt::Display for GpuError {
 
 impl std::error::Error for GpuError {}
 
+/// Keeps Mesa's Vulkan device-selection layer (`VK_LAYER_MESA_device_select`, an implicit
+/// layer installed with `mesa-vulkan-drivers`) from looking for a Wayland session where there
+/// is none: with `XDG_RUNTIME_DIR` unset or not a folder it prints "error: XDG_RUNTIME_DIR is
+/// invalid or not set in the environment." on every Vulkan instance, although nothing is
+/// wrong. The layer only reorders adapters for a display's default GPU, which does not matter
+/// here ([`GpuContext::new`] chooses by power preference), so this sets its own off switch,
+/// `NODEVICE_SELECT=1`, in that case — unless the user set it either way.
+///
+/// # Safety
+///
+/// It changes the process environment: call it first thing in `main`, before any thread is
+/// started (`std::env::set_var`'s contract).
+#[allow(unsafe_code)]
+pub unsafe fn quiet_headless_vulkan() {
+    let session = std::env::var_os("XDG_RUNTIME_DIR")
+        .is_some_and(|d| !d.is_empty() && std::path::Path::new(&d).is_dir());
+    if !session && std::env::var_os("NODEVICE_SELECT").is_none() {
+        // SAFETY: the caller runs this before any other thread exists.
+        unsafe { std::env::set_var("NODEVICE_SELECT", "1") };
+    }
+}
+
 /// A wgpu device and queue on the chosen adapter.
 pub struct GpuContext {
     /// The instance the adapter came from (a window's surface is made from it).

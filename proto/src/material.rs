@@ -140,6 +140,14 @@ impl Default for Material {
 }
 
 impl Material {
+    /// Whether anything of it is read through the mesh's UVs: its maps, its normal map or its
+    /// cut-out's alpha texture (a mesh keeps its UVs for such materials only).
+    pub fn samples_uvs(&self) -> bool {
+        self.maps.is_some()
+            || self.normal_map.is_some()
+            || self.cutout.as_ref().is_some_and(|c| c.texture.is_some())
+    }
+
     pub(crate) fn validate(&self, index: usize) -> Result<(), SceneError> {
         let bad = |m: String| Err(SceneError::Invalid(format!("materials[{index}]: {m}")));
         if !(self.roughness.is_finite() && self.roughness > 0.0 && self.roughness <= 1.0) {

@@ -141,8 +141,10 @@ fn bilinear(
     })
 }
 
-/// The 8-bit sRGB encoding of linear `c` (IEC 61966-2-1), the nearest code.
-fn linear_to_srgb8(c: f32) -> u8 {
+/// The 8-bit sRGB encoding of linear `c` (IEC 61966-2-1), the nearest code; NaN → 0. The
+/// inverse of the table colour textures are read through (and what PNG frames are written
+/// with).
+pub fn linear_to_srgb8(c: f32) -> u8 {
     let c = if c.is_finite() {
         c.clamp(0.0, 1.0)
     } else {

@@ -106,12 +106,7 @@ fn aces(x: f32) -> f32 {
 }
 
 fn encode_srgb(c: f32) -> u8 {
-    let s = if c <= 0.003_130_8 {
-        12.92 * c
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0 + 0.5).clamp(0.0, 255.0) as u8
+    bspvt_proto::texture::linear_to_srgb8(c)
 }
 
 #[cfg(test)]

@@ -549,7 +549,6 @@ impl GpuImage {
     }
 }
 
-/// An image from the resolve pass's little-endian `vec4<f32>` texels.
 /// The resolve pass's tangent frames: per vertex (unbent unit normal, 0) and (MikkTSpace
 /// tangent, bitangent sign) — `frame::normal_map`'s — where a material is normal-mapped;
 /// empty (so the pass bends nothing) otherwise.
@@ -567,6 +566,7 @@ fn tangent_frames(
         .collect()
 }
 
+/// An image from the resolve pass's little-endian `vec4<f32>` texels.
 fn image_from_bytes((w, h): (u32, u32), bytes: &[u8]) -> Image {
     let mut img = Image::new(w, h);
     for (px, texel) in img.pixels.iter_mut().zip(bytes.chunks_exact(16)) {

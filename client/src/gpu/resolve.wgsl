@@ -111,19 +111,14 @@ fn ray_dir(x: f32, y: f32) -> vec3f {
 }
 
 // gbuffer::ray_plane_barycentrics: the barycentric weights of the ray's hit on the plane of
-// (p0, p1, p2), clamped into the triangle.
+// (p0, p1, p2), clamped into the triangle; the centroid where the ray runs along the plane.
 fn weights(d: vec3f, p0: vec3f, p1: vec3f, p2: vec3f) -> vec3f {
-    let e1 = p1 - p0;
-    let e2 = p2 - p0;
-    let pv = cross(d, e2);
-    let det = dot(e1, pv);
-    if !(abs(det) > 0.0) || !finite(det) {
+    let pw = plane_weights(d, p0, p1, p2);
+    if pw.w < 0.0 {
         return vec3f(1.0 / 3.0);
     }
-    let inv = 1.0 / det;
-    let tv = fp.eye.xyz - p0;
-    var u = clamp(dot(tv, pv) * inv, 0.0, 1.0);
-    var v = clamp(dot(d, cross(tv, e1)) * inv, 0.0, 1.0);
+    var u = clamp(pw.y, 0.0, 1.0);
+    var v = clamp(pw.z, 0.0, 1.0);
     let s = u + v;
     if s > 1.0 {
         u /= s;
@@ -132,15 +127,15 @@ fn weights(d: vec3f, p0: vec3f, p1: vec3f, p2: vec3f) -> vec3f {
     return vec3f(1.0 - u - v, u, v);
 }
 
-// gbuffer::plane_barycentrics: the weights (xyz) where the ray meets the plane of
-// (p0, p1, p2), unclamped; w: 1 where it meets it in front, 0 where it does not.
+// gbuffer::plane_hit: the weights (xyz) where the ray meets the plane of (p0, p1, p2),
+// unclamped; w: 1 where it meets it in front, 0 behind, −1 where it runs along the plane.
 fn plane_weights(d: vec3f, p0: vec3f, p1: vec3f, p2: vec3f) -> vec4f {
     let e1 = p1 - p0;
     let e2 = p2 - p0;
     let pv = cross(d, e2);
     let det = dot(e1, pv);
     if !(abs(det) > 0.0) || !finite(det) {
-        return vec4f(0.0);
+        return vec4f(0.0, 0.0, 0.0, -1.0);
     }
     let inv = 1.0 / det;
     let tv = fp.eye.xyz - p0;

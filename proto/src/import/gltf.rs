@@ -1345,15 +1345,8 @@ impl Builder<'_> {
 
     /// Whether material `m` samples a texture through the mesh's UVs.
     fn textured(&self, m: Option<usize>) -> bool {
-        m.and_then(|i| self.materials.get(i)).is_some_and(|f| {
-            f.material.maps.is_some()
-                || f.material.normal_map.is_some()
-                || f.emissive_texture.is_some()
-                || f.material
-                    .cutout
-                    .as_ref()
-                    .is_some_and(|c| c.texture.is_some())
-        })
+        m.and_then(|i| self.materials.get(i))
+            .is_some_and(|f| f.material.samples_uvs() || f.emissive_texture.is_some())
     }
 
     /// A `KHR_lights_punctual` light placed by its node's world transform (position: the

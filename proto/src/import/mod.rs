@@ -393,12 +393,9 @@ pub(crate) fn finish_asset(raw: Raw) -> Result<Asset, MeshError> {
     }
     // UVs only where a kept triangle's material samples a texture.
     if !kept.material_ids.iter().any(|&m| {
-        materials.get(m as usize).is_some_and(|f| {
-            let m = &f.material;
-            m.maps.is_some()
-                || m.normal_map.is_some()
-                || m.cutout.as_ref().is_some_and(|c| c.texture.is_some())
-        })
+        materials
+            .get(m as usize)
+            .is_some_and(|f| f.material.samples_uvs())
     }) {
         kept.uvs.clear();
     }

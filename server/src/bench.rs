@@ -128,6 +128,7 @@ fn parse_cast(s: &str) -> Result<BenchCast> {
 }
 
 /// Vertices per GPU dispatch in the bench's GPU cast (a chunk's worth).
+#[cfg(feature = "gpu")]
 const GPU_BATCH: usize = 256;
 
 /// The GPU cast of `sample`, in batches of [`GPU_BATCH`] vertices on the current rayon pool

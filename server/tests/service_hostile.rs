@@ -993,3 +993,80 @@ fn a_client_abort_is_counted_apart_from_server_errors() {
     );
     assert_eq!(get(&agent(), &srv.url("/healthz")).status, 200);
 }
+
+/// The coverage-guided fuzz targets' entry points (`fuzz/`): every input a fuzzer found
+/// crashing, kept under `fuzz/regressions/<target>/`, now returns without a panic; and each entry
+/// point accepts a valid input, so a target is not fuzzing a wall of early errors.
+#[test]
+fn fuzz_regressions_replay_and_the_targets_accept_valid_input() {
+    use bspvt_proto::import::Format;
+    use bspvt_server::service::fuzz;
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let read = |rel: &str| std::fs::read(root.join(rel)).unwrap();
+    // Valid inputs are accepted.
+    let cornell = read("assets/rooms/cornell-box.obj");
+    let mtl = read("assets/rooms/cornell-box.mtl");
+    let b = fuzz::BOUNDARY;
+    let settings = r#"{"face_res": 16, "epsilon": 0.001, "supersampling": 1, "split": "default", "chunk_vertices": 64}"#;
+    let mut body = Vec::new();
+    for (head, data) in [
+        (
+            "name=\"mesh\"; filename=\"cornell-box.obj\"",
+            cornell.as_slice(),
+        ),
+        (
+            "name=\"file\"; filename=\"cornell-box.mtl\"",
+            mtl.as_slice(),
+        ),
+        // Without refinement (seconds for a room in a debug build).
+        ("name=\"settings\"", settings.as_bytes()),
+    ] {
+        body.extend(format!("--{b}\r\nContent-Disposition: form-data; {head}\r\n\r\n").bytes());
+        body.extend(data);
+        body.extend(b"\r\n");
+    }
+    body.extend(format!("--{b}--\r\n").bytes());
+    assert!(
+        fuzz::upload(&body),
+        "the upload target refuses a valid form"
+    );
+    assert!(!fuzz::upload(b"not a form"));
+    let plate = read("assets/scenes/plate.json");
+    assert!(
+        fuzz::scene_json(&plate),
+        "the scene target refuses plate.json"
+    );
+    assert!(!fuzz::scene_json(b"{\"meshes\": 3}"));
+    assert!(bspvt_tests::fuzz::import(&cornell, Format::Obj));
+    assert!(bspvt_tests::fuzz::import(
+        &read("assets/rooms/room.gltf"),
+        Format::Gltf
+    ));
+    // Every saved crash replays through its target.
+    let mut replayed = 0;
+    let dir = root.join("fuzz/regressions");
+    for target in std::fs::read_dir(&dir).unwrap() {
+        let target = target.unwrap().path();
+        if !target.is_dir() {
+            continue;
+        }
+        let name = target.file_name().unwrap().to_string_lossy().to_string();
+        for case in std::fs::read_dir(&target).unwrap() {
+            let case = case.unwrap().path();
+            let data = std::fs::read(&case).unwrap();
+            eprintln!("replaying {}", case.display());
+            let _accepted = match name.as_str() {
+                "gltf" => bspvt_tests::fuzz::import(&data, Format::Gltf),
+                "glb" => bspvt_tests::fuzz::import(&data, Format::Glb),
+                "obj" => bspvt_tests::fuzz::import(&data, Format::Obj),
+                "ply" => bspvt_tests::fuzz::import(&data, Format::Ply),
+                "bake" => bspvt_tests::fuzz::decode(&data),
+                "scene_json" => fuzz::scene_json(&data),
+                "upload" => fuzz::upload(&data),
+                other => panic!("fuzz/regressions/{other}: no such fuzz target"),
+            };
+            replayed += 1;
+        }
+    }
+    eprintln!("replayed {replayed} fuzz regressions");
+}

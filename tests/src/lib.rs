@@ -4,6 +4,7 @@
 
 #![warn(unreachable_pub, missing_docs)]
 
+pub mod fuzz;
 pub mod service;
 
 use bspvt_bake::cubemap::subpixel_offsets;

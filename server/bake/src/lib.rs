@@ -357,7 +357,8 @@ impl Baker {
     }
 
     /// Fits the trees of chunk `c` from its vertices' cube maps (in parallel on the current
-    /// rayon pool) and encodes its frame; the totals count no rays.
+    /// rayon pool) and encodes its frame; the totals count no rays (the GPU backend's fit).
+    #[cfg(feature = "gpu")]
     pub(crate) fn fit_chunk(
         &self,
         c: u32,

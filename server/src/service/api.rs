@@ -138,7 +138,7 @@ fn multipart_error(e: MultipartError) -> ApiError {
 /// bytes/s (Apache's `RequestReadTimeout body=… MinRate=…`): each byte received buys
 /// 1/min_rate s more, so a client trickling a byte a minute is cut off, not only a silent one.
 #[derive(Clone, Copy)]
-struct Pace {
+pub(super) struct Pace {
     start: Instant,
     /// When the last read completed.
     last: Instant,
@@ -148,7 +148,7 @@ struct Pace {
 }
 
 impl Pace {
-    fn new(idle: Duration, min_rate: u64) -> Pace {
+    pub(super) fn new(idle: Duration, min_rate: u64) -> Pace {
         let now = Instant::now();
         Pace {
             start: now,
@@ -236,7 +236,11 @@ async fn drain(mut mp: Multipart, max: u64, mut pace: Pace) {
     }
 }
 
-async fn read_upload(mut mp: Multipart, max_mesh: u64, mut pace: Pace) -> ApiResult<Upload> {
+pub(super) async fn read_upload(
+    mut mp: Multipart,
+    max_mesh: u64,
+    mut pace: Pace,
+) -> ApiResult<Upload> {
     let mut up = Upload {
         mesh: None,
         files: BTreeMap::new(),
@@ -980,14 +984,18 @@ pub(crate) async fn get_mesh(
     if not_modified(&headers, &etag) {
         return Ok(not_modified_response(&etag));
     }
-    let body = read_stored_scene(&st, &id, move |bytes| {
-        let scene = input::decode_scene(&bytes).map_err(|e| anyhow::anyhow!(e))?;
-        Ok(match format {
-            "ply" => ply_bytes(&scene.mesh),
-            _ => serde_json::to_vec(&scene.mesh)?,
+    let body = st
+        .bodies
+        .get_or_build(&etag, || {
+            read_stored_scene(&st, &id, move |bytes| {
+                let scene = input::decode_scene(&bytes).map_err(|e| anyhow::anyhow!(e))?;
+                Ok(match format {
+                    "ply" => ply_bytes(&scene.mesh),
+                    _ => serde_json::to_vec(&scene.mesh)?,
+                })
+            })
         })
-    })
-    .await?;
+        .await?;
     let content_type = if format == "ply" {
         "application/octet-stream"
     } else {
@@ -1029,7 +1037,10 @@ pub(crate) async fn get_scene_file(
     if not_modified(&headers, &etag) {
         return Ok(not_modified_response(&etag));
     }
-    let body = read_stored_scene(&st, &id, Ok).await?;
+    let body = st
+        .bodies
+        .get_or_build(&etag, || read_stored_scene(&st, &id, Ok))
+        .await?;
     Ok(immutable_response(
         &st,
         body,
@@ -1058,7 +1069,7 @@ async fn read_stored_scene(
 /// A body that never changes for its ETag: counted as served, revalidated by the client.
 fn immutable_response(
     st: &Shared,
-    body: Vec<u8>,
+    body: axum::body::Bytes,
     content_type: &'static str,
     etag: &str,
 ) -> Response {
@@ -1116,6 +1127,10 @@ pub(crate) struct Health {
     /// The distributed shape: the bake workers the database knows (seen in the last hour).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub workers: Option<Vec<super::pg::WorkerInfo>>,
+    /// The distributed shape: `ok`, or how the object store fails now (then `status` is
+    /// `degraded`: reads and bakes wait and retry; the service needs no restart).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub store: Option<String>,
 }
 
 /// Liveness and readiness (the database answers).
@@ -1134,8 +1149,16 @@ pub(crate) async fn healthz(State(st): State<Shared>) -> ApiResult<Json<Health>>
         .await
         .map_err(|e| ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "unhealthy", e.detail))?;
     let g = st.jobs.gauges();
+    let store = st.store.probe_objects().await;
+    let degraded = matches!(store, Some(Err(_)));
+    if degraded {
+        st.metrics
+            .store_probe_failures
+            .fetch_add(1, Ordering::Relaxed);
+    }
     Ok(Json(Health {
-        status: "ok".into(),
+        status: if degraded { "degraded" } else { "ok" }.into(),
+        store: store.map(|r| r.err().unwrap_or_else(|| "ok".into())),
         generation: g.generation,
         uptime_s: st.started.elapsed().as_secs_f64(),
         scenes_queued: g.scenes_queued,

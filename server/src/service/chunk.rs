@@ -19,8 +19,16 @@ pub(crate) fn baker(
     row: &SceneRow,
     pool: &rayon::ThreadPool,
 ) -> Result<Baker, String> {
-    let bytes = store.read_scene(&row.id)?;
-    let scene = super::input::decode_scene(&bytes)?;
+    baker_of(&store.read_scene(&row.id)?, row, pool)
+}
+
+/// [`baker`] of the stored scene's `bytes`, read already.
+pub(crate) fn baker_of(
+    bytes: &[u8],
+    row: &SceneRow,
+    pool: &rayon::ThreadPool,
+) -> Result<Baker, String> {
+    let scene = super::input::decode_scene(bytes)?;
     if scene.mesh.content_hash() != row.mesh_hash {
         return Err("the stored scene's mesh does not match its recorded hash".into());
     }

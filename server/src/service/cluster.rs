@@ -17,7 +17,7 @@
 //!   back its leases.
 
 use std::collections::{HashMap, HashSet};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -51,6 +51,17 @@ pub(crate) struct Workers {
     /// Tokens the heartbeat found taken over or whose scene is gone.
     lost: Mutex<HashSet<i64>>,
     bakers: Mutex<Vec<(String, Arc<Baker>)>>,
+    /// Chunks put back in a row for a failing store (`retry_later`'s backoff).
+    setbacks: AtomicU32,
+}
+
+/// Why a chunk was not baked.
+enum Failure {
+    /// The chunk's own (a corrupt or missing scene, a bake that panicked): it counts towards
+    /// failing the scene.
+    Chunk(String),
+    /// The object store's or the database's, for now: the chunk is tried again later.
+    Transient(String),
 }
 
 impl Workers {
@@ -78,6 +89,7 @@ impl Workers {
             stop: AtomicBool::new(false),
             held: Mutex::new(HashMap::new()),
             lost: Mutex::new(HashSet::new()),
+            setbacks: AtomicU32::new(0),
             bakers: Mutex::new(Vec::new()),
             pool,
         });
@@ -183,7 +195,8 @@ impl Workers {
         let baker = match self.baker(pg, &lease.scene_id) {
             Ok(Some(b)) => b,
             Ok(None) => return Ok(()), // deleted meanwhile
-            Err(reason) => return self.failed(pg, lease, &reason),
+            Err(Failure::Chunk(reason)) => return self.failed(pg, lease, &reason),
+            Err(Failure::Transient(reason)) => return self.retry_later(pg, lease, &reason),
         };
         let (frame, meta, vertices) = match super::chunk::bake(lease.idx, || {
             Ok(self.pool.install(|| baker.bake_chunk(lease.idx)))
@@ -198,12 +211,13 @@ impl Workers {
         }
         if let Err(e) = self.store.write_chunk(&lease.scene_id, lease.idx, &frame) {
             tracing::error!(error = %e, "cannot write a chunk object");
-            return self.failed(
+            return self.retry_later(
                 pg,
                 lease,
                 &format!("storage error writing chunk {}: {}", lease.idx, e.kind()),
             );
         }
+        self.setbacks.store(0, Ordering::Relaxed);
         match pg.complete(&self.id, lease, meta)? {
             Recorded::Yes => {
                 self.metrics.chunk_baked(vertices, t0.elapsed());
@@ -231,6 +245,25 @@ impl Workers {
         Ok(pg.scene(id)?.is_some_and(|r| !r.state.is_terminal()))
     }
 
+    /// A chunk that the object store or the database kept from being baked or stored (after
+    /// their own retries) goes back without counting against it, not to be leased again for
+    /// a while, and this worker waits as long before its next lease: exponential backoff
+    /// (1 s, 2 s, … at most 32 s, while the failures last) with jitter (a random 50–100 % of
+    /// it), so that workers neither spin on a store that is down nor come back in step. The
+    /// scene waits rather than fails: its chunks are not at fault.
+    fn retry_later(&self, pg: &PgDb, lease: &Lease, reason: &str) -> Result<()> {
+        let n = self.setbacks.fetch_add(1, Ordering::Relaxed).min(5);
+        let full = Duration::from_secs(1 << n);
+        let jitter =
+            0.5 + 0.5 * (getrandom::u32().unwrap_or(u32::MAX / 2) as f64 / u32::MAX as f64);
+        let delay = full.mul_f64(jitter);
+        tracing::warn!(%reason, retry_in_s = delay.as_secs_f64(), "chunk put back: the store failed; it is retried");
+        pg.put_back(lease, reason, delay)?;
+        lock(&self.bakers).retain(|(id, _)| id != &lease.scene_id);
+        std::thread::sleep(delay);
+        Ok(())
+    }
+
     /// A failed chunk goes back with its reason (the scene fails after enough workers).
     fn failed(&self, pg: &PgDb, lease: &Lease, reason: &str) -> Result<()> {
         tracing::error!(%reason, "chunk failed on this worker");
@@ -244,7 +277,7 @@ impl Workers {
     }
 
     /// The baker of scene `id` (kept for the last few scenes). `Ok(None)`: the scene is gone.
-    fn baker(&self, pg: &PgDb, id: &str) -> Result<Option<Arc<Baker>>, String> {
+    fn baker(&self, pg: &PgDb, id: &str) -> Result<Option<Arc<Baker>>, Failure> {
         let mut bakers = lock(&self.bakers);
         if let Some(i) = bakers.iter().position(|(s, _)| s == id) {
             let b = bakers.remove(i);
@@ -255,9 +288,24 @@ impl Workers {
         let row = match pg.scene(id) {
             Ok(Some(r)) => r,
             Ok(None) => return Ok(None),
-            Err(e) => return Err(format!("database error reading the scene: {e:#}")),
+            Err(e) => {
+                return Err(Failure::Transient(format!(
+                    "database error reading the scene: {e:#}"
+                )));
+            }
         };
-        let baker = Arc::new(super::chunk::baker(&self.store, &row, &self.pool)?);
+        let bytes = self
+            .store
+            .read_scene_or_retry(id)
+            .map_err(|(e, transient)| {
+                if transient {
+                    Failure::Transient(e)
+                } else {
+                    Failure::Chunk(e)
+                }
+            })?;
+        let baker =
+            Arc::new(super::chunk::baker_of(&bytes, &row, &self.pool).map_err(Failure::Chunk)?);
         if bakers.len() >= BAKERS_KEPT {
             bakers.remove(0);
         }

@@ -230,8 +230,13 @@ impl Drop for Reservation {
 /// Returns the allocator's free memory to the system (glibc's `malloc_trim`). glibc keeps
 /// what a thread freed in that thread's arena; after a parse on one thread and a bake on
 /// others, the resident set would hold both unless the first is given back. Called when a
-/// reservation's work ends; a no-op on other C libraries.
+/// reservation's work ends; a no-op on other C libraries, and with `BSPVT_MALLOC_TRIM=0` (to
+/// measure the resident set without it: `server/examples/soak.rs --no-trim`).
 pub(crate) fn give_back_freed() {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    if !*ON.get_or_init(|| std::env::var("BSPVT_MALLOC_TRIM").map_or(true, |v| v != "0")) {
+        return;
+    }
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     #[allow(unsafe_code)]
     // SAFETY: `malloc_trim` takes no pointers, is thread-safe (it locks each arena) and only

@@ -34,6 +34,8 @@ pub(crate) struct Metrics {
     /// Idle event streams ended to free a slot.
     pub streams_shed: AtomicU64,
     pub bake_errors: AtomicU64,
+    /// `/healthz` probes that found the object store failing (the distributed shape).
+    pub store_probe_failures: AtomicU64,
     recent_chunks: Mutex<VecDeque<Instant>>,
     /// Request latency by (route template, method, status class).
     latency: Mutex<BTreeMap<(String, &'static str, u16), Histogram>>,
@@ -130,6 +132,7 @@ impl Default for Metrics {
             started: Instant::now(),
             responses: Default::default(),
             client_aborts: AtomicU64::new(0),
+            store_probe_failures: AtomicU64::new(0),
             scenes_submitted: AtomicU64::new(0),
             scenes_done: AtomicU64::new(0),
             scenes_failed: AtomicU64::new(0),
@@ -376,6 +379,11 @@ impl Metrics {
         );
         self.render_latency(&mut o);
         if let Some(cl) = &g.cluster {
+            let _ = writeln!(
+                o,
+                "# HELP bspvt_store_probe_failures_total Health probes (/healthz) that found the object store failing (an error, a 5xx or no answer within 2 s); its requests meanwhile are retried.\n# TYPE bspvt_store_probe_failures_total counter\nbspvt_store_probe_failures_total {}",
+                self.store_probe_failures.load(Relaxed)
+            );
             render_cluster(&mut o, cl);
         }
         o

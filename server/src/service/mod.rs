@@ -21,12 +21,15 @@
 
 mod api;
 mod bench_cluster;
+mod bodies;
 mod chunk;
 mod clients;
 mod cluster;
 pub mod config;
 mod db;
 mod error;
+#[doc(hidden)]
+pub mod fuzz;
 mod http;
 mod idle;
 mod input;
@@ -350,6 +353,7 @@ impl Service {
             idle_streams: Arc::new(idle::IdleStreams::default()),
             requests: Arc::new(Semaphore::new(cfg.max_concurrent_requests)),
             reencode: Semaphore::new(std::thread::available_parallelism().map_or(2, |n| n.get())),
+            bodies: Default::default(),
             cfg,
             db,
             store,

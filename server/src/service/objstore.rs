@@ -26,9 +26,16 @@ use object_store::{ObjectStore, PutMode, PutOptions, PutPayload};
 use super::db::ChunkMeta;
 use super::io;
 
+/// How long `/healthz` waits for the object store.
+const PROBE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(2);
+
 /// An object store and the prefix under which this service keeps its objects.
 pub(crate) struct ObjStore {
     inner: Arc<dyn ObjectStore>,
+    /// The same store without retries and with a short timeout: `/healthz`'s probe answers
+    /// now, while `inner` retries with backoff (object_store's `RetryConfig`: at most 10
+    /// retries within 3 min, exponential backoff with decorrelated jitter).
+    probe: Arc<dyn ObjectStore>,
     prefix: String,
     /// For messages: `s3://bucket/prefix` or the folder.
     pub url: String,
@@ -72,19 +79,38 @@ impl ObjStore {
                     .with_context(|| format!("cannot create store folder {}", dir.display()))?;
                 let fs = object_store::local::LocalFileSystem::new_with_prefix(dir)
                     .with_context(|| format!("cannot open store folder {}", dir.display()))?;
+                let fs = Arc::new(fs);
                 Ok(ObjStore {
-                    inner: Arc::new(fs),
+                    probe: fs.clone(),
+                    inner: fs,
                     prefix: String::new(),
                     url: dir.display().to_string(),
                 })
             }
             StoreUrl::S3 { bucket, prefix } => {
-                let s3 = object_store::aws::AmazonS3Builder::from_env()
-                    .with_bucket_name(bucket)
-                    .build()
-                    .with_context(|| format!("cannot configure S3 bucket {bucket:?}"))?;
+                let build = |b: object_store::aws::AmazonS3Builder| {
+                    b.with_bucket_name(bucket)
+                        .build()
+                        .with_context(|| format!("cannot configure S3 bucket {bucket:?}"))
+                };
+                let s3 = build(object_store::aws::AmazonS3Builder::from_env())?;
+                let probe = build(
+                    object_store::aws::AmazonS3Builder::from_env()
+                        .with_retry(object_store::RetryConfig {
+                            max_retries: 0,
+                            ..Default::default()
+                        })
+                        // On top of the environment's client options (`AWS_ALLOW_HTTP`, …).
+                        .with_config(
+                            object_store::aws::AmazonS3ConfigKey::Client(
+                                object_store::ClientConfigKey::Timeout,
+                            ),
+                            format!("{}s", PROBE_TIMEOUT.as_secs()),
+                        ),
+                )?;
                 Ok(ObjStore {
                     inner: Arc::new(s3),
+                    probe: Arc::new(probe),
                     prefix: prefix.clone(),
                     url: format!("s3://{bucket}/{prefix}"),
                 })
@@ -120,6 +146,31 @@ impl ObjStore {
                 r?;
             }
             Ok(())
+        })
+    }
+
+    /// Whether the store answers now, without retries (`/healthz`): `Err` says how it failed,
+    /// naming no bucket, key or endpoint (the log has the detail).
+    pub(crate) async fn probe(&self) -> Result<(), String> {
+        let prefix = self.key("scenes");
+        let mut l = self.probe.list(Some(&prefix));
+        let r = tokio::time::timeout(PROBE_TIMEOUT, l.next()).await;
+        let e = match r {
+            Ok(None | Some(Ok(_))) => return Ok(()),
+            Ok(Some(Err(e))) => e.to_string(),
+            Err(_) => "timed out".to_string(),
+        };
+        tracing::warn!(store = %self.url, error = %e, "the object store's health probe failed");
+        let status = (500..600)
+            .map(|c: u16| c.to_string())
+            .find(|c| e.contains(&format!("status {c}")) || e.contains(&format!("{c} ")));
+        Err(match status {
+            Some(c) => format!("the object store answers {c}; requests are retried"),
+            None if e == "timed out" => format!(
+                "the object store did not answer within {} s; requests are retried",
+                PROBE_TIMEOUT.as_secs()
+            ),
+            None => "the object store cannot be reached; requests are retried".to_string(),
         })
     }
 

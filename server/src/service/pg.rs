@@ -907,6 +907,26 @@ impl PgDb {
         })
     }
 
+    /// Gives chunk `l` back without counting a failure, not to be leased for `delay` (the
+    /// store failed for now: `cluster`'s backoff). Nothing happens when the lease was lost.
+    pub(crate) fn put_back(&self, l: &Lease, reason: &str, delay: Duration) -> Result<()> {
+        let (l, reason) = (l.clone(), reason.to_string());
+        let secs = delay.as_secs_f64();
+        self.run("put a chunk back", move |c| {
+            let (l, reason) = (l.clone(), reason.clone());
+            Box::pin(async move {
+                c.execute(
+                    "UPDATE tasks SET worker = NULL, token = NULL, last_error = $3,
+                         lease_until = clock_timestamp() + make_interval(secs => $5)
+                     WHERE scene_id = $1 AND idx = $2 AND token = $4",
+                    &[&l.scene_id, &(l.idx as i32), &reason, &l.token, &secs],
+                )
+                .await?;
+                Ok(())
+            })
+        })
+    }
+
     /// Chunk `l` failed on `worker`: its lease is given back for another worker; after
     /// `max_failures` different workers the scene fails with `reason`. Returns whether the
     /// scene failed.

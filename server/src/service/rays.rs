@@ -3,7 +3,9 @@
 //! is on the GPU while another's trees are fitted). The GPU holds one uploaded BVH per scene
 //! being baked, dropped with the scene's baker.
 
-use std::sync::{Arc, Mutex, Weak};
+use std::sync::Arc;
+#[cfg(feature = "gpu")]
+use std::sync::{Mutex, Weak};
 
 use anyhow::Result;
 use bspvt_bake::{Backend, Baker, Totals};

@@ -41,6 +41,8 @@ pub(crate) struct AppState {
     pub requests: Arc<Semaphore>,
     /// Face-filter re-encodes running at once.
     pub reencode: Semaphore,
+    /// Scene and mesh bodies, built once per ETag.
+    pub bodies: super::bodies::Bodies,
     /// Becomes true when the server shuts down.
     pub shutdown: watch::Receiver<bool>,
     pub started: Instant,

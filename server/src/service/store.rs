@@ -83,6 +83,14 @@ impl Store {
         }
     }
 
+    /// Whether the object store answers now (`ObjStore::probe`); `None` for a data folder.
+    pub(crate) async fn probe_objects(&self) -> Option<Result<(), String>> {
+        match &self.object {
+            Some(o) => Some(o.probe().await),
+            None => None,
+        }
+    }
+
     fn ballast(&self) -> PathBuf {
         self.root.join("reserve")
     }
@@ -190,28 +198,37 @@ impl Store {
     /// Reads a scene's `scene.bin` payload, checking its frame and CRC. The error is public
     /// (a scene's `reason`): it names no server path; the log has the path.
     pub(crate) fn read_scene(&self, id: &str) -> Result<Vec<u8>, String> {
+        self.read_scene_or_retry(id).map_err(|(e, _)| e)
+    }
+
+    /// [`Store::read_scene`], the error saying whether a later try may succeed (the object
+    /// store failed, after its own retries) or not (missing, corrupt).
+    pub(crate) fn read_scene_or_retry(&self, id: &str) -> Result<Vec<u8>, (String, bool)> {
         if let Some(o) = &self.object {
             let data = match o.get(o.scene_object(id)) {
                 Ok(Some(d)) => d,
-                Ok(None) => return Err("the stored scene is missing".into()),
+                Ok(None) => return Err(("the stored scene is missing".into(), false)),
                 Err(e) => {
                     tracing::error!(scene = %id, error = %format!("{e:#}"), "cannot read the stored scene");
-                    return Err("cannot read the stored scene from the object store".into());
+                    return Err((
+                        "cannot read the stored scene from the object store".into(),
+                        true,
+                    ));
                 }
             };
             return unframe_scene(&data).map(<[u8]>::to_vec).map_err(|what| {
                 tracing::error!(scene = %id, what, "the stored scene is corrupt");
-                format!("the stored scene is corrupt: {what}")
+                (format!("the stored scene is corrupt: {what}"), false)
             });
         }
         let path = self.scene_dir(id).join("scene.bin");
         let data = fs::read(&path).map_err(|e| {
             tracing::error!(scene = %id, path = %path.display(), error = %e, "cannot read the stored scene");
-            format!("cannot read the stored scene: {}", e.kind())
+            (format!("cannot read the stored scene: {}", e.kind()), false)
         })?;
         unframe_scene(&data).map(<[u8]>::to_vec).map_err(|what| {
             tracing::error!(scene = %id, path = %path.display(), what, "the stored scene is corrupt");
-            format!("the stored scene is corrupt: {what}")
+            (format!("the stored scene is corrupt: {what}"), false)
         })
     }
 

@@ -6,10 +6,12 @@
 
 #![allow(dead_code)]
 
-use std::io::{BufRead, BufReader};
-use std::net::TcpListener;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use super::common::BIN;
@@ -216,6 +218,8 @@ impl Drop for Postgres {
 pub struct S3 {
     pub child: Child,
     pub port: u16,
+    /// The port clients are pointed at (`env`): the server's, or a [`FaultyProxy`]'s.
+    pub endpoint: u16,
     pub bucket: String,
 }
 
@@ -232,6 +236,7 @@ impl S3 {
         let mut s3 = S3 {
             child,
             port,
+            endpoint: port,
             bucket: "bspvt-test".into(),
         };
         if !wait_port(port, Duration::from_secs(60)) {
@@ -257,7 +262,7 @@ impl S3 {
             ("AWS_REGION".into(), "us-east-1".into()),
             (
                 "AWS_ENDPOINT_URL".into(),
-                format!("http://127.0.0.1:{}", self.port),
+                format!("http://127.0.0.1:{}", self.endpoint),
             ),
             ("AWS_ALLOW_HTTP".into(), "true".into()),
         ]
@@ -273,6 +278,115 @@ impl Drop for S3 {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
+}
+
+/// A TCP proxy in front of the S3 server that fails on purpose: it passes connections
+/// through, or (failing) cuts every open connection and answers each new request `503 Slow
+/// Down` with S3's `SlowDown` error, as a throttled or overloaded S3 does.
+pub struct FaultyProxy {
+    pub port: u16,
+    failing: Arc<AtomicBool>,
+    refused: Arc<AtomicU64>,
+    open: Arc<Mutex<Vec<TcpStream>>>,
+    stop: Arc<AtomicBool>,
+}
+
+impl FaultyProxy {
+    pub fn start(upstream: u16) -> FaultyProxy {
+        let listener = TcpListener::bind("127.0.0.1:0").expect("bind the proxy");
+        let port = listener.local_addr().expect("address").port();
+        let p = FaultyProxy {
+            port,
+            failing: Default::default(),
+            refused: Default::default(),
+            open: Default::default(),
+            stop: Default::default(),
+        };
+        let (failing, refused, open, stop) = (
+            p.failing.clone(),
+            p.refused.clone(),
+            p.open.clone(),
+            p.stop.clone(),
+        );
+        std::thread::spawn(move || {
+            for client in listener.incoming() {
+                if stop.load(Ordering::Relaxed) {
+                    break;
+                }
+                let Ok(client) = client else { continue };
+                if failing.load(Ordering::Relaxed) {
+                    refused.fetch_add(1, Ordering::Relaxed);
+                    std::thread::spawn(move || slow_down(client));
+                    continue;
+                }
+                let Ok(server) = TcpStream::connect(("127.0.0.1", upstream)) else {
+                    continue;
+                };
+                if let (Ok(c), Ok(s)) = (client.try_clone(), server.try_clone()) {
+                    open.lock().unwrap().extend([c, s]);
+                }
+                pipe(&client, &server);
+                pipe(&server, &client);
+            }
+        });
+        p
+    }
+
+    /// Starts or stops failing; starting cuts every connection open now.
+    pub fn fail(&self, on: bool) {
+        self.failing.store(on, Ordering::Relaxed);
+        if on {
+            for s in self.open.lock().unwrap().drain(..) {
+                let _ = s.shutdown(std::net::Shutdown::Both);
+            }
+        }
+    }
+
+    /// Connections answered 503 so far.
+    pub fn refused(&self) -> u64 {
+        self.refused.load(Ordering::Relaxed)
+    }
+}
+
+impl Drop for FaultyProxy {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        let _ = TcpStream::connect(("127.0.0.1", self.port));
+        self.fail(true);
+    }
+}
+
+/// Copies `from` into `to` on a thread until either closes.
+fn pipe(from: &TcpStream, to: &TcpStream) {
+    let (Ok(mut from), Ok(mut to)) = (from.try_clone(), to.try_clone()) else {
+        return;
+    };
+    std::thread::spawn(move || {
+        let _ = std::io::copy(&mut from, &mut to);
+        let _ = to.shutdown(std::net::Shutdown::Write);
+    });
+}
+
+/// Reads a request's head and answers S3's throttling error, then closes.
+fn slow_down(mut c: TcpStream) {
+    let _ = c.set_read_timeout(Some(Duration::from_secs(5)));
+    let mut head = Vec::new();
+    let mut b = [0u8; 4096];
+    while !head.windows(4).any(|w| w == b"\r\n\r\n") {
+        match c.read(&mut b) {
+            Ok(n) if n > 0 => head.extend_from_slice(&b[..n]),
+            _ => return,
+        }
+    }
+    let body = "<?xml version=\"1.0\" encoding=\"UTF-8\"?><Error><Code>SlowDown</Code>\
+                <Message>Please reduce your request rate.</Message></Error>";
+    let _ = write!(
+        c,
+        "HTTP/1.1 503 Slow Down\r\nContent-Type: application/xml\r\nContent-Length: {}\r\n\
+         Connection: close\r\n\r\n{body}",
+        body.len()
+    );
+    let _ = c.shutdown(std::net::Shutdown::Both);
 }
 
 /// Both engines, or `None` after printing why the test is skipped.

@@ -28,6 +28,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
+use bspvt_tests::Rng;
 use bspvt_tests::service::{Server, agent, plate_small_json, submit_ok, wait_done};
 
 struct Args {
@@ -107,18 +108,6 @@ fn get(from: [u8; 4], server: SocketAddr, path: &str, keep: Option<u64>) -> Resu
         }
     }
     Ok((status, n))
-}
-
-/// A small SplitMix64 per viewer (no shared state between threads).
-struct Rng(u64);
-impl Rng {
-    fn below(&mut self, n: u64) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        (z ^ (z >> 31)) % n.max(1)
-    }
 }
 
 fn viewer(

@@ -19,26 +19,16 @@ pub fn limits() -> Limits {
     }
 }
 
-/// One mesh file through its importer, then into a scene: what is accepted has finite
-/// positions and normals and indices in range, and becoming a scene does not panic.
+/// One mesh file through its importer, then into a scene: what is accepted passes
+/// [`bspvt_proto::Mesh::validate`] (finite positions and normals, indices in range, one normal
+/// per position), and becoming a scene does not panic.
 pub fn import(bytes: &[u8], format: Format) -> bool {
     let Ok(asset) = load_asset_bytes(bytes, format, &limits()) else {
         return false;
     };
-    let m = &asset.mesh;
-    let n = m.positions.len() as u32;
-    assert!(
-        m.positions.iter().all(|p| p.is_finite()),
-        "{format:?}: accepted a non-finite position"
-    );
-    assert!(
-        m.triangles.iter().flatten().all(|&i| i < n),
-        "{format:?}: accepted an index out of range"
-    );
-    assert!(
-        m.normals.iter().all(|v| v.is_finite()),
-        "{format:?}: accepted a non-finite normal"
-    );
+    if let Err(e) = asset.mesh.validate() {
+        panic!("{format:?}: accepted an unsound mesh: {e}");
+    }
     let _ = bspvt_proto::Scene::from_asset(asset);
     true
 }

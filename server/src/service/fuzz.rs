@@ -87,20 +87,9 @@ fn submit(up: Upload) -> bool {
     let Ok(Prepared { scene, .. }) = prepare(up, &limits(), &mut mem) else {
         return false;
     };
-    let m = &scene.mesh;
-    let n = m.positions.len() as u32;
-    assert!(
-        m.positions.iter().all(|p| p.is_finite()),
-        "accepted a non-finite position"
-    );
-    assert!(
-        m.triangles.iter().flatten().all(|&i| i < n),
-        "accepted an index out of range"
-    );
-    assert!(
-        m.normals.iter().all(|v| v.is_finite()),
-        "accepted a non-finite normal"
-    );
+    if let Err(e) = scene.mesh.validate() {
+        panic!("accepted an unsound mesh: {e}");
+    }
     // The stored form carries every bit of the bake's identity (warnings and the environment
     // are kept elsewhere: the job's row, the client's own map).
     let mut stored = decode_scene(&encode_scene(&scene)).expect("a stored scene decodes");

@@ -44,3 +44,30 @@ fn without_an_adapter_auto_falls_back_and_gpu_fails() {
     assert!(out.status.success(), "child failed:\n{text}");
     assert!(text.contains("auto: backend: CPU (no GPU"), "{text}");
 }
+
+/// No shader takes its parameters as a uniform buffer: lavapipe (the GPU path of CI and of
+/// machines without a GPU) specializes a shader on the uniform values its branches read and
+/// compiles it again whenever they change — a minute of LLVM on 2 cores for the resolve and
+/// per-vertex passes, each time the light's vertex count, the visible vertices or the mode
+/// changed (measured, docs/gpu.md). Parameters live in read-only storage buffers.
+#[test]
+fn no_shader_reads_a_uniform_buffer() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut seen = 0;
+    for dir in ["client/src/gpu", "proto/raytrace/src"] {
+        for entry in std::fs::read_dir(root.join(dir)).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_none_or(|x| x != "wgsl") {
+                continue;
+            }
+            let src = std::fs::read_to_string(&path).unwrap();
+            seen += 1;
+            assert!(
+                !src.lines().any(|l| l.contains("var<uniform>")),
+                "{} declares a uniform buffer; bind a read-only storage buffer instead",
+                path.display()
+            );
+        }
+    }
+    assert!(seen >= 7, "found only {seen} WGSL files");
+}

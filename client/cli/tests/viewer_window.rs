@@ -242,6 +242,18 @@ fn first_frame(out: &mut impl BufRead) -> Vec<String> {
     }
 }
 
+/// Reads the viewer's output until it says every tree is drawn.
+fn every_tree_on_screen(out: &mut impl BufRead) {
+    loop {
+        let mut line = String::new();
+        let n = out.read_line(&mut line).expect("viewer output");
+        assert!(n > 0, "the viewer ended before drawing every tree");
+        if line.starts_with("every tree on screen") {
+            return;
+        }
+    }
+}
+
 /// The viewer presents through a wgpu surface with the GPU backend, softbuffer with the CPU.
 fn presents_as(said: &[String], backend: &str) {
     let line = said
@@ -345,6 +357,9 @@ fn viewport(backend: Option<&str>) {
     if let Some(b) = backend {
         presents_as(&said, b);
     }
+    // Every tree drawn before any input: the held keys below are timed by the viewer's
+    // frames, and on lavapipe a pipeline's first use compiles it (a minute on a cold cache).
+    every_tree_on_screen(&mut out);
 
     let (conn, screen) = x11rb::connect(Some(&display)).expect("X connection");
     let root = conn.setup().roots[screen].root;
@@ -427,7 +442,13 @@ fn viewport(backend: Option<&str>) {
         if let Some(p) = found.filter(|p| image::open(p).is_ok()) {
             break image::open(&p).expect("screenshot PNG").to_rgb8();
         }
-        assert!(Instant::now() < deadline, "no screenshot was written");
+        if Instant::now() >= deadline {
+            // What the viewer said (its error, if it printed one) with the failure.
+            let _ = viewer.0.kill();
+            let mut rest = String::new();
+            let _ = std::io::Read::read_to_string(&mut out, &mut rest);
+            panic!("no screenshot was written; the viewer printed:\n{rest}");
+        }
         std::thread::sleep(Duration::from_millis(100));
     };
     let window = loop {

@@ -209,12 +209,12 @@ impl GpuFrames {
             raster_params: init(
                 "raster params",
                 bytemuck::bytes_of(&<RasterParams as bytemuck::Zeroable>::zeroed()),
-                U::UNIFORM,
+                U::STORAGE,
             ),
             resolve_params: init(
                 "resolve params",
                 bytemuck::bytes_of(&<ResolveParams as bytemuck::Zeroable>::zeroed()),
-                U::UNIFORM,
+                U::STORAGE,
             ),
             indices: init("indices", bytemuck::cast_slice(&indices), U::STORAGE),
             cut: init(

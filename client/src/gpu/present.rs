@@ -95,7 +95,7 @@ impl Compositor {
             params: buffer(
                 "present params",
                 std::mem::size_of::<Params>() as u64,
-                U::UNIFORM,
+                U::STORAGE,
             ),
             overlay: buffer("overlay", 16, U::STORAGE),
             upload: buffer("uploaded frame", 16, U::STORAGE),

@@ -8,7 +8,9 @@ struct Params {
     size: vec4u,
 };
 
-@group(0) @binding(0) var<uniform> params: Params;
+// Storage, not uniform: lavapipe specializes a shader on the uniform values its branches
+// read and compiles it again (a minute on 2 cores) whenever they change (docs/gpu.md).
+@group(0) @binding(0) var<storage, read> params: Params;
 @group(0) @binding(1) var<storage, read> radiance: array<vec4f>;
 // 0xAARRGGBB, premultiplied by A.
 @group(0) @binding(2) var<storage, read> overlay: array<u32>;

@@ -38,7 +38,9 @@ struct VertexOut {
     dropped: u32,
 }
 
-@group(0) @binding(0) var<uniform> fp: ResolveParams;
+// Storage, not uniform: lavapipe specializes a shader on the uniform values its branches
+// read and compiles it again (a minute on 2 cores) whenever they change (docs/gpu.md).
+@group(0) @binding(0) var<storage, read> fp: ResolveParams;
 // Four per vertex: position, (normal, u), (albedo, α), (F0, v) — the compute pass's records.
 @group(0) @binding(1) var<storage, read> verts: array<vec4f>;
 // Three per triangle.

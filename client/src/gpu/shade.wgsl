@@ -35,7 +35,9 @@ struct VertexOut {
     dropped: u32,
 }
 
-@group(0) @binding(0) var<uniform> params: Params;
+// Storage, not uniform: lavapipe specializes a shader on the uniform values its branches
+// read and compiles it again (a minute on 2 cores) whenever they change (docs/gpu.md).
+@group(0) @binding(0) var<storage, read> params: Params;
 // Four per vertex: position, normal, (albedo, α), (F0, 0).
 @group(0) @binding(1) var<storage, read> verts: array<vec4f>;
 @group(0) @binding(2) var<storage, read> jobs: array<u32>;

@@ -204,7 +204,7 @@ impl VertexShader {
                 gpu,
                 "params",
                 std::mem::size_of::<Params>() as u64,
-                U::UNIFORM,
+                U::STORAGE,
             ),
             ltc: ltc_buffer(gpu),
             verts: buffer(gpu, "vertices", n * 64, U::STORAGE),

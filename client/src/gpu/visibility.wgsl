@@ -10,7 +10,9 @@ struct Raster {
     view_proj: mat4x4f,
 }
 
-@group(0) @binding(0) var<uniform> rp: Raster;
+// Storage, not uniform: lavapipe specializes a shader on the uniform values its branches
+// read and compiles it again (a minute on 2 cores) whenever they change (docs/gpu.md).
+@group(0) @binding(0) var<storage, read> rp: Raster;
 // Four per vertex: position, normal, (albedo, α), (F0, 0) — the compute pass's records.
 @group(0) @binding(1) var<storage, read> verts: array<vec4f>;
 // Three per triangle.

@@ -191,7 +191,7 @@ impl GpuOccluder {
                 entry(5, read),
                 entry(6, read),
                 entry(7, wgpu::BufferBindingType::Storage { read_only: false }),
-                entry(8, wgpu::BufferBindingType::Uniform),
+                entry(8, read),
                 entry(9, read),
             ],
         });
@@ -437,7 +437,7 @@ impl GpuOccluder {
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("cube params"),
             contents: bytemuck::cast_slice(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
+            usage: wgpu::BufferUsages::STORAGE,
         });
         let buffers = [
             &self.nodes,

@@ -36,7 +36,9 @@ struct CubeParams {
     // invocations per row of the dispatch grid, mask words per vertex.
     grid: vec4<u32>,
 }
-@group(0) @binding(8) var<uniform> cp: CubeParams;
+// Storage, not uniform: lavapipe specializes a shader on the uniform values its branches
+// read and compiles it again (a minute on 2 cores) whenever they change (docs/gpu.md).
+@group(0) @binding(8) var<storage, read> cp: CubeParams;
 // The alpha cut-outs (Cutouts::gpu_words): a header (1, first entry word, first mask word, 0) —
 // a single 0 word when every surface is opaque —, each primitive's entry (0: opaque), 8 words
 // per entry (mask, has UVs, the corners' UVs), 16 per mask (width, height, first texel word,

@@ -10,7 +10,10 @@
 //!   reconnect, every chunk is recorded exactly once, the result is the offline bake's;
 //! - the S3 server throttling for 10 s mid-bake (its connections cut, every request answered
 //!   `503 SlowDown` by a proxy in front of it): the object-store clients retry with backoff and
-//!   jitter, the bake finishes by itself as the offline bake, and the logs say what happened.
+//!   jitter, the bake finishes by itself as the offline bake, and the logs say what happened;
+//! - a worker in its own network namespace cut off (packets dropped) while it holds a lease,
+//!   then let back: not live on `/healthz` meanwhile, its chunk baked by another worker, its
+//!   late work refused, and its connections heal without a restart.
 
 #![allow(clippy::unwrap_used)]
 
@@ -313,6 +316,197 @@ fn stale_worker_is_fenced_and_a_postgres_restart_loses_nothing() {
     );
     drop(wb);
     drop(wa);
+}
+
+/// A worker in its own network namespace, cut off (every packet dropped) while it holds a
+/// lease, and let back after its lease was taken over: a zombie with a stale fencing token.
+/// Meanwhile `/healthz` stops listing it live and another worker bakes its chunk; back, its
+/// connections heal by themselves, its late record is refused (fenced, counted in
+/// `/metrics`), and the bake ends as the offline bake. Needs root, iproute2 and iptables.
+#[test]
+fn a_worker_cut_off_from_the_network_loses_its_lease_and_heals() {
+    let (_t, dir) = tmp();
+    let ns = match Netns::create() {
+        Ok(ns) => ns,
+        Err(e) => {
+            eprintln!("SKIPPED a_worker_cut_off…: no network namespace ({e})");
+            return;
+        }
+    };
+    let Some((pg, s3)) = engines(&dir, "a_worker_cut_off…") else {
+        return;
+    };
+    let (json, mesh) = scene(&dir, 256, 8);
+    let offline = offline_bake(&dir, &json, "offline");
+    let a = agent();
+    let srv = api(
+        &dir,
+        "api",
+        &pg,
+        &s3,
+        "t6",
+        &["--workers", "0", "--lease-s", "3"],
+    );
+    let id = submit_scene(&a, &srv, &json, &mesh);
+    let total = status(&a, &srv, &id)["chunks_total"].as_i64().unwrap();
+    let w = ["--threads", "1", "--chunks", "1", "--lease-s", "3"];
+    let (pg_port, s3_port) = (ns.forward(pg.port), ns.forward(s3.port));
+    let mut zombie = Worker::start_in(
+        &ns,
+        &dir,
+        "zombie",
+        (&pg, pg_port),
+        (&s3, s3_port),
+        "t6",
+        &w,
+    );
+    let live = |who: &str| {
+        let h = get(&a, &srv.url("/healthz")).json();
+        h["workers"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| w["id"] == who && w["live"] == true)
+    };
+    let t0 = Instant::now();
+    while !live("zombie") {
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "the worker in the namespace never listed live; its log:\n{}",
+            zombie.log_text()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Cut while it holds a lease.
+    let held = |who: &str| {
+        pg.sql(&format!(
+            "SELECT idx FROM tasks WHERE scene_id = '{id}' AND worker = '{who}' LIMIT 1"
+        ))
+    };
+    let t0 = Instant::now();
+    let held_chunk = loop {
+        ns.cut(true);
+        if let Ok(i) = held("zombie").parse::<i64>() {
+            break i;
+        }
+        ns.cut(false);
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "the worker in the namespace never leased a chunk; its log:\n{}",
+            zombie.log_text()
+        );
+        std::thread::sleep(Duration::from_millis(30));
+    };
+    let cut_at = Instant::now();
+    let fresh = Worker::start(&dir, "fresh", &pg, &s3, "t6", &w);
+    // While it is away: not live on /healthz, and its chunk baked and recorded by the other.
+    let mut seen_not_live = None;
+    while pg.number(&format!(
+        "SELECT count(*) FROM chunks WHERE scene_id = '{id}' AND idx = {held_chunk}"
+    )) == 0
+        || seen_not_live.is_none()
+    {
+        if seen_not_live.is_none() && !live("zombie") {
+            seen_not_live = Some(cut_at.elapsed());
+        }
+        assert!(
+            cut_at.elapsed() < Duration::from_secs(90),
+            "chunk {held_chunk} never taken over, or the cut-off worker still listed live"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let recorded_by = pg.sql(&format!(
+        "SELECT worker FROM chunks WHERE scene_id = '{id}' AND idx = {held_chunk}"
+    ));
+    assert_eq!(recorded_by, "fresh");
+    // Away for 15 s at least: past its lease, its heartbeats and its connections' timeouts.
+    std::thread::sleep(Duration::from_secs(15).saturating_sub(cut_at.elapsed()));
+    let away = cut_at.elapsed();
+    let said_away = zombie.log_text();
+    ns.cut(false);
+    // Back: its late work is refused (fenced) or dropped (it learns its lease was lost).
+    let back_at = Instant::now();
+    let gave_up = || {
+        pg.number("SELECT coalesce(max(chunks_fenced), 0) FROM workers WHERE id = 'zombie'") > 0
+            || zombie.log_text().contains("lease lost")
+    };
+    while !gave_up() {
+        assert!(
+            back_at.elapsed() < Duration::from_secs(60),
+            "the cut-off worker neither was fenced nor dropped its lease; its log:\n{}",
+            zombie.log_text()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let learnt_after = back_at.elapsed();
+    let fenced =
+        pg.number("SELECT coalesce(max(chunks_fenced), 0) FROM workers WHERE id = 'zombie'");
+    assert_eq!(
+        recorded_by,
+        pg.sql(&format!(
+            "SELECT worker FROM chunks WHERE scene_id = '{id}' AND idx = {held_chunk}"
+        )),
+        "the cut-off worker overwrote the record"
+    );
+    let s = wait_done(&a, &srv, &id);
+    assert_eq!(s["chunks_baked_total"].as_i64(), Some(total), "{s}");
+    assert_eq!(
+        pg.number(&format!(
+            "SELECT count(*) FROM chunks WHERE scene_id = '{id}'"
+        )),
+        total
+    );
+    let served = get(&a, &srv.url(&format!("/v1/scenes/{id}/trees"))).body;
+    assert!(served == offline, "the trees differ from the offline bake");
+    if fenced > 0 {
+        let m = get(&a, &srv.url("/metrics")).text();
+        assert!(
+            metric(&m, "bspvt_cluster_chunks_fenced_total") >= 1.0,
+            "{m}"
+        );
+    }
+    // While away it said so (the database did not answer), not nothing.
+    assert!(
+        said_away.contains("database unavailable"),
+        "the cut-off worker's log does not say the database was unreachable:\n{said_away}"
+    );
+    // Its connections healed by themselves: alone, it bakes a second scene to the end.
+    drop(fresh);
+    let (json2, mesh2) = scene(&dir, 128, 8);
+    let offline2 = offline_bake(&dir, &json2, "offline2");
+    let id2 = submit_scene(&a, &srv, &json2, &mesh2);
+    let t_second = Instant::now();
+    let s2 = wait_done(&a, &srv, &id2);
+    let by_zombie = pg.number(&format!(
+        "SELECT count(*) FROM chunks WHERE scene_id = '{id2}' AND worker = 'zombie'"
+    ));
+    assert_eq!(Some(by_zombie), s2["chunks_total"].as_i64(), "{s2}");
+    let served2 = get(&a, &srv.url(&format!("/v1/scenes/{id2}/trees"))).body;
+    assert!(
+        served2 == offline2,
+        "the second scene's trees differ from the offline bake"
+    );
+    eprintln!(
+        "cut off for {:.1} s holding chunk {held_chunk} (not live on /healthz after {:.1} s; \
+         the chunk recorded by the other worker); back: {} {:.1} s later; a second scene of \
+         {by_zombie} chunks baked by it alone in {:.1} s. What it logged while away:\n{}",
+        away.as_secs_f64(),
+        seen_not_live.unwrap_or_default().as_secs_f64(),
+        if fenced > 0 {
+            "fenced"
+        } else {
+            "dropped its lost lease"
+        },
+        learnt_after.as_secs_f64(),
+        t_second.elapsed().as_secs_f64(),
+        said_away
+            .lines()
+            .filter(|l| l.contains("WARN") || l.contains("ERROR"))
+            .take(6)
+            .collect::<Vec<_>>()
+            .join("\n"),
+    );
+    zombie.kill();
 }
 
 /// S3 throttling and cut connections for 10 s mid-bake (a [`FaultyProxy`] in front of the S3

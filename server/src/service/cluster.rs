@@ -214,7 +214,7 @@ impl Workers {
             return self.retry_later(
                 pg,
                 lease,
-                &format!("storage error writing chunk {}: {}", lease.idx, e.kind()),
+                &format!("storage error writing chunk {}: {e}", lease.idx),
             );
         }
         self.setbacks.store(0, Ordering::Relaxed);

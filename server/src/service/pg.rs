@@ -22,6 +22,10 @@
 //! - every operation is retried while the database is unreachable or restarting (up to
 //!   [`RETRY_FOR`]), so workers and API instances ride out a PostgreSQL restart; a retried
 //!   completion whose first commit did succeed is recognised by its token;
+//! - an attempt not answered within a lease (5 s at least) is abandoned with its connection
+//!   and retried on a new one: across a network partition packets are dropped, not refused,
+//!   and a query would otherwise wait for TCP's own retransmission timers (minutes) — while
+//!   the process said nothing, and after the network came back;
 //! - changes are read by transaction id (`xid` columns, `pg_current_snapshot()`), so an API
 //!   instance polling them misses no commit, whatever order concurrent commits land in.
 
@@ -206,7 +210,7 @@ fn transient(e: &tokio_postgres::Error) -> bool {
 }
 
 /// Runs `f` on a pooled connection, retrying transient failures for up to [`RETRY_FOR`].
-async fn retry<T, F>(pool: Pool, what: &'static str, f: F) -> Result<T>
+async fn retry<T, F>(pool: Pool, what: &'static str, attempt: Duration, f: F) -> Result<T>
 where
     F: for<'a> Fn(&'a mut Object) -> Fut<'a, T> + Sync,
 {
@@ -214,15 +218,19 @@ where
     let mut delay = Duration::from_millis(50);
     loop {
         let err = match pool.get().await {
-            Ok(mut c) => match f(&mut c).await {
-                Ok(v) => return Ok(v),
-                Err(e) if transient(&e) => {
+            Ok(mut c) => match tokio::time::timeout(attempt, f(&mut c)).await {
+                Ok(Ok(v)) => return Ok(v),
+                Ok(Err(e)) if transient(&e) => {
                     // The connection may be dead: do not give it back.
                     let _ = Object::take(c);
                     format!("{e}")
                 }
-                Err(e) => {
+                Ok(Err(e)) => {
                     return Err(anyhow::Error::new(e).context(format!("database error ({what})")));
+                }
+                Err(_) => {
+                    let _ = Object::take(c);
+                    format!("no answer within {:.0} s", attempt.as_secs_f64())
                 }
             },
             Err(e) => format!("{e}"),
@@ -315,7 +323,8 @@ impl PgDb {
             .build()
             .context("cannot create the database pool")?;
         let p = pool.clone();
-        let generation = io::block_on(retry(p, "schema", |c| {
+        // Creating the schema waits for the other processes' advisory lock: a minute per try.
+        let generation = io::block_on(retry(p, "schema", Duration::from_secs(60), |c| {
             Box::pin(async move {
                 let tx = c.transaction().await?;
                 tx.execute("SELECT pg_advisory_xact_lock(2020)", &[])
@@ -346,7 +355,8 @@ impl PgDb {
         T: Send + 'static,
         F: for<'a> Fn(&'a mut Object) -> Fut<'a, T> + Send + Sync + 'static,
     {
-        io::block_on(retry(self.pool.clone(), what, f))
+        let attempt = self.lease_ttl.max(Duration::from_secs(5));
+        io::block_on(retry(self.pool.clone(), what, attempt, f))
     }
 
     pub(crate) fn ping(&self) -> Result<()> {
@@ -356,7 +366,9 @@ impl PgDb {
             let c = tokio::time::timeout(Duration::from_secs(3), pool.get())
                 .await
                 .context("the database does not answer")??;
-            c.query_one("SELECT 1", &[]).await?;
+            tokio::time::timeout(Duration::from_secs(3), c.query_one("SELECT 1", &[]))
+                .await
+                .context("the database does not answer")??;
             Ok(())
         })
     }

@@ -242,7 +242,9 @@ impl Store {
             };
             return o
                 .put_chunk(id, chunk, meta, frame.to_vec())
-                .map_err(io::Error::other);
+                // The whole chain (the object, the client's error, its cause: a timeout, a
+                // status), which the log and the put-back reason then name.
+                .map_err(|e| io::Error::other(format!("{e:#}")));
         }
         let path = self.chunk_path(id, chunk);
         let dir = path

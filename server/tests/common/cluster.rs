@@ -423,19 +423,62 @@ impl Worker {
         prefix: &str,
         extra: &[&str],
     ) -> Worker {
+        Worker::spawn(dir, id, &pg.url, &s3.env(), &s3.url(prefix), extra, None)
+    }
+
+    /// A worker in `ns`, reaching PostgreSQL and the S3 server through its forwards.
+    pub fn start_in(
+        ns: &Netns,
+        dir: &Path,
+        id: &str,
+        (pg, pg_port): (&Postgres, u16),
+        (s3, s3_port): (&S3, u16),
+        prefix: &str,
+        extra: &[&str],
+    ) -> Worker {
+        let url = pg.url.replace(
+            &format!("127.0.0.1:{}", pg.port),
+            &format!("{}:{pg_port}", ns.host_ip),
+        );
+        let mut env = s3.env();
+        for (k, v) in &mut env {
+            if k == "AWS_ENDPOINT_URL" {
+                *v = format!("http://{}:{s3_port}", ns.host_ip);
+            }
+        }
+        Worker::spawn(dir, id, &url, &env, &s3.url(prefix), extra, Some(ns))
+    }
+
+    fn spawn(
+        dir: &Path,
+        id: &str,
+        database: &str,
+        env: &[(String, String)],
+        store: &str,
+        extra: &[&str],
+        ns: Option<&Netns>,
+    ) -> Worker {
         let log = dir.join(format!("{id}.log"));
-        let mut child = Command::new(BIN)
+        let mut cmd = match ns {
+            Some(ns) => {
+                let mut c = Command::new("ip");
+                c.args(["netns", "exec", &ns.name, BIN]);
+                c
+            }
+            None => Command::new(BIN),
+        };
+        let mut child = cmd
             .args([
                 "worker",
                 "--database",
-                &pg.url,
+                database,
                 "--store",
-                &s3.url(prefix),
+                store,
                 "--id",
                 id,
             ])
             .args(extra)
-            .envs(s3.env())
+            .envs(env.iter().cloned())
             .env("RUST_LOG", "info,bspvt_server::service::cluster=debug")
             .stdout(Stdio::piped())
             .stderr(Stdio::from(
@@ -491,5 +534,125 @@ impl Worker {
             .args(["-CONT", &self.child.id().to_string()])
             .stderr(Stdio::null())
             .status();
+    }
+}
+
+/// A network namespace of its own for a worker: joined to this one by a veth pair (this side
+/// `host_ip`, the namespace's `.2`), with TCP forwards on `host_ip` to services on this
+/// side's loopback. [`Netns::cut`] drops every packet in the namespace (iptables), as a pulled
+/// cable or a partitioned switch does: no reset, connections hang until their own timeouts.
+/// Needs root, iproute2 and iptables; [`Netns::create`] says why not otherwise.
+pub struct Netns {
+    pub name: String,
+    host_if: String,
+    ns_if: String,
+    pub host_ip: String,
+    stop: Arc<AtomicBool>,
+}
+
+fn run(args: &[&str]) -> Result<(), String> {
+    let out = Command::new(args[0])
+        .args(&args[1..])
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", args[0]))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "`{}` failed: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&out.stderr).trim()
+        ))
+    }
+}
+
+impl Netns {
+    pub fn create() -> Result<Netns, String> {
+        if !is_root() {
+            return Err("not root".into());
+        }
+        // Unique per test process: interface names hold at most 15 bytes.
+        let n = std::process::id() % 250;
+        let ns = Netns {
+            name: format!("bspvt-w{n}"),
+            host_if: format!("bspvt{n}h"),
+            ns_if: format!("bspvt{n}n"),
+            host_ip: format!("10.231.{n}.1"),
+            stop: Default::default(),
+        };
+        let _ = run(&["ip", "netns", "del", &ns.name]);
+        let _ = run(&["ip", "link", "del", &ns.host_if]);
+        let ns_ip = format!("10.231.{n}.2/30");
+        let host_cidr = format!("{}/30", ns.host_ip);
+        let exec = |args: &[&str]| {
+            let mut a = vec!["ip", "netns", "exec", &ns.name];
+            a.extend_from_slice(args);
+            run(&a)
+        };
+        run(&["ip", "netns", "add", &ns.name])?;
+        run(&[
+            "ip",
+            "link",
+            "add",
+            &ns.host_if,
+            "type",
+            "veth",
+            "peer",
+            "name",
+            &ns.ns_if,
+        ])?;
+        run(&["ip", "link", "set", &ns.ns_if, "netns", &ns.name])?;
+        run(&["ip", "addr", "add", &host_cidr, "dev", &ns.host_if])?;
+        run(&["ip", "link", "set", &ns.host_if, "up"])?;
+        exec(&["ip", "addr", "add", &ns_ip, "dev", &ns.ns_if])?;
+        exec(&["ip", "link", "set", &ns.ns_if, "up"])?;
+        exec(&["ip", "link", "set", "lo", "up"])?;
+        exec(&["iptables", "-S"])?;
+        Ok(ns)
+    }
+
+    /// A port on `host_ip` that forwards to `upstream` on this side's loopback.
+    pub fn forward(&self, upstream: u16) -> u16 {
+        let listener = TcpListener::bind((self.host_ip.as_str(), 0)).expect("bind a forward");
+        let port = listener.local_addr().expect("address").port();
+        let stop = self.stop.clone();
+        std::thread::spawn(move || {
+            for client in listener.incoming() {
+                if stop.load(Ordering::Relaxed) {
+                    break;
+                }
+                let Ok(client) = client else { continue };
+                let Ok(server) = TcpStream::connect(("127.0.0.1", upstream)) else {
+                    continue;
+                };
+                pipe(&client, &server);
+                pipe(&server, &client);
+            }
+        });
+        port
+    }
+
+    /// Drops every packet in and out of the namespace (`on`), or lets them through again.
+    pub fn cut(&self, on: bool) {
+        let mut args = vec!["ip", "netns", "exec", &self.name, "iptables"];
+        if on {
+            for rule in [["-A", "INPUT", "-i"], ["-A", "OUTPUT", "-o"]] {
+                let mut a = args.clone();
+                a.extend_from_slice(&rule);
+                a.extend_from_slice(&[&self.ns_if, "-j", "DROP"]);
+                run(&a).expect("iptables DROP");
+            }
+        } else {
+            args.push("-F");
+            run(&args).expect("iptables -F");
+        }
+    }
+}
+
+impl Drop for Netns {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        let _ = run(&["ip", "netns", "del", &self.name]);
+        let _ = run(&["ip", "link", "del", &self.host_if]);
     }
 }

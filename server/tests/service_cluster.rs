@@ -77,6 +77,53 @@ fn status(a: &ureq::Agent, srv: &Server, id: &str) -> serde_json::Value {
     get(a, &srv.url(&format!("/v1/scenes/{id}"))).json()
 }
 
+/// A bake of [`scene`] at 256² faces submitted to a new API instance (no workers of its own,
+/// leases of `lease_s`) on `pg` and `s3` under `prefix`: the agent, the API, the scene's id,
+/// its chunk count and the offline bake's bytes.
+fn submit_bake(
+    dir: &Path,
+    pg: &Postgres,
+    s3: &S3,
+    prefix: &str,
+    lease_s: &str,
+) -> (ureq::Agent, Server, String, i64, Vec<u8>) {
+    let (json, mesh) = scene(dir, 256, 8);
+    let offline = offline_bake(dir, &json, "offline");
+    let a = agent();
+    let srv = api(
+        dir,
+        "api",
+        pg,
+        s3,
+        prefix,
+        &["--workers", "0", "--lease-s", lease_s],
+    );
+    let id = submit_scene(&a, &srv, &json, &mesh);
+    let total = status(&a, &srv, &id)["chunks_total"].as_i64().unwrap();
+    (a, srv, id, total, offline)
+}
+
+/// The scene ends `done` by itself, every chunk recorded once, its trees the offline bake's.
+fn ends_like_offline(
+    a: &ureq::Agent,
+    srv: &Server,
+    pg: &Postgres,
+    id: &str,
+    total: i64,
+    offline: &[u8],
+) {
+    let s = wait_done(a, srv, id);
+    assert_eq!(s["chunks_baked_total"].as_i64(), Some(total), "{s}");
+    assert_eq!(
+        pg.number(&format!(
+            "SELECT count(*) FROM chunks WHERE scene_id = '{id}'"
+        )),
+        total
+    );
+    let served = get(a, &srv.url(&format!("/v1/scenes/{id}/trees"))).body;
+    assert!(served == offline, "the trees differ from the offline bake");
+}
+
 fn tmp() -> (tempfile::TempDir, PathBuf) {
     let t = tempfile::tempdir().expect("temp dir");
     let p = t.path().to_path_buf();
@@ -213,19 +260,7 @@ fn stale_worker_is_fenced_and_a_postgres_restart_loses_nothing() {
     let Some((pg, s3)) = engines(&dir, "stale_worker_is_fenced…") else {
         return;
     };
-    let (json, mesh) = scene(&dir, 256, 8);
-    let offline = offline_bake(&dir, &json, "offline");
-    let a = agent();
-    let srv = api(
-        &dir,
-        "api",
-        &pg,
-        &s3,
-        "t2",
-        &["--workers", "0", "--lease-s", "2"],
-    );
-    let id = submit_scene(&a, &srv, &json, &mesh);
-    let total = status(&a, &srv, &id)["chunks_total"].as_u64().unwrap() as i64;
+    let (a, srv, id, total, offline) = submit_bake(&dir, &pg, &s3, "t2", "2");
     // No worker: the scene says why it does not advance.
     let s = wait_status(&a, &srv, &id, Duration::from_secs(30), |s| {
         s["reason"]
@@ -299,16 +334,7 @@ fn stale_worker_is_fenced_and_a_postgres_restart_loses_nothing() {
         pg.restart();
         eprintln!("PostgreSQL restarted with {before}/{total} chunks recorded");
     }
-    let s = wait_done(&a, &srv, &id);
-    assert_eq!(s["chunks_baked_total"].as_i64(), Some(total), "{s}");
-    assert_eq!(
-        pg.number(&format!(
-            "SELECT count(*) FROM chunks WHERE scene_id = '{id}'"
-        )),
-        total
-    );
-    let served = get(&a, &srv.url(&format!("/v1/scenes/{id}/trees"))).body;
-    assert!(served == offline, "the trees differ from the offline bake");
+    ends_like_offline(&a, &srv, &pg, &id, total, &offline);
     let m = get(&a, &srv.url("/metrics")).text();
     assert!(
         metric(&m, "bspvt_cluster_chunks_fenced_total") >= 1.0,
@@ -336,19 +362,7 @@ fn a_worker_cut_off_from_the_network_loses_its_lease_and_heals() {
     let Some((pg, s3)) = engines(&dir, "a_worker_cut_off…") else {
         return;
     };
-    let (json, mesh) = scene(&dir, 256, 8);
-    let offline = offline_bake(&dir, &json, "offline");
-    let a = agent();
-    let srv = api(
-        &dir,
-        "api",
-        &pg,
-        &s3,
-        "t6",
-        &["--workers", "0", "--lease-s", "3"],
-    );
-    let id = submit_scene(&a, &srv, &json, &mesh);
-    let total = status(&a, &srv, &id)["chunks_total"].as_i64().unwrap();
+    let (a, srv, id, total, offline) = submit_bake(&dir, &pg, &s3, "t6", "3");
     let w = ["--threads", "1", "--chunks", "1", "--lease-s", "3"];
     let (pg_port, s3_port) = (ns.forward(pg.port), ns.forward(s3.port));
     let mut zombie = Worker::start_in(
@@ -448,16 +462,7 @@ fn a_worker_cut_off_from_the_network_loses_its_lease_and_heals() {
         )),
         "the cut-off worker overwrote the record"
     );
-    let s = wait_done(&a, &srv, &id);
-    assert_eq!(s["chunks_baked_total"].as_i64(), Some(total), "{s}");
-    assert_eq!(
-        pg.number(&format!(
-            "SELECT count(*) FROM chunks WHERE scene_id = '{id}'"
-        )),
-        total
-    );
-    let served = get(&a, &srv.url(&format!("/v1/scenes/{id}/trees"))).body;
-    assert!(served == offline, "the trees differ from the offline bake");
+    ends_like_offline(&a, &srv, &pg, &id, total, &offline);
     if fenced > 0 {
         let m = get(&a, &srv.url("/metrics")).text();
         assert!(
@@ -522,19 +527,7 @@ fn s3_throttling_and_cut_connections_for_10_s_lose_nothing() {
     };
     let proxy = FaultyProxy::start(s3.port);
     s3.endpoint = proxy.port;
-    let (json, mesh) = scene(&dir, 256, 8);
-    let offline = offline_bake(&dir, &json, "offline");
-    let a = agent();
-    let srv = api(
-        &dir,
-        "api",
-        &pg,
-        &s3,
-        "t5",
-        &["--workers", "0", "--lease-s", "4"],
-    );
-    let id = submit_scene(&a, &srv, &json, &mesh);
-    let total = status(&a, &srv, &id)["chunks_total"].as_i64().unwrap();
+    let (a, srv, id, total, offline) = submit_bake(&dir, &pg, &s3, "t5", "4");
     let w = ["--threads", "1", "--chunks", "1", "--lease-s", "4"];
     let w1 = Worker::start(&dir, "s1", &pg, &s3, "t5", &w);
     let w2 = Worker::start(&dir, "s2", &pg, &s3, "t5", &w);
@@ -595,11 +588,7 @@ fn s3_throttling_and_cut_connections_for_10_s_lose_nothing() {
         "the workers' logs did not say what happened while it happened:\n{}",
         w1.log_text()
     );
-    let s = wait_done(&a, &srv, &id);
-    assert_eq!(s["chunks_baked_total"].as_i64(), Some(total), "{s}");
-    assert_eq!(chunks(), total);
-    let served = get(&a, &srv.url(&format!("/v1/scenes/{id}/trees"))).body;
-    assert!(served == offline, "the trees differ from the offline bake");
+    ends_like_offline(&a, &srv, &pg, &id, total, &offline);
     // A store's fault is not the chunks': none counted as failed (with two workers, a chunk
     // failed on both used to be leased by neither, and the bake stalled).
     let put_back = (w1.log_text() + &w2.log_text())

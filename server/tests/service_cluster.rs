@@ -13,13 +13,16 @@
 //!   jitter, the bake finishes by itself as the offline bake, and the logs say what happened;
 //! - a worker in its own network namespace cut off (packets dropped) while it holds a lease,
 //!   then let back: not live on `/healthz` meanwhile, its chunk baked by another worker, its
-//!   late work refused, and its connections heal without a restart.
+//!   late work refused, and its connections heal without a restart;
+//! - a worker whose own disk (folder, temporaries, log) is full bakes on.
 
 #![allow(clippy::unwrap_used)]
 
 #[path = "common/cluster.rs"]
 mod cluster;
 mod common;
+#[path = "common/tmpfs.rs"]
+mod tmpfs;
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -512,6 +515,45 @@ fn a_worker_cut_off_from_the_network_loses_its_lease_and_heals() {
             .join("\n"),
     );
     zombie.kill();
+}
+
+/// A worker whose own disk is full: its working folder, its temporaries (`TMPDIR`) and its
+/// log on a full tmpfs. A worker keeps nothing on local disk (chunks go to the object store,
+/// state to PostgreSQL), so it bakes on; a log line that cannot be written is dropped, not a
+/// crash. Needs root (or passwordless sudo) to mount.
+#[test]
+fn a_worker_on_a_full_disk_bakes_on() {
+    let (_t, dir) = tmp();
+    let disk = dir.join("disk");
+    let Some(_fs) = tmpfs::Tmpfs::mount(&disk, "1m") else {
+        eprintln!("SKIPPED a_worker_on_a_full_disk…: cannot mount a tmpfs (needs root or sudo)");
+        return;
+    };
+    let Some((pg, s3)) = engines(&dir, "a_worker_on_a_full_disk…") else {
+        return;
+    };
+    let (a, srv, id, total, offline) = submit_bake(&dir, &pg, &s3, "t7", "4");
+    let filled = tmpfs::fill(&disk.join("ballast"));
+    let w = ["--threads", "1", "--chunks", "1", "--lease-s", "4"];
+    let mut worker = Worker::start(&disk, "full", &pg, &s3, "t7", &w);
+    ends_like_offline(&a, &srv, &pg, &id, total, &offline);
+    assert_eq!(
+        pg.number(&format!(
+            "SELECT count(*) FROM chunks WHERE scene_id = '{id}' AND worker = 'full'"
+        )),
+        total,
+        "every chunk baked by the worker on the full disk"
+    );
+    assert!(
+        matches!(worker.child.try_wait(), Ok(None)),
+        "the worker on the full disk exited"
+    );
+    let logged = std::fs::metadata(disk.join("full.log")).map_or(0, |m| m.len());
+    eprintln!(
+        "a worker with its folder, TMPDIR and log on a full 1 MiB tmpfs ({filled} bytes of \
+         ballast) baked {total} chunks, the offline bake's bytes; its log kept {logged} bytes"
+    );
+    worker.kill();
 }
 
 /// S3 throttling and cut connections for 10 s mid-bake (a [`FaultyProxy`] in front of the S3

@@ -479,6 +479,9 @@ impl Worker {
             ])
             .args(extra)
             .envs(env.iter().cloned())
+            // Its own folder: working directory, temporaries and log.
+            .current_dir(dir)
+            .env("TMPDIR", dir)
             .env("RUST_LOG", "info,bspvt_server::service::cluster=debug")
             .stdout(Stdio::piped())
             .stderr(Stdio::from(

@@ -557,10 +557,10 @@ fn a_worker_on_a_full_disk_bakes_on() {
 }
 
 /// S3 throttling and cut connections for 10 s mid-bake (a [`FaultyProxy`] in front of the S3
-/// server). The object-store clients of the workers and the API retry with exponential backoff
+/// server: `503 SlowDown` for 5 s, then `500 InternalError`). The object-store clients of the workers and the API retry with exponential backoff
 /// and decorrelated jitter (`object_store`'s `RetryConfig`: at most 10 retries within 3 min, the
 /// bound), so no chunk fails, no process is restarted by hand, and the bake ends `done`,
-/// byte-identical to the offline bake; the workers' logs name the 503s as they happen.
+/// byte-identical to the offline bake; the logs name the 503s and 500s as they happen.
 #[test]
 fn s3_throttling_and_cut_connections_for_10_s_lose_nothing() {
     let (_t, dir) = tmp();
@@ -584,10 +584,15 @@ fn s3_throttling_and_cut_connections_for_10_s_lose_nothing() {
     let before = chunks();
     proxy.fail(true);
     let t0 = Instant::now();
-    let (mut said, mut health) = (false, None);
+    let (mut said, mut said_500, mut health) = (false, false, None);
     while t0.elapsed() < Duration::from_secs(10) {
-        let logs = w1.log_text() + &w2.log_text();
+        // 503 SlowDown for 5 s, then 500 InternalError.
+        if t0.elapsed() >= Duration::from_secs(5) {
+            proxy.internal_errors();
+        }
+        let logs = w1.log_text() + &w2.log_text() + &srv.log_text();
         said |= logs.contains("status 503");
+        said_500 |= logs.contains("status 500");
         if health.is_none() {
             let h = get(&a, &srv.url("/healthz"));
             let j = h.json();
@@ -603,16 +608,25 @@ fn s3_throttling_and_cut_connections_for_10_s_lose_nothing() {
     }
     let during = chunks() - before;
     proxy.fail(false);
+    let answered_500 = proxy.internal_answered();
     eprintln!(
-        "S3 failing for 10 s: {} connections answered 503, {during} chunks recorded meanwhile \
-         ({before}/{total} before); the workers' logs named the 503s during the fault: {said}",
-        proxy.refused()
+        "S3 failing for 10 s: {} connections answered 503 then {answered_500} answered 500, \
+         {during} chunks recorded meanwhile ({before}/{total} before); the logs named the 503s \
+         during the fault: {said}, the 500s: {said_500}",
+        proxy.refused() - answered_500
     );
     assert!(proxy.refused() > 0, "no request met the fault");
+    assert!(
+        answered_500 == 0 || said_500 || {
+            std::thread::sleep(Duration::from_secs(1));
+            (w1.log_text() + &w2.log_text() + &srv.log_text()).contains("status 500")
+        },
+        "{answered_500} requests answered 500 and no log says so"
+    );
     let health = health.expect("/healthz never said the store was failing");
     eprintln!("/healthz during the fault: store {health}");
     assert!(
-        health.contains("503"),
+        health.contains("503") || health.contains("500"),
         "{health}; the API's log: {}",
         srv.log_text()
             .lines()

@@ -282,11 +282,14 @@ impl Drop for S3 {
 
 /// A TCP proxy in front of the S3 server that fails on purpose: it passes connections
 /// through, or (failing) cuts every open connection and answers each new request `503 Slow
-/// Down` with S3's `SlowDown` error, as a throttled or overloaded S3 does.
+/// Down` with S3's `SlowDown` error, as a throttled or overloaded S3 does, or (after
+/// [`FaultyProxy::internal_errors`]) `500` with S3's `InternalError`.
 pub struct FaultyProxy {
     pub port: u16,
     failing: Arc<AtomicBool>,
+    internal: Arc<AtomicBool>,
     refused: Arc<AtomicU64>,
+    internal_answered: Arc<AtomicU64>,
     open: Arc<Mutex<Vec<TcpStream>>>,
     stop: Arc<AtomicBool>,
 }
@@ -298,13 +301,17 @@ impl FaultyProxy {
         let p = FaultyProxy {
             port,
             failing: Default::default(),
+            internal: Default::default(),
             refused: Default::default(),
+            internal_answered: Default::default(),
             open: Default::default(),
             stop: Default::default(),
         };
-        let (failing, refused, open, stop) = (
+        let (failing, internal, refused, internal_answered, open, stop) = (
             p.failing.clone(),
+            p.internal.clone(),
             p.refused.clone(),
+            p.internal_answered.clone(),
             p.open.clone(),
             p.stop.clone(),
         );
@@ -316,7 +323,11 @@ impl FaultyProxy {
                 let Ok(client) = client else { continue };
                 if failing.load(Ordering::Relaxed) {
                     refused.fetch_add(1, Ordering::Relaxed);
-                    std::thread::spawn(move || slow_down(client));
+                    let internal = internal.load(Ordering::Relaxed);
+                    if internal {
+                        internal_answered.fetch_add(1, Ordering::Relaxed);
+                    }
+                    std::thread::spawn(move || answer_error(client, internal));
                     continue;
                 }
                 let Ok(server) = TcpStream::connect(("127.0.0.1", upstream)) else {
@@ -342,7 +353,17 @@ impl FaultyProxy {
         }
     }
 
-    /// Connections answered 503 so far.
+    /// Fails with `500 InternalError` instead of `503 SlowDown` from now on.
+    pub fn internal_errors(&self) {
+        self.internal.store(true, Ordering::Relaxed);
+    }
+
+    /// Connections answered `500` so far.
+    pub fn internal_answered(&self) -> u64 {
+        self.internal_answered.load(Ordering::Relaxed)
+    }
+
+    /// Connections answered an error so far.
     pub fn refused(&self) -> u64 {
         self.refused.load(Ordering::Relaxed)
     }
@@ -367,8 +388,9 @@ fn pipe(from: &TcpStream, to: &TcpStream) {
     });
 }
 
-/// Reads a request's head and answers S3's throttling error, then closes.
-fn slow_down(mut c: TcpStream) {
+/// Reads a request's head and answers S3's throttling error (or `internal`: its internal
+/// error), then closes.
+fn answer_error(mut c: TcpStream, internal: bool) {
     let _ = c.set_read_timeout(Some(Duration::from_secs(5)));
     let mut head = Vec::new();
     let mut b = [0u8; 4096];
@@ -378,11 +400,26 @@ fn slow_down(mut c: TcpStream) {
             _ => return,
         }
     }
-    let body = "<?xml version=\"1.0\" encoding=\"UTF-8\"?><Error><Code>SlowDown</Code>\
-                <Message>Please reduce your request rate.</Message></Error>";
+    let (status, code, message) = if internal {
+        (
+            "500 Internal Server Error",
+            "InternalError",
+            "We encountered an internal error. Please try again.",
+        )
+    } else {
+        (
+            "503 Slow Down",
+            "SlowDown",
+            "Please reduce your request rate.",
+        )
+    };
+    let body = format!(
+        "<?xml version=\"1.0\" encoding=\"UTF-8\"?><Error><Code>{code}</Code>\
+         <Message>{message}</Message></Error>"
+    );
     let _ = write!(
         c,
-        "HTTP/1.1 503 Slow Down\r\nContent-Type: application/xml\r\nContent-Length: {}\r\n\
+        "HTTP/1.1 {status}\r\nContent-Type: application/xml\r\nContent-Length: {}\r\n\
          Connection: close\r\n\r\n{body}",
         body.len()
     );

@@ -6,7 +6,7 @@
 FROM debian:bookworm-slim
 COPY ca/ /usr/local/share/ca-certificates/
 RUN apt-get update \
- && apt-get install -y --no-install-recommends ca-certificates curl gcc libc6-dev \
+ && apt-get install -y --no-install-recommends ca-certificates=2023* curl=7.88.* gcc=4:12.* libc6-dev=2.36-* \
  && update-ca-certificates \
  && rm -rf /var/lib/apt/lists/*
 ENV RUSTUP_HOME=/usr/local/rustup CARGO_HOME=/usr/local/cargo PATH=/usr/local/cargo/bin:/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin

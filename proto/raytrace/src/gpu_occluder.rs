@@ -434,7 +434,7 @@ impl GpuOccluder {
             0,
             0,
         ];
-        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        let params_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("cube params"),
             contents: bytemuck::cast_slice(&params),
             usage: wgpu::BufferUsages::STORAGE,
@@ -448,7 +448,7 @@ impl GpuOccluder {
             &mask,
             &table.stops,
             &result,
-            &uniform,
+            &params_buffer,
             &self.cut,
         ];
         let entries: Vec<wgpu::BindGroupEntry> = buffers

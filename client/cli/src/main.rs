@@ -50,6 +50,10 @@ enum Command {
     Render(render::RenderArgs),
     /// Measure shading speed on real meshes (kernel µs/vertex and frame times).
     Bench(bspvt_lab::bench::BenchArgs),
+    /// Every method's frame time on one scene, as a ratio to a calibration workload run
+    /// alongside, against a committed baseline (`--baseline`): a slowdown shows whatever the
+    /// machine's speed.
+    BenchMethods(bspvt_lab::method_bench::BenchMethodsArgs),
     /// Speed and error of rt-penumbra (paper 003) and the shadow-map baselines against Monte
     /// Carlo area-light shadows (`ltc-exact`), with the equal-RMSE speed-up and cases that
     /// break the paper's assumptions (results.csv/.md/.json and images in --out).
@@ -116,6 +120,7 @@ fn main() -> std::process::ExitCode {
         Command::Serve(a) => bspvt_server::service::serve_command(&a),
         Command::Render(a) => render::run(a),
         Command::Bench(a) => bspvt_lab::bench::run(&a),
+        Command::BenchMethods(a) => bspvt_lab::method_bench::run(&a),
         Command::BenchPenumbra(a) => bspvt_lab::penumbra_bench::run(&a).map(|r| {
             eprintln!(
                 "bench-penumbra: {} case(s) written to {}",

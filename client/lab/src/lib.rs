@@ -2,7 +2,7 @@
 //!
 //! bspvt's research tooling, built on the client library: the error-against-run-time
 //! [`report`] of every method against converged Monte Carlo, image comparison ([`compare`]),
-//! the shading and method benchmarks ([`bench`], [`penumbra_bench`], [`sg_bench`], [`sky_bench`],
+//! the shading and method benchmarks ([`bench`], [`method_bench`], [`penumbra_bench`], [`sg_bench`], [`sky_bench`],
 //! [`refine_bench`]), the
 //! project's LTC fit of GGX ([`ltc_fit`]) and the Mitsuba 3 export ([`mitsuba`]).
 //!
@@ -15,6 +15,7 @@ pub mod bench;
 pub mod compare;
 pub mod gpu_bench;
 pub mod ltc_fit;
+pub mod method_bench;
 pub mod mitsuba;
 pub mod penumbra_bench;
 pub mod refine_bench;

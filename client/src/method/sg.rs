@@ -6,7 +6,7 @@ use anyhow::{Context, Result};
 use super::env_scene::Pose;
 use super::{Frame, FrameInput, FrameMethod, MethodState, Needs, SceneData, Settings, SetupReport};
 use crate::render::renderer::FrameCounts;
-use crate::sg::{SgEnv, SgOptions, SsdfMode};
+use crate::sg::{SgCache, SgEnv, SgOptions, SsdfMode};
 
 /// See the module doc.
 pub(crate) struct SgEnvironment;
@@ -45,6 +45,7 @@ impl FrameMethod for SgEnvironment {
             opts: e.sg,
             rays,
             pose: Pose::default(),
+            cache: SgCache::default(),
         }))
     }
 }
@@ -54,14 +55,23 @@ struct State {
     opts: SgOptions,
     rays: bool,
     pose: Pose,
+    /// Depth maps and diffuse tables kept while the scene is still.
+    cache: SgCache,
 }
 
 impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
         let (scene, gbuffer, occ, pose_ms) = self.pose.at(f, self.rays);
-        let (image, timings) =
-            crate::sg::render(scene, &f.renderer.view, gbuffer, &self.sg, occ, &self.opts)
-                .context("SG rendering")?;
+        let (image, timings) = crate::sg::render_cached(
+            scene,
+            &f.renderer.view,
+            gbuffer,
+            &self.sg,
+            occ,
+            &self.opts,
+            &mut self.cache,
+        )
+        .context("SG rendering")?;
         let mut frame = Frame::new(image, FrameCounts::default());
         frame.maps_ms = Some(timings.maps_ms);
         frame.pose_ms = pose_ms;

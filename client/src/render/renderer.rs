@@ -25,7 +25,7 @@ use crate::shade::sky::{shade_vertex_sky, unshadowed_sky};
 use crate::shade::{Lobes, Shaded, ShadowRatio, UNSHADOWED, unshadowed, unshadowed_lights};
 
 /// Where shading is evaluated.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Mode {
     /// Per vertex, interpolated over triangles (the paper's).

@@ -12,7 +12,7 @@ pub(crate) mod ssdf;
 
 pub use fit::{FitOptions, LightLobe, SgEnv, fit, fit_cached, fit_with};
 pub use lobe::Sg;
-pub use render::{SgOptions, SgTimings, SsdfMode, render};
+pub use render::{SgCache, SgOptions, SgTimings, SsdfMode, render, render_cached};
 
 #[cfg(test)]
 pub(crate) mod testutil {

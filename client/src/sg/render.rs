@@ -11,9 +11,13 @@
 //! asin(p·m_k), m_k the half-space of lobe k's SSDF at this point ([`super::ssdf`]).
 //!
 //! Nothing is precomputed: the screen-space depth maps are rendered from the mesh as it is
-//! in this frame, so moving geometry needs nothing but a new call.
+//! in this frame, so moving geometry needs nothing but a new call. A caller drawing a
+//! sequence passes an [`SgCache`] ([`render_cached`]): the maps and the diffuse tables are
+//! kept while the lobes and the mesh's positions are unchanged (a still scene), and rebuilt
+//! the frame they change (a moving one).
 
 use std::f64::consts::PI;
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Result, bail};
@@ -127,8 +131,29 @@ fn visible_integral(g: &Sg, full: f64, n: DVec3, b: &Boundary) -> f64 {
     full * f64::from(halfspace::fraction(g.lambda as f32, d))
 }
 
+/// What [`render_cached`] keeps between frames, each part with the key it was built for:
+/// the diffuse tables (a function of the lobes) and the screen-space depth maps (of the lobes,
+/// the mesh's positions and the maps' side).
+#[derive(Default)]
+pub struct SgCache {
+    tables: Option<(u64, Arc<Vec<Option<DiffuseTable>>>)>,
+    maps: Option<(u64, Arc<Vec<DepthMap>>)>,
+}
+
+/// Key of the lobes' shapes (axes and sharpness: what the tables and maps depend on).
+fn lobes_key(env: &SgEnv) -> u64 {
+    let mut h = bspvt_proto::hash::Fnv1a::default();
+    for l in &env.lobes {
+        for v in l.axis.iter().chain([&l.lambda]) {
+            h.write(&v.to_le_bytes());
+        }
+    }
+    h.finish()
+}
+
 /// Renders one SG frame of `scene` at the G-buffer's pixels. `occluder` is required for
-/// [`SsdfMode::Exact`]. Pixels without a surface are black.
+/// [`SsdfMode::Exact`]. Pixels without a surface are black. Builds everything anew: a
+/// sequence uses [`render_cached`].
 pub fn render(
     scene: &Scene,
     view: &View,
@@ -137,25 +162,65 @@ pub fn render(
     occluder: Option<&Occluder>,
     opts: &SgOptions,
 ) -> Result<(Image, SgTimings)> {
+    render_cached(
+        scene,
+        view,
+        gbuffer,
+        env,
+        occluder,
+        opts,
+        &mut SgCache::default(),
+    )
+}
+
+/// [`render`], reusing from `cache` the tables and depth maps that this frame's lobes and
+/// mesh positions leave unchanged (and storing this frame's).
+pub fn render_cached(
+    scene: &Scene,
+    view: &View,
+    gbuffer: &GBuffer,
+    env: &SgEnv,
+    occluder: Option<&Occluder>,
+    opts: &SgOptions,
+    cache: &mut SgCache,
+) -> Result<(Image, SgTimings)> {
     if opts.ssdf == SsdfMode::Exact && occluder.is_none() {
         bail!("the exact SSDF needs the ray-tracing BVH (an occluder)");
     }
     halfspace::warm_up();
     let mesh = &scene.mesh;
     let t0 = Instant::now();
-    let maps: Vec<DepthMap> = if opts.ssdf == SsdfMode::Screen {
-        let b = mesh.bounds();
-        let centre = b.center();
-        let radius = 0.5 * b.diagonal();
-        env.lobes
-            .par_iter()
-            .map(|l| {
-                let xi = DVec3::from(l.axis).normalize_or(DVec3::Y).as_vec3();
-                DepthMap::render(mesh, centre, radius, xi, opts.depth_res as usize)
-            })
-            .collect()
+    let lobes_key = lobes_key(env);
+    let maps: Arc<Vec<DepthMap>> = if opts.ssdf == SsdfMode::Screen {
+        let mut h = bspvt_proto::hash::Fnv1a::default();
+        h.write(&lobes_key.to_le_bytes());
+        h.write(&opts.depth_res.to_le_bytes());
+        h.write(&(mesh.triangles.len() as u64).to_le_bytes());
+        for p in &mesh.positions {
+            h.write_f32s(&p.to_array());
+        }
+        let key = h.finish();
+        match &cache.maps {
+            Some((k, maps)) if *k == key => maps.clone(),
+            _ => {
+                let b = mesh.bounds();
+                let centre = b.center();
+                let radius = 0.5 * b.diagonal();
+                let maps: Arc<Vec<DepthMap>> = Arc::new(
+                    env.lobes
+                        .par_iter()
+                        .map(|l| {
+                            let xi = DVec3::from(l.axis).normalize_or(DVec3::Y).as_vec3();
+                            DepthMap::render(mesh, centre, radius, xi, opts.depth_res as usize)
+                        })
+                        .collect(),
+                );
+                cache.maps = Some((key, maps.clone()));
+                maps
+            }
+        }
     } else {
-        Vec::new()
+        Arc::new(Vec::new())
     };
     let maps_ms = t0.elapsed().as_secs_f64() * 1e3;
     let t1 = Instant::now();
@@ -172,10 +237,19 @@ pub fn render(
         })
         .collect();
     // The diffuse term of each (not too sharp) lobe as a function of n·ξ ([`super::diffuse`]).
-    let tables: Vec<Option<DiffuseTable>> = lobes
-        .par_iter()
-        .map(|(g, _, _)| DiffuseTable::new(g))
-        .collect();
+    let tables = match &cache.tables {
+        Some((k, t)) if *k == lobes_key => t.clone(),
+        _ => {
+            let t: Arc<Vec<Option<DiffuseTable>>> = Arc::new(
+                lobes
+                    .par_iter()
+                    .map(|(g, _, _)| DiffuseTable::new(g))
+                    .collect(),
+            );
+            cache.tables = Some((lobes_key, t.clone()));
+            t
+        }
+    };
     let search = |point: &Point, k: usize, xi: Vec3| match opts.ssdf {
         SsdfMode::None => Boundary::Visible,
         SsdfMode::Screen => maps[k].boundary(point, bias_abs, opts.window),
@@ -487,10 +561,18 @@ mod tests {
             stride: 1,
             window: 6,
         };
-        let frame = |scene: &Scene| {
+        // One cache across the frames, as a sequence keeps it: a still frame reuses the maps,
+        // a moved mesh rebuilds them; either way the image is the one built from scratch.
+        let mut cache = SgCache::default();
+        let mut frame = |scene: &Scene| {
             let view = View::new(&camera, 64, 64);
             let g = GBuffer::rasterize(&scene.mesh, &view);
             let (img, _) = render(scene, &view, &g, &env, None, &opts).expect("render");
+            for _ in 0..2 {
+                let (cached, _) =
+                    render_cached(scene, &view, &g, &env, None, &opts, &mut cache).expect("render");
+                assert_eq!(cached.pixels, img.pixels, "the cached frame differs");
+            }
             (img, g)
         };
         let (a, ga) = frame(&scene);

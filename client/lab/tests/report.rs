@@ -122,6 +122,7 @@ fn quick_report_measures_every_method_and_reuses_its_cache() {
     // Environment lighting, against its own ground truth, when the shared map is there.
     match &sc.env {
         Some(env) => {
+            assert!(!env.dark, "the plate is open to the sky");
             let methods: BTreeSet<&str> = env.entries.iter().map(|e| e.method.as_str()).collect();
             assert_eq!(
                 methods,

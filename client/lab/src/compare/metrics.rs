@@ -140,9 +140,20 @@ pub fn rmse_mae(a: &Image, b: &Image, covered: &[bool]) -> (f64, f64) {
 }
 
 /// Relative MSE with the floor τ = [`REL_MSE_FLOOR`] × the reference's covered mean.
+/// Undefined against a black reference (no floor to scale by): 0 for an equal image, +∞ for
+/// any other.
 pub(crate) fn rel_mse(img: &Image, reference: &Image, covered: &[bool]) -> f64 {
     let tau = REL_MSE_FLOOR * covered_mean(reference, covered);
-    let tau2 = (tau * tau).max(f64::MIN_POSITIVE);
+    let tau2 = tau * tau;
+    if !(tau2 > 0.0) {
+        let equal = img
+            .pixels
+            .iter()
+            .zip(&reference.pixels)
+            .zip(covered)
+            .all(|((x, r), &c)| !c || x == r);
+        return if equal { 0.0 } else { f64::INFINITY };
+    }
     let (mut s, mut n) = (0.0, 0usize);
     for ((x, r), &c) in img.pixels.iter().zip(&reference.pixels).zip(covered) {
         if c {
@@ -237,6 +248,16 @@ mod tests {
         let a = image(&[0.1, 0.5, 2.0, 0.0]);
         let m = measure(&a, &a, &[true; 4], 1.0);
         assert_eq!(m, Metrics::default());
+    }
+
+    #[test]
+    fn relative_mse_against_black_is_zero_or_infinite() {
+        let black = image(&[0.0; 4]);
+        let dim = image(&[0.0, 1e-6, 0.0, 0.0]);
+        assert_eq!(rel_mse(&black, &black, &[true; 4]), 0.0);
+        assert_eq!(rel_mse(&dim, &black, &[true; 4]), f64::INFINITY);
+        // Where the difference is not covered, the images are equal.
+        assert_eq!(rel_mse(&dim, &black, &[true, false, true, true]), 0.0);
     }
 
     #[test]

@@ -39,6 +39,8 @@ pub struct EnvReport {
     pub(crate) gt_rmse_floor: f64,
     pub(crate) gt_seconds: f64,
     pub(crate) gt_from_cache: bool,
+    /// The ground truth is black on every covered pixel (a closed scene): nothing measured.
+    pub dark: bool,
     /// Per lobe count: the fit's relative L2 error and its time (precompute per map).
     pub fits: Vec<(usize, f64, f64)>,
     pub entries: Vec<Entry>,
@@ -120,6 +122,29 @@ pub(crate) fn measure_env(
         }
     };
     gt.save(&dir.join("ground-truth.png"), EXPOSURE)?;
+    let report = |fits, entries, dark| EnvReport {
+        map: map.display().to_string(),
+        gt_spp: st.env_gt_spp,
+        gt_mean_rel_stderr: gm.mean_rel_stderr,
+        gt_rmse_floor: gm.rmse_floor,
+        gt_seconds: gm.seconds,
+        gt_from_cache: from_cache,
+        dark,
+        fits,
+        entries,
+    };
+    // A closed scene (the room): no sample reached the map from any pixel the camera sees.
+    // Every method's error would be measured against black, relative errors are undefined,
+    // and the sky's bake (a minute for the room) would be spent on nothing.
+    if !gt
+        .pixels
+        .iter()
+        .zip(covered)
+        .any(|(p, &c)| c && p.iter().any(|&v| v > 0.0))
+    {
+        eprintln!("  the environment lights none of the camera's pixels: methods not measured");
+        return Ok(report(Vec::new(), Vec::new(), true));
+    }
     let scale = error_scale(&gt, covered);
 
     let folder = format!("{stem}/env");
@@ -200,14 +225,5 @@ pub(crate) fn measure_env(
             record(method, None, Some(k), None, ms, &img)?;
         }
     }
-    Ok(EnvReport {
-        map: map.display().to_string(),
-        gt_spp: st.env_gt_spp,
-        gt_mean_rel_stderr: gm.mean_rel_stderr,
-        gt_rmse_floor: gm.rmse_floor,
-        gt_seconds: gm.seconds,
-        gt_from_cache: from_cache,
-        fits,
-        entries,
-    })
+    Ok(report(fits, entries, false))
 }

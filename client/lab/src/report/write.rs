@@ -335,6 +335,14 @@ fn env_section(s: &mut String, sc: &SceneReport, env: &super::env::EnvReport) {
             ""
         }
     );
+    if env.dark {
+        let _ = writeln!(
+            s,
+            "The ground truth is black on every pixel the camera sees: no path from them \
+             reaches the map (a closed scene). The environment methods are not measured here.\n"
+        );
+        return;
+    }
     let _ = writeln!(
         s,
         "| K | fit error (relative L2) | fit s |\n|---:|---:|---:|"

@@ -1,12 +1,12 @@
 //! `bspvt bench-methods`: every registered method's frame time on one scene, against a
 //! committed baseline, so that a slowdown shows whatever the machine's speed.
 //!
-//! Absolute times differ between machines and between runs on a shared one, so each method's
-//! median frame time (the fastest of three sequences) is divided by the median time of a **calibration workload** run in the
-//! same process, between the methods (a fixed, project-independent mix of transcendental
-//! arithmetic and scattered memory reads on every worker thread). The baseline stores these
-//! ratios; a method whose ratio grew by more than `--threshold` is reported `SLOWER`
-//! (`--strict` makes that an error).
+//! Absolute times differ between machines and between runs on a shared one, so each
+//! sequence's median frame time is divided by the time of a **calibration workload** run just
+//! before and just after it in the same process (a fixed, project-independent mix of
+//! transcendental arithmetic and table reads on every worker thread); a row is the median of
+//! three such ratios. The baseline stores these ratios; a method whose ratio grew by more than
+//! `--threshold` is reported `SLOWER` (`--strict` makes that an error).
 //!
 //! The baseline belongs to a build profile: `.ci/run` compares the test-profile binary that
 //! `cargo test` builds with `assets/bench/methods-baseline.json`, recorded with that binary.
@@ -25,7 +25,8 @@ use serde::{Deserialize, Serialize};
 
 /// Wall time a method's timed frames cover at least (fast methods get more frames).
 const MIN_TIMED_MS: f64 = 200.0;
-/// Timed sequences per method and mode; the fastest median is kept.
+/// Timed sequences per method and mode, each between two calibrations; the median ratio is
+/// kept.
 const REPEATS: usize = 3;
 
 /// `bspvt bench-methods`: each method's frames against a committed baseline.
@@ -37,8 +38,8 @@ pub struct BenchMethodsArgs {
     /// Image side.
     #[arg(long, default_value_t = 128)]
     pub(crate) size: u32,
-    /// Timed frames per sequence (the light moves; a sequence's median frame time is kept, the
-    /// fastest of 3 sequences); fast methods get more frames, to cover 200 ms.
+    /// Timed frames per sequence (the light moves; a sequence's median frame time is kept);
+    /// fast methods get more frames, to cover 200 ms.
     #[arg(long, default_value_t = 7)]
     pub(crate) frames: usize,
     /// Samples per pixel of the stochastic methods (speed only: no error is measured).
@@ -78,7 +79,8 @@ pub(crate) struct Row {
     pub(crate) mode: Mode,
     /// Median frame time.
     pub(crate) ms_per_frame: f64,
-    /// `ms_per_frame` over the calibration's median time.
+    /// The median over three sequences of a sequence's median frame over the calibration
+    /// around it.
     pub(crate) ratio: f64,
 }
 
@@ -93,7 +95,8 @@ pub(crate) struct Run {
     /// Whether the binary has debug assertions (the dev and test profiles): ratios are
     /// compared only between runs of the same kind.
     pub(crate) debug_assertions: bool,
-    /// Median wall time of the calibration workload.
+    /// Median wall time of the calibration workload (each sequence is divided by the mean of
+    /// the two runs either side of it).
     pub(crate) calibration_ms: f64,
     pub(crate) rows: Vec<Row>,
 }
@@ -162,7 +165,7 @@ pub fn run(a: &BenchMethodsArgs) -> Result<()> {
         .as_ref()
         .map(|b| Trees::full(&b.trees, b.header.codec()));
 
-    let mut calibration = vec![calibrate()];
+    let mut calibration = Vec::new();
     let mut rows = Vec::new();
     for &method in &methods {
         let needs = method.needs();
@@ -204,39 +207,44 @@ pub fn run(a: &BenchMethodsArgs) -> Result<()> {
             } else {
                 opts.frames
             };
-            // The fastest of REPEATS sequences: interference from elsewhere only adds time.
-            let mut s = first;
+            // REPEATS sequences, each between two calibrations: a sequence's ratio is its median
+            // frame over the mean of the calibrations either side of it (slow drifts of the
+            // machine's speed cancel), and the row keeps the median of the ratios.
+            let mut before = calibrate();
+            let mut samples: Vec<(f64, f64, Mode)> = Vec::with_capacity(REPEATS);
             for _ in 0..REPEATS {
-                let next = run(&Options {
+                let s = run(&Options {
                     frames,
                     ..opts.clone()
                 })?;
-                if next.ms_per_frame < s.ms_per_frame || s.frames != frames {
-                    s = next;
-                }
+                let after = calibrate();
+                let cal = 0.5 * (before + after);
+                calibration.push(cal);
+                samples.push((s.ms_per_frame / cal, s.ms_per_frame, s.mode));
+                before = after;
             }
-            calibration.push(calibrate());
+            samples.sort_by(|x, y| x.0.total_cmp(&y.0));
+            let (ratio, ms_per_frame, shaded_in) = samples[samples.len() / 2];
             // A method that ignores the mode asked for draws the same frames twice: one row.
             if rows
                 .iter()
-                .any(|r: &Row| r.method == method.name() && r.mode == s.mode)
+                .any(|r: &Row| r.method == method.name() && r.mode == shaded_in)
             {
                 continue;
             }
             rows.push(Row {
                 method: method.name().to_string(),
-                mode: s.mode,
-                ms_per_frame: s.ms_per_frame,
-                ratio: 0.0,
+                mode: shaded_in,
+                ms_per_frame,
+                ratio,
             });
         }
     }
-    calibration.push(calibrate());
     calibration.sort_by(f64::total_cmp);
-    let calibration_ms = calibration[calibration.len() / 2];
-    for r in &mut rows {
-        r.ratio = r.ms_per_frame / calibration_ms;
-    }
+    let calibration_ms = calibration
+        .get(calibration.len() / 2)
+        .copied()
+        .unwrap_or(0.0);
     let run = Run {
         scene: a.scene.clone(),
         size: a.size,

@@ -382,7 +382,7 @@ impl VertexShader {
                 })
                 .collect();
             self.set_vertices(gpu, &records);
-            self.set_jobs(gpu, &renderer.visible_vertices);
+            self.set_jobs(gpu, &renderer.gpu_shaded_vertices());
             *key = Some(k);
         }
         self.sync_trees(gpu, trees);

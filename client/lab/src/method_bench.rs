@@ -16,10 +16,9 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use bspvt_client::method::sequence::{Options, render_sequence};
-use bspvt_client::method::trees::{cached_bake, cached_sky_bake};
+use bspvt_client::method::trees::{cached_bake, cached_sky_bake, load_checked};
 use bspvt_client::method::{EnvOptions, FrameMethod, Settings, registry};
 use bspvt_client::render::renderer::{Mode, Trees};
-use bspvt_proto::encoding::decode_bake;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -146,9 +145,7 @@ pub fn run(a: &BenchMethodsArgs) -> Result<()> {
     let needs_trees = methods.iter().any(|m| m.needs().lamp_trees(&scene));
     let bake = if needs_trees {
         let c = cached_bake("bench-methods", &scene, &a.cache, &|_, _| {})?;
-        let bytes =
-            std::fs::read(&c.path).with_context(|| format!("cannot read {}", c.path.display()))?;
-        Some(decode_bake(&bytes)?)
+        Some(load_checked(&c.path, &scene)?)
     } else {
         None
     };

@@ -163,7 +163,7 @@ impl<'a> Renderer<'a> {
     /// triangle the CPU's G-buffer found there (ties on shared edges, sub-pixel triangles), and
     /// a vertex it then interpolates must have been shaded: unshaded, it reads as unshadowed
     /// (bright speckles along the far edge of a finely refined umbra: canopy.gltf, 13.2 % mean
-    /// difference in the shadows against the CPU before, 3.4 % after; docs/gpu.md).
+    /// difference in the shadows against the CPU before, 3.5 % after; docs/gpu.md).
     pub(crate) fn gpu_shaded_vertices(&self) -> Vec<u32> {
         let mesh = &self.scene.mesh;
         let mut seen = vec![false; mesh.vertex_count()];

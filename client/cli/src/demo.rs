@@ -74,6 +74,8 @@ pub(crate) fn run(a: &DemoArgs) -> Result<()> {
             ", baked before: reusing it"
         }
     );
+    // The service's browser dashboard (bake progress, submissions), up while this runs.
+    println!("dashboard: {}/", served.remote.base().trim_end_matches('/'));
     let height = connected.scene.camera.image_height(a.size, None);
     let mut session = connected.session(&opts, a.size, height)?;
     session.method = method(&a.method)?;

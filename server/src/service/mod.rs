@@ -9,7 +9,7 @@
 //! the service handles below are public. The modules depend on each other without cycles, top
 //! to bottom: this module (router, server) → `openapi` → the handlers `api`, `stream`, `sse` →
 //! `state`, `http` → `jobs` → `store`, `input`, `metrics` → `db`, `error`, `config` →
-//! `memory` (the memory budget).
+//! `memory` (the memory budget); `web` (the browser dashboard at `/`) beside the handlers.
 //! docs/service.md describes the API, the storage layout and the invariants.
 //!
 //! Guarantees of this module: every request runs in a tracing span (id, method, path) and is
@@ -46,6 +46,7 @@ mod sse;
 mod state;
 mod store;
 mod stream;
+mod web;
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -99,6 +100,7 @@ pub(crate) fn router(state: Shared) -> Router {
     let cors = cors_layer(&state.cfg.cors_origins);
     let r = routes()
         .into_iter()
+        .chain(web::routes())
         .fold(Router::new(), |r, (path, handlers)| r.route(path, handlers))
         .fallback(api::not_found)
         .layer(DefaultBodyLimit::max(body_limit))

@@ -1,0 +1,164 @@
+//! The dashboard (`GET /`) in a real browser: a real `bspvt-server serve` with an API key on
+//! loopback, Debian's Chromium driven headless by playwright-core (`tests/browser/`), the page
+//! served behind a path prefix. The script drops the Cornell box (OBJ + MTL) on the page, waits
+//! on the page for `done`, checks the row against the API, deletes the scene; see
+//! `tests/browser/dashboard.mjs`. Skipped with a message where Node.js, Chromium or the
+//! script's packages are missing (`.ci/run` installs them: `apt-get install chromium`,
+//! `npm ci --prefix tests/browser`). Also, without a browser: the page and its files as
+//! served (types, policy, validators).
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::*;
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("the workspace")
+        .to_path_buf()
+}
+
+/// Node.js, Chromium and playwright-core, or why the browser test cannot run.
+fn browser_tools() -> Result<PathBuf, String> {
+    let node = Command::new("node").arg("--version").output();
+    if !node.is_ok_and(|o| o.status.success()) {
+        return Err("no `node` on PATH".into());
+    }
+    let chromium = std::env::var_os("BSPVT_CHROMIUM")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("/usr/bin/chromium"));
+    if !chromium.exists() {
+        return Err(format!(
+            "no Chromium at {} (apt-get install chromium, or set BSPVT_CHROMIUM)",
+            chromium.display()
+        ));
+    }
+    let pw = repo().join("tests/browser/node_modules/playwright-core");
+    if !pw.exists() {
+        return Err("tests/browser has no node_modules (npm ci --prefix tests/browser)".into());
+    }
+    Ok(chromium)
+}
+
+#[test]
+fn the_dashboard_submits_follows_and_deletes_a_scene_in_chromium() {
+    let chromium = match browser_tools() {
+        Ok(c) => c,
+        Err(why) => {
+            eprintln!("SKIPPED the dashboard in Chromium: {why}");
+            return;
+        }
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let srv = start(&tmp.path().join("data"), &["--api-key", API_KEY]);
+    let rooms = repo().join("assets/rooms");
+    let out = tmp.path().join("shots");
+    std::fs::create_dir_all(&out).unwrap();
+    let run = Command::new("node")
+        .current_dir(repo().join("tests/browser"))
+        .arg("dashboard.mjs")
+        .args(["--url", &srv.base, "--key", API_KEY])
+        .arg("--mesh")
+        .arg(rooms.join("cornell-box.obj"))
+        .arg("--file")
+        .arg(rooms.join("cornell-box.mtl"))
+        .arg("--out")
+        .arg(&out)
+        .arg("--chromium")
+        .arg(&chromium)
+        .output()
+        .expect("run node");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        run.status.success(),
+        "the browser script failed:\n{stderr}\n{stdout}\nserver log:\n{}",
+        srv.log_text()
+    );
+    eprintln!("{stdout}");
+    let seen: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap_or(""))
+        .unwrap_or_else(|e| panic!("the script's last line is not JSON ({e}): {stdout}"));
+    let id = seen["id"].as_str().expect("an id");
+    assert_eq!(
+        seen["states"].as_array().and_then(|s| s.last()),
+        Some(&"done".into())
+    );
+    // What the page submitted is what the API holds: the OBJ with its material library read
+    // (no warning about a missing .mtl), deleted at the end.
+    let a = agent();
+    let status = get(&a, &srv.url(&format!("/v1/scenes/{id}"))).json();
+    assert_eq!(status["state"], "cancelled", "{status}");
+    assert!(
+        status["source"]
+            .as_str()
+            .unwrap_or("")
+            .contains("cornell-box.obj"),
+        "{status}"
+    );
+    assert!(
+        status["warnings"]
+            .as_array()
+            .is_some_and(|w| w.iter().all(|w| !w.as_str().unwrap_or("").contains(".mtl"))),
+        "{status}"
+    );
+    assert!(out.join("dashboard.png").exists());
+}
+
+#[test]
+fn the_page_and_its_files_are_served_with_a_strict_policy() {
+    let tmp = tempfile::tempdir().unwrap();
+    let srv = start(&tmp.path().join("data"), &["--api-key", API_KEY]);
+    let a = agent();
+    // The page needs no key (it holds no data); the listing it calls does.
+    let page = get(&a, &srv.url("/"));
+    assert_eq!(page.status, 200);
+    assert_eq!(
+        page.header("content-type"),
+        Some("text/html; charset=utf-8")
+    );
+    let csp = page.header("content-security-policy").expect("a CSP");
+    for directive in [
+        "default-src 'none'",
+        "script-src 'self'",
+        "frame-ancestors 'none'",
+    ] {
+        assert!(csp.contains(directive), "{csp}");
+    }
+    assert!(
+        !csp.contains("unsafe-inline") && !csp.contains("unsafe-eval"),
+        "{csp}"
+    );
+    assert_eq!(page.header("x-content-type-options"), Some("nosniff"));
+    assert!(page.text().contains("ui/dashboard.js"));
+    for (file, kind) in [
+        ("dashboard.js", "text/javascript"),
+        ("upload.js", "text/javascript"),
+        ("style.css", "text/css"),
+        ("icon.svg", "image/svg+xml"),
+    ] {
+        let r = get(&a, &srv.url(&format!("/ui/{file}")));
+        assert_eq!(r.status, 200, "{file}");
+        assert!(
+            r.header("content-type").unwrap_or("").starts_with(kind),
+            "{file}"
+        );
+        // Revalidated on every load, 304 when unchanged.
+        let etag = r.header("etag").expect("an ETag").to_string();
+        let again = try_get(
+            &a,
+            &srv.url(&format!("/ui/{file}")),
+            &[("If-None-Match", &etag)],
+        )
+        .expect("GET");
+        assert_eq!(again.status, 304, "{file}");
+    }
+    let missing = get(&a, &srv.url("/ui/secret.txt"));
+    assert_eq!(missing.status, 404);
+    assert_eq!(missing.json()["error"], "not_found");
+    assert_eq!(get(&a, &srv.url("/v1/scenes")).status, 401);
+}

@@ -69,7 +69,7 @@ function rowFor(id) {
     progress: el('td'),
     vertices: el('td', { class: 'num' }),
     stored: el('td', { class: 'num' }),
-    created: el('td'),
+    created: el('td', { class: 'date' }),
     actions: el('td'),
   };
   const tr = el('tr', { 'data-id': id }, ...Object.values(cells));
@@ -132,11 +132,13 @@ function update(incoming) {
   if (s.chunks_total) text += ` · ${s.chunks_done}/${s.chunks_total} chunks`;
   if (s.state === 'baking' && s.eta_s != null) text += ` · ${Math.ceil(s.eta_s)} s left`;
   if (s.state === 'queued' && s.queue_position != null) text += ` · ${s.queue_position} ahead`;
-  c.progress.replaceChildren(bar, ' ', el('span', {}, text));
+  c.progress.replaceChildren(bar, el('div', { class: 'progress-text' }, text));
   c.vertices.textContent = (s.vertices_total ?? 0).toLocaleString('en');
   c.stored.textContent = s.sizes ? bytes(s.sizes.stored_bytes) : '';
   c.stored.title = s.sizes ? `uploaded ${bytes(s.sizes.upload_bytes)}` : '';
-  c.created.textContent = s.created_ms ? new Date(s.created_ms).toLocaleString() : '';
+  c.created.textContent = s.created_ms
+    ? new Date(s.created_ms).toLocaleString(undefined, { dateStyle: 'short', timeStyle: 'short' })
+    : '';
   if (TERMINAL.has(s.state) && row.stream) {
     row.stream.close();
     row.stream = null;

@@ -23,7 +23,7 @@
 
 pub mod envmap;
 pub mod frame;
-pub mod ggx;
+pub use bspvt_shaders::ggx;
 pub mod gpu;
 pub mod groundtruth;
 pub mod light;

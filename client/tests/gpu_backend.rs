@@ -54,7 +54,7 @@ fn without_an_adapter_auto_falls_back_and_gpu_fails() {
 fn no_shader_reads_a_uniform_buffer() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let mut seen = 0;
-    for dir in ["client/src/gpu", "proto/raytrace/src"] {
+    for dir in ["proto/shaders/src/gpu", "proto/raytrace/src"] {
         for entry in std::fs::read_dir(root.join(dir)).unwrap() {
             let path = entry.unwrap().path();
             if path.extension().is_none_or(|x| x != "wgsl") {

@@ -12,6 +12,8 @@ use anyhow::{Result, bail};
 use bspvt_proto::Scene;
 use glam::DMat4;
 
+use bspvt_shaders::gpu::{materials, wgsl};
+
 use super::context::{Gpu, buffer_entries};
 use super::vertex::{LightRecord, VertexShader, light_record, ltc_buffer, supports};
 use crate::frame::image::Image;
@@ -76,25 +78,6 @@ pub struct GpuFrames {
     target: Option<Target>,
 }
 
-/// The visibility buffer's binding and reader, appended to `resolve.wgsl`.
-fn visibility_binding(samples: u32) -> &'static str {
-    if samples > 1 {
-        "@group(0) @binding(8) var vis: texture_multisampled_2d<u32>;
-fn vis_id(px: vec2i, s: u32) -> u32 {
-    let v = textureLoad(vis, px, i32(s));
-    return v.x | (v.y << 16u);
-}
-"
-    } else {
-        "@group(0) @binding(8) var vis: texture_2d<u32>;
-fn vis_id(px: vec2i, s: u32) -> u32 {
-    let v = textureLoad(vis, px, 0);
-    return v.x | (v.y << 16u);
-}
-"
-    }
-}
-
 /// The raster and resolve pipelines for `samples` per pixel, compiled once per process.
 fn pipelines(gpu: &Gpu, samples: u32) -> Result<(wgpu::RenderPipeline, wgpu::ComputePipeline)> {
     let mut cache = gpu
@@ -113,19 +96,8 @@ fn pipelines(gpu: &Gpu, samples: u32) -> Result<(wgpu::RenderPipeline, wgpu::Com
                 })
         })
     };
-    let raster_module = module(
-        "visibility.wgsl",
-        [include_str!("visibility.wgsl"), bspvt_raytrace::CUTOUT_WGSL].concat(),
-    )?;
-    let resolve_module = module(
-        "resolve.wgsl",
-        [
-            include_str!("common.wgsl"),
-            include_str!("resolve.wgsl"),
-            visibility_binding(samples),
-        ]
-        .concat(),
-    )?;
+    let raster_module = module("visibility.wgsl", wgsl::visibility())?;
+    let resolve_module = module("resolve.wgsl", wgsl::resolve(samples))?;
     let raster = gpu.checked("the visibility pipeline", || {
         gpu.device
             .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
@@ -232,7 +204,7 @@ impl GpuFrames {
             ),
             materials: init(
                 "materials",
-                &vec![0; 16 * super::materials::RECORDS * scene.materials.len().max(1)],
+                &vec![0; 16 * materials::RECORDS * scene.materials.len().max(1)],
                 U::STORAGE,
             ),
             frames: init(
@@ -242,7 +214,7 @@ impl GpuFrames {
             ),
             surface_textures: init(
                 "surface textures",
-                bytemuck::cast_slice(&super::materials::tables(&scene.materials, uvs, true).1),
+                bytemuck::cast_slice(&materials::tables(&scene.materials, uvs, true).1),
                 U::STORAGE,
             ),
             materials_key: None,
@@ -397,7 +369,7 @@ impl GpuFrames {
         if self.materials_key != Some(mkey) {
             let mesh = &renderer.scene.mesh;
             let uvs = mesh.uvs.len() == mesh.vertex_count();
-            let (m, _) = super::materials::tables(renderer.materials(), uvs, false);
+            let (m, _) = materials::tables(renderer.materials(), uvs, false);
             gpu.queue
                 .write_buffer(&self.materials, 0, bytemuck::cast_slice(&m));
             self.materials_key = Some(mkey);

@@ -6,7 +6,6 @@
 pub mod backend;
 pub mod context;
 pub mod frame;
-mod materials;
 pub mod present;
 pub(crate) mod trees;
 pub mod vertex;

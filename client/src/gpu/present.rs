@@ -53,7 +53,7 @@ impl Compositor {
             gpu.device
                 .create_shader_module(wgpu::ShaderModuleDescriptor {
                     label: Some("present.wgsl"),
-                    source: wgpu::ShaderSource::Wgsl(include_str!("present.wgsl").into()),
+                    source: wgpu::ShaderSource::Wgsl(bspvt_shaders::gpu::wgsl::present().into()),
                 })
         })?;
         let pipeline = gpu.checked("the present pipeline", || {

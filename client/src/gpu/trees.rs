@@ -2,28 +2,12 @@
 //! (as decoded on the CPU). Trees that arrive while streaming are appended: the node buffer
 //! grows by doubling (a GPU-side copy), and only the new vertices' roots are written.
 
-use bspvt_proto::bspvt::{LineCodec, Node, VertexTrees};
+use bspvt_proto::bspvt::{LineCodec, VertexTrees};
 use bspvt_proto::cubemap::FACES;
+use bspvt_shaders::gpu::trees::{NO_TREES, codec_params, encode_vertex, line_normals};
 
 use super::context::Gpu;
 use crate::render::renderer::Trees;
-
-/// Root of a face without a tree (visible: `bspvt::ABSENT_FACE_VALUE`).
-pub(crate) const ABSENT: u32 = u32::MAX;
-/// Face 0's root of a vertex whose trees have not arrived (shaded unshadowed).
-pub(crate) const NO_TREES: u32 = u32::MAX - 1;
-/// A leaf's node word: this bit | v̄ (0..255). A split's: angle << 16 | offset.
-const LEAF: u32 = 0x8000_0000;
-
-/// The node words of one face tree: \[word, right child relative to the tree's root\].
-pub(crate) fn encode(nodes: &[Node], out: &mut Vec<[u32; 2]>) {
-    out.extend(nodes.iter().map(|n| match *n {
-        Node::Leaf { value } => [LEAF | u32::from(value), 0],
-        Node::Split { line, right } => {
-            [u32::from(line.angle) << 16 | u32::from(line.offset), right]
-        }
-    }));
-}
 
 /// The trees on the GPU and which vertices' trees are there.
 pub(crate) struct GpuTrees {
@@ -104,16 +88,8 @@ impl GpuTrees {
         };
         let mut words = Vec::new();
         for &v in new {
-            for (f, face) in trees[v as usize].faces.iter().enumerate() {
-                self.roots_cpu[v as usize * FACES + f] = match face {
-                    Some(tree) => {
-                        let root = self.node_len + words.len() as u64;
-                        encode(&tree.nodes, &mut words);
-                        u32::try_from(root).unwrap_or(ABSENT)
-                    }
-                    None => ABSENT,
-                };
-            }
+            let roots = encode_vertex(&trees[v as usize], self.node_len, &mut words);
+            self.roots_cpu[v as usize * FACES..][..FACES].copy_from_slice(&roots);
             self.uploaded[v as usize] = true;
         }
         self.reserve(gpu, self.node_len + words.len() as u64);
@@ -130,15 +106,11 @@ impl GpuTrees {
 
     /// Uses `codec`'s lines.
     pub(crate) fn set_codec(&mut self, gpu: &Gpu, codec: &LineCodec) {
-        let normals: Vec<[f32; 2]> = (0..codec.angles())
-            .map(|a| codec.normal(a as u16).to_array())
-            .collect();
+        let normals = line_normals(codec);
         self.line_normals = storage(gpu, "line normals", (normals.len() * 8) as u64);
         gpu.queue
             .write_buffer(&self.line_normals, 0, bytemuck::cast_slice(&normals));
-        let o = codec.offsets();
-        // LineCodec's half step, computed as it does.
-        self.codec = (o, bspvt_proto::bspvt::line::MAX_OFFSET / o as f32);
+        self.codec = codec_params(codec);
     }
 
     fn reset(&mut self, gpu: &Gpu, source: (usize, usize)) {

@@ -4,6 +4,7 @@
 use anyhow::{Result, bail};
 use bspvt_proto::bspvt::{LineCodec, VertexTrees};
 use bspvt_proto::scene::Material;
+use bspvt_shaders::gpu::records;
 use glam::{DVec3, Vec3};
 
 use super::context::Gpu;
@@ -51,16 +52,9 @@ pub struct ShadePoint {
     pub material: Material,
 }
 
-/// The vertex record of the shader: position, normal, (albedo, α), (F0, 0); the frames put
-/// the vertex's UV in the normal's and F0's w.
+/// The vertex record of the shader (`bspvt_shaders::gpu::records`), without a UV.
 pub(crate) fn vertex_record(p: &ShadePoint) -> [[f32; 4]; 4] {
-    let m = &p.material;
-    [
-        p.p.extend(1.0).to_array(),
-        p.n.extend(0.0).to_array(),
-        [m.albedo[0], m.albedo[1], m.albedo[2], m.roughness],
-        [m.specular[0], m.specular[1], m.specular[2], 0.0],
-    ]
+    records::vertex_record(p.p, p.n, &p.material, None)
 }
 
 /// The light as the shaders read it (`light_normal`, `radiance`, `light` of their uniforms):
@@ -159,7 +153,7 @@ pub struct VertexShader {
 
 /// The compute pipeline of `shade.wgsl`.
 fn pipeline(gpu: &Gpu) -> wgpu::ComputePipeline {
-    let src = [include_str!("common.wgsl"), include_str!("shade.wgsl")].concat();
+    let src = bspvt_shaders::gpu::wgsl::shade();
     let module = gpu
         .device
         .create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -368,17 +362,8 @@ impl VertexShader {
             let records: Vec<_> = (0..self.vertices as u32)
                 .map(|v| {
                     let (p, n, m) = renderer.vertex_surface(v);
-                    let mut r = vertex_record(&ShadePoint {
-                        p: p.as_vec3(),
-                        n: n.as_vec3(),
-                        material: m.into_owned(),
-                    });
-                    // The UV rides in the normal's and F0's spare w (resolve.wgsl reads it).
-                    if let Some(uv) = renderer.scene.mesh.uvs.get(v as usize) {
-                        r[1][3] = uv.x;
-                        r[3][3] = uv.y;
-                    }
-                    r
+                    let uv = renderer.scene.mesh.uvs.get(v as usize).copied();
+                    records::vertex_record(p.as_vec3(), n.as_vec3(), &m, uv)
                 })
                 .collect();
             self.set_vertices(gpu, &records);

@@ -8,4 +8,4 @@
 //! - [`polygon`]: the polygon integral (horizon clip, stable edge integral).
 
 pub mod polygon;
-pub mod table;
+pub use bspvt_shaders::ltc_table as table;

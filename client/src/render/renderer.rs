@@ -134,16 +134,7 @@ impl<'a> Renderer<'a> {
             .enumerate()
             .filter_map(|(v, &s)| s.then_some(v as u32))
             .collect();
-        let mesh = &scene.mesh;
-        let mut vertex_material = vec![u32::MAX; mesh.vertex_count()];
-        for (t, tri) in mesh.triangles.iter().enumerate() {
-            for &v in tri {
-                let m = &mut vertex_material[v as usize];
-                if *m == u32::MAX {
-                    *m = mesh.material_ids.get(t).copied().unwrap_or(0);
-                }
-            }
-        }
+        let vertex_material = bspvt_shaders::gpu::records::vertex_materials(&scene.mesh);
         Renderer {
             scene,
             view,

@@ -22,8 +22,8 @@ use std::time::Duration;
 pub use cutout::Cutouts;
 
 /// `covers`, the cut-out test of [`Cutouts::gpu_words`] in WGSL, for shaders that declare the
-/// `cut` buffer (`occlusion.wgsl`; the client's raster pass).
-#[cfg(feature = "gpu")]
+/// `cut` buffer (`occlusion.wgsl`; the raster pass of `bspvt_shaders::gpu::wgsl`). Text only:
+/// it needs no GPU feature.
 pub const CUTOUT_WGSL: &str = include_str!("cutout.wgsl");
 
 use bspvt_proto::Mesh;

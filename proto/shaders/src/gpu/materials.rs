@@ -53,7 +53,7 @@ const METALLIC_ROUGHNESS: f32 = 1.0;
 const DIFFUSE_MAP: f32 = 2.0;
 
 /// Vec4 records per material.
-pub(crate) const RECORDS: usize = 5;
+pub const RECORDS: usize = 5;
 
 /// The material records and the texture words. Per material: (albedo, α), (F0, kind),
 /// then for metallic-roughness (base colour factor), (metallic, roughness, base colour
@@ -67,7 +67,7 @@ pub(crate) const RECORDS: usize = 5;
 /// `uvs`: whether the mesh has texture coordinates (without, every material is its constant
 /// fields, as on the CPU); `texels`: whether to build the texture words (the records alone
 /// when only the materials' constants changed: the texture indices do not depend on them).
-pub(crate) fn tables(materials: &[Material], uvs: bool, texels: bool) -> (Vec<[f32; 4]>, Vec<u32>) {
+pub fn tables(materials: &[Material], uvs: bool, texels: bool) -> (Vec<[f32; 4]>, Vec<u32>) {
     let bits = |x: u32| f32::from_bits(x);
     let mut uses: Vec<(&TextureRef, bool)> = Vec::new();
     let mut index: HashMap<TextureKey, u32> = HashMap::new();

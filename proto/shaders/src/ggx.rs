@@ -45,7 +45,7 @@ pub fn d(alpha: f64, cos_h: f64) -> f64 {
 /// Smith's Λ(ω) for GGX: (√(1 + α² tan²θ) − 1) / 2, in the cancellation-free form
 /// α² tan²θ / (2 (√(1 + α² tan²θ) + 1)).
 #[inline]
-pub(crate) fn lambda(alpha: f64, cos_theta: f64) -> f64 {
+pub fn lambda(alpha: f64, cos_theta: f64) -> f64 {
     if cos_theta <= 0.0 {
         return f64::INFINITY;
     }
@@ -121,7 +121,7 @@ pub fn sample_vndf(alpha: f64, wo: DVec3, u: [f64; 2]) -> DVec3 {
 
 /// Density (per solid angle) of [`sample_vndf`] producing `wi`: G₁(ωo) D(h) / (4 cos θo).
 #[inline]
-pub(crate) fn pdf_vndf(alpha: f64, wo: DVec3, wi: DVec3) -> f64 {
+pub fn pdf_vndf(alpha: f64, wo: DVec3, wi: DVec3) -> f64 {
     if wo.z <= 0.0 {
         return 0.0;
     }

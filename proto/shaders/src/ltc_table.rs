@@ -90,7 +90,7 @@ pub fn alpha_node(i: usize, n: usize) -> f64 {
 
 /// The continuous node coordinate s ∈ [0, 1] of a (clamped) α: α = α_min^(1 − s).
 #[inline]
-pub(crate) fn alpha_coord(alpha: f64) -> f64 {
+pub fn alpha_coord(alpha: f64) -> f64 {
     (1.0 - ggx::clamp_alpha(alpha).ln() / MIN_ALPHA.ln()).clamp(0.0, 1.0)
 }
 
@@ -103,7 +103,7 @@ pub fn theta_node(j: usize, n: usize) -> f64 {
 /// The continuous node coordinate v ∈ [0, 1] of a view angle θ (radians), clamped to
 /// [0, θ_max]: v = 1 − √(1 − θ/θ_max).
 #[inline]
-pub(crate) fn theta_coord(theta: f64) -> f64 {
+pub fn theta_coord(theta: f64) -> f64 {
     let t = (theta / theta_max()).clamp(0.0, 1.0);
     (1.0 - (1.0 - t).sqrt()).clamp(0.0, 1.0)
 }
@@ -186,7 +186,7 @@ impl LtcShape {
 
     #[cfg(test)]
     /// M (maps the clamped cosine's frame to the lobe), column-major.
-    pub(crate) fn m(&self) -> DMat3 {
+    pub fn m(&self) -> DMat3 {
         let (x, z) = self.frame();
         DMat3::from_cols(
             self.m11 * x + self.m31 * z,
@@ -197,7 +197,7 @@ impl LtcShape {
 
     /// M⁻¹ normalised so that its (1, 1) entry is 1: rows (m22/Δ)(X − m13 Z), Y,
     /// (m22/Δ)(m11 Z − m31 X) with Δ = m11 − m13 m31. Its determinant is m22²/Δ > 0.
-    pub(crate) fn m_inv(&self) -> DMat3 {
+    pub fn m_inv(&self) -> DMat3 {
         let (x, z) = self.frame();
         let k = self.m22 / self.xz_det();
         let r0 = k * (x - self.m13 * z);
@@ -233,7 +233,7 @@ impl TableEntry {
     }
 
     /// The inverse of [`TableEntry::to_array`].
-    pub(crate) fn from_array(a: [f64; 7]) -> Self {
+    pub fn from_array(a: [f64; 7]) -> Self {
         TableEntry {
             shape: LtcShape {
                 rho: a[0],
@@ -496,7 +496,7 @@ impl LtcTable {
     /// The per-node quantities [`Self::lookup`] interpolates, in f32 for the GPU's copy of
     /// the lookup (`gpu/common.wgsl`): per node (δ, ln m11, ln m22, q), (m31, magnitude,
     /// fresnel, 0), index i·size + j.
-    pub(crate) fn gpu_nodes(&self) -> Vec<[f32; 4]> {
+    pub fn gpu_nodes(&self) -> Vec<[f32; 4]> {
         self.nodes
             .iter()
             .flat_map(|n| {

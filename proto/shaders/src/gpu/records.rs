@@ -1,0 +1,36 @@
+//! The vertex records the shading passes read (`verts` of shade.wgsl, resolve.wgsl and
+//! visibility.wgsl): four vec4 per vertex.
+
+use bspvt_proto::Mesh;
+use bspvt_proto::scene::Material;
+use glam::{Vec2, Vec3};
+
+/// The material each vertex is shaded with per vertex: that of the first triangle that uses
+/// it (material 0 where the mesh has no material ids; `u32::MAX` for a vertex no triangle
+/// uses).
+pub fn vertex_materials(mesh: &Mesh) -> Vec<u32> {
+    let mut out = vec![u32::MAX; mesh.vertex_count()];
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        for &v in tri {
+            if let Some(m) = out.get_mut(v as usize)
+                && *m == u32::MAX
+            {
+                *m = mesh.material_ids.get(t).copied().unwrap_or(0);
+            }
+        }
+    }
+    out
+}
+
+/// Position, (unit normal, u), (albedo, α), (F0, v): `material` is the one the vertex is
+/// shaded with (a textured material already evaluated at its UV); the UV rides in the spare w
+/// of the normal and F0 (0 without one) for the per-pixel pass's texture lookups.
+pub fn vertex_record(p: Vec3, n: Vec3, m: &Material, uv: Option<Vec2>) -> [[f32; 4]; 4] {
+    let uv = uv.unwrap_or(Vec2::ZERO);
+    [
+        p.extend(1.0).to_array(),
+        n.extend(uv.x).to_array(),
+        [m.albedo[0], m.albedo[1], m.albedo[2], m.roughness],
+        [m.specular[0], m.specular[1], m.specular[2], uv.y],
+    ]
+}

@@ -4,8 +4,8 @@
 //! on the page for `done`, checks the row against the API, deletes the scene; see
 //! `tests/browser/dashboard.mjs`. Skipped with a message where Node.js, Chromium or the
 //! script's packages are missing (`.ci/run` installs them: `apt-get install chromium`,
-//! `npm ci --prefix tests/browser`). Also, without a browser: the page and its files as
-//! served (types, policy, validators).
+//! `npm ci --prefix tests/browser`). Also, without a browser: the pages and their files as
+//! served (types, policy, validators; the viewer's shaders are the native client's).
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -157,6 +157,23 @@ fn the_page_and_its_files_are_served_with_a_strict_policy() {
         .expect("GET");
         assert_eq!(again.status, 304, "{file}");
     }
+    // The viewer's page, and the shaders exactly as the native client compiles them.
+    let view = get(&a, &srv.url("/view/0123456789abcdef0123456789abcdef"));
+    assert_eq!(view.status, 200);
+    assert!(view.header("content-security-policy").is_some());
+    assert!(view.text().contains("../ui/viewer.js"));
+    use bspvt_shaders::gpu::wgsl;
+    for (name, source) in [
+        ("shade.wgsl", wgsl::shade()),
+        ("visibility.wgsl", wgsl::visibility()),
+        ("resolve.wgsl", wgsl::resolve(1)),
+        ("present.wgsl", wgsl::present().to_string()),
+    ] {
+        let r = get(&a, &srv.url(&format!("/ui/wgsl/{name}")));
+        assert_eq!(r.status, 200, "{name}");
+        assert_eq!(r.text(), source, "{name} is not the native client's source");
+    }
+    assert_eq!(get(&a, &srv.url("/ui/wgsl/other.wgsl")).status, 404);
     let missing = get(&a, &srv.url("/ui/secret.txt"));
     assert_eq!(missing.status, 404);
     assert_eq!(missing.json()["error"], "not_found");

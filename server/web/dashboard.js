@@ -136,6 +136,14 @@ function update(incoming) {
   c.vertices.textContent = (s.vertices_total ?? 0).toLocaleString('en');
   c.stored.textContent = s.sizes ? bytes(s.sizes.stored_bytes) : '';
   c.stored.title = s.sizes ? `uploaded ${bytes(s.sizes.upload_bytes)}` : '';
+  // The viewer streams while the bake runs: offered as soon as the scene can be read.
+  const viewable = s.state === 'done' || s.state === 'baking' || s.state === 'queued';
+  const link = c.actions.querySelector('a.view');
+  if (viewable && !link) {
+    c.actions.prepend(el('a', { class: 'view', href: api(`view/${s.id}`) }, 'view'), ' ');
+  } else if (!viewable && link) {
+    link.remove();
+  }
   c.created.textContent = s.created_ms
     ? new Date(s.created_ms).toLocaleString(undefined, { dateStyle: 'short', timeStyle: 'short' })
     : '';

@@ -10,57 +10,15 @@
 // server/tests/browser_dashboard.rs starts the server and runs this.
 
 import { readFileSync } from 'node:fs';
-import http from 'node:http';
 import { basename, join } from 'node:path';
 import { chromium } from 'playwright-core';
 
-const args = parseArgs(process.argv.slice(2));
-const PREFIX = '/bspvt/';
+import { BASE_FLAGS, PREFIX, parseArgs, prefixProxy } from './proxy.mjs';
 
-function parseArgs(argv) {
-  const out = { file: [] };
-  for (let i = 0; i < argv.length; i += 2) {
-    const k = argv[i].replace(/^--/, '');
-    const v = argv[i + 1];
-    if (v === undefined) throw new Error(`--${k} needs a value`);
-    if (k === 'file') out.file.push(v);
-    else out[k] = v;
-  }
-  for (const need of ['url', 'mesh', 'out']) {
-    if (!out[need]) throw new Error(`--${need} is required`);
-  }
-  return out;
-}
+const args = parseArgs(process.argv.slice(2), ['url', 'mesh', 'out']);
 
 function fail(msg) {
   throw new Error(msg);
-}
-
-/** A reverse proxy that serves `upstream` under PREFIX (and nothing else), streaming both ways. */
-function prefixProxy(upstream) {
-  const up = new URL(upstream);
-  const server = http.createServer((req, res) => {
-    if (!req.url.startsWith(PREFIX)) {
-      res.writeHead(404).end('outside the prefix');
-      return;
-    }
-    const p = http.request(
-      {
-        host: up.hostname,
-        port: up.port,
-        method: req.method,
-        path: `/${req.url.slice(PREFIX.length)}`,
-        headers: req.headers,
-      },
-      (r) => {
-        res.writeHead(r.statusCode, r.headers);
-        r.pipe(res);
-      },
-    );
-    p.on('error', (e) => res.writeHead(502).end(String(e)));
-    req.pipe(p);
-  });
-  return new Promise((ok) => server.listen(0, '127.0.0.1', () => ok(server)));
 }
 
 const proxy = await prefixProxy(args.url);
@@ -69,14 +27,7 @@ const base = `http://127.0.0.1:${proxy.address().port}${PREFIX}`;
 const browser = await chromium.launch({
   executablePath: args.chromium ?? '/usr/bin/chromium',
   headless: true,
-  args: [
-    '--no-sandbox',
-    '--disable-gpu',
-    '--disable-background-networking',
-    '--disable-component-update',
-    '--no-first-run',
-    '--disable-sync',
-  ],
+  args: [...BASE_FLAGS, '--disable-gpu'],
 });
 const problems = [];
 const seen = {};
@@ -161,6 +112,9 @@ try {
   if (api.warnings.length && !cells[1].includes(`${api.warnings.length} warning`)) {
     fail(`the API has ${api.warnings.length} warnings, the row says ${cells[1]}`);
   }
+  // The row offers the viewer, under the same prefix.
+  const view = await page.getAttribute(`${row} a.view`, 'href');
+  if (view !== `${base}view/${id}`) fail(`the row's viewer link is ${view}, not ${base}view/${id}`);
   await page.screenshot({ path: join(args.out, 'dashboard.png') });
 
   // A bad drop is refused on the page, with a reason, and nothing is sent.

@@ -74,8 +74,10 @@ pub(crate) fn run(a: &DemoArgs) -> Result<()> {
             ", baked before: reusing it"
         }
     );
-    // The service's browser dashboard (bake progress, submissions), up while this runs.
-    println!("dashboard: {}/", served.remote.base().trim_end_matches('/'));
+    // The service's browser pages (bake progress, submissions; the WebGPU viewer), up while
+    // this runs.
+    let base = served.remote.base().trim_end_matches('/');
+    println!("dashboard: {base}/  viewer: {base}/view/{}", served.id);
     let height = connected.scene.camera.image_height(a.size, None);
     let mut session = connected.session(&opts, a.size, height)?;
     session.method = method(&a.method)?;

@@ -61,10 +61,10 @@ pub struct GpuFrames {
     resolve: wgpu::ComputePipeline,
     raster_params: wgpu::Buffer,
     resolve_params: wgpu::Buffer,
-    indices: wgpu::Buffer,
+    /// Per triangle: corners and material (`records::triangles`).
+    tris: wgpu::Buffer,
     /// The scene's cut-outs by triangle, for the raster pass's alpha test.
     cut: wgpu::Buffer,
-    tri_material: wgpu::Buffer,
     materials: wgpu::Buffer,
     /// The textures the materials sample (`materials::tables`).
     surface_textures: wgpu::Buffer,
@@ -158,10 +158,7 @@ impl GpuFrames {
         let mesh = &scene.mesh;
         let uvs = mesh.uvs.len() == mesh.vertex_count();
         let (raster, resolve) = pipelines(gpu, samples)?;
-        let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
-        let tri_material: Vec<u32> = (0..mesh.triangles.len())
-            .map(|t| mesh.material_ids.get(t).copied().unwrap_or(0))
-            .collect();
+        let tris = bspvt_shaders::gpu::records::triangles(mesh);
         let init = |label: &str, bytes: &[u8], usage: wgpu::BufferUsages| {
             let mut padded = bytes.to_vec();
             padded.resize(bytes.len().max(16), 0);
@@ -188,18 +185,13 @@ impl GpuFrames {
                 bytemuck::bytes_of(&<ResolveParams as bytemuck::Zeroable>::zeroed()),
                 U::STORAGE,
             ),
-            indices: init("indices", bytemuck::cast_slice(&indices), U::STORAGE),
+            tris: init("triangles", bytemuck::cast_slice(&tris), U::STORAGE),
             cut: init(
                 "cut-outs",
                 bytemuck::cast_slice(
                     &bspvt_raytrace::Cutouts::of(mesh, &scene.materials)
                         .map_or(vec![0u32], |c| c.gpu_words_by_triangle()),
                 ),
-                U::STORAGE,
-            ),
-            tri_material: init(
-                "triangle materials",
-                bytemuck::cast_slice(&tri_material),
                 U::STORAGE,
             ),
             materials: init(
@@ -409,7 +401,7 @@ impl GpuFrames {
             &[
                 &self.raster_params,
                 &self.shader.verts,
-                &self.indices,
+                &self.tris,
                 &self.cut,
             ],
         );
@@ -418,8 +410,7 @@ impl GpuFrames {
         let buffers = [
             &self.resolve_params,
             &self.shader.verts,
-            &self.indices,
-            &self.tri_material,
+            &self.tris,
             &self.materials,
             &self.shader.out,
             &self.ltc,
@@ -461,19 +452,19 @@ impl GpuFrames {
         let buffers: Vec<&wgpu::Buffer> = buffers.iter().chain([&t.image]).collect();
         let mut entries = buffer_entries(&buffers);
         entries.push(wgpu::BindGroupEntry {
-            binding: 8,
+            binding: 7,
             resource: wgpu::BindingResource::TextureView(&vis_view),
         });
         entries.push(wgpu::BindGroupEntry {
-            binding: 9,
+            binding: 8,
             resource: light_texture.as_entire_binding(),
         });
         entries.push(wgpu::BindGroupEntry {
-            binding: 10,
+            binding: 9,
             resource: surface_textures.as_entire_binding(),
         });
         entries.push(wgpu::BindGroupEntry {
-            binding: 11,
+            binding: 10,
             resource: frames.as_entire_binding(),
         });
         let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {

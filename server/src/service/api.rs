@@ -1050,7 +1050,7 @@ pub(crate) async fn get_scene_file(
 }
 
 /// Reads scene `id`'s stored bytes off the async threads and maps them with `f`.
-async fn read_stored_scene(
+pub(crate) async fn read_stored_scene(
     st: &Shared,
     id: &str,
     f: impl FnOnce(Vec<u8>) -> anyhow::Result<Vec<u8>> + Send + 'static,
@@ -1067,7 +1067,7 @@ async fn read_stored_scene(
 }
 
 /// A body that never changes for its ETag: counted as served, revalidated by the client.
-fn immutable_response(
+pub(crate) fn immutable_response(
     st: &Shared,
     body: axum::body::Bytes,
     content_type: &'static str,

@@ -2,12 +2,14 @@
 //! for jobs and metadata, chunk files for the trees, all under one data directory.
 //!
 //! Modules: [`config`] (flags, environment, TOML), `api` (handlers), `stream` (tree
-//! streaming), `sse` (status events), `openapi` (the API document and its handler),
+//! streaming, also as GPU words), `gpu_scene` (a scene as the GPU shaders read it, for the
+//! browser viewer), `sse` (status events), `openapi` (the API document and its handler),
 //! `state` (what every handler reaches: state, scene lookup, stream accounting), `http`
 //! (query strings, conditional requests), `jobs` (scheduler and workers), `store` (files),
 //! `db` (SQLite), `input` (uploads → scenes), `metrics`, `error`. Only [`config`] and
 //! the service handles below are public. The modules depend on each other without cycles, top
-//! to bottom: this module (router, server) → `openapi` → the handlers `api`, `stream`, `sse` →
+//! to bottom: this module (router, server) → `openapi` → the handlers `api`, `stream`, `sse`,
+//! `gpu_scene` →
 //! `state`, `http` → `jobs` → `store`, `input`, `metrics` → `db`, `error`, `config` →
 //! `memory` (the memory budget); `web` (the browser dashboard at `/`) beside the handlers.
 //! docs/service.md describes the API, the storage layout and the invariants.
@@ -30,6 +32,7 @@ mod db;
 mod error;
 #[doc(hidden)]
 pub mod fuzz;
+mod gpu_scene;
 mod http;
 mod idle;
 mod input;
@@ -88,6 +91,7 @@ pub(crate) fn routes() -> Vec<(&'static str, MethodRouter<Shared>)> {
         ("/v1/scenes/{id}/mesh", get(api::get_mesh)),
         ("/v1/scenes/{id}/scene", get(api::get_scene_file)),
         ("/v1/scenes/{id}/trees", get(stream::get_trees)),
+        ("/v1/scenes/{id}/gpu-scene", get(gpu_scene::get_gpu_scene)),
         ("/v1/openapi.json", get(openapi::openapi)),
         ("/healthz", get(api::healthz)),
         ("/metrics", get(api::metrics)),
@@ -103,6 +107,7 @@ pub(crate) fn router(state: Shared) -> Router {
         .chain(web::routes())
         .fold(Router::new(), |r, (path, handlers)| r.route(path, handlers))
         .fallback(api::not_found)
+        .layer(compression())
         .layer(DefaultBodyLimit::max(body_limit))
         .layer(middleware::from_fn_with_state(state.clone(), observe))
         .layer(middleware::map_response(error::json_errors));
@@ -113,6 +118,33 @@ pub(crate) fn router(state: Shared) -> Router {
         None => r,
     }
     .with_state(state)
+}
+
+/// gzip (when the request accepts it) for what browsers fetch and is not compressed already:
+/// the viewer's GPU words and scene bundle (3–6× smaller: docs/service.md, "Viewer"), the
+/// pages, scripts, styles and shaders. Never the event streams (each event must go out at
+/// once), the encoded trees (zstd inside) or the API's JSON.
+fn compression()
+-> tower_http::compression::CompressionLayer<impl tower_http::compression::Predicate> {
+    use axum::http::{Extensions, HeaderMap, Version, header};
+    use tower_http::compression::predicate::{Predicate, SizeAbove};
+    let browser_bodies = |_: StatusCode, _: Version, h: &HeaderMap, _: &Extensions| {
+        h.get(header::CONTENT_TYPE)
+            .and_then(|v| v.to_str().ok())
+            .is_some_and(|t| {
+                [
+                    "application/vnd.bspvt-gpu",
+                    "text/html",
+                    "text/css",
+                    "text/javascript",
+                    "text/wgsl",
+                ]
+                .iter()
+                .any(|p| t.starts_with(p))
+            })
+    };
+    tower_http::compression::CompressionLayer::new()
+        .compress_when(SizeAbove::new(1024).and(browser_bodies))
 }
 
 /// CORS for browser clients on `origins` (`*`: any); none when the list is empty. Requests

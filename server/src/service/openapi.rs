@@ -31,6 +31,7 @@ use super::{api, sse, stream};
         api::get_mesh,
         api::get_scene_file,
         stream::get_trees,
+        super::gpu_scene::get_gpu_scene,
         api::healthz,
         api::metrics,
         openapi,

@@ -28,8 +28,10 @@ use axum::body::{Body, Bytes};
 use axum::extract::{Path, RawQuery, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
+use bspvt_proto::bspvt::VertexTrees;
 use bspvt_proto::cubemap::FACES;
 use bspvt_proto::encoding::{BakeHeader, decode_chunk, decode_header, encode_chunk};
+use bspvt_shaders::gpu::trees;
 use tokio::sync::watch;
 
 use super::clients::Client;
@@ -60,18 +62,43 @@ pub(crate) struct Selection {
     pub chunks: std::ops::Range<u32>,
     /// Bit f set = face f kept.
     pub faces: u8,
+    /// The encoding of the body.
+    pub format: Format,
+}
+
+/// The body's encoding: the bake file's frames (`encoded`, the default), or the trees as the
+/// GPU shaders read them (`gpu`, for the browser viewer: [`gpu_header`], [`gpu_chunk`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Format {
+    Encoded,
+    Gpu,
 }
 
 impl Selection {
     /// Parses `vertices=A..B` (also `A..`, `..B`) and `faces=LIST` against a scene.
     pub(crate) fn parse(q: Option<&str>, row: &SceneRow) -> ApiResult<Selection> {
         let n = row.vertex_count;
-        let (mut range, mut faces) = (None, None);
+        let (mut range, mut faces, mut format) = (None, None, None);
         for (k, v) in query_pairs(q)? {
             match k.as_str() {
                 "vertices" if range.is_none() => range = Some(parse_range(&v, n)?),
                 "faces" if faces.is_none() => faces = Some(parse_faces(&v)?),
-                "vertices" | "faces" => {
+                "format" if format.is_none() => {
+                    format = Some(match v.as_str() {
+                        "encoded" => Format::Encoded,
+                        "gpu" => Format::Gpu,
+                        other => {
+                            return Err(ApiError::bad_request(
+                                "invalid_query",
+                                format!(
+                                    "format {:?} is neither encoded nor gpu",
+                                    super::error::truncate(other, 40)
+                                ),
+                            ));
+                        }
+                    })
+                }
+                "vertices" | "faces" | "format" => {
                     return Err(ApiError::bad_request(
                         "invalid_query",
                         format!("`{k}` is given twice"),
@@ -81,7 +108,7 @@ impl Selection {
                     return Err(ApiError::bad_request(
                         "invalid_query",
                         format!(
-                            "unknown query parameter {:?} (expected vertices, faces)",
+                            "unknown query parameter {:?} (expected vertices, faces, format)",
                             super::error::truncate(other, 100)
                         ),
                     ));
@@ -93,6 +120,7 @@ impl Selection {
         Ok(Selection {
             chunks: a / cv..b.div_ceil(cv),
             faces: faces.unwrap_or(ALL_FACES),
+            format: format.unwrap_or(Format::Encoded),
         })
     }
 }
@@ -164,7 +192,7 @@ fn etag(row: &SceneRow, sel: &Selection, chunks: &[ChunkMeta]) -> String {
     eat(&row.header);
     eat(&sel.chunks.start.to_le_bytes());
     eat(&sel.chunks.end.to_le_bytes());
-    eat(&[sel.faces]);
+    eat(&[sel.faces, sel.format as u8]);
     for m in chunks {
         eat(&m.bytes.to_le_bytes());
         eat(&m.crc32.to_le_bytes());
@@ -181,6 +209,7 @@ fn etag(row: &SceneRow, sel: &Selection, chunks: &[ChunkMeta]) -> String {
         ("id" = String, Path, description = "Scene id"),
         ("vertices" = Option<String>, Query, description = "`A..B` (end exclusive), `A..` or `..B`: the chunks intersecting this range are sent (default: all)"),
         ("faces" = Option<String>, Query, description = "Comma-separated faces to keep: 0-5 or px,nx,py,ny,pz,nz (default: all). Chunks are re-encoded without the other faces."),
+        ("format" = Option<String>, Query, description = "`encoded` (default: the bake file's frames) or `gpu` (the node words and roots the GPU shaders read, for the browser viewer; docs/service.md)"),
     ),
     responses(
         (status = 200, description = "Header frame then chunk frames (docs/encoding.md). Headers: X-Bspvt-Vertices (covered range), X-Bspvt-Chunks, ETag when final.", content_type = "application/vnd.bspvt"),
@@ -235,7 +264,7 @@ pub(crate) async fn get_trees(
         (sel.chunks.end as u64 * cv as u64).min(live.row.vertex_count as u64)
     );
     let length = match &durable {
-        Some(m) if sel.faces == ALL_FACES => {
+        Some(m) if sel.faces == ALL_FACES && sel.format == Format::Encoded => {
             Some(live.row.header.len() as u64 + m.iter().map(|c| c.bytes as u64).sum::<u64>())
         }
         _ => None,
@@ -243,9 +272,13 @@ pub(crate) async fn get_trees(
     let stream = TreeStream {
         st: st.clone(),
         rx: live.subscribe(),
-        header_frame: Some(Bytes::from(live.row.header.clone())),
+        header_frame: Some(Bytes::from(match sel.format {
+            Format::Encoded => live.row.header.clone(),
+            Format::Gpu => gpu_header(&header),
+        })),
         live,
         header,
+        format: sel.format,
         next: sel.chunks.start,
         end: sel.chunks.end,
         faces: sel.faces,
@@ -253,12 +286,20 @@ pub(crate) async fn get_trees(
         done: false,
         _guard: guard,
     };
-    let body = Body::from_stream(futures_util::stream::unfold(stream, TreeStream::step));
+    // Fused: a layer that polls again after the end (gzip's encoder does) gets `None`, not
+    // `unfold`'s panic.
+    let body = Body::from_stream(futures_util::StreamExt::fuse(futures_util::stream::unfold(
+        stream,
+        TreeStream::step,
+    )));
     let mut r = body.into_response();
     let h = r.headers_mut();
     h.insert(
         header::CONTENT_TYPE,
-        HeaderValue::from_static("application/vnd.bspvt"),
+        HeaderValue::from_static(match sel.format {
+            Format::Encoded => "application/vnd.bspvt",
+            Format::Gpu => "application/vnd.bspvt-gpu",
+        }),
     );
     if let Ok(v) = HeaderValue::from_str(&covered) {
         h.insert("x-bspvt-vertices", v);
@@ -292,6 +333,7 @@ struct TreeStream {
     next: u32,
     end: u32,
     faces: u8,
+    format: Format,
     shutdown: watch::Receiver<bool>,
     done: bool,
     _guard: StreamGuard,
@@ -401,9 +443,10 @@ impl TreeStream {
         }
     }
 
-    /// Drops the faces not asked for (re-encoding the chunk), on the blocking pool.
+    /// Drops the faces not asked for (re-encoding the chunk) or turns the chunk into GPU
+    /// words, on the blocking pool; a whole-face encoded chunk is sent as stored.
     async fn filter(&self, frame: Vec<u8>) -> Result<Vec<u8>, String> {
-        if self.faces == ALL_FACES {
+        if self.faces == ALL_FACES && self.format == Format::Encoded {
             return Ok(frame);
         }
         let _permit = self
@@ -413,7 +456,7 @@ impl TreeStream {
             .await
             .map_err(|e| e.to_string())?;
         let header = self.header.clone();
-        let faces = self.faces;
+        let (faces, format) = (self.faces, self.format);
         blocking(move || {
             let (mut chunk, _) = decode_chunk(&frame, &header)?;
             for t in &mut chunk.trees {
@@ -423,15 +466,59 @@ impl TreeStream {
                     }
                 }
             }
-            Ok(encode_chunk(
-                chunk.first_vertex,
-                &chunk.trees,
-                &header.codec(),
-            ))
+            Ok(match format {
+                Format::Encoded => encode_chunk(chunk.first_vertex, &chunk.trees, &header.codec()),
+                Format::Gpu => gpu_chunk(chunk.first_vertex, &chunk.trees),
+            })
         })
         .await
         .map_err(|e| e.detail)
     }
+}
+
+/// The `format=gpu` stream's header: `"BVGT"`, then u32 LE version (1), vertex count, chunk
+/// vertices, the line codec's offsets O and angle count A, f32 LE half step √2 / O, and the A
+/// line normals (2 × f32 each): what `shade.wgsl` needs besides the nodes
+/// (`bspvt_shaders::gpu::trees`).
+pub(crate) fn gpu_header(h: &BakeHeader) -> Vec<u8> {
+    let codec = h.codec();
+    let normals = trees::line_normals(&codec);
+    let (offsets, half_step) = trees::codec_params(&codec);
+    let mut out = b"BVGT".to_vec();
+    for x in [
+        1,
+        h.vertex_count,
+        h.chunk_vertices,
+        offsets,
+        normals.len() as u32,
+    ] {
+        out.extend_from_slice(&x.to_le_bytes());
+    }
+    out.extend_from_slice(&half_step.to_le_bytes());
+    for n in normals.iter().flatten() {
+        out.extend_from_slice(&n.to_le_bytes());
+    }
+    out
+}
+
+/// One chunk of the `format=gpu` stream: `"BVGC"`, u32 LE first vertex, vertex count V and
+/// node count N, then 6·V root indices relative to the chunk's first node ([`trees::ABSENT`]
+/// for a face without a tree), then N nodes of two u32 (`shade.wgsl`'s `nodes`).
+pub(crate) fn gpu_chunk(first_vertex: u32, vertex_trees: &[VertexTrees]) -> Vec<u8> {
+    let mut nodes = Vec::new();
+    let roots: Vec<[u32; FACES]> = vertex_trees
+        .iter()
+        .map(|t| trees::encode_vertex(t, 0, &mut nodes))
+        .collect();
+    let mut out = Vec::with_capacity(16 + roots.len() * 24 + nodes.len() * 8);
+    out.extend_from_slice(b"BVGC");
+    for x in [first_vertex, roots.len() as u32, nodes.len() as u32] {
+        out.extend_from_slice(&x.to_le_bytes());
+    }
+    for w in roots.iter().flatten().chain(nodes.iter().flatten()) {
+        out.extend_from_slice(&w.to_le_bytes());
+    }
+    out
 }
 
 #[cfg(test)]

@@ -5,6 +5,23 @@ use bspvt_proto::Mesh;
 use bspvt_proto::scene::Material;
 use glam::{Vec2, Vec3};
 
+/// Per triangle: its three corners and its material (`tris` of visibility.wgsl and
+/// resolve.wgsl).
+pub fn triangles(mesh: &Mesh) -> Vec<[u32; 4]> {
+    mesh.triangles
+        .iter()
+        .enumerate()
+        .map(|(t, c)| {
+            [
+                c[0],
+                c[1],
+                c[2],
+                mesh.material_ids.get(t).copied().unwrap_or(0),
+            ]
+        })
+        .collect()
+}
+
 /// The material each vertex is shaded with per vertex: that of the first triangle that uses
 /// it (material 0 where the mesh has no material ids; `u32::MAX` for a vertex no triangle
 /// uses).
@@ -33,4 +50,23 @@ pub fn vertex_record(p: Vec3, n: Vec3, m: &Material, uv: Option<Vec2>) -> [[f32;
         [m.albedo[0], m.albedo[1], m.albedo[2], m.roughness],
         [m.specular[0], m.specular[1], m.specular[2], uv.y],
     ]
+}
+
+/// The records of every vertex of a mesh at rest: the vertex's material (its first
+/// triangle's, clamped to the list; textured ones evaluated at the vertex's UV) and its
+/// unbent normal — what a viewer without normal maps or a roughness override shades.
+pub fn mesh_vertex_records(mesh: &Mesh, materials: &[Material]) -> Vec<[[f32; 4]; 4]> {
+    let fallback = Material::default();
+    let ids = vertex_materials(mesh);
+    (0..mesh.vertex_count())
+        .map(|v| {
+            let id = ids[v] as usize;
+            let m = materials
+                .get(id.min(materials.len().saturating_sub(1)))
+                .unwrap_or(&fallback);
+            let uv = mesh.uvs.get(v).copied();
+            let n = mesh.normals.get(v).copied().unwrap_or(Vec3::Y);
+            vertex_record(mesh.positions[v], n.normalize_or(Vec3::Y), &m.at(uv), uv)
+        })
+        .collect()
 }

@@ -43,26 +43,25 @@ struct VertexOut {
 @group(0) @binding(0) var<storage, read> fp: ResolveParams;
 // Four per vertex: position, (normal, u), (albedo, α), (F0, v) — the compute pass's records.
 @group(0) @binding(1) var<storage, read> verts: array<vec4f>;
-// Three per triangle.
-@group(0) @binding(2) var<storage, read> indices: array<u32>;
-// The material of each triangle.
-@group(0) @binding(3) var<storage, read> tri_material: array<u32>;
-// Four per material (gpu/materials.rs): (albedo, α), (F0, kind), then the textured kinds'
+// Per triangle: its three corners and its material (gpu/records.rs `triangles`; one buffer,
+// not two, so that the pass fits WebGPU's ten storage buffers per stage).
+@group(0) @binding(2) var<storage, read> tris: array<vec4u>;
+// Five per material (gpu/materials.rs): (albedo, α), (F0, kind), then the textured kinds'
 // factors and texture indices.
-@group(0) @binding(4) var<storage, read> materials: array<vec4f>;
-@group(0) @binding(5) var<storage, read> shading: array<VertexOut>;
-@group(0) @binding(6) var<storage, read> ltc: array<vec4f>;
+@group(0) @binding(3) var<storage, read> materials: array<vec4f>;
+@group(0) @binding(4) var<storage, read> shading: array<VertexOut>;
+@group(0) @binding(5) var<storage, read> ltc: array<vec4f>;
 // Linear radiance per pixel, row-major.
-@group(0) @binding(7) var<storage, read_write> image: array<vec4f>;
+@group(0) @binding(6) var<storage, read_write> image: array<vec4f>;
 // The light's texture (LightTexture::gpu_words; a placeholder when untextured).
-@group(0) @binding(9) var<storage, read> light_texture: array<vec4f>;
+@group(0) @binding(8) var<storage, read> light_texture: array<vec4f>;
 // The textures the materials sample: a 12-word header per texture use (width, height,
 // offset, wrap u | wrap v << 4, the UV transform a, b, c, d, tx, ty as f32 bits, two unused),
 // then RGBA8 texels (gpu/materials.rs).
-@group(0) @binding(10) var<storage, read> surface_tex: array<u32>;
+@group(0) @binding(9) var<storage, read> surface_tex: array<u32>;
 // Two per vertex where a material is normal-mapped — (unbent normal, 0), (tangent, bitangent
 // sign) —, a single zero vec4 otherwise (frame.rs `tangent_frames`).
-@group(0) @binding(11) var<storage, read> frames: array<vec4f>;
+@group(0) @binding(10) var<storage, read> frames: array<vec4f>;
 
 fn light_count() -> u32 {
     return fp.counts.x;
@@ -344,9 +343,10 @@ fn keep_facing(bent: vec3f, n: vec3f, wo: vec3f) -> vec3f {
 
 // The radiance of triangle t seen along the ray through image point (x, y).
 fn shade(t: u32, x: f32, y: f32) -> vec3f {
-    let i0 = indices[3u * t];
-    let i1 = indices[3u * t + 1u];
-    let i2 = indices[3u * t + 2u];
+    let tri = tris[t];
+    let i0 = tri.x;
+    let i1 = tri.y;
+    let i2 = tri.z;
     let p0 = verts[4u * i0].xyz;
     let p1 = verts[4u * i1].xyz;
     let p2 = verts[4u * i2].xyz;
@@ -378,7 +378,7 @@ fn shade(t: u32, x: f32, y: f32) -> vec3f {
     let side = select(1.0, -1.0, dot(n, g) < 0.0);
     let el = length(to_eye);
     let wo = select(n, to_eye / el, el > 0.0 && finite(el));
-    let m = min(tri_material[t], max(fp.counts.w, 1u) - 1u);
+    let m = min(tri.w, max(fp.counts.w, 1u) - 1u);
     let uv = w.x * vec2f(verts[4u * i0 + 1u].w, verts[4u * i0 + 3u].w)
         + w.y * vec2f(verts[4u * i1 + 1u].w, verts[4u * i1 + 3u].w)
         + w.z * vec2f(verts[4u * i2 + 1u].w, verts[4u * i2 + 3u].w);

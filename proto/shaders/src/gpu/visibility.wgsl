@@ -15,8 +15,8 @@ struct Raster {
 @group(0) @binding(0) var<storage, read> rp: Raster;
 // Four per vertex: position, normal, (albedo, α), (F0, 0) — the compute pass's records.
 @group(0) @binding(1) var<storage, read> verts: array<vec4f>;
-// Three per triangle.
-@group(0) @binding(2) var<storage, read> indices: array<u32>;
+// Per triangle: its three corners and its material (gpu/records.rs `triangles`).
+@group(0) @binding(2) var<storage, read> tris: array<vec4u>;
 
 // The scene's alpha cut-outs by mesh triangle (Cutouts::gpu_words_by_triangle; one 0 word:
 // none), tested by `covers` (bspvt_raytrace::CUTOUT_WGSL, appended).
@@ -32,7 +32,7 @@ struct Varyings {
 @vertex
 fn vs(@builtin(vertex_index) i: u32) -> Varyings {
     var out: Varyings;
-    out.clip = rp.view_proj * vec4f(verts[4u * indices[i]].xyz, 1.0);
+    out.clip = rp.view_proj * vec4f(verts[4u * tris[i / 3u][i % 3u]].xyz, 1.0);
     out.id = i / 3u + 1u;
     let corner = i % 3u;
     out.bary = vec3f(f32(corner == 0u), f32(corner == 1u), f32(corner == 2u));

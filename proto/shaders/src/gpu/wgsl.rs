@@ -35,14 +35,14 @@ pub fn present() -> &'static str {
 /// The visibility buffer's binding and reader, appended to `resolve.wgsl`.
 fn visibility_binding(samples: u32) -> &'static str {
     if samples > 1 {
-        "@group(0) @binding(8) var vis: texture_multisampled_2d<u32>;
+        "@group(0) @binding(7) var vis: texture_multisampled_2d<u32>;
 fn vis_id(px: vec2i, s: u32) -> u32 {
     let v = textureLoad(vis, px, i32(s));
     return v.x | (v.y << 16u);
 }
 "
     } else {
-        "@group(0) @binding(8) var vis: texture_2d<u32>;
+        "@group(0) @binding(7) var vis: texture_2d<u32>;
 fn vis_id(px: vec2i, s: u32) -> u32 {
     let v = textureLoad(vis, px, 0);
     return v.x | (v.y << 16u);

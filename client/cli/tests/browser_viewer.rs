@@ -1,0 +1,197 @@
+//! The browser viewer (`/view/{id}`) against `bspvt render`: a real `bspvt serve` on
+//! loopback bakes the built-in `plate-small` scene; Debian's Chromium, headless, with WebGPU on
+//! its SwiftShader device, opens the viewer behind a path prefix (`tests/browser/viewer.mjs`,
+//! playwright-core), waits for every tree and that frame, and saves the canvas; `bspvt render`
+//! draws the same scene, camera and light on the CPU. The two must agree away from edges (mean
+//! difference ≤ 2 % of full scale), and a shift-drag must move the light and change the frame.
+//! Skipped with a message where Node.js, Chromium or `tests/browser/node_modules` is missing
+//! (`.ci/run` installs them).
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use bspvt_tests::service::{agent, submit_ok, wait_done};
+use common::*;
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// Node.js, Chromium and playwright-core, or why the browser test cannot run.
+fn browser_tools() -> Result<PathBuf, String> {
+    let node = Command::new("node").arg("--version").output();
+    if !node.is_ok_and(|o| o.status.success()) {
+        return Err("no `node` on PATH".into());
+    }
+    let chromium = std::env::var_os("BSPVT_CHROMIUM")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("/usr/bin/chromium"));
+    if !chromium.exists() {
+        return Err(format!(
+            "no Chromium at {} (apt-get install chromium, or set BSPVT_CHROMIUM)",
+            chromium.display()
+        ));
+    }
+    if !repo()
+        .join("tests/browser/node_modules/playwright-core")
+        .exists()
+    {
+        return Err("tests/browser has no node_modules (npm ci --prefix tests/browser)".into());
+    }
+    Ok(chromium)
+}
+
+/// Linear-in-8-bit RGB of a PNG, row-major.
+fn rgb(path: &Path) -> (u32, u32, Vec<[f32; 3]>) {
+    let img = image::open(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .to_rgb8();
+    let px = img
+        .pixels()
+        .map(|p| p.0.map(|c| f32::from(c) / 255.0))
+        .collect();
+    (img.width(), img.height(), px)
+}
+
+/// Mean absolute difference (0–1, averaged over channels) of `a` and `b`, over the pixels of
+/// `a` that are not at an edge: no 8-neighbour differs from them by more than 0.06 in mean
+/// value (silhouettes, where the CPU's and the rasteriser's coverage rules differ by a pixel).
+fn mean_difference_off_edges(w: u32, h: u32, a: &[[f32; 3]], b: &[[f32; 3]]) -> (f64, f64) {
+    let lum = |p: &[f32; 3]| (p[0] + p[1] + p[2]) / 3.0;
+    let (w, h) = (w as i64, h as i64);
+    let (mut sum, mut n) = (0.0f64, 0u64);
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let l = lum(&a[i]);
+            let edge = (-1..=1).any(|dy: i64| {
+                (-1..=1).any(|dx: i64| {
+                    let (xx, yy) = (x + dx, y + dy);
+                    xx >= 0
+                        && yy >= 0
+                        && xx < w
+                        && yy < h
+                        && (lum(&a[(yy * w + xx) as usize]) - l).abs() > 0.06
+                })
+            });
+            if !edge {
+                sum += (0..3)
+                    .map(|c| f64::from((a[i][c] - b[i][c]).abs()))
+                    .sum::<f64>()
+                    / 3.0;
+                n += 1;
+            }
+        }
+    }
+    (sum / n.max(1) as f64, n as f64 / (w * h) as f64)
+}
+
+#[test]
+fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
+    let chromium = match browser_tools() {
+        Ok(c) => c,
+        Err(why) => {
+            eprintln!("SKIPPED the viewer in Chromium: {why}");
+            return;
+        }
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = plate_small(tmp.path(), "plate", 16, 256);
+    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
+    let a = agent();
+    let scene_json = std::fs::read(&scene).unwrap();
+    let id = submit_ok(
+        &a,
+        &srv,
+        &[("scene", Some("plate.json"), &scene_json)],
+        None,
+    );
+    wait_done(&a, &srv, &id);
+    let (w, h) = (192, 144);
+    let reference = tmp.path().join("ref.png");
+    let st = Command::new(BIN)
+        .arg("render")
+        .arg(&scene)
+        .args(["--method", "bspvt", "--mode", "pixel"])
+        .args(["--width", &w.to_string(), "--height", &h.to_string()])
+        .arg("--cache")
+        .arg(tmp.path().join("cache"))
+        .arg("--out")
+        .arg(&reference)
+        .status()
+        .expect("bspvt render");
+    assert!(st.success());
+    let run = Command::new("node")
+        .current_dir(repo().join("tests/browser"))
+        .arg("viewer.mjs")
+        .args(["--url", &srv.base, "--id", &id, "--mode", "pixel"])
+        .args(["--width", &w.to_string(), "--height", &h.to_string()])
+        .arg("--out")
+        .arg(tmp.path())
+        .arg("--chromium")
+        .arg(&chromium)
+        .output()
+        .expect("run node");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "the browser script failed:\n{}\n{stdout}\nserver log:\n{}",
+        String::from_utf8_lossy(&run.stderr),
+        srv.log_text()
+    );
+    let seen: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap_or(""))
+        .unwrap_or_else(|e| panic!("the script's last line is not JSON ({e}): {stdout}"));
+    eprintln!(
+        "viewer in {}: graphics path {}, first frame {} ms after the page's start, {} ms per \
+         frame, {} bytes fetched",
+        seen["browser"], seen["graphics"], seen["firstFrameMs"], seen["bench_ms"], seen["bytes"]
+    );
+    assert!(
+        seen["graphics"]
+            .as_str()
+            .unwrap_or("")
+            .starts_with("WebGPU"),
+        "{seen}"
+    );
+
+    // BSPVT_BROWSER_OUT=DIR keeps the frames (the docs' screenshots come from here).
+    if let Some(dir) = std::env::var_os("BSPVT_BROWSER_OUT") {
+        let dir = PathBuf::from(dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        for f in ["ref.png", "web.png", "web-moved.png"] {
+            std::fs::copy(tmp.path().join(f), dir.join(f)).unwrap();
+        }
+    }
+    let (rw, rh, r) = rgb(&reference);
+    let (ww, wh, web) = rgb(&tmp.path().join("web.png"));
+    assert_eq!((rw, rh), (ww, wh), "sizes");
+    let (diff, kept) = mean_difference_off_edges(rw, rh, &r, &web);
+    eprintln!(
+        "browser vs bspvt render: mean difference {:.4} over {:.1} % of the pixels (edges left out)",
+        diff,
+        kept * 100.0
+    );
+    assert!(kept > 0.8, "edges cover too much of the frame: {kept}");
+    assert!(
+        diff <= 0.02,
+        "the browser's frame differs from bspvt render's by {diff}"
+    );
+
+    // The light moved in its region, and the frame changed with it.
+    let (_, _, moved) = rgb(&tmp.path().join("web-moved.png"));
+    let (change, _) = mean_difference_off_edges(ww, wh, &web, &moved);
+    eprintln!(
+        "light dragged by {}: frame changed by {change:.4}",
+        seen["light_offset"]
+    );
+    assert!(
+        seen["light_offset"]
+            .as_str()
+            .is_some_and(|o| o != "0.000,0.000,0.000")
+    );
+    assert!(change > 0.002, "the frame did not change: {change}");
+}

@@ -1,0 +1,196 @@
+//! `GET /v1/scenes/{id}/gpu-scene`: a scene as the GPU shaders read it, for the browser viewer
+//! (`/view/{id}`): the buffers of `bspvt_shaders::gpu` built here, once per scene, with the
+//! same code the native client fills its wgpu buffers with, so the page only uploads them.
+//!
+//! Body: `"BVGS"`, u32 LE length L, L bytes of JSON (padded with spaces to a multiple of 4),
+//! then the sections the JSON's `sections` lists as `[offset, bytes]` from the end of the JSON:
+//! `verts` (4 × vec4f per vertex: position, (normal, u), (albedo, α), (F0, v)), `tris`
+//! (vec4u per triangle: corners and material), `materials` (vec4f records),
+//! `surface_textures` (u32 words), `cut` (u32 words), `ltc` (vec4f, two per table node). The
+//! JSON also carries the camera, the polygon lights (points, normal, radiance, region), the
+//! bounds, and `not_shown`: what of the scene the browser's GPU path leaves out, one sentence
+//! each.
+
+use axum::extract::{Path, State};
+use axum::http::HeaderMap;
+use axum::response::Response;
+use bspvt_proto::Scene;
+use bspvt_proto::api::JobState;
+use bspvt_shaders::gpu::{materials, records};
+use bspvt_shaders::ltc_table::LtcTable;
+use serde_json::json;
+
+use super::api::{immutable_response, read_stored_scene};
+use super::error::{ApiResult, ErrorBody, gone};
+use super::http::{not_modified, not_modified_response};
+use super::input;
+use super::state::{Shared, lookup};
+
+/// The bundle's format version (the JSON's `version`).
+const VERSION: u32 = 1;
+
+/// The scene as the GPU shaders read it (see the module documentation).
+#[utoipa::path(
+    get,
+    path = "/v1/scenes/{id}/gpu-scene",
+    tag = "scenes",
+    params(("id" = String, Path, description = "Scene id")),
+    responses(
+        (status = 200, description = "\"BVGS\", u32 JSON length, JSON (camera, lights, sections), then the GPU buffers (docs/service.md, \"Viewer\")", content_type = "application/vnd.bspvt-gpu-scene"),
+        (status = 304, description = "Not modified (If-None-Match)"),
+        (status = 404, description = "Unknown id", body = ErrorBody),
+        (status = 410, description = "Deleted", body = ErrorBody),
+    )
+)]
+pub(crate) async fn get_gpu_scene(
+    State(st): State<Shared>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> ApiResult<Response> {
+    let live = lookup(&st, &id).await?;
+    if live.state() == JobState::Cancelled {
+        return Err(gone(&id));
+    }
+    // A scene never changes after submission; the bundle's version is part of its name.
+    let etag = format!("\"gpu-scene-{id}-{:016x}-v{VERSION}\"", live.row.mesh_hash);
+    if not_modified(&headers, &etag) {
+        return Ok(not_modified_response(&etag));
+    }
+    let body = st
+        .bodies
+        .get_or_build(&etag, || {
+            read_stored_scene(&st, &id, |bytes| {
+                let scene = input::decode_scene(&bytes).map_err(|e| anyhow::anyhow!(e))?;
+                bundle(&scene)
+            })
+        })
+        .await?;
+    Ok(immutable_response(
+        &st,
+        body,
+        "application/vnd.bspvt-gpu-scene",
+        &etag,
+    ))
+}
+
+/// Little-endian bytes of 32-bit words.
+fn le<T: Copy>(words: &[T], to: impl Fn(T) -> [u8; 4]) -> Vec<u8> {
+    words.iter().flat_map(|&w| to(w)).collect()
+}
+
+/// The bundle of `scene` (see the module documentation).
+pub(crate) fn bundle(scene: &Scene) -> anyhow::Result<Vec<u8>> {
+    let mesh = &scene.mesh;
+    let uvs = mesh.uvs.len() == mesh.vertex_count();
+    let verts: Vec<f32> = records::mesh_vertex_records(mesh, &scene.materials)
+        .iter()
+        .flatten()
+        .flatten()
+        .copied()
+        .collect();
+    let tris: Vec<u32> = records::triangles(mesh).into_iter().flatten().collect();
+    let (material_records, textures) = materials::tables(&scene.materials, uvs, true);
+    let cut = bspvt_raytrace::Cutouts::of(mesh, &scene.materials)
+        .map_or(vec![0u32], |c| c.gpu_words_by_triangle());
+    let table = LtcTable::builtin();
+    let ltc = table.gpu_nodes();
+    let sections: Vec<(&str, Vec<u8>)> = vec![
+        ("verts", le(&verts, f32::to_le_bytes)),
+        ("tris", le(&tris, u32::to_le_bytes)),
+        (
+            "materials",
+            le(
+                &material_records
+                    .iter()
+                    .flatten()
+                    .copied()
+                    .collect::<Vec<_>>(),
+                f32::to_le_bytes,
+            ),
+        ),
+        ("surface_textures", le(&textures, u32::to_le_bytes)),
+        ("cut", le(&cut, u32::to_le_bytes)),
+        (
+            "ltc",
+            le(
+                &ltc.iter().flatten().copied().collect::<Vec<_>>(),
+                f32::to_le_bytes,
+            ),
+        ),
+    ];
+    let mut offset = 0usize;
+    let mut table_of_sections = serde_json::Map::new();
+    for (name, bytes) in &sections {
+        table_of_sections.insert((*name).into(), json!([offset, bytes.len()]));
+        offset += bytes.len();
+    }
+    let lights: Vec<_> = scene
+        .lights
+        .iter()
+        .map(|l| {
+            json!({
+                "vertices": l.points().iter().map(|p| p.to_array()).collect::<Vec<_>>(),
+                "normal": l.normal().to_array(),
+                "radiance": l.radiance,
+                "two_sided": l.two_sided,
+                "region": l.region.as_ref().map(|r| json!({"min": r.min, "max": r.max})),
+                "moves_in_plane": l.moves_in_plane,
+            })
+        })
+        .collect();
+    let bounds = mesh.bounds();
+    let doc = json!({
+        "version": VERSION,
+        "vertices": mesh.vertex_count(),
+        "triangles": mesh.triangles.len(),
+        "materials": scene.materials.len(),
+        "uvs": uvs,
+        "bounds": {"min": bounds.min.to_array(), "max": bounds.max.to_array()},
+        "camera": scene.camera,
+        "lights": lights,
+        "ltc_size": table.size(),
+        "chunk_vertices": scene.bake.chunk_vertices,
+        "not_shown": not_shown(scene),
+        "sections": table_of_sections,
+    });
+    let mut text = serde_json::to_string(&doc)?;
+    while !text.len().is_multiple_of(4) {
+        text.push(' ');
+    }
+    let len = u32::try_from(text.len())?;
+    let mut out = Vec::with_capacity(8 + text.len() + offset);
+    out.extend_from_slice(b"BVGS");
+    out.extend_from_slice(&len.to_le_bytes());
+    out.extend_from_slice(text.as_bytes());
+    for (_, bytes) in sections {
+        out.extend_from_slice(&bytes);
+    }
+    Ok(out)
+}
+
+/// What of `scene` the browser's GPU path does not draw, one sentence each.
+fn not_shown(scene: &Scene) -> Vec<String> {
+    let mut out = Vec::new();
+    if !scene.punctual.is_empty() {
+        out.push(format!(
+            "{} point or spot light(s): the GPU path shades polygon lights only",
+            scene.punctual.len()
+        ));
+    }
+    if !scene.suns.is_empty() {
+        out.push(format!(
+            "{} sun(s): the GPU path shades polygon lights only",
+            scene.suns.len()
+        ));
+    }
+    if scene.lights.iter().any(|l| l.image.is_some()) {
+        out.push("light textures: a textured light is drawn with its radiance".into());
+    }
+    if scene.lights.iter().any(|l| l.vertices.len() > 8) {
+        out.push("lights of more than 8 vertices".into());
+    }
+    if scene.materials.iter().any(|m| m.normal_map.is_some()) {
+        out.push("normal maps: surfaces are shaded with their mesh normals".into());
+    }
+    out
+}

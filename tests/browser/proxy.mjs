@@ -1,0 +1,58 @@
+// A reverse proxy that serves a service under a path prefix (and nothing else), streaming
+// both ways, as a deployment behind nginx or a gateway would.
+
+import http from 'node:http';
+
+export const PREFIX = '/bspvt/';
+
+/** Listens on a free loopback port; resolves to the server (`.address().port`). */
+export function prefixProxy(upstream) {
+  const up = new URL(upstream);
+  const server = http.createServer((req, res) => {
+    if (!req.url.startsWith(PREFIX)) {
+      res.writeHead(404).end('outside the prefix');
+      return;
+    }
+    const p = http.request(
+      {
+        host: up.hostname,
+        port: up.port,
+        method: req.method,
+        path: `/${req.url.slice(PREFIX.length)}`,
+        headers: req.headers,
+      },
+      (r) => {
+        res.writeHead(r.statusCode, r.headers);
+        r.pipe(res);
+      },
+    );
+    p.on('error', (e) => res.writeHead(502).end(String(e)));
+    req.pipe(p);
+  });
+  return new Promise((ok) => server.listen(0, '127.0.0.1', () => ok(server)));
+}
+
+/** `--key value` pairs; `--file` may repeat. */
+export function parseArgs(argv, required) {
+  const out = { file: [] };
+  for (let i = 0; i < argv.length; i += 2) {
+    const k = argv[i].replace(/^--/, '');
+    const v = argv[i + 1];
+    if (v === undefined) throw new Error(`--${k} needs a value`);
+    if (k === 'file') out.file.push(v);
+    else out[k] = v;
+  }
+  for (const need of required) {
+    if (!out[need]) throw new Error(`--${need} is required`);
+  }
+  return out;
+}
+
+/** Flags every headless run needs on this closed network. */
+export const BASE_FLAGS = [
+  '--no-sandbox',
+  '--disable-background-networking',
+  '--disable-component-update',
+  '--no-first-run',
+  '--disable-sync',
+];

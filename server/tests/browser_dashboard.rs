@@ -11,43 +11,13 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use common::*;
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .expect("the workspace")
-        .to_path_buf()
-}
-
-/// Node.js, Chromium and playwright-core, or why the browser test cannot run.
-fn browser_tools() -> Result<PathBuf, String> {
-    let node = Command::new("node").arg("--version").output();
-    if !node.is_ok_and(|o| o.status.success()) {
-        return Err("no `node` on PATH".into());
-    }
-    let chromium = std::env::var_os("BSPVT_CHROMIUM")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("/usr/bin/chromium"));
-    if !chromium.exists() {
-        return Err(format!(
-            "no Chromium at {} (apt-get install chromium, or set BSPVT_CHROMIUM)",
-            chromium.display()
-        ));
-    }
-    let pw = repo().join("tests/browser/node_modules/playwright-core");
-    if !pw.exists() {
-        return Err("tests/browser has no node_modules (npm ci --prefix tests/browser)".into());
-    }
-    Ok(chromium)
-}
-
 #[test]
 fn the_dashboard_submits_follows_and_deletes_a_scene_in_chromium() {
-    let chromium = match browser_tools() {
+    let chromium = match bspvt_tests::browser::tools() {
         Ok(c) => c,
         Err(why) => {
             eprintln!("SKIPPED the dashboard in Chromium: {why}");
@@ -56,11 +26,11 @@ fn the_dashboard_submits_follows_and_deletes_a_scene_in_chromium() {
     };
     let tmp = tempfile::tempdir().unwrap();
     let srv = start(&tmp.path().join("data"), &["--api-key", API_KEY]);
-    let rooms = repo().join("assets/rooms");
+    let rooms = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/rooms");
     let out = tmp.path().join("shots");
     std::fs::create_dir_all(&out).unwrap();
     let run = Command::new("node")
-        .current_dir(repo().join("tests/browser"))
+        .current_dir(bspvt_tests::browser::scripts())
         .arg("dashboard.mjs")
         .args(["--url", &srv.base, "--key", API_KEY])
         .arg("--mesh")

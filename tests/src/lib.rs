@@ -1,9 +1,11 @@
 //! Shared helpers for the tests: a seeded random generator, random leaf values, random
 //! visibility cube maps, and a checker for the split of a spherical polygon by a vertex's
-//! trees; and [`service`], the one harness of every test that runs the baking service.
+//! trees; [`service`], the one harness of every test that runs the baking service; and
+//! [`browser`], the tools of the browser tests.
 
 #![warn(unreachable_pub, missing_docs)]
 
+pub mod browser;
 pub mod fuzz;
 pub mod service;
 

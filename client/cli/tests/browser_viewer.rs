@@ -17,34 +17,6 @@ use std::process::Command;
 use bspvt_tests::service::{agent, submit_ok, wait_done};
 use common::*;
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// Node.js, Chromium and playwright-core, or why the browser test cannot run.
-fn browser_tools() -> Result<PathBuf, String> {
-    let node = Command::new("node").arg("--version").output();
-    if !node.is_ok_and(|o| o.status.success()) {
-        return Err("no `node` on PATH".into());
-    }
-    let chromium = std::env::var_os("BSPVT_CHROMIUM")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("/usr/bin/chromium"));
-    if !chromium.exists() {
-        return Err(format!(
-            "no Chromium at {} (apt-get install chromium, or set BSPVT_CHROMIUM)",
-            chromium.display()
-        ));
-    }
-    if !repo()
-        .join("tests/browser/node_modules/playwright-core")
-        .exists()
-    {
-        return Err("tests/browser has no node_modules (npm ci --prefix tests/browser)".into());
-    }
-    Ok(chromium)
-}
-
 /// Linear-in-8-bit RGB of a PNG, row-major.
 fn rgb(path: &Path) -> (u32, u32, Vec<[f32; 3]>) {
     let img = image::open(path)
@@ -92,7 +64,7 @@ fn mean_difference_off_edges(w: u32, h: u32, a: &[[f32; 3]], b: &[[f32; 3]]) -> 
 
 #[test]
 fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
-    let chromium = match browser_tools() {
+    let chromium = match bspvt_tests::browser::tools() {
         Ok(c) => c,
         Err(why) => {
             eprintln!("SKIPPED the viewer in Chromium: {why}");
@@ -126,7 +98,7 @@ fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
         .expect("bspvt render");
     assert!(st.success());
     let run = Command::new("node")
-        .current_dir(repo().join("tests/browser"))
+        .current_dir(bspvt_tests::browser::scripts())
         .arg("viewer.mjs")
         .args(["--url", &srv.base, "--id", &id, "--mode", "pixel"])
         .args(["--width", &w.to_string(), "--height", &h.to_string()])

@@ -957,10 +957,6 @@ pub(crate) async fn get_mesh(
     RawQuery(q): RawQuery,
     headers: HeaderMap,
 ) -> ApiResult<Response> {
-    let live = lookup(&st, &id).await?;
-    if live.state() == JobState::Cancelled {
-        return Err(gone(&id));
-    }
     let mut format = "json";
     for (k, v) in query_pairs(q.as_deref())? {
         match (k.as_str(), v.as_str()) {
@@ -980,32 +976,26 @@ pub(crate) async fn get_mesh(
             }
         }
     }
-    let etag = format!("\"mesh-{:016x}-{format}\"", live.row.mesh_hash);
-    if not_modified(&headers, &etag) {
-        return Ok(not_modified_response(&etag));
-    }
-    let body = st
-        .bodies
-        .get_or_build(&etag, || {
-            read_stored_scene(&st, &id, move |bytes| {
-                let scene = input::decode_scene(&bytes).map_err(|e| anyhow::anyhow!(e))?;
-                Ok(match format {
-                    "ply" => ply_bytes(&scene.mesh),
-                    _ => serde_json::to_vec(&scene.mesh)?,
-                })
-            })
-        })
-        .await?;
     let content_type = if format == "ply" {
         "application/octet-stream"
     } else {
         "application/json"
     };
-    let mut r = immutable_response(&st, body, content_type, &etag);
-    if let Ok(v) = HeaderValue::from_str(&format!("{:016x}", live.row.mesh_hash)) {
-        r.headers_mut().insert("x-bspvt-mesh-hash", v);
-    }
-    Ok(r)
+    scene_derived(
+        &st,
+        &id,
+        &headers,
+        |hash| format!("\"mesh-{hash:016x}-{format}\""),
+        content_type,
+        move |bytes| {
+            let scene = input::decode_scene(&bytes).map_err(|e| anyhow::anyhow!(e))?;
+            Ok(match format {
+                "ply" => ply_bytes(&scene.mesh),
+                _ => serde_json::to_vec(&scene.mesh)?,
+            })
+        },
+    )
+    .await
 }
 
 /// The scene exactly as baked (mesh, materials, lights, camera, bake settings), in the
@@ -1028,29 +1018,50 @@ pub(crate) async fn get_scene_file(
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> ApiResult<Response> {
-    let live = lookup(&st, &id).await?;
-    if live.state() == JobState::Cancelled {
-        return Err(gone(&id));
-    }
     // A scene never changes after submission: its id and mesh hash name its bytes.
-    let etag = format!("\"scene-{id}-{:016x}\"", live.row.mesh_hash);
-    if not_modified(&headers, &etag) {
+    scene_derived(
+        &st,
+        &id,
+        &headers,
+        |hash| format!("\"scene-{id}-{hash:016x}\""),
+        "application/octet-stream",
+        Ok,
+    )
+    .await
+}
+
+/// A body made from scene `id`'s stored bytes by `build`: named by `etag` (of the mesh hash),
+/// built once per name and shared (`bodies`), 304 when the client has it, 410 for a deleted
+/// scene; with `X-Bspvt-Mesh-Hash`. The scene, its mesh and its GPU bundle are such bodies.
+pub(crate) async fn scene_derived(
+    st: &Shared,
+    id: &str,
+    headers: &HeaderMap,
+    etag: impl FnOnce(u64) -> String,
+    content_type: &'static str,
+    build: impl FnOnce(Vec<u8>) -> anyhow::Result<Vec<u8>> + Send + 'static,
+) -> ApiResult<Response> {
+    let live = lookup(st, id).await?;
+    if live.state() == JobState::Cancelled {
+        return Err(gone(id));
+    }
+    let etag = etag(live.row.mesh_hash);
+    if not_modified(headers, &etag) {
         return Ok(not_modified_response(&etag));
     }
     let body = st
         .bodies
-        .get_or_build(&etag, || read_stored_scene(&st, &id, Ok))
+        .get_or_build(&etag, || read_stored_scene(st, id, build))
         .await?;
-    Ok(immutable_response(
-        &st,
-        body,
-        "application/octet-stream",
-        &etag,
-    ))
+    let mut r = immutable_response(st, body, content_type, &etag);
+    if let Ok(v) = HeaderValue::from_str(&format!("{:016x}", live.row.mesh_hash)) {
+        r.headers_mut().insert("x-bspvt-mesh-hash", v);
+    }
+    Ok(r)
 }
 
 /// Reads scene `id`'s stored bytes off the async threads and maps them with `f`.
-pub(crate) async fn read_stored_scene(
+async fn read_stored_scene(
     st: &Shared,
     id: &str,
     f: impl FnOnce(Vec<u8>) -> anyhow::Result<Vec<u8>> + Send + 'static,
@@ -1067,7 +1078,7 @@ pub(crate) async fn read_stored_scene(
 }
 
 /// A body that never changes for its ETag: counted as served, revalidated by the client.
-pub(crate) fn immutable_response(
+fn immutable_response(
     st: &Shared,
     body: axum::body::Bytes,
     content_type: &'static str,

@@ -15,16 +15,14 @@ use axum::extract::{Path, State};
 use axum::http::HeaderMap;
 use axum::response::Response;
 use bspvt_proto::Scene;
-use bspvt_proto::api::JobState;
 use bspvt_shaders::gpu::{materials, records};
 use bspvt_shaders::ltc_table::LtcTable;
 use serde_json::json;
 
-use super::api::{immutable_response, read_stored_scene};
-use super::error::{ApiResult, ErrorBody, gone};
-use super::http::{not_modified, not_modified_response};
+use super::api::scene_derived;
+use super::error::{ApiResult, ErrorBody};
 use super::input;
-use super::state::{Shared, lookup};
+use super::state::Shared;
 
 /// The bundle's format version (the JSON's `version`).
 const VERSION: u32 = 1;
@@ -47,30 +45,19 @@ pub(crate) async fn get_gpu_scene(
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> ApiResult<Response> {
-    let live = lookup(&st, &id).await?;
-    if live.state() == JobState::Cancelled {
-        return Err(gone(&id));
-    }
     // A scene never changes after submission; the bundle's version is part of its name.
-    let etag = format!("\"gpu-scene-{id}-{:016x}-v{VERSION}\"", live.row.mesh_hash);
-    if not_modified(&headers, &etag) {
-        return Ok(not_modified_response(&etag));
-    }
-    let body = st
-        .bodies
-        .get_or_build(&etag, || {
-            read_stored_scene(&st, &id, |bytes| {
-                let scene = input::decode_scene(&bytes).map_err(|e| anyhow::anyhow!(e))?;
-                bundle(&scene)
-            })
-        })
-        .await?;
-    Ok(immutable_response(
+    scene_derived(
         &st,
-        body,
+        &id,
+        &headers,
+        |hash| format!("\"gpu-scene-{id}-{hash:016x}-v{VERSION}\""),
         "application/vnd.bspvt-gpu-scene",
-        &etag,
-    ))
+        |bytes| {
+            let scene = input::decode_scene(&bytes).map_err(|e| anyhow::anyhow!(e))?;
+            bundle(&scene)
+        },
+    )
+    .await
 }
 
 /// Little-endian bytes of 32-bit words.

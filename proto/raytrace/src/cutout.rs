@@ -108,7 +108,6 @@ impl Cutouts {
     /// bytes start at, the wrap modes along u and v — 0 repeat, 1 clamp, 2 mirror —, alpha,
     /// cut-off, the texture's mean alpha, its UV transform's a, b, c, d, tx, ty, two unused),
     /// then the masks' alpha bytes, four to a word.
-    #[cfg(feature = "gpu")]
     pub(crate) fn gpu_words(&self, slots: &[u32]) -> Vec<u32> {
         use bspvt_proto::texture::Wrap;
         let entries = 4 + slots.len();
@@ -169,7 +168,6 @@ impl Cutouts {
 
     /// [`Cutouts::gpu_words`] with each mesh triangle's entry in mesh order (a raster pass's
     /// triangle index).
-    #[cfg(feature = "gpu")]
     pub fn gpu_words_by_triangle(&self) -> Vec<u32> {
         self.gpu_words(&self.slot)
     }

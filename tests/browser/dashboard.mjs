@@ -11,9 +11,7 @@
 
 import { readFileSync } from 'node:fs';
 import { basename, join } from 'node:path';
-import { chromium } from 'playwright-core';
-
-import { BASE_FLAGS, PREFIX, parseArgs, prefixProxy } from './proxy.mjs';
+import { open, parseArgs } from './proxy.mjs';
 
 const args = parseArgs(process.argv.slice(2), ['url', 'mesh', 'out']);
 
@@ -21,14 +19,7 @@ function fail(msg) {
   throw new Error(msg);
 }
 
-const proxy = await prefixProxy(args.url);
-const base = `http://127.0.0.1:${proxy.address().port}${PREFIX}`;
-// playwright-core starts Chromium on a fresh, empty profile of its own (deleted at close).
-const browser = await chromium.launch({
-  executablePath: args.chromium ?? '/usr/bin/chromium',
-  headless: true,
-  args: [...BASE_FLAGS, '--disable-gpu'],
-});
+const { proxy, base, browser } = await open(args.url, args.chromium, ['--disable-gpu']);
 const problems = [];
 const seen = {};
 try {

@@ -1,7 +1,9 @@
-// A reverse proxy that serves a service under a path prefix (and nothing else), streaming
-// both ways, as a deployment behind nginx or a gateway would.
+// What both browser scripts share: a reverse proxy that serves a service under a path prefix
+// (and nothing else), streaming both ways, as a deployment behind nginx or a gateway would;
+// Chromium started headless; the scripts' arguments.
 
 import http from 'node:http';
+import { chromium as launcher } from 'playwright-core';
 
 export const PREFIX = '/bspvt/';
 
@@ -49,10 +51,26 @@ export function parseArgs(argv, required) {
 }
 
 /** Flags every headless run needs on this closed network. */
-export const BASE_FLAGS = [
+const BASE_FLAGS = [
   '--no-sandbox',
   '--disable-background-networking',
   '--disable-component-update',
   '--no-first-run',
   '--disable-sync',
 ];
+
+/**
+ * Debian's Chromium (`chromium`: its path), headless with `flags`, on a fresh profile of
+ * playwright-core's own (deleted at close); the proxy that serves `url` under PREFIX; and the
+ * page's base URL through it.
+ */
+export async function open(url, chromium, flags) {
+  const proxy = await prefixProxy(url);
+  const base = `http://127.0.0.1:${proxy.address().port}${PREFIX}`;
+  const browser = await launcher.launch({
+    executablePath: chromium ?? '/usr/bin/chromium',
+    headless: true,
+    args: [...BASE_FLAGS, ...flags],
+  });
+  return { proxy, base, browser };
+}

@@ -13,9 +13,7 @@
 
 import { writeFileSync } from 'node:fs';
 import { join } from 'node:path';
-import { chromium } from 'playwright-core';
-
-import { BASE_FLAGS, PREFIX, parseArgs, prefixProxy } from './proxy.mjs';
+import { open, parseArgs } from './proxy.mjs';
 
 const args = parseArgs(process.argv.slice(2), ['url', 'id', 'width', 'height', 'mode', 'out']);
 // WebGPU on Chromium's own SwiftShader (Vulkan on the CPU): the canvas presents through
@@ -33,13 +31,7 @@ function fail(msg) {
   throw new Error(msg);
 }
 
-const proxy = await prefixProxy(args.url);
-const base = `http://127.0.0.1:${proxy.address().port}${PREFIX}`;
-const browser = await chromium.launch({
-  executablePath: args.chromium ?? '/usr/bin/chromium',
-  headless: true,
-  args: [...BASE_FLAGS, ...WEBGPU_FLAGS],
-});
+const { proxy, base, browser } = await open(args.url, args.chromium, WEBGPU_FLAGS);
 const problems = [];
 try {
   const page = await browser.newPage({ viewport: { width: Number(args.width) + 80, height: Number(args.height) + 400 } });

@@ -658,9 +658,9 @@ async function main() {
     viewer.dirty = false;
     const complete = streamed && viewer.treesIn === viewer.n;
     const start = performance.now();
-    html.dataset.step = `drawing ${frames}`;
+    html.dataset.step = `drawing frame ${drawn + 1}`;
     await viewer.draw();
-    html.dataset.step = `drawn ${frames}`;
+    html.dataset.step = `drew frame ${drawn + 1}`;
     const ms = performance.now() - start;
     frames += 1;
     if (first === null) {

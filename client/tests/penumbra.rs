@@ -117,7 +117,7 @@ fn rt_penumbra_beats_hard_shadow_against_ltc_exact() {
         let mut err = Vec::new();
         for t in ALL {
             let start = Instant::now();
-            let img = penumbra::render(&r, &l, t, Some(&occ), &p).unwrap();
+            let img = penumbra::render(&r, &Guide::new(&r), &l, t, Some(&occ), &p).unwrap();
             let ms = start.elapsed().as_secs_f64() * 1e3;
             let e = mae(&img, &reference, &r);
             eprintln!(
@@ -161,8 +161,15 @@ fn rt_penumbra_beats_hard_shadow_against_ltc_exact() {
             kernel: Kernel::Light(8),
             ..p
         };
-        let img =
-            penumbra::render(&r, &l, Technique::RtPenumbra, Some(&occ), &light_kernel).unwrap();
+        let img = penumbra::render(
+            &r,
+            &Guide::new(&r),
+            &l,
+            Technique::RtPenumbra,
+            Some(&occ),
+            &light_kernel,
+        )
+        .unwrap();
         let e = mae(&img, &reference, &r);
         eprintln!("{name}: RtPenumbra, light-shaped kernel 8×8: {e:.5}");
         assert!(e < 0.85 * hard, "{name}: light kernel {e} vs hard {hard}");
@@ -224,7 +231,7 @@ fn finite_in_degenerate_configurations() {
                     "{name} {t:?}: pixel {i} factor {v}"
                 );
             }
-            let img = penumbra::render(&r, &l, t, Some(&occ), &p).unwrap();
+            let img = penumbra::render(&r, &Guide::new(&r), &l, t, Some(&occ), &p).unwrap();
             assert!(
                 img.pixels
                     .iter()

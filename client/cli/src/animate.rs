@@ -55,6 +55,8 @@ pub(crate) struct AnimateReport {
     pub(crate) first_frame_ms: f64,
     /// Share of the vertices whose trees were in that first frame.
     pub(crate) first_frame_trees: f64,
+    /// Where the time to the first frame went.
+    pub(crate) first_frame_stages: Stages,
     /// From the command's start to every tree present (the first full-quality frame).
     pub(crate) full_trees_ms: Option<f64>,
     /// Median and mean time of one frame along the path (shading only, no file writing).
@@ -72,6 +74,55 @@ pub(crate) struct AnimateReport {
     pub(crate) reconnects: u64,
     pub(crate) trees_complete: bool,
     pub(crate) stream_error: Option<String>,
+}
+
+/// The stages from the command's start to the first frame, each stage's own time (ms).
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub(crate) struct Stages {
+    /// Reaching the service (an embedded one started, a local scene submitted) and fetching
+    /// the scene and its mesh.
+    pub(crate) connect_ms: f64,
+    /// The session: G-buffer, visible vertices, the tree fetcher started, cached trees read.
+    pub(crate) session_ms: f64,
+    /// The method and the backend set up (a GPU's device, buffers and pipelines).
+    pub(crate) setup_ms: f64,
+    /// The first frame drawn (after one poll of the stream).
+    pub(crate) draw_ms: f64,
+}
+
+/// Marks the end of each stage of [`Stages`] as the command goes.
+pub(crate) struct StageClock {
+    started: Instant,
+    last: Instant,
+    pub(crate) stages: Stages,
+}
+
+impl StageClock {
+    pub(crate) fn new(started: Instant) -> StageClock {
+        StageClock {
+            started,
+            last: started,
+            stages: Stages::default(),
+        }
+    }
+
+    /// The ms since the previous mark.
+    pub(crate) fn lap(&mut self) -> f64 {
+        let now = Instant::now();
+        let ms = (now - self.last).as_secs_f64() * 1e3;
+        self.last = now;
+        ms
+    }
+}
+
+impl std::fmt::Display for Stages {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "connect {:.0} ms, session {:.0} ms, set-up {:.0} ms, draw {:.0} ms",
+            self.connect_ms, self.session_ms, self.setup_ms, self.draw_ms
+        )
+    }
 }
 
 /// The frame sequence's settings.
@@ -123,17 +174,19 @@ impl AnimateReport {
     }
 
     /// Draws the first frame at once, with whatever trees have arrived, records when (since
-    /// `started`) and with how many trees, and saves it as `path`.
+    /// `clock`'s start), the stages before it, and with how many trees, and saves it as `path`.
     pub(crate) fn first_frame(
         &mut self,
         session: &mut Session,
-        started: Instant,
+        mut clock: StageClock,
         path: &Path,
         exposure: f32,
     ) -> Result<()> {
         session.poll();
         let img = session.frame();
-        self.first_frame_ms = started.elapsed().as_secs_f64() * 1e3;
+        clock.stages.draw_ms = clock.lap();
+        self.first_frame_ms = clock.started.elapsed().as_secs_f64() * 1e3;
+        self.first_frame_stages = clock.stages;
         self.first_frame_trees = session.streamed.fraction();
         img.save(path, exposure)
     }
@@ -188,18 +241,22 @@ pub(crate) fn run(a: &AnimateArgs) -> Result<()> {
     }
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let mut clock = StageClock::new(started);
     let opts = a.connect.options();
     let connected = connect(&opts)?;
+    clock.stages.connect_ms = clock.lap();
     let f = &a.frame;
     let height = connected.scene.camera.image_height(f.width, f.height);
     let mut session = connected.session(&opts, f.width, height)?;
+    clock.stages.session_ms = clock.lap();
     session.method = method(&f.method)?;
     session.mode = f.mode.into();
     session.set_env(f.env.options(&connected.scene)?);
     session.set_backend(f.backend.resolve()?);
     session.set_roughness(a.roughness);
+    clock.stages.setup_ms = clock.lap();
     let mut report = AnimateReport::new(&connected, &session, a.frames);
-    report.first_frame(&mut session, started, &a.out.join("first.png"), a.exposure)?;
+    report.first_frame(&mut session, clock, &a.out.join("first.png"), a.exposure)?;
 
     let full_at = |s: &Session, report: &mut AnimateReport| {
         if report.full_trees_ms.is_none() && s.streamed.complete() {
@@ -258,9 +315,10 @@ pub(crate) fn run(a: &AnimateArgs) -> Result<()> {
 
 pub(crate) fn print_summary(r: &AnimateReport, out: &Path) {
     println!(
-        "first shaded frame after {:.0} ms ({:.0} % of the trees){}",
+        "first shaded frame after {:.0} ms ({:.0} % of the trees; {}){}",
         r.first_frame_ms,
         r.first_frame_trees * 100.0,
+        r.first_frame_stages,
         r.full_trees_ms
             .map(|t| format!("; all trees after {t:.0} ms"))
             .unwrap_or_default()

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use bspvt_proto::api::JobState;
 
-use crate::animate::{self, AnimateReport, PathOptions, render_path};
+use crate::animate::{self, AnimateReport, PathOptions, StageClock, render_path};
 use crate::frame_args::{ConnectArgs, EnvArgs, method, method_values};
 use crate::gif::Preview;
 use bspvt_client::session::connect::connect;
@@ -59,8 +59,10 @@ pub(crate) fn run(a: &DemoArgs) -> Result<()> {
         cache_dir: a.out.join("cache"),
         no_cache: false,
     };
+    let mut clock = StageClock::new(started);
     let opts = args.options();
     let connected = connect(&opts)?;
+    clock.stages.connect_ms = clock.lap();
     let served = &connected.served;
     println!(
         "{} on the embedded service {} (data in {}): scene {}{}",
@@ -80,16 +82,19 @@ pub(crate) fn run(a: &DemoArgs) -> Result<()> {
     println!("dashboard: {base}/  viewer: {base}/view/{}", served.id);
     let height = connected.scene.camera.image_height(a.size, None);
     let mut session = connected.session(&opts, a.size, height)?;
+    clock.stages.session_ms = clock.lap();
     session.method = method(&a.method)?;
     session.set_env(a.env.options(&connected.scene)?);
     session.set_backend(a.backend.resolve()?);
+    clock.stages.setup_ms = clock.lap();
     let mut report = AnimateReport::new(&connected, &session, a.frames);
     // The first frame right away, with whatever trees are here (unshadowed where none are).
-    report.first_frame(&mut session, started, &a.out.join("first.png"), 1.0)?;
+    report.first_frame(&mut session, clock, &a.out.join("first.png"), 1.0)?;
     println!(
-        "first shaded frame after {:.0} ms ({:.0} % of the trees)",
+        "first shaded frame after {:.0} ms ({:.0} % of the trees; {})",
         report.first_frame_ms,
-        report.first_frame_trees * 100.0
+        report.first_frame_trees * 100.0,
+        report.first_frame_stages
     );
 
     // Bake progress, from the service's status as the fetcher relays it.

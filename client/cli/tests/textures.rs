@@ -692,6 +692,7 @@ fn punctual_point_and_spot_lights() {
     let light = Light::from_scene(&scene.lights[0]);
     let img = bspvt_client::penumbra::render(
         &r,
+        &bspvt_client::penumbra::Guide::new(&r),
         &light,
         Technique::RtHard,
         Some(&occ),

@@ -26,7 +26,7 @@ use crate::compare::metrics::{covered as covered_pixels, mean_image, rmse_mae as
 use bspvt_client::frame::image::Image;
 use bspvt_client::groundtruth::ltcvis::{builtin_lookup, render_ltc_exact_visibility};
 use bspvt_client::light::Light;
-use bspvt_client::penumbra::{self, Params, Technique};
+use bspvt_client::penumbra::{self, Guide, Params, Technique};
 use bspvt_client::render::renderer::Renderer;
 
 /// `bspvt bench-penumbra`: rt-penumbra and the shadow-map baselines against Monte Carlo area-light shadows.
@@ -385,9 +385,11 @@ fn measure_case(scene_name: &str, case: &Case, st: &Settings, out: &Path) -> Res
     };
     let mut rows = Vec::new();
     let params = Params::default();
+    // Per camera, like the G-buffer: outside the timed frames (the methods cache it).
+    let guide = Guide::new(&r);
     for (t, name) in METHODS {
         let (ms, img) = timed(st.frames, || {
-            penumbra::render(&r, &light, t, Some(&occ), &params)
+            penumbra::render(&r, &guide, &light, t, Some(&occ), &params)
         })?;
         rows.push(row(name, None, ms, &img)?);
     }

@@ -5,7 +5,7 @@
 use anyhow::Result;
 
 use super::{Frame, FrameInput, FrameMethod, MethodState, Needs, SceneData, Settings};
-use crate::penumbra::{self, Params, Technique};
+use crate::penumbra::{self, GuideCache, Params, Technique};
 use crate::render::renderer::{FrameCounts, Mode};
 
 /// A point-light shadow technique, registered under its name.
@@ -45,6 +45,7 @@ impl FrameMethod for PointShadow {
         Ok(Box::new(State {
             technique: self.technique,
             params: settings.penumbra,
+            guide: GuideCache::default(),
         }))
     }
 }
@@ -52,11 +53,13 @@ impl FrameMethod for PointShadow {
 struct State {
     technique: Technique,
     params: Params,
+    guide: GuideCache,
 }
 
 impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
         let occ = self.technique.needs_rays().then(|| f.scene.occluder());
+        let guide = self.guide.get(f.renderer);
         let image = if f.renderer.scene.punctual.is_empty() {
             // Each polygon light as a point light at its centroid, summed (a sun has no
             // point to cast from: it is left to the other methods).
@@ -67,10 +70,10 @@ impl MethodState for State {
                 .cloned()
                 .collect();
             super::sum_over_lights(&polygons, |light| {
-                penumbra::render(f.renderer, light, self.technique, occ, &self.params)
+                penumbra::render(f.renderer, guide, light, self.technique, occ, &self.params)
             })?
         } else {
-            penumbra::render_punctual(f.renderer, self.technique, occ, &self.params)?
+            penumbra::render_punctual(f.renderer, guide, self.technique, occ, &self.params)?
         };
         Ok(Frame::new(
             image,

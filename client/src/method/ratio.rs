@@ -5,7 +5,7 @@
 use anyhow::Result;
 
 use super::{Frame, FrameInput, FrameMethod, MethodState, Needs, SceneData, Settings, SetupReport};
-use crate::penumbra::Guide;
+use crate::penumbra::GuideCache;
 use crate::ratio::render_ratio;
 use crate::render::renderer::{FrameCounts, Mode};
 
@@ -58,6 +58,7 @@ impl FrameMethod for Ratio {
         Ok(Box::new(State {
             spp: settings.spp,
             denoise: self.denoised.then_some(settings.denoise_radius),
+            guide: GuideCache::default(),
         }))
     }
 }
@@ -65,16 +66,17 @@ impl FrameMethod for Ratio {
 struct State {
     spp: u32,
     denoise: Option<f64>,
+    guide: GuideCache,
 }
 
 impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
         let r = f.renderer;
-        let guide = Guide::new(r);
+        let guide = self.guide.get(r);
         let image = super::sum_over_lights(f.lights, |light| {
             Ok(render_ratio(
                 r,
-                &guide,
+                guide,
                 light,
                 f.scene.occluder(),
                 self.spp,

@@ -6,9 +6,10 @@
 //! [`Params::max_radius`] pixels. The kernel is a box of that half-width — the hard shadow of a square light's centre convolved with the
 //! light's image scaled by (Z_r − Z_o)/Z_o, which is what the similar-triangles width
 //! describes — applied separably (rows, then columns), with fractional coverage at the box's
-//! ends so the width varies smoothly. Taps on another surface (depth off the centre's tangent
-//! plane, or a different normal: [`Guide::same_surface`]) get weight 0, so shadows do not bleed
-//! across depth or normal discontinuities.
+//! ends so the width varies smoothly. The box stops where the centre's surface does along the
+//! line — at the first pair of neighbours not on one surface (depth off the tangent plane, or
+//! a different normal: [`Guide::same_surface`]) — so shadows do not bleed across depth or
+//! normal discontinuities; within it, prefix sums give each pixel's box in O(1) at any width.
 //!
 //! Only occluded pixels know a width (the occluder distance comes from their shadow ray). The
 //! penumbra is centred on the hard shadow's edge and extends onto the lit side too, and its
@@ -64,50 +65,66 @@ pub(crate) fn edge_radius(
 }
 
 /// Largest half-width among same-surface pixels q whose box reaches p (|p − q| ≤ q's radius in
-/// pixels along each axis; p's own included), in two separable passes. The search reaches
+/// pixels along each axis; p's own included), in two separable passes. The boxes reach at most
 /// `params.max_radius` pixels.
 pub(crate) fn spread_radius(radius: &Widths, guide: &Guide, params: &Params) -> Vec<f64> {
-    let reach = params.max_radius.max(0.0).ceil() as isize;
-    let h = spread_pass(radius, guide, params, reach, true);
-    spread_pass(&h, guide, params, reach, false)
+    let h = spread_pass(radius, guide, params, true);
+    spread_pass(&h, guide, params, false)
 }
 
-fn spread_pass(
-    radius: &Widths,
-    guide: &Guide,
-    params: &Params,
-    reach: isize,
-    horizontal: bool,
-) -> Vec<f64> {
-    let (w, h) = (guide.width as isize, guide.height as isize);
+/// One pass of [`spread_radius`] along rows (`horizontal`) or columns. A scatter from the
+/// pixels with a width: only the few near a hard shadow's edge have one, so the pass costs
+/// their boxes, not a search around every pixel. Lines are independent (run in parallel);
+/// the max is order-free, so the result does not depend on the schedule.
+fn spread_pass(radius: &Widths, guide: &Guide, params: &Params, horizontal: bool) -> Vec<f64> {
+    let (w, h) = (guide.width, guide.height);
+    let (lines, len) = if horizontal { (h, w) } else { (w, h) };
+    let at = move |line: usize, t: usize| {
+        if horizontal {
+            line * w + t
+        } else {
+            t * w + line
+        }
+    };
     let cap = params.max_radius;
-    (0..radius.len())
+    let spread: Vec<Vec<(usize, f64)>> = (0..lines)
         .into_par_iter()
-        .map(|i| {
-            let own = radius[i];
-            let Some(c) = &guide.pixels[i] else {
-                return own;
-            };
-            let (x, y) = ((i as isize) % w, (i as isize) / w);
-            let mut best = own;
-            for k in -reach..=reach {
-                let (qx, qy) = if horizontal { (x + k, y) } else { (x, y + k) };
-                if k == 0 || qx < 0 || qy < 0 || qx >= w || qy >= h {
+        .map(|line| {
+            let mut grown = Vec::new();
+            let mut best: Vec<f64> = Vec::new();
+            for t in 0..len {
+                let r = radius[at(line, t)];
+                if !(r > 0.0) {
                     continue;
                 }
-                let j = (qy * w + qx) as usize;
-                let r = radius[j];
-                if r > best
-                    && let Some(q) = &guide.pixels[j]
-                    && (k.unsigned_abs() as f64) <= q.pixels(r, horizontal, cap)
-                    && guide.same_surface(c, q, params)
-                {
-                    best = r;
+                let Some(q) = &guide.pixels[at(line, t)] else {
+                    continue;
+                };
+                if best.is_empty() {
+                    best = (0..len).map(|u| radius[at(line, u)]).collect();
+                }
+                let n = q.pixels(r, horizontal, cap).floor() as usize;
+                let (lo, hi) = (t.saturating_sub(n), (t + n).min(len - 1));
+                for u in (lo..=hi).filter(|&u| u != t) {
+                    if r > best[u]
+                        && let Some(c) = &guide.pixels[at(line, u)]
+                        && guide.same_surface(c, q, params)
+                    {
+                        best[u] = r;
+                        grown.push(u);
+                    }
                 }
             }
-            best
+            grown.sort_unstable();
+            grown.dedup();
+            grown.into_iter().map(|u| (at(line, u), best[u])).collect()
         })
-        .collect()
+        .collect();
+    let mut out = radius.to_vec();
+    for (i, r) in spread.into_iter().flatten() {
+        out[i] = r;
+    }
+    out
 }
 
 /// Box blur of world half-width `radius[p]` at every pixel p, separable and edge-aware.
@@ -117,6 +134,10 @@ pub(crate) fn blur(values: &[f32], radius: &Widths, guide: &Guide, params: &Para
     blur_pass(&h, radius, guide, params, false)
 }
 
+/// One pass of [`blur`] along rows (`horizontal`) or columns. The box is summed over the
+/// centre's run of one surface along the line (neighbours on the same surface both ways,
+/// [`Guide::same_surface`]), from prefix sums: O(1) per pixel at any width. Lines are
+/// independent (run in parallel).
 fn blur_pass(
     values: &[f32],
     radius: &Widths,
@@ -124,37 +145,81 @@ fn blur_pass(
     params: &Params,
     horizontal: bool,
 ) -> Vec<f32> {
-    let (w, h) = (guide.width as isize, guide.height as isize);
+    let (w, h) = (guide.width, guide.height);
+    let (lines, len) = if horizontal { (h, w) } else { (w, h) };
+    let at = move |line: usize, t: usize| {
+        if horizontal {
+            line * w + t
+        } else {
+            t * w + line
+        }
+    };
     let cap = params.max_radius.max(0.0);
-    (0..values.len())
+    let blurred: Vec<Vec<(usize, f32)>> = (0..lines)
         .into_par_iter()
-        .map(|i| {
-            let Some(c) = &guide.pixels[i] else {
-                return values[i];
-            };
-            let r = c.pixels(radius[i], horizontal, cap);
-            let n = (r + 0.5).floor() as isize;
-            let (x, y) = ((i as isize) % w, (i as isize) / w);
-            // The centre always counts (weight 1); tap k covers [k − ½, k + ½] ∩ [−r, r].
-            let (mut sum, mut wsum) = (f64::from(values[i]), 1.0);
-            for k in (-n..=n).filter(|&k| k != 0) {
-                let (qx, qy) = if horizontal { (x + k, y) } else { (x, y + k) };
-                if qx < 0 || qy < 0 || qx >= w || qy >= h {
-                    continue;
-                }
-                let wk = (r + 0.5 - k.unsigned_abs() as f64).clamp(0.0, 1.0);
-                let j = (qy * w + qx) as usize;
-                if wk > 0.0
-                    && let Some(q) = &guide.pixels[j]
-                    && guide.same_surface(c, q, params)
-                {
-                    sum += wk * f64::from(values[j]);
-                    wsum += wk;
-                }
+        .map(|line| {
+            let px = |t: usize| guide.pixels[at(line, t)].as_ref();
+            // Each centre's radius in pixels along the line (< ½: only the centre).
+            let r: Vec<f64> = (0..len)
+                .map(|t| px(t).map_or(0.0, |c| c.pixels(radius[at(line, t)], horizontal, cap)))
+                .collect();
+            if r.iter().all(|&r| r < 0.5) {
+                return Vec::new();
             }
-            (sum / wsum) as f32
+            let v: Vec<f64> = (0..len).map(|t| f64::from(values[at(line, t)])).collect();
+            // Prefix sums, and the first tap of each pixel's run of one surface.
+            let mut sum = Vec::with_capacity(len + 1);
+            sum.push(0.0f64);
+            let mut start = vec![0usize; len];
+            for t in 0..len {
+                sum.push(sum[t] + v[t]);
+                let joined = t > 0
+                    && match (px(t - 1), px(t)) {
+                        (Some(a), Some(b)) => {
+                            guide.same_surface(a, b, params) && guide.same_surface(b, a, params)
+                        }
+                        _ => false,
+                    };
+                start[t] = if joined { start[t - 1] } else { t };
+            }
+            let mut end = vec![len - 1; len];
+            for t in (0..len - 1).rev() {
+                end[t] = if start[t + 1] == start[t] {
+                    end[t + 1]
+                } else {
+                    t
+                };
+            }
+            (0..len)
+                .filter(|&t| r[t] >= 0.5 && px(t).is_some())
+                .map(|t| {
+                    // Taps at distance k ≥ 1 weigh clamp(r + ½ − k, 0, 1): 1 up to
+                    // full = ⌊r − ½⌋, then one tap of weight frac.
+                    let full = (r[t] - 0.5).floor() as usize;
+                    let frac = r[t] + 0.5 - (full + 1) as f64;
+                    let (lo, hi) = (t.saturating_sub(full).max(start[t]), (t + full).min(end[t]));
+                    let mut s = sum[hi + 1] - sum[lo];
+                    let mut n = (hi - lo + 1) as f64;
+                    if frac > 0.0 {
+                        if let Some(u) = t.checked_sub(full + 1).filter(|&u| u >= start[t]) {
+                            s += frac * v[u];
+                            n += frac;
+                        }
+                        if t + full < end[t] {
+                            s += frac * v[t + full + 1];
+                            n += frac;
+                        }
+                    }
+                    (at(line, t), (s / n) as f32)
+                })
+                .collect()
         })
-        .collect()
+        .collect();
+    let mut out = values.to_vec();
+    for (i, v) in blurred.into_iter().flatten() {
+        out[i] = v;
+    }
+    out
 }
 
 /// Light-shaped gather: the hard shadow from the light's centroid c, shifted by
@@ -351,6 +416,53 @@ mod tests {
             .collect();
         let out = blur(&values, &vec![0.04; values.len()], &g, &p);
         assert!(out[16] < 0.9 && out[15] > 0.1, "{} {}", out[15], out[16]);
+    }
+
+    /// On one continuous surface the prefix-sum box equals the box summed tap by tap: the
+    /// centre with weight 1, tap k with clamp(r + ½ − |k|, 0, 1), cut at the image's border.
+    #[test]
+    fn prefix_sums_match_the_box_tap_by_tap() {
+        let mut g = guide(false);
+        for px in g.pixels.iter_mut().flatten() {
+            px.depth = 1.0;
+            px.position.z = 1.0;
+            px.step = [0.01; 2];
+        }
+        let p = Params::default();
+        let n = g.pixels.len();
+        // Deterministic pseudo-random values and half-widths (0 … 12 pixels).
+        let hash = |i: usize, s: u64| {
+            let x = (i as u64 ^ s).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+            ((x >> 11) as f64) / ((1u64 << 53) as f64)
+        };
+        let values: Vec<f32> = (0..n).map(|i| hash(i, 1) as f32).collect();
+        let radius: Vec<f64> = (0..n).map(|i| 0.12 * hash(i, 2)).collect();
+        let (w, h) = (g.width as isize, g.height as isize);
+        for horizontal in [true, false] {
+            let got = blur_pass(&values, &radius, &g, &p, horizontal);
+            for i in 0..n {
+                let c = g.pixels[i].as_ref().expect("all surface");
+                let r = c.pixels(radius[i], horizontal, p.max_radius);
+                let (x, y) = ((i as isize) % w, (i as isize) / w);
+                let (mut sum, mut wsum) = (f64::from(values[i]), 1.0);
+                let m = (r + 0.5).floor() as isize;
+                for k in (-m..=m).filter(|&k| k != 0) {
+                    let (qx, qy) = if horizontal { (x + k, y) } else { (x, y + k) };
+                    if qx < 0 || qy < 0 || qx >= w || qy >= h {
+                        continue;
+                    }
+                    let wk = (r + 0.5 - k.unsigned_abs() as f64).clamp(0.0, 1.0);
+                    sum += wk * f64::from(values[(qy * w + qx) as usize]);
+                    wsum += wk;
+                }
+                let want = (sum / wsum) as f32;
+                assert!(
+                    (got[i] - want).abs() <= 1e-6,
+                    "pixel {i} horizontal {horizontal}: {} vs {want}",
+                    got[i]
+                );
+            }
+        }
     }
 
     #[test]

@@ -92,19 +92,20 @@ pub fn shadow_factor(
 
 /// One frame: the unshadowed per-pixel LTC shading × the technique's shadow factor. When the
 /// scene has punctual lights (glTF `KHR_lights_punctual`), they are the point lights instead
-/// of the polygon's centroid ([`render_punctual`]).
+/// of the polygon's centroid ([`render_punctual`]). `guide`: `r`'s [`Guide`] (per camera, like
+/// the G-buffer it is read from: [`GuideCache`]).
 pub fn render(
     r: &Renderer,
+    guide: &Guide,
     light: &Light,
     technique: Technique,
     occluder: Option<&Occluder>,
     params: &Params,
 ) -> Result<Image> {
     if !r.scene.punctual.is_empty() {
-        return render_punctual(r, technique, occluder, params);
+        return render_punctual(r, guide, technique, occluder, params);
     }
-    let guide = Guide::new(r);
-    let s = shadow_factor(r, &guide, light, technique, occluder, params)?;
+    let s = shadow_factor(r, guide, light, technique, occluder, params)?;
     Ok(compose(
         &r.shade_pixels(std::slice::from_ref(light), None),
         &s,
@@ -118,15 +119,15 @@ pub fn render(
 /// their fixed filters.
 pub fn render_punctual(
     r: &Renderer,
+    guide: &Guide,
     technique: Technique,
     occluder: Option<&Occluder>,
     params: &Params,
 ) -> Result<Image> {
-    let guide = Guide::new(r);
     let mut out = Image::new(r.gbuffer.width, r.gbuffer.height);
     for p in &r.scene.punctual {
         let caster = point_caster(r.scene, p);
-        let s = shadow_factor(r, &guide, &caster, technique, occluder, params)?;
+        let s = shadow_factor(r, guide, &caster, technique, occluder, params)?;
         let lit = compose(&r.shade_pixels_punctual(p), &s);
         for (o, l) in out.pixels.iter_mut().zip(&lit.pixels) {
             for k in 0..3 {
@@ -248,6 +249,22 @@ pub struct Guide {
     pub pixels: Vec<Option<GuidePixel>>,
     /// World size of one pixel at view depth 1: 2 tan(fov_y / 2) / height.
     pub footprint_per_depth: f64,
+}
+
+/// The [`Guide`] of the last camera a method drew for: a frame whose camera (and materials)
+/// did not change reuses it, as it reuses the G-buffer.
+#[derive(Default)]
+pub struct GuideCache(Option<(u64, Guide)>);
+
+impl GuideCache {
+    /// `r`'s guide, built when `r`'s camera differs from the cached one.
+    pub fn get(&mut self, r: &Renderer) -> &Guide {
+        let key = r.shading_key();
+        if self.0.as_ref().is_some_and(|(k, _)| *k != key) {
+            self.0 = None;
+        }
+        &self.0.get_or_insert_with(|| (key, Guide::new(r))).1
+    }
 }
 
 /// One pixel's visible surface, as the edge-aware filters see it.

@@ -28,5 +28,15 @@ step bake_bunny_x4_gpu 100 "$D/bspvt-server" bake --mesh /tmp/bunny_x4.ply --bac
 TAILN=14 step bench_gpu 60 "$D/bspvt" bench-gpu --meshes bunny.ply --subdivide 0,1,2 \
   --sizes 512x512,1920x1080 --frames 8 --cpu-frames 2 --cache /tmp/cache --json "$OUT/bench-gpu.json"
 (cd tests && TAILN=12 step t_cast_gpu 45 "$D/t_cast_gpu" --nocapture --test-threads 1)
+# Time to the first frame from the service (issue 37 item 2): the 557K bunny submitted to a
+# served service on loopback and streamed at 1080p on the GPU; the stages (connect, session,
+# set-up, draw) and the frames after it are printed.
+"$D/bspvt-server" serve --data-dir /tmp/srv --addr 127.0.0.1:18111 > "$OUT/serve.log" 2>&1 &
+SRV=$!
+sleep 2
+TAILN=4 step first_frame_gpu 90 "$D/bspvt" animate --mesh /tmp/bunny_x4.ply \
+  --server http://127.0.0.1:18111 --progressive --frames 30 --width 1920 --height 1080 \
+  --out /tmp/first-frame --no-cache --no-gif --backend gpu
+kill "$SRV"
 echo "== done" | tee -a "$OUT/summary.txt"
 cat "$OUT/summary.txt"

@@ -7,9 +7,15 @@ import { chromium as launcher } from 'playwright-core';
 
 export const PREFIX = '/bspvt/';
 
-/** Listens on a free loopback port; resolves to the server (`.address().port`). */
-export function prefixProxy(upstream) {
+/**
+ * Listens on a free loopback port; resolves to the server (`.address().port`). `faults.cutTrees`:
+ * the first that many tree-stream responses (`…/trees?…`) are cut mid-body — their first bytes
+ * sent, then the connection reset, as a dropped link does; `server.faults.cut` counts them.
+ */
+export function prefixProxy(upstream, faults = {}) {
   const up = new URL(upstream);
+  let toCut = faults.cutTrees ?? 0;
+  const stats = { cut: 0 };
   const server = http.createServer((req, res) => {
     if (!req.url.startsWith(PREFIX)) {
       res.writeHead(404).end('outside the prefix');
@@ -25,12 +31,25 @@ export function prefixProxy(upstream) {
       },
       (r) => {
         res.writeHead(r.statusCode, r.headers);
+        if (toCut > 0 && r.statusCode === 200 && /\/trees\?/.test(req.url)) {
+          toCut -= 1;
+          stats.cut += 1;
+          r.once('data', (d) => {
+            res.write(d.subarray(0, Math.min(d.length, 256)));
+            res.destroy();
+            r.destroy();
+          });
+          return;
+        }
         r.pipe(res);
       },
     );
-    p.on('error', (e) => res.writeHead(502).end(String(e)));
+    p.on('error', (e) => {
+      if (!res.headersSent) res.writeHead(502).end(String(e));
+    });
     req.pipe(p);
   });
+  server.faults = stats;
   return new Promise((ok) => server.listen(0, '127.0.0.1', () => ok(server)));
 }
 
@@ -61,11 +80,11 @@ const BASE_FLAGS = [
 
 /**
  * Debian's Chromium (`chromium`: its path), headless with `flags`, on a fresh profile of
- * playwright-core's own (deleted at close); the proxy that serves `url` under PREFIX; and the
- * page's base URL through it.
+ * playwright-core's own (deleted at close); the proxy that serves `url` under PREFIX (with
+ * `faults`, see prefixProxy); and the page's base URL through it.
  */
-export async function open(url, chromium, flags) {
-  const proxy = await prefixProxy(url);
+export async function open(url, chromium, flags, faults = {}) {
+  const proxy = await prefixProxy(url, faults);
   const base = `http://127.0.0.1:${proxy.address().port}${PREFIX}`;
   const browser = await launcher.launch({
     executablePath: chromium ?? '/usr/bin/chromium',

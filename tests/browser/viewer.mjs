@@ -2,10 +2,12 @@
 // SwiftShader Vulkan device Chromium ships (the flags below; Chromium does not take Mesa's
 // lavapipe here), behind a path prefix. Waits for `data-state="complete"` (every tree in and
 // that frame drawn), saves the canvas, times a few frames, shift-drags the light across the
-// canvas and saves the frame after.
+// canvas and saves the frame after. With `--cut-trees N` the proxy cuts the first N tree
+// responses mid-body (a dropped link): the viewer must ask for those chunks again and still
+// complete.
 //
 //   node viewer.mjs --url http://127.0.0.1:PORT --id ID --width W --height H --mode vertex|pixel
-//                   --out DIR [--chromium /usr/bin/chromium]
+//                   --out DIR [--chromium /usr/bin/chromium] [--cut-trees N]
 //
 // Writes DIR/web.png and DIR/web-moved.png; prints one JSON line with what it saw (graphics
 // path, time to first frame, ms per frame, bytes fetched); exits non-zero on any failure.
@@ -31,7 +33,9 @@ function fail(msg) {
   throw new Error(msg);
 }
 
-const { proxy, base, browser } = await open(args.url, args.chromium, WEBGPU_FLAGS);
+const { proxy, base, browser } = await open(args.url, args.chromium, WEBGPU_FLAGS, {
+  cutTrees: Number(args['cut-trees'] ?? 0),
+});
 const problems = [];
 try {
   const page = await browser.newPage({ viewport: { width: Number(args.width) + 80, height: Number(args.height) + 400 } });
@@ -80,6 +84,7 @@ try {
   await canvasPng('web-moved.png');
   seen.light_offset = await page.evaluate(() => document.documentElement.dataset.lightOffset);
   if (problems.length) fail(problems.join('\n'));
+  seen.cut_tree_responses = proxy.faults.cut;
   seen.browser = browser.version();
   console.log(JSON.stringify(seen));
 } finally {

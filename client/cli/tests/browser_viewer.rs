@@ -4,6 +4,8 @@
 //! playwright-core), waits for every tree and that frame, and saves the canvas; `bspvt render`
 //! draws the same scene, camera and light on the CPU. The two must agree away from edges (mean
 //! difference ≤ 2 % of full scale), and a shift-drag must move the light and change the frame.
+//! The proxy cuts the first two tree responses mid-body (a dropped link): the viewer must ask
+//! for those chunks again, and the frame it completes is still the one compared.
 //! Skipped with a message where Node.js, Chromium or `tests/browser/node_modules` is missing
 //! (`.ci/run` installs them).
 
@@ -102,6 +104,8 @@ fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
         .arg("viewer.mjs")
         .args(["--url", &srv.base, "--id", &id, "--mode", "pixel"])
         .args(["--width", &w.to_string(), "--height", &h.to_string()])
+        // Two tree responses cut mid-body: the viewer resumes by asking for them again.
+        .args(["--cut-trees", "2"])
         .arg("--out")
         .arg(tmp.path())
         .arg("--chromium")
@@ -121,6 +125,10 @@ fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
         "viewer in {}: graphics path {}, first frame {} ms after the page's start, {} ms per \
          frame, {} bytes fetched",
         seen["browser"], seen["graphics"], seen["firstFrameMs"], seen["bench_ms"], seen["bytes"]
+    );
+    assert_eq!(
+        seen["cut_tree_responses"], 2,
+        "the proxy did not cut two tree responses: {seen}"
     );
     assert!(
         seen["graphics"]

@@ -77,54 +77,39 @@ pub(crate) fn spread_radius(radius: &Widths, guide: &Guide, params: &Params) -> 
 /// their boxes, not a search around every pixel. Lines are independent (run in parallel);
 /// the max is order-free, so the result does not depend on the schedule.
 fn spread_pass(radius: &Widths, guide: &Guide, params: &Params, horizontal: bool) -> Vec<f64> {
-    let (w, h) = (guide.width, guide.height);
-    let (lines, len) = if horizontal { (h, w) } else { (w, h) };
-    let at = move |line: usize, t: usize| {
-        if horizontal {
-            line * w + t
-        } else {
-            t * w + line
-        }
-    };
+    let lines = Lines::of(guide, horizontal);
+    let (len, at) = (lines.len, |line, t| lines.index(line, t));
     let cap = params.max_radius;
-    let spread: Vec<Vec<(usize, f64)>> = (0..lines)
-        .into_par_iter()
-        .map(|line| {
-            let mut grown = Vec::new();
-            let mut best: Vec<f64> = Vec::new();
-            for t in 0..len {
-                let r = radius[at(line, t)];
-                if !(r > 0.0) {
-                    continue;
-                }
-                let Some(q) = &guide.pixels[at(line, t)] else {
-                    continue;
-                };
-                if best.is_empty() {
-                    best = (0..len).map(|u| radius[at(line, u)]).collect();
-                }
-                let n = q.pixels(r, horizontal, cap).floor() as usize;
-                let (lo, hi) = (t.saturating_sub(n), (t + n).min(len - 1));
-                for u in (lo..=hi).filter(|&u| u != t) {
-                    if r > best[u]
-                        && let Some(c) = &guide.pixels[at(line, u)]
-                        && guide.same_surface(c, q, params)
-                    {
-                        best[u] = r;
-                        grown.push(u);
-                    }
+    lines.update(radius, |line| {
+        let mut grown = Vec::new();
+        let mut best: Vec<f64> = Vec::new();
+        for t in 0..len {
+            let r = radius[at(line, t)];
+            if !(r > 0.0) {
+                continue;
+            }
+            let Some(q) = &guide.pixels[at(line, t)] else {
+                continue;
+            };
+            if best.is_empty() {
+                best = (0..len).map(|u| radius[at(line, u)]).collect();
+            }
+            let n = q.pixels(r, horizontal, cap).floor() as usize;
+            let (lo, hi) = (t.saturating_sub(n), (t + n).min(len - 1));
+            for u in (lo..=hi).filter(|&u| u != t) {
+                if r > best[u]
+                    && let Some(c) = &guide.pixels[at(line, u)]
+                    && guide.same_surface(c, q, params)
+                {
+                    best[u] = r;
+                    grown.push(u);
                 }
             }
-            grown.sort_unstable();
-            grown.dedup();
-            grown.into_iter().map(|u| (at(line, u), best[u])).collect()
-        })
-        .collect();
-    let mut out = radius.to_vec();
-    for (i, r) in spread.into_iter().flatten() {
-        out[i] = r;
-    }
-    out
+        }
+        grown.sort_unstable();
+        grown.dedup();
+        grown.into_iter().map(|u| (at(line, u), best[u])).collect()
+    })
 }
 
 /// Box blur of world half-width `radius[p]` at every pixel p, separable and edge-aware.
@@ -145,81 +130,113 @@ fn blur_pass(
     params: &Params,
     horizontal: bool,
 ) -> Vec<f32> {
-    let (w, h) = (guide.width, guide.height);
-    let (lines, len) = if horizontal { (h, w) } else { (w, h) };
-    let at = move |line: usize, t: usize| {
-        if horizontal {
-            line * w + t
-        } else {
-            t * w + line
-        }
-    };
+    let lines = Lines::of(guide, horizontal);
+    let (len, at) = (lines.len, |line, t| lines.index(line, t));
     let cap = params.max_radius.max(0.0);
-    let blurred: Vec<Vec<(usize, f32)>> = (0..lines)
-        .into_par_iter()
-        .map(|line| {
-            let px = |t: usize| guide.pixels[at(line, t)].as_ref();
-            // Each centre's radius in pixels along the line (< ½: only the centre).
-            let r: Vec<f64> = (0..len)
-                .map(|t| px(t).map_or(0.0, |c| c.pixels(radius[at(line, t)], horizontal, cap)))
-                .collect();
-            if r.iter().all(|&r| r < 0.5) {
-                return Vec::new();
-            }
-            let v: Vec<f64> = (0..len).map(|t| f64::from(values[at(line, t)])).collect();
-            // Prefix sums, and the first tap of each pixel's run of one surface.
-            let mut sum = Vec::with_capacity(len + 1);
-            sum.push(0.0f64);
-            let mut start = vec![0usize; len];
-            for t in 0..len {
-                sum.push(sum[t] + v[t]);
-                let joined = t > 0
-                    && match (px(t - 1), px(t)) {
-                        (Some(a), Some(b)) => {
-                            guide.same_surface(a, b, params) && guide.same_surface(b, a, params)
-                        }
-                        _ => false,
-                    };
-                start[t] = if joined { start[t - 1] } else { t };
-            }
-            let mut end = vec![len - 1; len];
-            for t in (0..len - 1).rev() {
-                end[t] = if start[t + 1] == start[t] {
-                    end[t + 1]
-                } else {
-                    t
-                };
-            }
-            (0..len)
-                .filter(|&t| r[t] >= 0.5 && px(t).is_some())
-                .map(|t| {
-                    // Taps at distance k ≥ 1 weigh clamp(r + ½ − k, 0, 1): 1 up to
-                    // full = ⌊r − ½⌋, then one tap of weight frac.
-                    let full = (r[t] - 0.5).floor() as usize;
-                    let frac = r[t] + 0.5 - (full + 1) as f64;
-                    let (lo, hi) = (t.saturating_sub(full).max(start[t]), (t + full).min(end[t]));
-                    let mut s = sum[hi + 1] - sum[lo];
-                    let mut n = (hi - lo + 1) as f64;
-                    if frac > 0.0 {
-                        if let Some(u) = t.checked_sub(full + 1).filter(|&u| u >= start[t]) {
-                            s += frac * v[u];
-                            n += frac;
-                        }
-                        if t + full < end[t] {
-                            s += frac * v[t + full + 1];
-                            n += frac;
-                        }
+    lines.update(values, |line| {
+        let px = |t: usize| guide.pixels[at(line, t)].as_ref();
+        // Each centre's radius in pixels along the line (< ½: only the centre).
+        let r: Vec<f64> = (0..len)
+            .map(|t| px(t).map_or(0.0, |c| c.pixels(radius[at(line, t)], horizontal, cap)))
+            .collect();
+        if r.iter().all(|&r| r < 0.5) {
+            return Vec::new();
+        }
+        let v: Vec<f64> = (0..len).map(|t| f64::from(values[at(line, t)])).collect();
+        // Prefix sums, and the first tap of each pixel's run of one surface.
+        let mut sum = Vec::with_capacity(len + 1);
+        sum.push(0.0f64);
+        let mut start = vec![0usize; len];
+        for t in 0..len {
+            sum.push(sum[t] + v[t]);
+            let joined = t > 0
+                && match (px(t - 1), px(t)) {
+                    (Some(a), Some(b)) => {
+                        guide.same_surface(a, b, params) && guide.same_surface(b, a, params)
                     }
-                    (at(line, t), (s / n) as f32)
-                })
-                .collect()
-        })
-        .collect();
-    let mut out = values.to_vec();
-    for (i, v) in blurred.into_iter().flatten() {
-        out[i] = v;
+                    _ => false,
+                };
+            start[t] = if joined { start[t - 1] } else { t };
+        }
+        let mut end = vec![len - 1; len];
+        for t in (0..len - 1).rev() {
+            end[t] = if start[t + 1] == start[t] {
+                end[t + 1]
+            } else {
+                t
+            };
+        }
+        (0..len)
+            .filter(|&t| r[t] >= 0.5 && px(t).is_some())
+            .map(|t| {
+                // Taps at distance k ≥ 1 weigh clamp(r + ½ − k, 0, 1): 1 up to
+                // full = ⌊r − ½⌋, then one tap of weight frac.
+                let full = (r[t] - 0.5).floor() as usize;
+                let frac = r[t] + 0.5 - (full + 1) as f64;
+                let (lo, hi) = (t.saturating_sub(full).max(start[t]), (t + full).min(end[t]));
+                let mut s = sum[hi + 1] - sum[lo];
+                let mut n = (hi - lo + 1) as f64;
+                if frac > 0.0 {
+                    if let Some(u) = t.checked_sub(full + 1).filter(|&u| u >= start[t]) {
+                        s += frac * v[u];
+                        n += frac;
+                    }
+                    if t + full < end[t] {
+                        s += frac * v[t + full + 1];
+                        n += frac;
+                    }
+                }
+                (at(line, t), (s / n) as f32)
+            })
+            .collect()
+    })
+}
+
+/// An image's rows (`horizontal`) or columns, as the separable passes walk them.
+#[derive(Clone, Copy)]
+struct Lines {
+    width: usize,
+    count: usize,
+    /// Pixels per line.
+    len: usize,
+    horizontal: bool,
+}
+
+impl Lines {
+    fn of(guide: &Guide, horizontal: bool) -> Lines {
+        let (w, h) = (guide.width, guide.height);
+        Lines {
+            width: w,
+            count: if horizontal { h } else { w },
+            len: if horizontal { w } else { h },
+            horizontal,
+        }
     }
-    out
+
+    /// The row-major index of pixel `t` of line `line`.
+    #[inline]
+    fn index(self, line: usize, t: usize) -> usize {
+        if self.horizontal {
+            line * self.width + t
+        } else {
+            t * self.width + line
+        }
+    }
+
+    /// `base` with the (index, value) pairs each line's `f` returns written over it; the lines
+    /// run in parallel.
+    fn update<T: Copy + Send + Sync>(
+        self,
+        base: &[T],
+        f: impl Fn(usize) -> Vec<(usize, T)> + Sync + Send,
+    ) -> Vec<T> {
+        let changed: Vec<Vec<(usize, T)>> = (0..self.count).into_par_iter().map(f).collect();
+        let mut out = base.to_vec();
+        for (i, v) in changed.into_iter().flatten() {
+            out[i] = v;
+        }
+        out
+    }
 }
 
 /// Light-shaped gather: the hard shadow from the light's centroid c, shifted by
@@ -391,6 +408,17 @@ mod tests {
         }
     }
 
+    /// The same 32 × 8 image as one wall at depth 1 (one continuous surface).
+    fn flat() -> Guide {
+        let mut g = guide(false);
+        for px in g.pixels.iter_mut().flatten() {
+            px.depth = 1.0;
+            px.position.z = 1.0;
+            px.step = [0.01; 2];
+        }
+        g
+    }
+
     #[test]
     fn no_bleeding_across_depth_or_normal_discontinuities() {
         let p = Params::default();
@@ -405,12 +433,7 @@ mod tests {
             assert_eq!(out, values, "tilt {tilt}: bled across the discontinuity");
         }
         // The same edge on one continuous surface is blurred (the test can fail).
-        let mut g = guide(false);
-        for px in g.pixels.iter_mut().flatten() {
-            px.depth = 1.0;
-            px.position.z = 1.0;
-            px.step = [0.01; 2];
-        }
+        let g = flat();
         let values: Vec<f32> = (0..g.pixels.len())
             .map(|i| if i % 32 < 16 { 0.0 } else { 1.0 })
             .collect();
@@ -422,12 +445,7 @@ mod tests {
     /// centre with weight 1, tap k with clamp(r + ½ − |k|, 0, 1), cut at the image's border.
     #[test]
     fn prefix_sums_match_the_box_tap_by_tap() {
-        let mut g = guide(false);
-        for px in g.pixels.iter_mut().flatten() {
-            px.depth = 1.0;
-            px.position.z = 1.0;
-            px.step = [0.01; 2];
-        }
+        let g = flat();
         let p = Params::default();
         let n = g.pixels.len();
         // Deterministic pseudo-random values and half-widths (0 … 12 pixels).
@@ -499,12 +517,7 @@ mod tests {
 
     #[test]
     fn radius_spreads_from_the_edge_onto_the_lit_side() {
-        let mut g = guide(false);
-        for px in g.pixels.iter_mut().flatten() {
-            px.depth = 1.0;
-            px.position.z = 1.0;
-            px.step = [0.01; 2];
-        }
+        let g = flat();
         let p = Params::default();
         let hard: Vec<f32> = (0..g.pixels.len())
             .map(|i| if i % 32 < 16 { 0.0 } else { 1.0 })

@@ -132,8 +132,9 @@ class Viewer {
     this.method = query.get('method') === 'ltc' ? 'ltc' : 'bspvt';
     this.mode = query.get('mode') === 'pixel' ? 'pixel' : 'vertex';
     this.exposure = Number(query.get('exposure') ?? '1') || 1;
+    // Every lamp is drawn (one shading pass each, added up); the one picked is dragged.
     this.lightIndex = 0;
-    this.lightOffset = [0, 0, 0];
+    this.lightOffsets = doc.lights.map(() => [0, 0, 0]);
     this.fetched = doc.fetched;
     this.decoded = doc.decoded;
     this.treesIn = 0;
@@ -176,7 +177,7 @@ class Viewer {
     this.lineNormals = zeros(16);
     this.shadeParams = zeros(208);
     this.rasterParams = zeros(64);
-    this.resolveParams = zeros(256);
+    this.resolveParams = zeros(272);
     this.presentParams = zeros(16);
     this.image = zeros(this.width * this.height * 16);
     this.overlay = zeros(this.width * this.height * 4);
@@ -237,17 +238,17 @@ class Viewer {
     this.dirty = true;
   }
 
-  /** The light posed: the scene's, moved by the offset the user dragged it by. */
-  light() {
-    const l = this.doc.lights[this.lightIndex];
+  /** Lamp k posed: the scene's, moved by the offset the user dragged it by. */
+  light(k) {
+    const l = this.doc.lights[k];
     if (!l) return null;
-    return { ...l, vertices: l.vertices.map((p) => add(p, this.lightOffset)) };
+    return { ...l, vertices: l.vertices.map((p) => add(p, this.lightOffsets[k])) };
   }
 
-  /** `LightRecord` of client/src/gpu/vertex.rs: 40 words, and the vertex count (0: none). */
-  lightRecord() {
+  /** `LightRecord` of client/src/gpu/vertex.rs for lamp k: 40 words, and the vertex count (0: none). */
+  lightRecord(k) {
     const words = new Float32Array(40);
-    const l = this.light();
+    const l = this.light(k);
     if (!l) return { words, count: 0 };
     words.set([...l.normal, l.two_sided ? 1 : 0], 0);
     words.set([...l.radiance, 0], 4);
@@ -257,10 +258,11 @@ class Viewer {
     return { words, count: finite && l.vertices.length <= 8 ? l.vertices.length : 0 };
   }
 
-  writeParams() {
+  /** The passes' parameters for lamp k; `layer`: 1 adds its frame to the lamps' before it. */
+  writeParams(k, layer) {
     const q = this.device.queue;
     const v = this.view;
-    const { words: light, count } = this.lightRecord();
+    const { words: light, count } = this.lightRecord(k);
     const codec = this.codec ?? { offsets: 1, halfStep: 0 };
     // shade.wgsl `Params`: eye, light, counts (light vertices, jobs, codec offsets, LTC size),
     // codec (half step).
@@ -272,7 +274,7 @@ class Viewer {
     q.writeBuffer(this.shadeParams, 0, sp);
     q.writeBuffer(this.rasterParams, 0, viewProj(v, this.diagonal));
     // resolve.wgsl `ResolveParams`.
-    const rp = new ArrayBuffer(256);
+    const rp = new ArrayBuffer(272);
     const f = new Float32Array(rp, 0, 16);
     f.set([...v.eye, v.tanHalf], 0);
     f.set([...v.forward, v.width / v.height], 4);
@@ -289,6 +291,7 @@ class Viewer {
       1,
       0,
     ]);
+    new Uint32Array(rp, 256, 4).set([layer, 0, 0, 0]);
     q.writeBuffer(this.resolveParams, 0, rp);
     const pp = new ArrayBuffer(16);
     new Uint32Array(pp).set([this.width, this.height, 0, 0]);
@@ -306,82 +309,89 @@ class Viewer {
     });
   }
 
-  /** One frame: per-vertex shading, visibility raster, resolve, present. */
+  /**
+   * One frame: the visibility raster once, then per lamp its per-vertex shading and a resolve
+   * that adds its frame to the image, then present. The lamps are submitted one after the
+   * other (their parameters share one buffer each).
+   */
   draw() {
-    this.writeParams();
     const d = this.device;
-    const enc = d.createCommandEncoder();
     const roots = this.method === 'bspvt' ? this.roots : this.rootsNone;
-    {
-      const pass = enc.beginComputePass();
-      pass.setPipeline(this.shadePipe);
-      pass.setBindGroup(
-        0,
-        this.group(this.shadePipe, [
-          this.shadeParams,
-          this.verts,
-          this.jobs,
-          roots,
-          this.nodes,
-          this.lineNormals,
-          this.ltc,
-          this.results,
-          this.lightTexture,
-        ]),
-      );
-      pass.dispatchWorkgroups(Math.ceil(this.n / 64));
-      pass.end();
+    const lamps = Math.max(1, this.doc.lights.length);
+    for (let k = 0; k < lamps; k++) {
+      this.writeParams(k, k === 0 ? 0 : 1);
+      const enc = d.createCommandEncoder();
+      {
+        const pass = enc.beginComputePass();
+        pass.setPipeline(this.shadePipe);
+        pass.setBindGroup(
+          0,
+          this.group(this.shadePipe, [
+            this.shadeParams,
+            this.verts,
+            this.jobs,
+            roots,
+            this.nodes,
+            this.lineNormals,
+            this.ltc,
+            this.results,
+            this.lightTexture,
+          ]),
+        );
+        pass.dispatchWorkgroups(Math.ceil(this.n / 64));
+        pass.end();
+      }
+      const visView = this.visibility.createView();
+      if (k === 0) {
+        const pass = enc.beginRenderPass({
+          colorAttachments: [{ view: visView, clearValue: [0, 0, 0, 0], loadOp: 'clear', storeOp: 'store' }],
+          depthStencilAttachment: {
+            view: this.depth.createView(),
+            depthClearValue: 0,
+            depthLoadOp: 'clear',
+            depthStoreOp: 'discard',
+          },
+        });
+        pass.setPipeline(this.rasterPipe);
+        pass.setBindGroup(0, this.group(this.rasterPipe, [this.rasterParams, this.verts, this.tris, this.cut]));
+        pass.draw(this.doc.triangles * 3);
+        pass.end();
+      }
+      {
+        const pass = enc.beginComputePass();
+        pass.setPipeline(this.resolvePipe);
+        pass.setBindGroup(
+          0,
+          this.group(this.resolvePipe, [
+            this.resolveParams,
+            this.verts,
+            this.tris,
+            this.materials,
+            this.results,
+            this.ltc,
+            this.image,
+            visView,
+            this.lightTexture,
+            this.surfaceTextures,
+            this.frames,
+          ]),
+        );
+        pass.dispatchWorkgroups(Math.ceil(this.width / 8), Math.ceil(this.height / 8));
+        pass.end();
+      }
+      if (k === lamps - 1) {
+        const pass = enc.beginRenderPass({
+          colorAttachments: [
+            { view: this.context.getCurrentTexture().createView(), clearValue: [0, 0, 0, 1], loadOp: 'clear', storeOp: 'store' },
+          ],
+        });
+        pass.setPipeline(this.presentPipe);
+        pass.setBindGroup(0, this.group(this.presentPipe, [this.presentParams, this.image, this.overlay]));
+        pass.draw(3);
+        pass.end();
+      }
+      d.queue.submit([enc.finish()]);
     }
-    const visView = this.visibility.createView();
-    {
-      const pass = enc.beginRenderPass({
-        colorAttachments: [{ view: visView, clearValue: [0, 0, 0, 0], loadOp: 'clear', storeOp: 'store' }],
-        depthStencilAttachment: {
-          view: this.depth.createView(),
-          depthClearValue: 0,
-          depthLoadOp: 'clear',
-          depthStoreOp: 'discard',
-        },
-      });
-      pass.setPipeline(this.rasterPipe);
-      pass.setBindGroup(0, this.group(this.rasterPipe, [this.rasterParams, this.verts, this.tris, this.cut]));
-      pass.draw(this.doc.triangles * 3);
-      pass.end();
-    }
-    {
-      const pass = enc.beginComputePass();
-      pass.setPipeline(this.resolvePipe);
-      pass.setBindGroup(
-        0,
-        this.group(this.resolvePipe, [
-          this.resolveParams,
-          this.verts,
-          this.tris,
-          this.materials,
-          this.results,
-          this.ltc,
-          this.image,
-          visView,
-          this.lightTexture,
-          this.surfaceTextures,
-          this.frames,
-        ]),
-      );
-      pass.dispatchWorkgroups(Math.ceil(this.width / 8), Math.ceil(this.height / 8));
-      pass.end();
-    }
-    {
-      const pass = enc.beginRenderPass({
-        colorAttachments: [
-          { view: this.context.getCurrentTexture().createView(), clearValue: [0, 0, 0, 1], loadOp: 'clear', storeOp: 'store' },
-        ],
-      });
-      pass.setPipeline(this.presentPipe);
-      pass.setBindGroup(0, this.group(this.presentPipe, [this.presentParams, this.image, this.overlay]));
-      pass.draw(3);
-      pass.end();
-    }
-    d.queue.submit([enc.finish()]);
     return d.queue.onSubmittedWorkDone();
   }
 
@@ -534,7 +544,8 @@ function orbit(viewer, dx, dy) {
 
 /** Moves the light in the horizontal plane, its centroid kept inside its region. */
 function moveLight(viewer, dx, dy) {
-  const l = viewer.doc.lights[viewer.lightIndex];
+  const lamp = viewer.lightIndex;
+  const l = viewer.doc.lights[lamp];
   if (!l?.region) {
     say('this light has no region to move in (the scene file gives one)');
     return;
@@ -545,12 +556,12 @@ function moveLight(viewer, dx, dy) {
   const flat = (a) => normalizeOr([a[0], 0, a[2]], [0, 0, 0]);
   const delta = add(scale(flat(v.right), dx * k), scale(flat(v.forward), -dy * k));
   const centroid = scale(l.vertices.reduce(add, [0, 0, 0]), 1 / l.vertices.length);
-  const o = add(viewer.lightOffset, delta);
+  const o = add(viewer.lightOffsets[lamp], delta);
   for (const axis of [0, 2]) {
     const at = centroid[axis] + o[axis];
     o[axis] += Math.max(l.region.min[axis], Math.min(l.region.max[axis], at)) - at;
   }
-  viewer.lightOffset = o;
+  viewer.lightOffsets[lamp] = o;
   viewer.dirty = true;
   html.dataset.lightOffset = o.map((x) => x.toFixed(3)).join(',');
 }
@@ -612,8 +623,6 @@ async function main() {
     doc.lights.forEach((_, k) => $('light').append(new Option(`#${k}`, String(k))));
     $('light').addEventListener('change', () => {
       viewer.lightIndex = Number($('light').value);
-      viewer.lightOffset = [0, 0, 0];
-      viewer.dirty = true;
     });
   }
   if (doc.lights.length === 0) say('the scene has no polygon light: the GPU path draws it black');

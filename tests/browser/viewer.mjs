@@ -7,7 +7,7 @@
 // complete.
 //
 //   node viewer.mjs --url http://127.0.0.1:PORT --id ID --width W --height H --mode vertex|pixel
-//                   --out DIR [--chromium /usr/bin/chromium] [--cut-trees N]
+//                   --out DIR [--chromium /usr/bin/chromium] [--cut-trees N] [--drag no]
 //
 // Writes DIR/web.png and DIR/web-moved.png; prints one JSON line with what it saw (graphics
 // path, time to first frame, ms per frame, bytes fetched); exits non-zero on any failure.
@@ -64,25 +64,28 @@ try {
   };
   await canvasPng('web.png');
 
-  // Shift-drag from the canvas's centre 40 % of its width to the right: the light moves.
-  const box = await (await page.$('#frame')).boundingBox();
-  const frames = Number(await page.evaluate(() => document.documentElement.dataset.frames));
-  const [x, y] = [box.x + box.width / 2, box.y + box.height / 2];
-  await page.keyboard.down('Shift');
-  await page.mouse.move(x, y);
-  await page.mouse.down();
-  await page.mouse.move(x + box.width * 0.4, y, { steps: 4 });
-  await page.mouse.up();
-  await page.keyboard.up('Shift');
-  await page.waitForFunction(
-    (f) => Number(document.documentElement.dataset.frames) > f && document.documentElement.dataset.drawing !== 'true',
-    frames,
-    { timeout: 60_000 },
-  );
-  // The last frame of the drag, once nothing more is to be drawn.
-  await page.waitForFunction(() => document.documentElement.dataset.idle === 'true', null, { timeout: 60_000 });
-  await canvasPng('web-moved.png');
-  seen.light_offset = await page.evaluate(() => document.documentElement.dataset.lightOffset);
+  // Shift-drag from the canvas's centre 40 % of its width to the right: the light moves
+  // (`--drag no`: a scene whose lamps have no region to move in).
+  if (args.drag !== 'no') {
+    const box = await (await page.$('#frame')).boundingBox();
+    const frames = Number(await page.evaluate(() => document.documentElement.dataset.frames));
+    const [x, y] = [box.x + box.width / 2, box.y + box.height / 2];
+    await page.keyboard.down('Shift');
+    await page.mouse.move(x, y);
+    await page.mouse.down();
+    await page.mouse.move(x + box.width * 0.4, y, { steps: 4 });
+    await page.mouse.up();
+    await page.keyboard.up('Shift');
+    await page.waitForFunction(
+      (f) => Number(document.documentElement.dataset.frames) > f && document.documentElement.dataset.drawing !== 'true',
+      frames,
+      { timeout: 60_000 },
+    );
+    // The last frame of the drag, once nothing more is to be drawn.
+    await page.waitForFunction(() => document.documentElement.dataset.idle === 'true', null, { timeout: 60_000 });
+    await canvasPng('web-moved.png');
+    seen.light_offset = await page.evaluate(() => document.documentElement.dataset.lightOffset);
+  }
   if (problems.length) fail(problems.join('\n'));
   seen.cut_tree_responses = proxy.faults.cut;
   seen.browser = browser.version();

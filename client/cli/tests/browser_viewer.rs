@@ -64,6 +64,93 @@ fn mean_difference_off_edges(w: u32, h: u32, a: &[[f32; 3]], b: &[[f32; 3]]) -> 
     (sum / n.max(1) as f64, n as f64 / (w * h) as f64)
 }
 
+/// What one run of `tests/browser/viewer.mjs` gave: its JSON line and the frames it saved
+/// (web.png, web-moved.png in `dir`).
+struct Seen {
+    json: serde_json::Value,
+    dir: PathBuf,
+}
+
+/// Opens scene `id` of `srv` in the viewer at `w` × `h`, per pixel, with `extra` arguments to
+/// the script; panics with the script's output and the server's log when it fails.
+fn view(
+    chromium: &Path,
+    srv: &Server,
+    id: &str,
+    (w, h): (u32, u32),
+    dir: &Path,
+    extra: &[&str],
+) -> Seen {
+    let run = Command::new("node")
+        .current_dir(bspvt_tests::browser::scripts())
+        .arg("viewer.mjs")
+        .args(["--url", &srv.base, "--id", id, "--mode", "pixel"])
+        .args(["--width", &w.to_string(), "--height", &h.to_string()])
+        .args(extra)
+        .arg("--out")
+        .arg(dir)
+        .arg("--chromium")
+        .arg(chromium)
+        .output()
+        .expect("run node");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "the browser script failed:\n{}\n{stdout}\nserver log:\n{}",
+        String::from_utf8_lossy(&run.stderr),
+        srv.log_text()
+    );
+    let json: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap_or(""))
+        .unwrap_or_else(|e| panic!("the script's last line is not JSON ({e}): {stdout}"));
+    eprintln!(
+        "viewer in {}: graphics path {}, first frame {} ms after the page's start, {} ms per \
+         frame, {} bytes fetched",
+        json["browser"], json["graphics"], json["firstFrameMs"], json["bench_ms"], json["bytes"]
+    );
+    assert!(
+        json["graphics"]
+            .as_str()
+            .unwrap_or("")
+            .starts_with("WebGPU"),
+        "{json}"
+    );
+    Seen {
+        json,
+        dir: dir.to_path_buf(),
+    }
+}
+
+/// `bspvt render SOURCE --method bspvt --mode pixel` at `w` × `h` into `out`, with `extra`.
+fn render(
+    source: &[&std::ffi::OsStr],
+    (w, h): (u32, u32),
+    cache: &Path,
+    out: &Path,
+    extra: &[&str],
+) {
+    let st = Command::new(BIN)
+        .arg("render")
+        .args(source)
+        .args(["--method", "bspvt", "--mode", "pixel"])
+        .args(["--width", &w.to_string(), "--height", &h.to_string()])
+        .args(extra)
+        .arg("--cache")
+        .arg(cache)
+        .arg("--out")
+        .arg(out)
+        .status()
+        .expect("bspvt render");
+    assert!(st.success());
+}
+
+/// The mean difference off edges of two PNGs of one size, and the share of pixels compared.
+fn compare(a: &Path, b: &Path) -> (f64, f64) {
+    let (aw, ah, a) = rgb(a);
+    let (bw, bh, b) = rgb(b);
+    assert_eq!((aw, ah), (bw, bh), "sizes");
+    mean_difference_off_edges(aw, ah, &a, &b)
+}
+
 #[test]
 fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
     let chromium = match bspvt_tests::browser::tools() {
@@ -85,57 +172,28 @@ fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
         None,
     );
     wait_done(&a, &srv, &id);
-    let (w, h) = (192, 144);
+    let size = (192, 144);
     let reference = tmp.path().join("ref.png");
-    let st = Command::new(BIN)
-        .arg("render")
-        .arg(&scene)
-        .args(["--method", "bspvt", "--mode", "pixel"])
-        .args(["--width", &w.to_string(), "--height", &h.to_string()])
-        .arg("--cache")
-        .arg(tmp.path().join("cache"))
-        .arg("--out")
-        .arg(&reference)
-        .status()
-        .expect("bspvt render");
-    assert!(st.success());
-    let run = Command::new("node")
-        .current_dir(bspvt_tests::browser::scripts())
-        .arg("viewer.mjs")
-        .args(["--url", &srv.base, "--id", &id, "--mode", "pixel"])
-        .args(["--width", &w.to_string(), "--height", &h.to_string()])
-        // Two tree responses cut mid-body: the viewer resumes by asking for them again.
-        .args(["--cut-trees", "2"])
-        .arg("--out")
-        .arg(tmp.path())
-        .arg("--chromium")
-        .arg(&chromium)
-        .output()
-        .expect("run node");
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(
-        run.status.success(),
-        "the browser script failed:\n{}\n{stdout}\nserver log:\n{}",
-        String::from_utf8_lossy(&run.stderr),
-        srv.log_text()
+    render(
+        &[scene.as_os_str()],
+        size,
+        &tmp.path().join("cache"),
+        &reference,
+        &[],
     );
-    let seen: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap_or(""))
-        .unwrap_or_else(|e| panic!("the script's last line is not JSON ({e}): {stdout}"));
-    eprintln!(
-        "viewer in {}: graphics path {}, first frame {} ms after the page's start, {} ms per \
-         frame, {} bytes fetched",
-        seen["browser"], seen["graphics"], seen["firstFrameMs"], seen["bench_ms"], seen["bytes"]
+    // Two tree responses cut mid-body: the viewer resumes by asking for them again.
+    let seen = view(
+        &chromium,
+        &srv,
+        &id,
+        size,
+        tmp.path(),
+        &["--cut-trees", "2"],
     );
     assert_eq!(
-        seen["cut_tree_responses"], 2,
-        "the proxy did not cut two tree responses: {seen}"
-    );
-    assert!(
-        seen["graphics"]
-            .as_str()
-            .unwrap_or("")
-            .starts_with("WebGPU"),
-        "{seen}"
+        seen.json["cut_tree_responses"], 2,
+        "the proxy did not cut two tree responses: {}",
+        seen.json
     );
 
     // BSPVT_BROWSER_OUT=DIR keeps the frames (the docs' screenshots come from here).
@@ -146,10 +204,7 @@ fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
             std::fs::copy(tmp.path().join(f), dir.join(f)).unwrap();
         }
     }
-    let (rw, rh, r) = rgb(&reference);
-    let (ww, wh, web) = rgb(&tmp.path().join("web.png"));
-    assert_eq!((rw, rh), (ww, wh), "sizes");
-    let (diff, kept) = mean_difference_off_edges(rw, rh, &r, &web);
+    let (diff, kept) = compare(&reference, &seen.dir.join("web.png"));
     eprintln!(
         "browser vs bspvt render: mean difference {:.4} over {:.1} % of the pixels (edges left out)",
         diff,
@@ -162,16 +217,61 @@ fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
     );
 
     // The light moved in its region, and the frame changed with it.
-    let (_, _, moved) = rgb(&tmp.path().join("web-moved.png"));
-    let (change, _) = mean_difference_off_edges(ww, wh, &web, &moved);
+    let (change, _) = compare(&seen.dir.join("web.png"), &seen.dir.join("web-moved.png"));
     eprintln!(
         "light dragged by {}: frame changed by {change:.4}",
-        seen["light_offset"]
+        seen.json["light_offset"]
     );
     assert!(
-        seen["light_offset"]
+        seen.json["light_offset"]
             .as_str()
             .is_some_and(|o| o != "0.000,0.000,0.000")
     );
     assert!(change > 0.002, "the frame did not change: {change}");
+}
+
+/// A glTF room lit by two emissive lamps (`assets/rooms/two-lamps.gltf`): the viewer draws
+/// both at once, as `bspvt render` does, and not the first alone.
+#[test]
+fn the_browser_viewer_draws_every_lamp() {
+    let chromium = match bspvt_tests::browser::tools() {
+        Ok(c) => c,
+        Err(why) => {
+            eprintln!("SKIPPED the viewer in Chromium: {why}");
+            return;
+        }
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/two-lamps.gltf");
+    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
+    let a = agent();
+    let bytes = std::fs::read(&gltf).unwrap();
+    let id = submit_ok(&a, &srv, &[("mesh", Some("two-lamps.gltf"), &bytes)], None);
+    wait_done(&a, &srv, &id);
+    let size = (128, 128);
+    let cache = tmp.path().join("cache");
+    let source = [std::ffi::OsStr::new("--mesh"), gltf.as_os_str()];
+    let both = tmp.path().join("both.png");
+    let first = tmp.path().join("first.png");
+    render(&source, size, &cache, &both, &[]);
+    render(&source, size, &cache, &first, &["--light", "0"]);
+    // Lamps from a glTF have no region to be dragged in.
+    let seen = view(&chromium, &srv, &id, size, tmp.path(), &["--drag", "no"]);
+    let web = seen.dir.join("web.png");
+    let (diff, kept) = compare(&both, &web);
+    let (to_first, _) = compare(&first, &web);
+    eprintln!(
+        "two lamps: browser vs bspvt render {diff:.4} over {:.1} % of the pixels; vs the first \
+         lamp alone {to_first:.4}",
+        kept * 100.0
+    );
+    assert!(kept > 0.8, "edges cover too much of the frame: {kept}");
+    assert!(
+        diff <= 0.02,
+        "the browser's two lamps differ from bspvt render's by {diff}"
+    );
+    assert!(
+        to_first > 0.05,
+        "the browser's frame is the first lamp's alone ({to_first})"
+    );
 }

@@ -38,6 +38,9 @@ struct ResolveParams {
     light: LightRecord,
     counts: [u32; 4],
     size: [u32; 4],
+    /// x: 1 to add this light's frame to the image (the browser's several lights); here each
+    /// light is a frame of its own, summed on the CPU.
+    layer: [u32; 4],
 }
 
 /// The visibility buffer's format: triangle index + 1 in two 16-bit halves (Rg16Uint is
@@ -392,6 +395,7 @@ impl GpuFrames {
                 self.samples,
                 renderer.roughness_override().map_or(0, f32::to_bits),
             ],
+            layer: [0; 4],
         };
         gpu.queue
             .write_buffer(&self.resolve_params, 0, bytemuck::bytes_of(&resolve));

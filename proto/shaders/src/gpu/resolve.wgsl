@@ -28,6 +28,9 @@ struct ResolveParams {
     counts: vec4u,
     // width, height, samples per pixel, the roughness override's f32 bits (0: none).
     size: vec4u,
+    // x: 1 when `image` holds the frames of the lights drawn before this one and this light's
+    // frame is added to it (several lights, one pass each); 0: this frame replaces it.
+    layer: vec4u,
 }
 
 struct VertexOut {
@@ -449,7 +452,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         if first != 0u {
             c = shade(first - 1u, f32(id.x) + 0.5, f32(id.y) + 0.5);
         }
-        image[id.y * fp.size.x + id.x] = vec4f(c, 1.0);
+        put(id.y * fp.size.x + id.x, c);
         return;
     }
     var sum = vec3f(0.0);
@@ -477,5 +480,14 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         value[s] = c;
         sum += c;
     }
-    image[id.y * fp.size.x + id.x] = vec4f(sum / f32(samples), 1.0);
+    put(id.y * fp.size.x + id.x, sum / f32(samples));
+}
+
+// Writes pixel i's radiance c, or adds it to the lights' before it (`ResolveParams::layer`).
+fn put(i: u32, c: vec3f) {
+    if fp.layer.x == 1u {
+        image[i] = vec4f(image[i].xyz + c, 1.0);
+    } else {
+        image[i] = vec4f(c, 1.0);
+    }
 }

@@ -17,12 +17,8 @@ use common::*;
 
 #[test]
 fn the_dashboard_submits_follows_and_deletes_a_scene_in_chromium() {
-    let chromium = match bspvt_tests::browser::tools() {
-        Ok(c) => c,
-        Err(why) => {
-            eprintln!("SKIPPED the dashboard in Chromium: {why}");
-            return;
-        }
+    let Some(chromium) = bspvt_tests::browser::chromium_or_skip("the dashboard in Chromium") else {
+        return;
     };
     let tmp = tempfile::tempdir().unwrap();
     let srv = start(&tmp.path().join("data"), &["--api-key", API_KEY]);

@@ -31,3 +31,10 @@ pub fn tools() -> Result<PathBuf, String> {
     }
     Ok(chromium)
 }
+
+/// [`tools`]' Chromium, or `None` after printing why `what` is skipped.
+pub fn chromium_or_skip(what: &str) -> Option<PathBuf> {
+    tools()
+        .map_err(|why| eprintln!("SKIPPED {what}: {why}"))
+        .ok()
+}

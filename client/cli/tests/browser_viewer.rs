@@ -153,12 +153,8 @@ fn compare(a: &Path, b: &Path) -> (f64, f64) {
 
 #[test]
 fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
-    let chromium = match bspvt_tests::browser::tools() {
-        Ok(c) => c,
-        Err(why) => {
-            eprintln!("SKIPPED the viewer in Chromium: {why}");
-            return;
-        }
+    let Some(chromium) = bspvt_tests::browser::chromium_or_skip("the viewer in Chromium") else {
+        return;
     };
     let tmp = tempfile::tempdir().unwrap();
     let scene = plate_small(tmp.path(), "plate", 16, 256);
@@ -234,12 +230,8 @@ fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
 /// both at once, as `bspvt render` does, and not the first alone.
 #[test]
 fn the_browser_viewer_draws_every_lamp() {
-    let chromium = match bspvt_tests::browser::tools() {
-        Ok(c) => c,
-        Err(why) => {
-            eprintln!("SKIPPED the viewer in Chromium: {why}");
-            return;
-        }
+    let Some(chromium) = bspvt_tests::browser::chromium_or_skip("the viewer in Chromium") else {
+        return;
     };
     let tmp = tempfile::tempdir().unwrap();
     let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/two-lamps.gltf");

@@ -258,8 +258,8 @@ class Viewer {
     return { words, count: finite && l.vertices.length <= 8 ? l.vertices.length : 0 };
   }
 
-  /** The passes' parameters for lamp k; `layer`: 1 adds its frame to the lamps' before it. */
-  writeParams(k, layer) {
+  /** The shading passes' parameters for lamp k; `layer`: 1 adds its frame to the lamps' before it. */
+  writeLampParams(k, layer) {
     const q = this.device.queue;
     const v = this.view;
     const { words: light, count } = this.lightRecord(k);
@@ -272,7 +272,6 @@ class Viewer {
     new Uint32Array(sp, 176, 4).set([count, this.n, codec.offsets, this.doc.ltc_size]);
     new Float32Array(sp, 192, 4).set([codec.halfStep, 0, 0, 0]);
     q.writeBuffer(this.shadeParams, 0, sp);
-    q.writeBuffer(this.rasterParams, 0, viewProj(v, this.diagonal));
     // resolve.wgsl `ResolveParams`.
     const rp = new ArrayBuffer(272);
     const f = new Float32Array(rp, 0, 16);
@@ -293,6 +292,12 @@ class Viewer {
     ]);
     new Uint32Array(rp, 256, 4).set([layer, 0, 0, 0]);
     q.writeBuffer(this.resolveParams, 0, rp);
+  }
+
+  /** The parameters of the passes run once a frame: the raster's camera, present's exposure. */
+  writeFrameParams() {
+    const q = this.device.queue;
+    q.writeBuffer(this.rasterParams, 0, viewProj(this.view, this.diagonal));
     const pp = new ArrayBuffer(16);
     new Uint32Array(pp).set([this.width, this.height, 0, 0]);
     new Float32Array(pp, 8, 1)[0] = this.exposure;
@@ -317,31 +322,44 @@ class Viewer {
   draw() {
     const d = this.device;
     const roots = this.method === 'bspvt' ? this.roots : this.rootsNone;
+    const visView = this.visibility.createView();
+    // The same buffers for every lamp: the groups are made once a frame.
+    const shadeGroup = this.group(this.shadePipe, [
+      this.shadeParams,
+      this.verts,
+      this.jobs,
+      roots,
+      this.nodes,
+      this.lineNormals,
+      this.ltc,
+      this.results,
+      this.lightTexture,
+    ]);
+    const resolveGroup = this.group(this.resolvePipe, [
+      this.resolveParams,
+      this.verts,
+      this.tris,
+      this.materials,
+      this.results,
+      this.ltc,
+      this.image,
+      visView,
+      this.lightTexture,
+      this.surfaceTextures,
+      this.frames,
+    ]);
+    this.writeFrameParams();
     const lamps = Math.max(1, this.doc.lights.length);
     for (let k = 0; k < lamps; k++) {
-      this.writeParams(k, k === 0 ? 0 : 1);
+      this.writeLampParams(k, k === 0 ? 0 : 1);
       const enc = d.createCommandEncoder();
       {
         const pass = enc.beginComputePass();
         pass.setPipeline(this.shadePipe);
-        pass.setBindGroup(
-          0,
-          this.group(this.shadePipe, [
-            this.shadeParams,
-            this.verts,
-            this.jobs,
-            roots,
-            this.nodes,
-            this.lineNormals,
-            this.ltc,
-            this.results,
-            this.lightTexture,
-          ]),
-        );
+        pass.setBindGroup(0, shadeGroup);
         pass.dispatchWorkgroups(Math.ceil(this.n / 64));
         pass.end();
       }
-      const visView = this.visibility.createView();
       if (k === 0) {
         const pass = enc.beginRenderPass({
           colorAttachments: [{ view: visView, clearValue: [0, 0, 0, 0], loadOp: 'clear', storeOp: 'store' }],
@@ -360,22 +378,7 @@ class Viewer {
       {
         const pass = enc.beginComputePass();
         pass.setPipeline(this.resolvePipe);
-        pass.setBindGroup(
-          0,
-          this.group(this.resolvePipe, [
-            this.resolveParams,
-            this.verts,
-            this.tris,
-            this.materials,
-            this.results,
-            this.ltc,
-            this.image,
-            visView,
-            this.lightTexture,
-            this.surfaceTextures,
-            this.frames,
-          ]),
-        );
+        pass.setBindGroup(0, resolveGroup);
         pass.dispatchWorkgroups(Math.ceil(this.width / 8), Math.ceil(this.height / 8));
         pass.end();
       }

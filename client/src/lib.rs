@@ -10,6 +10,7 @@
 //! 1. kernels, free of I/O: [`ggx`], [`ltc`], [`shade`], [`sg`]'s lobes, [`texture`], [`light`];
 //! 2. [`frame`]: the image, camera, G-buffer, BRDF and shadow-ray types every method shares;
 //!    [`envmap`]: the environment map; [`sky`]: the map as textured quad lights at infinity;
+//!    [`sky_cells`]: the sphere of directions as world-fixed cells, for a map that turns;
 //! 3. [`render`] (per-vertex / per-pixel frames), [`gpu`] (the same on the GPU),
 //!    [`groundtruth`], [`penumbra`], [`sg`], [`ratio`];
 //! 4. [`method`]: the [`method::FrameMethod`] interface and its registry, one file per method;
@@ -37,6 +38,7 @@ pub mod session;
 pub mod sg;
 pub mod shade;
 pub mod sky;
+pub mod sky_cells;
 pub mod stream;
 pub mod texture;
 pub mod viewer;

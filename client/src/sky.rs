@@ -64,6 +64,9 @@ pub struct SkyPieces {
     pub dropped_power: f64,
     /// The map's radiance scale.
     pub strength: f64,
+    /// Whether a piece was split for its power more than [`SUN_DEPTH`] times: a small bright
+    /// source (a sun), ≥ 16× the map's mean radiance over 1/16 of a piece.
+    pub has_sun: bool,
 }
 
 impl SkyPieces {
@@ -107,11 +110,14 @@ impl SkyPieces {
         let share = SPLIT_SHARE / (FACES as f64 * f64::from(k * k));
         let omega: f64 = built.iter().map(|(p, _, _)| p.solid_angle).sum();
         let mean = total / omega.max(1e-300);
+        let mut has_sun = false;
         loop {
             let (split, keep): (Vec<_>, Vec<_>) = built.into_iter().partition(|(p, w, c)| {
                 let sun = *w > share * total
                     && *w > SPLIT_CONTRAST * mean * p.solid_angle
                     && c.depth < MAX_SPLIT_DEPTH;
+                // Split twice already and still over an even share: ≥ 16× the map's mean.
+                has_sun |= total > 0.0 && sun && c.depth >= SUN_DEPTH;
                 let varied = c.depth < MAX_VARIATION_DEPTH
                     && *w > VARIATION_SHARE * share * total
                     && p.texture.quadrant_variation() > SPLIT_VARIATION;
@@ -147,6 +153,7 @@ impl SkyPieces {
             dropped,
             dropped_power,
             strength,
+            has_sun,
         })
     }
 
@@ -212,6 +219,9 @@ const SPLIT_SHARE: f64 = 1.0;
 /// … and its mean radiance is more than this many times the map's (a margin above 1, so
 /// that a constant map is not split by rounding).
 const SPLIT_CONTRAST: f64 = 1.1;
+/// A piece split for its power this many times and still split is a sun
+/// ([`SkyPieces::has_sun`]).
+const SUN_DEPTH: u32 = 2;
 /// Splits of a piece at most (a piece of side 2/k is split down to 2/(k·2⁵)).
 const MAX_SPLIT_DEPTH: u32 = 5;
 /// A piece whose quadrants' mean luminances differ by more than this fraction of its mean (a
@@ -299,6 +309,22 @@ mod tests {
         assert!(SkyPieces::new(&env, 0, DEFAULT_THRESHOLD, 1.0).is_err());
         assert!(SkyPieces::new(&env, 2, f64::NAN, 1.0).is_err());
         assert!(SkyPieces::new(&env, 2, 0.0, -1.0).is_err());
+    }
+
+    /// A small bright source makes a sun; a smooth sky (brighter up than down, ×20) does not.
+    #[test]
+    fn a_sun_is_told_from_a_bright_sky() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let env = EnvLight::load(&crate::envmap::write_test_map(dir.path())).expect("map");
+        let s = SkyPieces::new(&env, 2, DEFAULT_THRESHOLD, 1.0).expect("pieces");
+        assert!(s.has_sun, "the test map's 6×6-texel sun at 100× the sky");
+        let (w, h) = (64u32, 32u32);
+        let px = (0..w * h)
+            .map(|i| [1.0 + 19.0 * (1.0 - (i / w) as f32 / h as f32); 3])
+            .collect();
+        let sky = EnvLight::from_pixels(w, h, px).expect("map");
+        let s = SkyPieces::new(&sky, 2, DEFAULT_THRESHOLD, 1.0).expect("pieces");
+        assert!(!s.has_sun);
     }
 
     #[test]
@@ -494,5 +520,77 @@ mod tests {
                 .sum();
             assert!(moved / sum > 1e-3, "a 45° turn changed nothing");
         }
+    }
+
+    /// Mean |a − b| / mean b over the pixels, and the largest |a − b| / max b.
+    fn difference(a: &crate::frame::image::Image, b: &crate::frame::image::Image) -> (f64, f64) {
+        let (mut diff, mut sum, mut worst, mut top) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        for (p, q) in a.pixels.iter().zip(&b.pixels) {
+            for c in 0..3 {
+                let d = f64::from((p[c] - q[c]).abs());
+                diff += d;
+                sum += f64::from(q[c]);
+                worst = worst.max(d);
+                top = top.max(f64::from(q[c]));
+            }
+        }
+        assert!(sum > 0.0 && top > 0.0);
+        (diff / sum, worst / top)
+    }
+
+    /// The sky in world-fixed cells ([`crate::sky_cells`]) against the pieces, per vertex, on
+    /// an open plane: a constant map gives the same furnace (both tile the sphere exactly;
+    /// ρ = 1); the test map turned by 37° agrees within the cells' resolution, and turned the
+    /// other way does not (the cells turn the map the way the pieces do).
+    #[test]
+    fn cells_turn_the_sky_as_the_pieces_do() {
+        use crate::render::sky_cells::CellTransfer;
+        use crate::sky_cells::SkyCells;
+        let m = Material {
+            name: "m".into(),
+            roughness: 0.2,
+            albedo: [0.6, 0.5, 0.4],
+            specular: [0.3, 0.3, 0.3],
+            maps: None,
+            cutout: None,
+            normal_map: None,
+        };
+        let (scene, bake) = open_plane(m);
+        let trees = Trees::full(&bake.trees, bake.header.codec());
+        let r = Renderer::new(&scene, 96, 96);
+        let white = EnvLight::constant([1.0, 1.0, 1.0]);
+        let cells = SkyCells::new(&white, 12, 1.0).expect("cells");
+        let pieces = SkyPieces::new(&white, 2, DEFAULT_THRESHOLD, 1.0).expect("pieces");
+        let (a, counts) = r.sky_cells(
+            &cells,
+            &cells.radiance(10.0),
+            Some(&trees),
+            &mut CellTransfer::default(),
+        );
+        assert!(counts.vertices_shaded > 10);
+        let (b, _) = r.sky(&pieces.posed(10.0), Some(&trees), Mode::Vertex);
+        let (mean, worst) = difference(&a, &b);
+        eprintln!("white sky, cells against pieces: mean {mean:.2e}, worst {worst:.2e}");
+        assert!(
+            mean < 1e-3 && worst < 3e-3,
+            "mean {mean:.2e}, worst {worst:.2e}"
+        );
+
+        let dir = tempfile::tempdir().expect("temp dir");
+        let env = EnvLight::load(&crate::envmap::write_test_map(dir.path())).expect("map");
+        let cells = SkyCells::new(&env, 12, 1.0).expect("cells");
+        let pieces = SkyPieces::new(&env, 2, DEFAULT_THRESHOLD, 1.0).expect("pieces");
+        let (want, _) = r.sky(&pieces.posed(37.0), Some(&trees), Mode::Vertex);
+        let mut keep = CellTransfer::default();
+        let (same, _) = r.sky_cells(&cells, &cells.radiance(37.0), Some(&trees), &mut keep);
+        let (other, c) = r.sky_cells(&cells, &cells.radiance(-37.0), Some(&trees), &mut keep);
+        assert_eq!(c.pieces, 0, "the second frame cut nothing again");
+        let (near, _) = difference(&same, &want);
+        let (far, _) = difference(&other, &want);
+        eprintln!(
+            "test map at 37°: cells against pieces {near:.3e}; turned the other way {far:.3e}"
+        );
+        assert!(near < 0.03, "{near}");
+        assert!(far > 3.0 * near, "{far} vs {near}");
     }
 }

@@ -87,6 +87,13 @@ pub(crate) struct EnvArgs {
     #[arg(long, default_value_t = bspvt_client::sky::DEFAULT_K,
           value_parser = clap::value_parser!(u32).range(1..=i64::from(bspvt_client::sky::MAX_K)))]
     pub(crate) sky_pieces: u32,
+    /// `--method bspvt-env --mode vertex`: the sky in world-fixed cells of B latitude bands ×
+    /// 2B sectors, cut by the trees once per vertex, so that a turning map costs two dot
+    /// products per vertex a frame; 0: the pieces every frame (as per pixel, and for a map
+    /// with a sun).
+    #[arg(long, default_value_t = bspvt_client::sky_cells::DEFAULT_BANDS,
+          value_parser = clap::value_parser!(u32).range(0..=i64::from(bspvt_client::sky_cells::MAX_BANDS)))]
+    pub(crate) sky_cells: u32,
     /// Spherical Gaussians fitted to the map (`--method sg`).
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=256))]
     pub(crate) lobes: u32,
@@ -111,6 +118,7 @@ impl EnvArgs {
         let mut o = EnvOptions {
             lobes: self.lobes as usize,
             pieces: self.sky_pieces,
+            cells: self.sky_cells,
             sg: SgOptions {
                 ssdf: self.ssdf.into(),
                 depth_res: self.depth_res,

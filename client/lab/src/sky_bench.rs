@@ -19,8 +19,10 @@ use bspvt_client::frame::image::Image;
 use bspvt_client::groundtruth::render_mc_env;
 use bspvt_client::method::trees::cached_sky_bake;
 use bspvt_client::render::renderer::{Mode, Renderer, Trees};
+use bspvt_client::render::sky_cells::CellTransfer;
 use bspvt_client::sg::{self, SgOptions, SsdfMode};
 use bspvt_client::sky::{DEFAULT_THRESHOLD, SkyPieces};
+use bspvt_client::sky_cells::SkyCells;
 
 use crate::bench::median_ms;
 use crate::compare::metrics::{covered, covered_mean, rmse_mae};
@@ -48,6 +50,9 @@ pub struct BenchSkyArgs {
     /// Pieces per cube-face side to measure.
     #[arg(long, value_delimiter = ',', default_values_t = vec![1u32, 2, 4, 8])]
     pub(crate) pieces: Vec<u32>,
+    /// `bspvt-env` per vertex in world-fixed cells: latitude bands to measure (0: none).
+    #[arg(long, value_delimiter = ',', default_values_t = vec![8u32, 12, 16])]
+    pub(crate) cells: Vec<u32>,
     /// SG lobes of the comparison.
     #[arg(long, value_delimiter = ',', default_values_t = vec![16usize, 32])]
     pub(crate) lobes: Vec<usize>,
@@ -85,6 +90,10 @@ pub struct Row {
     pub(crate) rel_rmse: f64,
     /// Tree pieces integrated per shaded vertex (`bspvt-env`).
     pub(crate) tree_pieces_per_vertex: Option<f64>,
+    /// Latitude bands of the sky's cells (`bspvt-env-cells`).
+    pub(crate) bands: Option<u32>,
+    /// The first frame (the cells cut by every vertex's trees), ms (`bspvt-env-cells`).
+    pub(crate) first_frame_ms: Option<f64>,
 }
 
 /// What `bspvt bench-sky` measured.
@@ -122,6 +131,8 @@ impl Row {
             rel_mae,
             rel_rmse,
             tree_pieces_per_vertex: None,
+            bands: None,
+            first_frame_ms: None,
         }
     }
 }
@@ -145,6 +156,17 @@ fn sky_scene(a: &BenchSkyArgs) -> Result<(String, Scene)> {
         label += &format!(" subdivided to {} vertices", sky.mesh.vertex_count());
     }
     Ok((label, sky))
+}
+
+/// `camera` turned by `deg` about the vertical through its target.
+fn orbit_camera(camera: &bspvt_proto::scene::Camera, deg: f64) -> bspvt_proto::scene::Camera {
+    let target = glam::Vec3::from(camera.target).as_dvec3();
+    let eye = glam::Vec3::from(camera.position).as_dvec3();
+    let moved = target + glam::DMat3::from_rotation_y(deg.to_radians()) * (eye - target);
+    bspvt_proto::scene::Camera {
+        position: moved.as_vec3().to_array(),
+        ..camera.clone()
+    }
 }
 
 /// Runs `bspvt bench-sky` and writes results.json/.md and images.
@@ -201,6 +223,10 @@ pub fn run(a: &BenchSkyArgs) -> Result<Report> {
                 row.k
                     .map(|k| format!("k={k} ({} pieces)", row.sky_pieces.unwrap_or(0))),
                 row.lobes.map(|l| format!("K={l}")),
+                row.bands
+                    .map(|b| format!("B={b} ({} cells)", row.sky_pieces.unwrap_or(0))),
+                row.first_frame_ms
+                    .map(|ms| format!("first frame {ms:.0} ms")),
             ]
             .into_iter()
             .flatten()
@@ -242,6 +268,48 @@ pub fn run(a: &BenchSkyArgs) -> Result<Report> {
                 format!("bspvt-env-k{k}-{mode:?}.png").to_lowercase(),
             )?;
         }
+    }
+    // The sky in world-fixed cells, per vertex: the first frame cuts the cells by the trees;
+    // then the map turns 1° a frame with the camera still, and again with the camera moving
+    // too (two cameras 1° apart about the target, in turn: every frame re-weights the
+    // specular lobe of every vertex).
+    let orbit = orbit_camera(&scene.camera, 1.0);
+    let r2 = Renderer::with_camera(&scene, &orbit, a.size, a.size);
+    for &bands in a.cells.iter().filter(|&&b| b > 0) {
+        let cells = SkyCells::new(&env, bands, 1.0)?;
+        let mut keep = CellTransfer::default();
+        let t = Instant::now();
+        let (img, counts) = r.sky_cells(&cells, &cells.radiance(0.0), Some(&trees), &mut keep);
+        let first = t.elapsed().as_secs_f64() * 1e3;
+        let mut turn = 0.0;
+        let (ms, _) = median_ms(frames.max(5), || {
+            turn += 1.0;
+            Ok(r.sky_cells(&cells, &cells.radiance(turn), Some(&trees), &mut keep))
+        })?;
+        let (err, name) = (errors(&img), format!("bspvt-env-cells-b{bands}.png"));
+        let row = Row {
+            sky_pieces: Some(cells.len()),
+            tree_pieces_per_vertex: Some(
+                counts.pieces as f64 / counts.vertices_shaded.max(1) as f64,
+            ),
+            bands: Some(bands),
+            first_frame_ms: Some(first),
+            ..Row::new("bspvt-env-cells", Mode::Vertex, ms, err)
+        };
+        push(row, &img, name)?;
+        let mut i = 0;
+        let (ms, _) = median_ms(frames.max(5), || {
+            turn += 1.0;
+            i += 1;
+            let view = if i % 2 == 0 { &r } else { &r2 };
+            Ok(view.sky_cells(&cells, &cells.radiance(turn), Some(&trees), &mut keep))
+        })?;
+        let row = Row {
+            sky_pieces: Some(cells.len()),
+            bands: Some(bands),
+            ..Row::new("bspvt-env-cells, camera moving", Mode::Vertex, ms, err)
+        };
+        push(row, &img, format!("bspvt-env-cells-b{bands}-moving.png"))?;
     }
     // Without the trees: what the shadows are worth.
     let sky = SkyPieces::new(&env, 2, DEFAULT_THRESHOLD, 1.0)?;
@@ -304,8 +372,8 @@ fn markdown(r: &Report) -> String {
         "# bench-sky: {} under {} ({} vertices, {} shaded; {}² on {} threads)\n\n\
          Reference: Monte Carlo, {} spp, {:.1} s, mean relative standard error {:.4}. \
          Sky bake: {} bytes{}.\n\n\
-         | method | mode | k | pieces | K | ms/frame | fps | mean abs. error | RMSE | tree pieces/vertex |\n\
-         |---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+         | method | mode | k | B | pieces or cells | K | ms/frame | fps | mean abs. error | RMSE | tree pieces/vertex | first frame ms |\n\
+         |---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         r.scene,
         r.env,
         r.vertices,
@@ -325,17 +393,19 @@ fn markdown(r: &Report) -> String {
     let opt = |v: Option<String>| v.unwrap_or_default();
     for x in &r.rows {
         s += &format!(
-            "| {} | {} | {} | {} | {} | {:.1} | {:.1} | {:.2} % | {:.2} % | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {:.1} | {:.1} | {:.2} % | {:.2} % | {} | {} |\n",
             x.method,
             opt(x.mode.map(|m| format!("{m:?}").to_lowercase())),
             opt(x.k.map(|k| k.to_string())),
+            opt(x.bands.map(|b| b.to_string())),
             opt(x.sky_pieces.map(|k| k.to_string())),
             opt(x.lobes.map(|k| k.to_string())),
             x.ms_per_frame,
             x.fps,
             100.0 * x.rel_mae,
             100.0 * x.rel_rmse,
-            opt(x.tree_pieces_per_vertex.map(|p| format!("{p:.1}")))
+            opt(x.tree_pieces_per_vertex.map(|p| format!("{p:.1}"))),
+            opt(x.first_frame_ms.map(|ms| format!("{ms:.0}")))
         );
     }
     s
@@ -357,6 +427,7 @@ mod tests {
             env: Some(bspvt_client::envmap::write_test_map(dir.path())),
             size: 48,
             pieces: vec![1, 2],
+            cells: vec![4],
             lobes: vec![4],
             frames: 1,
             spp: 64,
@@ -364,7 +435,7 @@ mod tests {
             out: dir.path().join("out"),
         };
         let r = run(&a).expect("bench-sky runs");
-        assert_eq!(r.rows.len(), 2 * 2 + 1 + 2);
+        assert_eq!(r.rows.len(), 2 * 2 + 2 + 1 + 2);
         assert!(
             r.rows
                 .iter()
@@ -381,6 +452,13 @@ mod tests {
             .find(|x| x.method == "bspvt-env-unshadowed")
             .expect("row");
         assert!(shadowed.rel_mae < open.rel_mae, "{shadowed:?} vs {open:?}");
+        // The cells' shadows too.
+        let cells = r
+            .rows
+            .iter()
+            .find(|x| x.method == "bspvt-env-cells")
+            .expect("row");
+        assert!(cells.rel_mae < open.rel_mae, "{cells:?} vs {open:?}");
         assert!(a.out.join("results.md").is_file());
         // A second run finds the sky's bake in the cache.
         let again = run(&a).expect("bench-sky runs again");

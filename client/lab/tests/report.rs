@@ -128,6 +128,7 @@ fn quick_report_measures_every_method_and_reuses_its_cache() {
                 methods,
                 [
                     "bspvt-env",
+                    "bspvt-env-cells",
                     "bspvt-env-pixel",
                     "mc-env",
                     "sg-exact",
@@ -160,6 +161,10 @@ fn quick_report_measures_every_method_and_reuses_its_cache() {
                 .collect();
             assert_eq!(sky.len(), 3);
             assert!(sky.iter().all(|e| e.metrics.rmse < env_rmse("sg-screen")));
+            // The cells (the shared map has no sun): within 10 % of the pieces' error at k = 2.
+            let k2 = sky[1].metrics.rmse; // k = 1, 2, 4 in that order
+            let cells = env_rmse("bspvt-env-cells");
+            assert!(cells < 1.1 * k2, "cells {cells} vs pieces {k2}");
             assert!(env.fits.iter().all(|f| f.1.is_finite() && f.1 < 1.0));
         }
         None => {

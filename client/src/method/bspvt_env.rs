@@ -2,13 +2,18 @@
 //! ([`crate::sky`]), each cut by the vertex's sky trees and integrated with LTC GGX
 //! [paper000 §3.1 eq. 2]; the scene's lamps, where it has any, with their own trees in the
 //! same frame. The map turns at run time: only the pieces move ([`FrameInput::env_rotation_deg`]).
+//! Per vertex, unless the map has a sun, the sky is shaded in world-fixed cells instead
+//! ([`crate::sky_cells`]): the trees cut them once per vertex, and a turning map only changes
+//! their radiance.
 
 use anyhow::Result;
 
 use super::{Frame, FrameInput, FrameMethod, MethodState, Needs, SceneData, Settings};
 use crate::frame::image::Image;
 use crate::render::renderer::{FrameCounts, Mode, Trees};
+use crate::render::sky_cells::CellTransfer;
 use crate::sky::SkyPieces;
+use crate::sky_cells::SkyCells;
 
 /// See the module doc.
 pub(crate) struct BspvtEnv;
@@ -21,7 +26,7 @@ impl FrameMethod for BspvtEnv {
         "BSPVT environment"
     }
     fn description(&self) -> &'static str {
-        "environment map as k×k quad lights per cube face, shadowed by baked sky trees × LTC GGX, plus the scene's lamps (--env, --env-rotation, --sky-pieces)"
+        "environment map as k×k quad lights per cube face (per vertex: world-fixed cells), shadowed by baked sky trees × LTC GGX, plus the scene's lamps (--env, --env-rotation, --sky-pieces, --sky-cells)"
     }
     fn needs(&self) -> Needs {
         Needs {
@@ -34,8 +39,18 @@ impl FrameMethod for BspvtEnv {
         let e = &settings.env;
         let env = crate::envmap::EnvLight::load(&e.path)?;
         let sky = SkyPieces::new(&env, e.pieces, e.threshold, e.strength)?;
+        let cells = match e.cells {
+            0 => None,
+            _ if !SkyCells::suits(&sky) => {
+                tracing::info!("the map has a sun: the sky is shaded in pieces, not cells");
+                None
+            }
+            bands => Some(SkyCells::new(&env, bands, e.strength)?),
+        };
         Ok(Box::new(State {
             sky,
+            cells,
+            transfer: CellTransfer::default(),
             rotation_deg: e.rotation_deg,
             cached: None,
         }))
@@ -44,6 +59,10 @@ impl FrameMethod for BspvtEnv {
 
 struct State {
     sky: SkyPieces,
+    /// The sky in cells, for per-vertex frames (`None`: the pieces).
+    cells: Option<SkyCells>,
+    /// The vertices' cell terms, kept between frames.
+    transfer: CellTransfer,
     rotation_deg: f64,
     /// The last sky frame and what it was drawn for: while the map's rotation, the camera,
     /// the materials and the sky trees stay, the sky is reused and only the lamps are
@@ -71,8 +90,17 @@ impl MethodState for State {
         let (mut image, mut counts) = match &self.cached {
             Some((k, image, counts)) if *k == key => (image.clone(), *counts),
             _ => {
-                let pieces = self.sky.posed(rotation);
-                let (image, counts) = f.renderer.sky(&pieces, f.sky_trees, f.mode);
+                let (image, counts) = match (&self.cells, f.mode) {
+                    (Some(cells), Mode::Vertex) => f.renderer.sky_cells(
+                        cells,
+                        &cells.radiance(rotation),
+                        f.sky_trees,
+                        &mut self.transfer,
+                    ),
+                    _ => f
+                        .renderer
+                        .sky(&self.sky.posed(rotation), f.sky_trees, f.mode),
+                };
                 self.cached = Some((key, image.clone(), counts));
                 (image, counts)
             }

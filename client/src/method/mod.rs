@@ -118,6 +118,9 @@ pub struct EnvOptions {
     pub pieces: u32,
     /// `bspvt-env`: pieces carrying less than this fraction of the map's power are left out.
     pub threshold: f64,
+    /// `bspvt-env` per vertex: the sky in world-fixed cells of this many latitude bands
+    /// ([`crate::sky_cells`]); 0, or a map with a sun: the pieces.
+    pub cells: u32,
 }
 
 impl EnvOptions {
@@ -149,6 +152,7 @@ impl Default for EnvOptions {
             strength: 1.0,
             pieces: crate::sky::DEFAULT_K,
             threshold: crate::sky::DEFAULT_THRESHOLD,
+            cells: crate::sky_cells::DEFAULT_BANDS,
         }
     }
 }

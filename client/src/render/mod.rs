@@ -3,3 +3,4 @@
 pub mod path;
 pub mod posed;
 pub mod renderer;
+pub mod sky_cells;

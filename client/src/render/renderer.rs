@@ -283,7 +283,7 @@ impl<'a> Renderer<'a> {
         (p, n, self.material_at(id, uv))
     }
 
-    fn vertex_lobes(&self, v: u32) -> (Lobes, DVec3, DVec3) {
+    pub(crate) fn vertex_lobes(&self, v: u32) -> (Lobes, DVec3, DVec3) {
         let (p, n, m) = self.vertex_surface(v);
         let wo = (self.view.eye - p).normalize_or(n);
         (Lobes::new(self.table, &m, n, wo), p, n)

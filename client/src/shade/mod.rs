@@ -12,6 +12,7 @@
 
 pub mod bspvt;
 pub mod sky;
+pub(crate) mod sky_cells;
 
 use bspvt_proto::scene::Material;
 use bspvt_proto::sphere::{self, SphPoly};

@@ -23,8 +23,10 @@ use bspvt_client::groundtruth::render_mc_env;
 use bspvt_client::method::trees::cached_sky_bake;
 use bspvt_client::render::renderer::Renderer;
 use bspvt_client::render::renderer::{Mode, Trees};
+use bspvt_client::render::sky_cells::CellTransfer;
 use bspvt_client::sg::{self, SgOptions, SsdfMode};
 use bspvt_client::sky::{DEFAULT_THRESHOLD, SkyPieces};
+use bspvt_client::sky_cells::{DEFAULT_BANDS, SkyCells};
 
 const SEED_GT: u64 = 0x5e6e_0001;
 const SEED_MC: u64 = 0x5e6e_1000;
@@ -225,5 +227,16 @@ pub(crate) fn measure_env(
             record(method, None, Some(k), None, ms, &img)?;
         }
     }
+    // The same sky in world-fixed cells, per vertex: the time of a frame of a turning map
+    // (the cells' terms made by a first frame, outside the timing).
+    let cells = SkyCells::new(&env, DEFAULT_BANDS, 1.0)?;
+    let mut keep = CellTransfer::default();
+    let (first, _) = r.sky_cells(&cells, &cells.radiance(0.0), Some(&sky_trees), &mut keep);
+    let mut turn = 0.0;
+    let (ms, _) = median_ms(st.frames, || {
+        turn += 1.0;
+        Ok(r.sky_cells(&cells, &cells.radiance(turn), Some(&sky_trees), &mut keep))
+    })?;
+    record("bspvt-env-cells", None, None, None, ms, &first)?;
     Ok(report(fits, entries, false))
 }

@@ -213,6 +213,15 @@ pub(crate) fn env_plot(s: &SceneReport, env: &EnvReport, dir: &Path) -> Result<P
             points: of("bspvt-env"),
         },
         Series {
+            name: format!(
+                "BSPVT sky in {} cells, per vertex, the map turning",
+                2 * bspvt_client::sky_cells::DEFAULT_BANDS.pow(2)
+            ),
+            colour: RGBColor(20, 190, 190),
+            line: false,
+            points: of("bspvt-env-cells"),
+        },
+        Series {
             name: "BSPVT sky, per pixel (k = 1, 2, 4, …)".into(),
             colour: RGBColor(120, 40, 160),
             line: true,

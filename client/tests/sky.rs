@@ -297,3 +297,55 @@ fn the_cornell_box_under_the_shared_map_matches_monte_carlo() {
         assert!(e <= 0.05 * m, "{mode}: mean |error| {e} > 5 % of {m}");
     }
 }
+
+/// The sky in cells while trees stream in: a frame cuts only the vertices whose trees are new
+/// (a turn of the map cuts nothing), and once all are in, the kept terms give the frame that
+/// a fresh start gives, to the bit.
+#[test]
+fn cells_recut_only_the_vertices_whose_trees_arrive() {
+    use bspvt_client::envmap::{EnvLight, write_test_map};
+    use bspvt_client::render::sky_cells::CellTransfer;
+    use bspvt_client::sky_cells::SkyCells;
+    let mut scene = bspvt_proto::scene::open_scene(Some("builtin:plate-small"), None)
+        .unwrap()
+        .sky();
+    scene.bake.face_res = 16;
+    let baked = bake(&scene);
+    let r = Renderer::new(&scene, 64, 64);
+    let dir = tempfile::tempdir().unwrap();
+    let env = EnvLight::load(&write_test_map(dir.path())).unwrap();
+    let cells = SkyCells::new(&env, 8, 1.0).unwrap();
+    let half: Vec<bool> = (0..baked.trees.len()).map(|v| v % 2 == 0).collect();
+    let partial = Trees::partial(&baked.trees, baked.header.codec(), &half);
+    let full = Trees::full(&baked.trees, baked.header.codec());
+
+    let mut keep = CellTransfer::default();
+    let (_, first) = r.sky_cells(&cells, &cells.radiance(0.0), Some(&partial), &mut keep);
+    assert!(first.pieces > 0, "the first frame cuts the cells");
+    let (_, turned) = r.sky_cells(&cells, &cells.radiance(25.0), Some(&partial), &mut keep);
+    assert_eq!(turned.pieces, 0, "a turn of the map cuts nothing");
+    let (streamed, rest) = r.sky_cells(&cells, &cells.radiance(25.0), Some(&full), &mut keep);
+    assert!(
+        rest.pieces > 0 && rest.pieces < first.pieces * 3,
+        "the rest of the trees: {} pieces (first frame {})",
+        rest.pieces,
+        first.pieces
+    );
+    let (fresh, all) = r.sky_cells(
+        &cells,
+        &cells.radiance(25.0),
+        Some(&full),
+        &mut CellTransfer::default(),
+    );
+    assert!(
+        all.pieces > rest.pieces,
+        "{} vs {}",
+        all.pieces,
+        rest.pieces
+    );
+    assert!(
+        streamed.pixels == fresh.pixels,
+        "kept terms differ from fresh ones"
+    );
+    assert!(keep.bytes() > 0 && keep.vertices_kept() == r.visible_vertex_count());
+}

@@ -94,6 +94,8 @@ pub struct Row {
     pub(crate) bands: Option<u32>,
     /// The first frame (the cells cut by every vertex's trees), ms (`bspvt-env-cells`).
     pub(crate) first_frame_ms: Option<f64>,
+    /// Bytes kept between frames for the visible vertices' cells (`bspvt-env-cells`).
+    pub(crate) kept_bytes: Option<usize>,
 }
 
 /// What `bspvt bench-sky` measured.
@@ -133,6 +135,7 @@ impl Row {
             tree_pieces_per_vertex: None,
             bands: None,
             first_frame_ms: None,
+            kept_bytes: None,
         }
     }
 }
@@ -227,6 +230,8 @@ pub fn run(a: &BenchSkyArgs) -> Result<Report> {
                     .map(|b| format!("B={b} ({} cells)", row.sky_pieces.unwrap_or(0))),
                 row.first_frame_ms
                     .map(|ms| format!("first frame {ms:.0} ms")),
+                row.kept_bytes
+                    .map(|b| format!("{:.1} MiB kept", b as f64 / f64::from(1 << 20))),
             ]
             .into_iter()
             .flatten()
@@ -294,6 +299,7 @@ pub fn run(a: &BenchSkyArgs) -> Result<Report> {
             ),
             bands: Some(bands),
             first_frame_ms: Some(first),
+            kept_bytes: Some(keep.bytes()),
             ..Row::new("bspvt-env-cells", Mode::Vertex, ms, err)
         };
         push(row, &img, name)?;

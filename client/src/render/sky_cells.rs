@@ -34,6 +34,21 @@ impl CellTransfer {
     pub fn vertices_kept(&self) -> usize {
         self.vertices.iter().filter(|v| v.is_some()).count()
     }
+
+    /// Bytes held: the terms and weights kept (by capacity) and the per-vertex slots.
+    pub fn bytes(&self) -> usize {
+        let slots = self.vertices.capacity() * std::mem::size_of::<Option<VertexCells>>();
+        let kept: usize = self
+            .vertices
+            .iter()
+            .flatten()
+            .map(|v| {
+                v.terms.capacity() * std::mem::size_of::<CellTerm>()
+                    + v.weights.capacity() * std::mem::size_of::<f32>()
+            })
+            .sum();
+        slots + kept
+    }
 }
 
 impl Renderer<'_> {
@@ -77,6 +92,7 @@ impl Renderer<'_> {
                     let t = trees.filter(|_| has).map(|t| (&t.trees[v], &t.codec));
                     (pieces, dropped) =
                         cell_terms(&cells.grid().polys, nrm, &lobes.to_local, t, &mut terms);
+                    terms.shrink_to_fit();
                     *slot = Some(VertexCells {
                         with_trees: has,
                         view: !view,

@@ -144,6 +144,7 @@ pub(crate) fn specular_weights(
     out: &mut Vec<f32>,
 ) {
     out.clear();
+    out.reserve_exact(terms.len());
     let mut local = vec![None; grid.corners.len()];
     let mut edge_value = vec![f64::NAN; grid.edges.len()];
     let mut dirs = SphPoly::new();

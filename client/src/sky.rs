@@ -391,6 +391,19 @@ mod tests {
         (scene, bake)
     }
 
+    /// A material of albedo (0.6, 0.5, 0.4), roughness `alpha` and grey F0 `f0`.
+    fn plastic(alpha: f32, f0: f32) -> Material {
+        Material {
+            name: "m".into(),
+            roughness: alpha,
+            albedo: [0.6, 0.5, 0.4],
+            specular: [f0; 3],
+            maps: None,
+            cutout: None,
+            normal_map: None,
+        }
+    }
+
     /// ∫ over the upper hemisphere of the LTC density: midpoint rule in (cos θ, φ).
     fn ltc_hemisphere(ltc: &crate::ltc::table::Ltc) -> f64 {
         let (nu, nphi) = (800, 800);
@@ -476,16 +489,7 @@ mod tests {
             }
         }
         let turned = EnvLight::from_pixels(env.width, env.height, px).expect("map");
-        let m = Material {
-            name: "m".into(),
-            roughness: 0.3,
-            albedo: [0.6, 0.5, 0.4],
-            specular: [0.04; 3],
-            maps: None,
-            cutout: None,
-            normal_map: None,
-        };
-        let (scene, bake) = open_plane(m);
+        let (scene, bake) = open_plane(plastic(0.3, 0.04));
         let trees = Trees::full(&bake.trees, bake.header.codec());
         let r = Renderer::new(&scene, 96, 96);
         for mode in [Mode::Vertex, Mode::Pixel] {
@@ -546,16 +550,7 @@ mod tests {
     fn cells_turn_the_sky_as_the_pieces_do() {
         use crate::render::sky_cells::CellTransfer;
         use crate::sky_cells::SkyCells;
-        let m = Material {
-            name: "m".into(),
-            roughness: 0.2,
-            albedo: [0.6, 0.5, 0.4],
-            specular: [0.3, 0.3, 0.3],
-            maps: None,
-            cutout: None,
-            normal_map: None,
-        };
-        let (scene, bake) = open_plane(m);
+        let (scene, bake) = open_plane(plastic(0.2, 0.3));
         let trees = Trees::full(&bake.trees, bake.header.codec());
         let r = Renderer::new(&scene, 96, 96);
         let white = EnvLight::constant([1.0, 1.0, 1.0]);

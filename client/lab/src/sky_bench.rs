@@ -447,23 +447,13 @@ mod tests {
                 .iter()
                 .all(|x| x.rel_mae.is_finite() && x.ms_per_frame > 0.0)
         );
-        let shadowed = r
-            .rows
-            .iter()
-            .find(|x| x.method == "bspvt-env" && x.k == Some(2) && x.mode == Some(Mode::Pixel))
-            .expect("row");
-        let open = r
-            .rows
-            .iter()
-            .find(|x| x.method == "bspvt-env-unshadowed")
-            .expect("row");
+        let row = |f: &dyn Fn(&Row) -> bool| r.rows.iter().find(|x| f(x)).expect("row");
+        let shadowed =
+            row(&|x| x.method == "bspvt-env" && x.k == Some(2) && x.mode == Some(Mode::Pixel));
+        let open = row(&|x| x.method == "bspvt-env-unshadowed");
         assert!(shadowed.rel_mae < open.rel_mae, "{shadowed:?} vs {open:?}");
         // The cells' shadows too.
-        let cells = r
-            .rows
-            .iter()
-            .find(|x| x.method == "bspvt-env-cells")
-            .expect("row");
+        let cells = row(&|x| x.method == "bspvt-env-cells");
         assert!(cells.rel_mae < open.rel_mae, "{cells:?} vs {open:?}");
         assert!(a.out.join("results.md").is_file());
         // A second run finds the sky's bake in the cache.

@@ -309,20 +309,27 @@ pub(crate) fn run(a: &AnimateArgs) -> Result<()> {
     let stats = a.out.join("stats.json");
     std::fs::write(&stats, serde_json::to_vec_pretty(&report)?)
         .with_context(|| format!("cannot write {}", stats.display()))?;
-    print_summary(&report, &a.out);
+    print_summary(&report, &a.out, false);
     Ok(())
 }
 
-pub(crate) fn print_summary(r: &AnimateReport, out: &Path) {
-    println!(
-        "first shaded frame after {:.0} ms ({:.0} % of the trees; {}){}",
-        r.first_frame_ms,
-        r.first_frame_trees * 100.0,
-        r.first_frame_stages,
-        r.full_trees_ms
-            .map(|t| format!("; all trees after {t:.0} ms"))
-            .unwrap_or_default()
-    );
+/// Prints what `r` measured; the first frame's line unless `first_frame_told` (`demo` says it
+/// as it happens), the time to all trees either way.
+pub(crate) fn print_summary(r: &AnimateReport, out: &Path, first_frame_told: bool) {
+    let all_trees = r
+        .full_trees_ms
+        .map(|t| format!("all trees after {t:.0} ms"));
+    if !first_frame_told {
+        println!(
+            "first shaded frame after {:.0} ms ({:.0} % of the trees; {}){}",
+            r.first_frame_ms,
+            r.first_frame_trees * 100.0,
+            r.first_frame_stages,
+            all_trees.map(|t| format!("; {t}")).unwrap_or_default()
+        );
+    } else if let Some(t) = all_trees {
+        println!("{t}");
+    }
     println!(
         "{} frames at {}×{} while the light moves ({} {}): median {:.2} ms/frame ({:.0} fps) on {} threads",
         r.frames, r.width, r.height, r.method, r.mode, r.ms_per_frame, r.fps, r.threads

@@ -221,7 +221,7 @@ pub(crate) fn run(a: &DemoArgs) -> Result<()> {
         a.out.join("stats.json"),
         serde_json::to_vec_pretty(&report)?,
     )?;
-    animate::print_summary(&report, &frames_dir);
+    animate::print_summary(&report, &frames_dir, true);
     println!(
         "no display: wrote {} frames and {} (set DISPLAY for the window)",
         a.frames,

@@ -82,8 +82,8 @@ pub(crate) fn cell_terms(
 }
 
 /// The cells as a grid: corners and edges shared between neighbours, so that a vertex
-/// integrates each edge of the cells it sees once (Σ over a polygon's edges, Heitz et al.
-/// 2016 eq. 11: an edge shared by two cells enters them with opposite signs).
+/// integrates each edge of the cells it sees once (the integral is a sum over the polygon's
+/// edges, [`crate::ltc::polygon`]: an edge shared by two cells enters them with opposite signs).
 #[derive(Clone, Debug)]
 pub(crate) struct CellGrid {
     /// Each cell's corners.

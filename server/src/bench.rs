@@ -144,14 +144,16 @@ fn gpu_pass(
         let t = Instant::now();
         let (maps, counts) = baker.gpu_cube_maps(caster, batch)?;
         let per_vertex = t.elapsed().as_secs_f64() / batch.len() as f64;
-        let (n, rays) = (batch.len() as u64, counts.rays);
+        let n = batch.len() as u64;
         for (i, m) in maps.into_iter().enumerate() {
             // Rays are counted per batch: spread over its vertices, the sum kept (the
             // per-vertex figures are means).
-            let r = rays / n + u64::from((i as u64) < rays % n);
+            let spread = |x: u64| x / n + u64::from((i as u64) < x % n);
+            let r = spread(counts.rays);
             let c = CastCounts {
                 rays: r,
                 traversals: r,
+                recast: spread(counts.recast),
             };
             out.push((m, c, per_vertex));
         }
@@ -320,7 +322,15 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                 #[cfg(feature = "gpu")]
                 BenchCast::Gpu => {
                     let caster = caster.as_ref().context("no GPU context")?;
-                    pool.install(|| gpu_pass(&baker, caster, &sample))
+                    let out = pool.install(|| gpu_pass(&baker, caster, &sample))?;
+                    let (rays, again) = out
+                        .iter()
+                        .fold((0, 0), |(r, a), (_, c, _)| (r + c.rays, a + c.recast));
+                    eprintln!(
+                        "{name}: GPU cast: {again} of {rays} sub-rays cast again on the CPU \
+                         (pixels the device's rounding could have decided otherwise)"
+                    );
+                    Ok(out)
                 }
                 #[cfg(not(feature = "gpu"))]
                 BenchCast::Gpu => {
@@ -369,6 +379,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                         vertices: 1,
                         rays: counts.rays,
                         traversals: counts.traversals,
+                        recast: counts.recast,
                         ray_seconds: *rs,
                         fit_seconds: fs,
                         fit: st,

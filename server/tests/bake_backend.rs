@@ -117,4 +117,16 @@ fn gpu_bake_and_gpu_service_write_the_cpu_bytes() {
         r.body == cpu,
         "the GPU service's bake differs from the CPU bake"
     );
+    // The GPU's utilisation: busy for some of the bake, never longer than the process ran.
+    let m = get(&a, &srv.url("/metrics"));
+    let text = String::from_utf8_lossy(&m.body);
+    let value = |name: &str| -> f64 {
+        text.lines()
+            .find_map(|l| l.strip_prefix(name)?.trim().parse().ok())
+            .unwrap_or_else(|| panic!("{name} missing from /metrics:\n{text}"))
+    };
+    let busy = value("bspvt_gpu_busy_seconds_total ");
+    let up = value("bspvt_uptime_seconds ");
+    eprintln!("GPU busy {busy:.3} s of {up:.3} s up");
+    assert!(busy > 0.0 && busy <= up, "GPU busy {busy} s, up {up} s");
 }

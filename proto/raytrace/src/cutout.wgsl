@@ -26,12 +26,19 @@ fn alpha_texel(base: u32, width: u32, x: u32, y: u32) -> f32 {
 // Cutout::covers at barycentric weights `bw` of primitive `id`'s corners: the alpha factor ×
 // the texture's bilinear alpha (Texture::sample) at the interpolated UV reaches the cut-off.
 fn covers(id: u32, bw: vec3<f32>) -> bool {
+    return coverage(id, bw, 0.0).x >= 0.0;
+}
+
+// `covers` as a margin: (the alpha reached − the cut-off, how far that may be off when each
+// weight of `bw` is off by up to `e_bw`, plus the sampling's own rounding; 0 where every device
+// computes the same value: opaque, or no texture).
+fn coverage(id: u32, bw: vec3<f32>, e_bw: f32) -> vec2<f32> {
     if cut[0] == 0u {
-        return true;
+        return vec2<f32>(1.0, 0.0);
     }
     let slot = cut[4u + id];
     if slot == 0u {
-        return true;
+        return vec2<f32>(1.0, 0.0);
     }
     let e = cut[1] + 8u * (slot - 1u);
     let m = cut[2] + 16u * cut[e];
@@ -40,10 +47,12 @@ fn covers(id: u32, bw: vec3<f32>) -> bool {
     let width = cut[m];
     let height = cut[m + 1u];
     if width == 0u || height == 0u {
-        return alpha >= cutoff;
+        return vec2<f32>(alpha - cutoff, 0.0);
     }
     if cut[e + 1u] == 0u {
-        return alpha * bitcast<f32>(cut[m + 7u]) >= cutoff;
+        // A compiler may fuse the product into the difference.
+        let covered = alpha * bitcast<f32>(cut[m + 7u]);
+        return vec2<f32>(covered - cutoff, 1.52587890625e-5 * (abs(covered) + abs(cutoff)));
     }
     let uv0 = vec2<f32>(bitcast<f32>(cut[e + 2u]), bitcast<f32>(cut[e + 3u]));
     let uv1 = vec2<f32>(bitcast<f32>(cut[e + 4u]), bitcast<f32>(cut[e + 5u]));
@@ -76,6 +85,13 @@ fn covers(id: u32, bw: vec3<f32>) -> bool {
     let d = alpha_texel(base, width, xs.y, ys.y);
     let top = a + (b - a) * fx;
     let bottom = c + (d - c) * fx;
-    return alpha * (top + (bottom - top) * fy) >= cutoff;
+    // The bilinear alpha changes by at most one texel step (≤ 1) per texel: a UV off by
+    // (δu, δv) moves it by ≤ width·δu + height·δv; the texel coordinates (|x|, |y|) carry
+    // their own rounding.
+    let span = abs(uv0) + abs(uv1) + abs(uv2);
+    let e_mesh = span * (e_bw + 1.52587890625e-5);
+    let e_uv = vec2<f32>((abs(ta) + abs(tb)) * max(e_mesh.x, e_mesh.y), (abs(tc) + abs(td)) * max(e_mesh.x, e_mesh.y))
+        + 1.52587890625e-5 * (abs(uv) + 1.0);
+    let e_alpha = abs(alpha) * (f32(width) * e_uv.x + f32(height) * e_uv.y + 1.52587890625e-5 * (abs(x) + abs(y) + 4.0));
+    return vec2<f32>(alpha * (top + (bottom - top) * fy) - cutoff, e_alpha);
 }
-

@@ -70,6 +70,50 @@ pub struct GpuContext {
     pub queue: wgpu::Queue,
     /// The adapter's name, driver and type (for logs and benchmark records).
     pub info: wgpu::AdapterInfo,
+    /// How long the bake's work has kept this device busy ([`GpuContext::busy_seconds`]).
+    busy: BusyClock,
+}
+
+/// Wall-clock time during which at least one piece of work was in flight: a union of
+/// intervals, so work overlapping from several threads counts once.
+#[derive(Default)]
+struct BusyClock {
+    /// (pieces in flight, since when some have been, seconds of finished busy spells).
+    state: std::sync::Mutex<(u32, Option<std::time::Instant>, f64)>,
+}
+
+/// Holds a [`BusyClock`] busy until dropped.
+pub(crate) struct Busy<'a>(&'a BusyClock);
+
+impl BusyClock {
+    fn enter(&self) -> Busy<'_> {
+        let mut s = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        if s.0 == 0 {
+            s.1 = Some(std::time::Instant::now());
+        }
+        s.0 += 1;
+        Busy(self)
+    }
+
+    fn seconds(&self) -> f64 {
+        let s = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        s.2 + s
+            .1
+            .filter(|_| s.0 > 0)
+            .map_or(0.0, |t| t.elapsed().as_secs_f64())
+    }
+}
+
+impl Drop for Busy<'_> {
+    fn drop(&mut self) {
+        let mut s = self.0.state.lock().unwrap_or_else(|p| p.into_inner());
+        s.0 = s.0.saturating_sub(1);
+        if s.0 == 0
+            && let Some(t) = s.1.take()
+        {
+            s.2 += t.elapsed().as_secs_f64();
+        }
+    }
 }
 
 impl GpuContext {
@@ -102,7 +146,20 @@ impl GpuContext {
             device,
             queue,
             info,
+            busy: BusyClock::default(),
         })
+    }
+
+    /// Seconds during which this device had at least one of the bake's dispatches in flight
+    /// (upload to read-back, [`crate::GpuOccluder::cube_counts`]) since it was made: its rate is
+    /// the GPU's utilisation by the bake (the service's `bspvt_gpu_busy_seconds_total`).
+    pub fn busy_seconds(&self) -> f64 {
+        self.busy.seconds()
+    }
+
+    /// Marks the device busy until the guard is dropped.
+    pub(crate) fn busy(&self) -> Busy<'_> {
+        self.busy.enter()
     }
 
     /// "name (backend, device type, driver)", for logs.

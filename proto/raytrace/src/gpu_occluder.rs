@@ -92,9 +92,24 @@ pub struct GpuCubeTable {
     stop_count: u32,
     pixels: u32,
     samples: u32,
+    /// ULP every reciprocal and quotient of the shader is scaled by (0: none).
+    skew: u32,
+    /// Every test answered as computed, none unsure.
+    plain: bool,
 }
 
 impl GpuCubeTable {
+    /// Test hook: the shader scales every reciprocal and quotient by (1 + `ulps` · 2⁻²³), as
+    /// a device whose division rounds less well (WGSL allows 2.5 ULP) would; with `plain`, it
+    /// answers every test as computed and flags nothing unsure (the shader before the flag).
+    /// So a test on any adapter can show what another device's rounding changes, and that
+    /// the flag catches it.
+    #[doc(hidden)]
+    pub fn skew_rounding(&mut self, ulps: u32, plain: bool) {
+        self.skew = ulps;
+        self.plain = plain;
+    }
+
     /// Pixels per cube map (6 · res²).
     pub fn pixels(&self) -> u32 {
         self.pixels
@@ -145,13 +160,18 @@ impl GpuOccluder {
             })
         };
         let nodes = storage("cwbvh nodes", bytemuck::cast_slice(&occ.bvh.nodes));
+        // Per triangle 16 floats: v0, e1, e2, ng, then |e1|, |e2|, |ng| (rounded up a hair:
+        // bounds of the shader's rounding, `occlusion.wgsl`) and 0.
         let tri_words: Vec<f32> = occ
             .tris
             .iter()
             .flat_map(|t| {
+                let norms = [t.e1, t.e2, t.ng].map(|v| v.length() * (1.0 + 1e-6));
                 [t.v0, t.e1, t.e2, t.ng]
                     .into_iter()
                     .flat_map(|v| v.to_array())
+                    .chain(norms)
+                    .chain([0.0])
             })
             .collect();
         let tris = storage("triangles", bytemuck::cast_slice(&tri_words));
@@ -321,6 +341,8 @@ impl GpuOccluder {
             stop_count: stops.len() as u32,
             pixels,
             samples,
+            skew: 0,
+            plain: false,
         };
         scope_error(validation)?;
         scope_error(memory)?;
@@ -329,12 +351,14 @@ impl GpuOccluder {
 
     /// For each of `sources` and each of `table`'s pixels whose bit is set in the source's
     /// mask (`masks`: ⌈pixels / 32⌉ words per source, bit p of word p / 32), in that order
-    /// (source, then pixel): its escaping sub-rays | its cast sub-rays << 8. A sub-ray below
-    /// the source's horizon escapes uncast; the others are cast from its origin to their first
-    /// stop, and escape when no triangle (but the source's own) is hit in [t_min, stop): the
-    /// answer of [`Occluder::occluded_between`] for the same ray, up to rays that graze a
-    /// triangle's edge (the two machines may round such a hit either way). Only the pixels
-    /// that matter come back, 2 bytes each.
+    /// (source, then pixel): its escaping sub-rays | 0x80 when unsure | its cast sub-rays << 8.
+    /// A sub-ray below the source's horizon escapes uncast; the others are cast from its origin
+    /// to their first stop, and escape when no triangle (but the source's own) is hit in
+    /// [t_min, stop): the answer of [`Occluder::occluded_between`] for the same ray, except in
+    /// a pixel flagged unsure (0x80), where some decision (a barycentric, t, a box, a stop, the
+    /// horizon, a cut-out's alpha) was within this device's possible rounding (2⁻¹⁶ of the
+    /// magnitudes it is made of) of the other way: the caller casts those again. Only the
+    /// pixels that matter come back, 2 bytes each.
     pub fn cube_counts(
         &self,
         ctx: &GpuContext,
@@ -390,6 +414,7 @@ impl GpuOccluder {
         }
         let device = &ctx.device;
         let t0 = std::time::Instant::now();
+        let _busy = ctx.busy();
         let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let input = |label: &str, contents: &[u8]| {
@@ -431,8 +456,8 @@ impl GpuOccluder {
             table.stop_count,
             gx * WORKGROUP,
             table.pixels.div_ceil(32),
-            0,
-            0,
+            table.skew,
+            u32::from(table.plain),
         ];
         let params_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("cube params"),

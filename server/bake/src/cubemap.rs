@@ -106,12 +106,16 @@ pub struct CastCounts {
     pub rays: u64,
     /// Rays that traversed the BVH.
     pub traversals: u64,
+    /// GPU cast: sub-rays cast again on the CPU, those of pixels where the device's rounding
+    /// could have decided a ray otherwise than the CPU's (counted in `rays` too).
+    pub recast: u64,
 }
 
 impl std::ops::AddAssign for CastCounts {
     fn add_assign(&mut self, o: CastCounts) {
         self.rays += o.rays;
         self.traversals += o.traversals;
+        self.recast += o.recast;
     }
 }
 
@@ -591,21 +595,32 @@ impl VertexRays<'_> {
         occ: &Occluder,
         table: &RayTable,
     ) -> [Option<FacePixels>; FACES] {
-        let origin = self.origin;
-        let s = table.samples as usize;
         let mut matters = vec![false; table.centre[0].len()];
         std::array::from_fn(|f| {
             let mut px = FacePixels::default();
             self.face_mask(table, f, &mut matters);
             for p in (0..matters.len()).filter(|&p| matters[p]) {
-                let subs = &table.sub[f][p * s..(p + 1) * s];
                 px.index.push(p as u32);
-                px.visible.push(self.escaping(subs, |d| {
-                    let t_max = self.t_max(origin, d);
-                    occ.occluded_between(origin, d, self.t_min, t_max, self.vertex)
-                }));
+                px.visible.push(self.reference_pixel(occ, table, f, p));
             }
             (!px.index.is_empty()).then_some(px)
+        })
+    }
+
+    /// The escaping sub-rays of pixel `p` of face `f`, every one cast against the BVH (the
+    /// reference every cast must equal; the GPU's unsure pixels are cast again by it).
+    pub(crate) fn reference_pixel(
+        &self,
+        occ: &Occluder,
+        table: &RayTable,
+        f: usize,
+        p: usize,
+    ) -> u16 {
+        let s = table.samples as usize;
+        let origin = self.origin;
+        self.escaping(&table.sub[f][p * s..(p + 1) * s], |d| {
+            let t_max = self.t_max(origin, d);
+            occ.occluded_between(origin, d, self.t_min, t_max, self.vertex)
         })
     }
 }

@@ -3,11 +3,18 @@
 //! chunk's trees ([`Baker::bake_all_gpu`]).
 //!
 //! The rays are those of [`VertexRays::cast_brute_force`]: every sub-ray above the horizon of
-//! every pixel that matters, to the light; so the cube maps equal the CPU casts' up to rays
-//! that graze a triangle's edge, where the two machines may round a hit either way (counted by
-//! `tests/tests/cast_gpu.rs`). Which pixels matter is decided here, on the CPU (so the sets
-//! are the CPU's exactly); the sub-ray directions are uploaded once per bake and the rays made
-//! on the GPU, which returns each pixel's counts.
+//! every pixel that matters, to the light. Which pixels matter is decided here, on the CPU (so
+//! the sets are the CPU's exactly); the sub-ray directions are uploaded once per bake and the
+//! rays made on the GPU, which returns each pixel's counts. A device may round otherwise than
+//! the CPU (WGSL lets it fuse a·b + c, and divide to 2.5 ULP), which decides rays through a
+//! triangle's edge or a box's corner either way; so the shader flags a pixel when any decision
+//! of its rays was within a bound of that rounding of the other way, and the CPU casts the
+//! flagged pixels again ([`VertexRays::reference_pixel`]): the cube maps, and so the bake's
+//! bytes, are the CPU's on any device (`tests/tests/cast_gpu.rs`; the test below skews the
+//! shader's rounding to show it).
+//!
+//! [`VertexRays::cast_brute_force`]: crate::cubemap::VertexRays
+//! [`VertexRays::reference_pixel`]: crate::cubemap::VertexRays
 //!
 //! [`VertexRays::cast_brute_force`]: crate::cubemap::VertexRays
 
@@ -44,7 +51,12 @@ pub enum GpuBakeError {
 
 /// The vertices of one dispatch: where their rays start, and per vertex its mask of pixels
 /// that matter (the GPU's input) and, per face, those pixels in order (for the assembly).
+/// Bit 7 of a pixel's GPU count: the device's answer for some ray of it was within rounding
+/// of the other way (`occlusion.wgsl`); the CPU casts the pixel again.
+const UNSURE: u16 = 0x80;
+
 struct GpuBatch {
+    vertices: Vec<u32>,
     sources: Vec<CubeSource>,
     masks: Vec<u32>,
     faces: Vec<[Vec<u32>; FACES]>,
@@ -114,6 +126,7 @@ impl Baker {
             })
             .collect();
         let mut batch = GpuBatch {
+            vertices: vertices.to_vec(),
             sources: Vec::with_capacity(vertices.len()),
             masks: Vec::with_capacity(vertices.len() * words),
             faces: Vec::with_capacity(vertices.len()),
@@ -128,8 +141,10 @@ impl Baker {
 
     /// Each vertex's cube map from its batch and the GPU's counts (one per pixel that
     /// matters, in the batch's order), and what casting them cost (every sub-ray cast
-    /// traverses the BVH).
-    fn gpu_assemble(batch: GpuBatch, counts: &[u16]) -> (Vec<CubeMap>, CastCounts) {
+    /// traverses the BVH). A pixel the GPU flags as unsure (some decision of its rays was
+    /// within rounding of the other way, `occlusion.wgsl`) is cast again here by the CPU's
+    /// reference, so the cube maps are the CPU's whatever the device's rounding.
+    fn gpu_assemble(&self, batch: GpuBatch, counts: &[u16]) -> (Vec<CubeMap>, CastCounts) {
         // Where each vertex's counts start.
         let mut start = 0;
         let starts: Vec<usize> = batch
@@ -141,37 +156,50 @@ impl Baker {
                 s
             })
             .collect();
-        let per_vertex: Vec<(CubeMap, u64)> = batch
+        let samples = u64::from(self.table.samples);
+        let per_vertex: Vec<(CubeMap, u64, u64)> = batch
             .faces
             .into_par_iter()
             .zip(starts)
-            .map(|(faces, s)| {
+            .zip(batch.vertices)
+            .map(|((faces, s), v)| {
+                let rays = self.vertex_rays(v);
                 let mut next = counts.get(s..).unwrap_or_default().iter();
-                let mut cast = 0u64;
+                let (mut cast, mut again) = (0u64, 0u64);
+                let mut f = 0;
                 let map = faces.map(|index| {
+                    let face = f;
+                    f += 1;
                     if index.is_empty() {
                         return None;
                     }
-                    let visible = next
-                        .by_ref()
-                        .take(index.len())
-                        .map(|&w| {
+                    let visible = index
+                        .iter()
+                        .zip(next.by_ref())
+                        .map(|(&p, &w)| {
                             cast += u64::from(w >> 8);
-                            w & 0xff
+                            if w & UNSURE != 0 {
+                                again += samples;
+                                rays.reference_pixel(&self.occluder, &self.table, face, p as usize)
+                            } else {
+                                w & 0x7f
+                            }
                         })
                         .collect();
                     Some(FacePixels { index, visible })
                 });
-                (map, cast)
+                (map, cast, again)
             })
             .collect();
-        let rays = per_vertex.iter().map(|(_, c)| c).sum();
-        let maps = per_vertex.into_iter().map(|(m, _)| m).collect();
+        let rays = per_vertex.iter().map(|(_, c, _)| c).sum();
+        let again = per_vertex.iter().map(|(_, _, r)| r).sum();
+        let maps = per_vertex.into_iter().map(|(m, _, _)| m).collect();
         (
             maps,
             CastCounts {
                 rays,
                 traversals: rays,
+                recast: again,
             },
         )
     }
@@ -185,7 +213,7 @@ impl Baker {
     ) -> Result<(Vec<CubeMap>, CastCounts), GpuError> {
         let batch = self.gpu_batch(vertices);
         let counts = batch.cast(gpu)?;
-        Ok(Self::gpu_assemble(batch, &counts))
+        Ok(self.gpu_assemble(batch, &counts))
     }
 
     /// [`Baker::bake_chunk`] with the rays cast on the GPU (the service's GPU workers: several
@@ -197,6 +225,7 @@ impl Baker {
         let (frame, mut t) = self.fit_chunk(c, &maps);
         t.rays = counts.rays;
         t.traversals = counts.traversals;
+        t.recast = counts.recast;
         t.ray_seconds = ray_seconds;
         Ok((frame, t))
     }
@@ -269,7 +298,7 @@ impl Baker {
                     return Err(GpuError::Failed("the GPU thread stopped".into()).into());
                 };
                 let t0 = Instant::now();
-                let (maps, counts) = Self::gpu_assemble(batch, &occluded?);
+                let (maps, counts) = self.gpu_assemble(batch, &occluded?);
                 let seconds = seconds + t0.elapsed().as_secs_f64();
                 let t1 = Instant::now();
                 let (frame, mut t) = self.fit_chunk(c, &maps);
@@ -282,6 +311,7 @@ impl Baker {
                 }
                 t.rays = counts.rays;
                 t.traversals = counts.traversals;
+                t.recast = counts.recast;
                 t.ray_seconds = seconds;
                 bytes.extend_from_slice(&frame);
                 totals += t;
@@ -310,5 +340,87 @@ impl GpuBatch {
             )));
         }
         Ok(counts)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The GPU of this machine (lavapipe in CI), or `None`, saying so.
+    fn gpu() -> Option<Arc<GpuContext>> {
+        match GpuContext::new() {
+            Ok(ctx) => Some(Arc::new(ctx)),
+            Err(e) => {
+                eprintln!("skipped: no GPU adapter ({e})");
+                None
+            }
+        }
+    }
+
+    /// Another device's rounding cannot change a cube map. With every reciprocal and quotient
+    /// of the shader skewed by a few ULP (as WGSL lets a device divide), the plain answers —
+    /// the shader's without the unsure flag — on the refined room, whose dyadic grid puts
+    /// rays exactly on triangle edges, differ from the CPU's; with the flag, the pixels it
+    /// marks, cast again on the CPU, give the CPU's cube maps exactly, at any skew, for a
+    /// small share of the rays cast again.
+    #[test]
+    fn rounding_of_another_device_never_changes_a_cube_map() {
+        let Some(ctx) = gpu() else { return };
+        let mut scene = bspvt_proto::builtin::scene("room").expect("built-in room");
+        scene.bake.face_res = 8;
+        crate::refine::refine_scene(&mut scene).expect("refinement");
+        let b = Baker::new(&scene);
+        let n = b.mesh().vertex_count() as u32;
+        let vertices: Vec<u32> = (0..n).step_by(3).collect();
+        let cpu: Vec<CubeMap> = vertices
+            .iter()
+            .map(|&v| b.cube_map_with(v, crate::CastMode::Full).0)
+            .collect();
+        let differing = |maps: &[CubeMap]| -> u64 {
+            let mut d = 0;
+            for (g, c) in maps.iter().zip(&cpu) {
+                for (g, c) in g.iter().zip(c) {
+                    let (Some(g), Some(c)) = (g, c) else {
+                        assert_eq!(g.is_some(), c.is_some(), "pixels that matter");
+                        continue;
+                    };
+                    assert_eq!(g.index, c.index, "pixels that matter");
+                    d += g
+                        .visible
+                        .iter()
+                        .zip(&c.visible)
+                        .map(|(a, b)| u64::from(a.abs_diff(*b)))
+                        .sum::<u64>();
+                }
+            }
+            d
+        };
+        let mut caster = b.gpu_caster(ctx).expect("BVH on the GPU");
+        let mut plain_differing = Vec::new();
+        for ulps in [0, 4, 64] {
+            caster.table.skew_rounding(ulps, true);
+            let (plain, _) = b.gpu_cube_maps(&caster, &vertices).expect("GPU cast");
+            caster.table.skew_rounding(ulps, false);
+            let (maps, counts) = b.gpu_cube_maps(&caster, &vertices).expect("GPU cast");
+            let (p, d) = (differing(&plain), differing(&maps));
+            eprintln!(
+                "room at 8², skew {ulps} ULP: {} sub-rays; plain answers: {p} differ from the \
+                 CPU's; flagged: {} cast again on the CPU, {d} differ",
+                counts.rays, counts.recast
+            );
+            assert_eq!(d, 0, "skew {ulps} ULP: the cube maps differ from the CPU's");
+            assert!(
+                counts.recast * 20 < counts.rays,
+                "skew {ulps} ULP: {} of {} sub-rays cast again",
+                counts.recast,
+                counts.rays
+            );
+            plain_differing.push(p);
+        }
+        assert!(
+            plain_differing.iter().any(|&p| p > 0),
+            "no skew changed a plain answer: the test would see nothing"
+        );
     }
 }

@@ -49,8 +49,10 @@ use fit::{FitStats, Fitter};
 /// the directions that reach it matter. 5: a point or spot light stops rays at its sphere (before,
 /// they were not lights for the bake). 6: the ray–triangle test is closed at the edges
 /// (`bspvt_raytrace::hit`): a ray through an edge two triangles share no longer slips between
-/// them.
-pub const ALGORITHM_VERSION: u32 = 6;
+/// them. 7: nor past the BVH's box test, when that edge is a leaf box's face (the occluder's
+/// boxes reach a margin past their triangles: `bspvt_raytrace::Occluder`; the room's bake
+/// changed, the pinned ones did not).
+pub const ALGORITHM_VERSION: u32 = 7;
 
 /// Ray origins are offset along the normal by this fraction of the scene's diagonal.
 pub(crate) const RAY_OFFSET_SCALE: f32 = 1e-4;
@@ -107,6 +109,8 @@ pub struct Totals {
     pub rays: u64,
     /// Rays that traversed the BVH.
     pub traversals: u64,
+    /// GPU backend: sub-rays cast again on the CPU ([`CastCounts::recast`]).
+    pub recast: u64,
     /// Thread-seconds spent casting rays.
     pub ray_seconds: f64,
     /// Thread-seconds spent fitting trees.
@@ -122,6 +126,7 @@ impl std::ops::AddAssign for Totals {
         self.vertices += o.vertices;
         self.rays += o.rays;
         self.traversals += o.traversals;
+        self.recast += o.recast;
         self.ray_seconds += o.ray_seconds;
         self.fit_seconds += o.fit_seconds;
         self.fit += o.fit;
@@ -343,6 +348,7 @@ impl Baker {
                     vertices: 1,
                     rays: r.rays,
                     traversals: r.traversals,
+                    recast: 0,
                     ray_seconds: r.ray_seconds,
                     fit_seconds: r.fit_seconds,
                     fit: r.fit,

@@ -25,6 +25,9 @@ pub struct BakeStats {
     /// Rays per vertex that traversed the BVH (the rest were answered by a candidate list or,
     /// in the adaptive cast, by a neighbour's blocker).
     pub traversals_per_vertex: f64,
+    /// GPU backend: sub-rays per vertex cast again on the CPU, those of pixels where the
+    /// device's rounding could have decided a ray otherwise (0 on the CPU).
+    pub recast_per_vertex: f64,
     /// Rays tested per ray-casting thread-second.
     pub rays_per_thread_second: f64,
     /// How rays were cast (`adaptive` or `full`: the same cube maps).
@@ -81,6 +84,7 @@ impl BakeStats {
             fit_thread_seconds_per_vertex: t.fit_seconds / v,
             rays_per_vertex: t.rays as f64 / v,
             traversals_per_vertex: t.traversals as f64 / v,
+            recast_per_vertex: t.recast as f64 / v,
             rays_per_thread_second: if t.ray_seconds > 0.0 {
                 t.rays as f64 / t.ray_seconds
             } else {

@@ -924,6 +924,7 @@ impl Jobs {
                 workers: self.workers as u64,
                 generation: self.db.generation(),
                 cluster: Some(g.clone()),
+                gpu_busy_seconds: self.rays.gpu_busy_seconds(),
                 ..Gauges::default()
             };
         }
@@ -933,6 +934,7 @@ impl Jobs {
             scenes_baking: s.active.len() as u64,
             workers: self.workers as u64,
             generation: self.db.generation(),
+            gpu_busy_seconds: self.rays.gpu_busy_seconds(),
             ..Gauges::default()
         };
         for l in s.live.values() {

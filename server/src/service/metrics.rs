@@ -69,6 +69,8 @@ pub(crate) struct Gauges {
     pub memory_reserved_bytes: u64,
     /// The distributed shape: the queue and the workers, from the database.
     pub cluster: Option<super::pg::ClusterGauges>,
+    /// `--bake-backend gpu`: seconds the GPU has had a bake dispatch in flight.
+    pub gpu_busy_seconds: Option<f64>,
 }
 
 /// The distributed shape's series: the workers the database knows (seen in the last hour).
@@ -345,6 +347,12 @@ impl Metrics {
             "# HELP bspvt_streams_shed_total Idle event streams ended to give their slot to a new stream.\n# TYPE bspvt_streams_shed_total counter\nbspvt_streams_shed_total {}",
             self.streams_shed.load(Relaxed)
         );
+        if let Some(busy) = g.gpu_busy_seconds {
+            let _ = writeln!(
+                o,
+                "# HELP bspvt_gpu_busy_seconds_total Seconds this process's GPU had at least one bake dispatch in flight (upload to read-back); its rate is the GPU's utilisation by the bake.\n# TYPE bspvt_gpu_busy_seconds_total counter\nbspvt_gpu_busy_seconds_total {busy:.3}"
+            );
+        }
         let _ = writeln!(
             o,
             "# HELP bspvt_scenes_total Scenes by what happened to them in this process.\n# TYPE bspvt_scenes_total counter"

@@ -49,8 +49,17 @@ impl Rays {
         }
     }
 
-    /// Bakes chunk `c` of `baker`'s scene (the same frame whichever backend, up to rays that
-    /// graze a triangle's edge: docs/bake.md, "The GPU backend").
+    /// Seconds this process's GPU has had a bake dispatch in flight (`None` on the CPU).
+    pub(crate) fn gpu_busy_seconds(&self) -> Option<f64> {
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &self.gpu {
+            return Some(gpu.ctx.busy_seconds());
+        }
+        None
+    }
+
+    /// Bakes chunk `c` of `baker`'s scene (the same frame whichever backend: docs/bake.md,
+    /// "The GPU backend").
     pub(crate) fn bake_chunk(
         &self,
         pool: &rayon::ThreadPool,

@@ -360,66 +360,90 @@ mod tests {
 
     /// Another device's rounding cannot change a cube map. With every reciprocal and quotient
     /// of the shader skewed by a few ULP (as WGSL lets a device divide), the plain answers —
-    /// the shader's without the unsure flag — on the refined room, whose dyadic grid puts
-    /// rays exactly on triangle edges, differ from the CPU's; with the flag, the pixels it
-    /// marks, cast again on the CPU, give the CPU's cube maps exactly, at any skew, for a
-    /// small share of the rays cast again.
+    /// the shader's without the unsure flag — differ from the CPU's on the refined room, whose
+    /// dyadic grid puts rays exactly on triangle edges; with the flag, the pixels it marks,
+    /// cast again on the CPU, give the CPU's cube maps exactly, at any skew, for a small share
+    /// of the rays cast again. The same on the punctual room (rays that end at bulbs) and the
+    /// checker canopy (rays through an alpha cut-out).
     #[test]
     fn rounding_of_another_device_never_changes_a_cube_map() {
         let Some(ctx) = gpu() else { return };
-        let mut scene = bspvt_proto::builtin::scene("room").expect("built-in room");
-        scene.bake.face_res = 8;
-        crate::refine::refine_scene(&mut scene).expect("refinement");
-        let b = Baker::new(&scene);
-        let n = b.mesh().vertex_count() as u32;
-        let vertices: Vec<u32> = (0..n).step_by(3).collect();
-        let cpu: Vec<CubeMap> = vertices
-            .iter()
-            .map(|&v| b.cube_map_with(v, crate::CastMode::Full).0)
-            .collect();
-        let differing = |maps: &[CubeMap]| -> u64 {
-            let mut d = 0;
-            for (g, c) in maps.iter().zip(&cpu) {
-                for (g, c) in g.iter().zip(c) {
-                    let (Some(g), Some(c)) = (g, c) else {
-                        assert_eq!(g.is_some(), c.is_some(), "pixels that matter");
-                        continue;
-                    };
-                    assert_eq!(g.index, c.index, "pixels that matter");
-                    d += g
-                        .visible
-                        .iter()
-                        .zip(&c.visible)
-                        .map(|(a, b)| u64::from(a.abs_diff(*b)))
-                        .sum::<u64>();
-                }
+        let rooms = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms");
+        let mut scenes = Vec::new();
+        for (name, res, step) in [("room", 8, 3), ("punctual-room", 16, 5)] {
+            let mut scene = bspvt_proto::builtin::scene(name).expect("built-in scene");
+            scene.bake.face_res = res;
+            if let Some(r) = scene
+                .bake
+                .refine
+                .as_mut()
+                .filter(|_| name == "punctual-room")
+            {
+                r.max_vertices = 2000;
             }
-            d
-        };
-        let mut caster = b.gpu_caster(ctx).expect("BVH on the GPU");
-        let mut plain_differing = Vec::new();
-        for ulps in [0, 4, 64] {
-            caster.table.skew_rounding(ulps, true);
-            let (plain, _) = b.gpu_cube_maps(&caster, &vertices).expect("GPU cast");
-            caster.table.skew_rounding(ulps, false);
-            let (maps, counts) = b.gpu_cube_maps(&caster, &vertices).expect("GPU cast");
-            let (p, d) = (differing(&plain), differing(&maps));
-            eprintln!(
-                "room at 8², skew {ulps} ULP: {} sub-rays; plain answers: {p} differ from the \
-                 CPU's; flagged: {} cast again on the CPU, {d} differ",
-                counts.rays, counts.recast
-            );
-            assert_eq!(d, 0, "skew {ulps} ULP: the cube maps differ from the CPU's");
-            assert!(
-                counts.recast * 20 < counts.rays,
-                "skew {ulps} ULP: {} of {} sub-rays cast again",
-                counts.recast,
-                counts.rays
-            );
-            plain_differing.push(p);
+            scenes.push((format!("{name} at {res}²"), scene, step));
+        }
+        let canopy = bspvt_proto::Scene::from_mesh_path(&rooms.join("checker-canopy.gltf"))
+            .expect("checker canopy");
+        let mut canopy = canopy;
+        canopy.bake.face_res = 16;
+        if let Some(r) = &mut canopy.bake.refine {
+            r.max_vertices = 1500;
+        }
+        scenes.push(("checker canopy at 16²".to_string(), canopy, 5));
+        let mut plain_differing = 0;
+        for (label, mut scene, step) in scenes {
+            crate::refine::refine_scene(&mut scene).expect("refinement");
+            let b = Baker::new(&scene);
+            let n = b.mesh().vertex_count() as u32;
+            let vertices: Vec<u32> = (0..n).step_by(step).collect();
+            let cpu: Vec<CubeMap> = vertices
+                .iter()
+                .map(|&v| b.cube_map_with(v, crate::CastMode::Full).0)
+                .collect();
+            let differing = |maps: &[CubeMap]| -> u64 {
+                let mut d = 0;
+                for (g, c) in maps.iter().zip(&cpu) {
+                    for (g, c) in g.iter().zip(c) {
+                        let (Some(g), Some(c)) = (g, c) else {
+                            assert_eq!(g.is_some(), c.is_some(), "pixels that matter");
+                            continue;
+                        };
+                        assert_eq!(g.index, c.index, "pixels that matter");
+                        d += g
+                            .visible
+                            .iter()
+                            .zip(&c.visible)
+                            .map(|(a, b)| u64::from(a.abs_diff(*b)))
+                            .sum::<u64>();
+                    }
+                }
+                d
+            };
+            let mut caster = b.gpu_caster(ctx.clone()).expect("BVH on the GPU");
+            for ulps in [0, 4, 64] {
+                caster.table.skew_rounding(ulps, true);
+                let (plain, _) = b.gpu_cube_maps(&caster, &vertices).expect("GPU cast");
+                caster.table.skew_rounding(ulps, false);
+                let (maps, counts) = b.gpu_cube_maps(&caster, &vertices).expect("GPU cast");
+                let (p, d) = (differing(&plain), differing(&maps));
+                eprintln!(
+                    "{label}, skew {ulps} ULP: {} sub-rays; plain answers: {p} differ from the \
+                     CPU's; flagged: {} cast again on the CPU, {d} differ",
+                    counts.rays, counts.recast
+                );
+                assert_eq!(d, 0, "{label}, skew {ulps} ULP: the cube maps differ");
+                assert!(
+                    counts.recast * 20 < counts.rays,
+                    "{label}, skew {ulps} ULP: {} of {} sub-rays cast again",
+                    counts.recast,
+                    counts.rays
+                );
+                plain_differing += p;
+            }
         }
         assert!(
-            plain_differing.iter().any(|&p| p > 0),
+            plain_differing > 0,
             "no skew changed a plain answer: the test would see nothing"
         );
     }

@@ -112,23 +112,25 @@ pub fn distinct_triangles(mesh: &Mesh, tris: &[Triangle]) -> (Vec<u32>, Vec<Tria
     (unique, built)
 }
 
-/// How far, relative to the scene's largest coordinate, the BVH's boxes reach past their
-/// triangles (2⁻¹⁶: ~128 ULP of that coordinate, far above the box test's rounding).
-const BOX_MARGIN: f32 = 1.0 / 65_536.0;
+/// How far, relative to the scene's diagonal, the BVH's boxes reach past their triangles
+/// (2⁻¹⁸). The box test's slabs are t = (p − o)/d for a box corner p and a ray origin o in the
+/// scene: their rounding is a few ULP of |p − o| ≤ the diagonal, so 2⁻¹⁸ of it is ≥ 32 ULP.
+const BOX_MARGIN: f32 = 1.0 / 262_144.0;
 
-/// `t` grown by `margin` along each axis away from its centroid (not along an axis it is flat
-/// in: a floor's box stays flat, and a flat slab's entry and exit are one value). Only the
-/// BVH's boxes are built from it. Without the margin a ray that hits a triangle on its edge
-/// where that edge is its leaf box's face (a dyadic floor's triangles, crossed by a pixel's
-/// ray exactly on an edge) could be refused by the box test — its entry in one axis rounded a
-/// hair past its exit in another — and the traversal miss a hit the triangle test (and the
-/// bake's candidate lists) count.
+/// `t` grown along each axis away from its centroid by `margin`, or 4 ULP of a coordinate
+/// where that is more (far from the origin), but not along an axis it is flat in (where the
+/// centroid rounds to it: a floor's box stays flat, and a flat slab's entry and exit are one
+/// value). Only the BVH's boxes are built from it. Without the margin a ray that hits a
+/// triangle on its edge where that edge is its leaf box's face (a dyadic floor's triangles,
+/// crossed by a pixel's ray exactly on an edge) could be refused by the box test — its entry
+/// in one axis rounded a hair past its exit in another — and the traversal miss a hit the
+/// triangle test (and the bake's candidate lists) count.
 fn grown(t: &Triangle, margin: f32) -> Triangle {
     let c = (t.v0 + t.v1 + t.v2) / 3.0;
     let out = |v: Vec3A| {
         let away = v - c;
         let step = Vec3A::select(away.cmpeq(Vec3A::ZERO), Vec3A::ZERO, away.signum());
-        v + step * margin
+        v + step * Vec3A::splat(margin).max(v.abs() * (4.0 * f32::EPSILON))
     };
     Triangle {
         v0: out(t.v0),
@@ -154,10 +156,9 @@ impl Occluder {
         let (unique, built) = distinct_triangles(mesh, tris);
         // The boxes are built around the triangles grown by a margin ([`grown`]); the hits are
         // tested on the triangles themselves.
-        let b = mesh.bounds();
-        let largest = b.min.abs().max(b.max.abs()).max_element();
-        let margin = if largest.is_finite() {
-            BOX_MARGIN * largest
+        let diagonal = mesh.bounds().diagonal();
+        let margin = if diagonal.is_finite() {
+            BOX_MARGIN * diagonal
         } else {
             0.0
         };

@@ -62,7 +62,7 @@ const UNSURE: u32 = 1u;
 const HIT: u32 = 2u;
 // How far this device's value of a quantity may be from the CPU's, relative to the magnitudes
 // it is made of: WGSL allows 2.5 ULP for a division and lets a compiler fuse a·b + c (the CPU
-// rounds each IEEE-exactly); 2⁻¹⁶ is ~100 ULP. A decision closer than that to the other way
+// rounds each IEEE-exactly); 2⁻¹⁶ is 128 ULP. A decision closer than that to the other way
 // makes the pixel "unsure", and the CPU casts it again (Baker::gpu_cube_maps), so the two
 // machines give the same cube map whatever the device's rounding.
 const ROUNDING: f32 = 1.52587890625e-5; // 2^-16

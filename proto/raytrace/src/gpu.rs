@@ -78,40 +78,50 @@ pub struct GpuContext {
 /// intervals, so work overlapping from several threads counts once.
 #[derive(Default)]
 struct BusyClock {
-    /// (pieces in flight, since when some have been, seconds of finished busy spells).
-    state: std::sync::Mutex<(u32, Option<std::time::Instant>, f64)>,
+    state: std::sync::Mutex<Spells>,
+}
+
+#[derive(Default)]
+struct Spells {
+    /// Pieces of work in flight.
+    in_flight: u32,
+    /// When the current busy spell began (`None` while idle).
+    since: Option<std::time::Instant>,
+    /// Seconds of the finished spells.
+    done: f64,
 }
 
 /// Holds a [`BusyClock`] busy until dropped.
 pub(crate) struct Busy<'a>(&'a BusyClock);
 
 impl BusyClock {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Spells> {
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
     fn enter(&self) -> Busy<'_> {
-        let mut s = self.state.lock().unwrap_or_else(|p| p.into_inner());
-        if s.0 == 0 {
-            s.1 = Some(std::time::Instant::now());
+        let mut s = self.lock();
+        if s.in_flight == 0 {
+            s.since = Some(std::time::Instant::now());
         }
-        s.0 += 1;
+        s.in_flight += 1;
         Busy(self)
     }
 
     fn seconds(&self) -> f64 {
-        let s = self.state.lock().unwrap_or_else(|p| p.into_inner());
-        s.2 + s
-            .1
-            .filter(|_| s.0 > 0)
-            .map_or(0.0, |t| t.elapsed().as_secs_f64())
+        let s = self.lock();
+        s.done + s.since.map_or(0.0, |t| t.elapsed().as_secs_f64())
     }
 }
 
 impl Drop for Busy<'_> {
     fn drop(&mut self) {
-        let mut s = self.0.state.lock().unwrap_or_else(|p| p.into_inner());
-        s.0 = s.0.saturating_sub(1);
-        if s.0 == 0
-            && let Some(t) = s.1.take()
+        let mut s = self.0.lock();
+        s.in_flight = s.in_flight.saturating_sub(1);
+        if s.in_flight == 0
+            && let Some(t) = s.since.take()
         {
-            s.2 += t.elapsed().as_secs_f64();
+            s.done += t.elapsed().as_secs_f64();
         }
     }
 }

@@ -136,7 +136,7 @@ fn intersect_node(n: u32, o: vec3<f32>, inv_d: vec3<f32>, neg: vec3<bool>, t_max
             let lo = max(max(max(t0.x + k * e0.x, t0.y + k * e0.y), t0.z + k * e0.z), BOX_T_MIN);
             let hi = min(min(min(t1.x - k * e1.x, t1.y - k * e1.y), t1.z - k * e1.z), t_max - k * t_err);
             if select(lo > hi, lo < hi, enter) == false {
-                let d = box_pairs(t0, e0, t1, e1, t_max, t_err);
+                let d = box_pairs(t0, e0, t1, e1, BOX_T_MIN, t_max, t_err);
                 enter = d != MISS;
                 unsure_box = unsure_box || d == UNSURE;
             }
@@ -154,11 +154,11 @@ fn intersect_node(n: u32, o: vec3<f32>, inv_d: vec3<f32>, neg: vec3<bool>, t_max
 }
 
 // Whether a box with slab entries `t0` and exits `t1` (errors `e0`, `e1`) is entered between
-// BOX_T_MIN and `t_max` (error `t_err`): every entry ≤ every exit. An entry and the exit of its
+// `lowest` and `t_max` (error `t_err`): every entry ≤ every exit. An entry and the exit of its
 // own axis are never swapped by rounding (both round the same monotone function of near ≤ far),
 // so only the other pairs can make the two machines disagree.
-fn box_pairs(t0: vec3<f32>, e0: vec3<f32>, t1: vec3<f32>, e1: vec3<f32>, t_max: f32, t_err: f32) -> u32 {
-    let a = array<f32, 4>(t0.x, t0.y, t0.z, BOX_T_MIN);
+fn box_pairs(t0: vec3<f32>, e0: vec3<f32>, t1: vec3<f32>, e1: vec3<f32>, lowest: f32, t_max: f32, t_err: f32) -> u32 {
+    let a = array<f32, 4>(t0.x, t0.y, t0.z, lowest);
     let ea = array<f32, 4>(e0.x, e0.y, e0.z, 0.0);
     let b = array<f32, 4>(t1.x, t1.y, t1.z, t_max);
     let eb = array<f32, 4>(e1.x, e1.y, e1.z, t_err);
@@ -194,8 +194,10 @@ fn blocks(id: u32, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, t_err: f3
     let r = cross(d, c);
     let det = dot(ng, d);
     let inv_det = skewed(1.0 / det);
-    let u = dot(r, e2) * inv_det;
-    let v = dot(r, e1) * inv_det;
+    // The numerators of u and v.
+    let n = vec2<f32>(dot(r, e2), dot(r, e1));
+    let u = n.x * inv_det;
+    let v = n.y * inv_det;
     let w = 1.0 - u - v;
     if cp.grid.w == 1u {
         let t = dot(ng, c) * inv_det;
@@ -208,7 +210,6 @@ fn blocks(id: u32, o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, t_err: f3
     }
     // |d| = 1 (the table's unit directions), |c| bounded by |c|₁ (no square root: ≤ √3 ×
     // looser), the triangle's own norms stored with it.
-    let n = vec2<f32>(dot(r, e2), dot(r, e1));
     let norms = vec3<f32>(tris[b + 12u], tris[b + 13u], tris[b + 14u]);
     return judge(id, u, v, w, n, det, dot(ng, c) * inv_det, norm1(c), norms, t_min, t_max, t_err);
 }
@@ -410,8 +411,10 @@ fn ray_end(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
                 tk = enter;
                 ek = e_enter;
             }
-            if abs(enter) <= e_enter || abs(enter - exit) <= e_enter + max(max(ef.x, ef.y), ef.z) {
-                unsure_end = unsure_end || slabs_unsure(near, en, far, ef);
+            // Whether the box is ahead (its entry against 0), and whether the ray meets it.
+            unsure_end = unsure_end || abs(enter) <= e_enter;
+            if abs(enter - exit) <= e_enter + max(max(ef.x, ef.y), ef.z) {
+                unsure_end = unsure_end || box_pairs(near, en, far, ef, -F32_MAX, F32_MAX, 0.0) == UNSURE;
             }
         } else if a.w == 1.0 {
             let den = dot(d, b.xyz);
@@ -498,26 +501,6 @@ fn ray_end(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
     return vec2<f32>(t, err);
 }
 
-// Whether a ray's entry into a box (slab entries `near`, exits `far`, errors `en`, `ef`) may be
-// decided otherwise by another device: some entry and some other axis's exit, or the entry and
-// 0, within their errors (an axis's own entry and exit keep their order: see `box_pairs`).
-fn slabs_unsure(near: vec3<f32>, en: vec3<f32>, far: vec3<f32>, ef: vec3<f32>) -> bool {
-    let a = array<f32, 3>(near.x, near.y, near.z);
-    let ea = array<f32, 3>(en.x, en.y, en.z);
-    let b = array<f32, 3>(far.x, far.y, far.z);
-    let eb = array<f32, 3>(ef.x, ef.y, ef.z);
-    let enter = max(max(near.x, near.y), near.z);
-    var unsure = abs(enter) <= max(max(en.x, en.y), en.z);
-    for (var i = 0u; i < 3u; i++) {
-        for (var j = 0u; j < 3u; j++) {
-            if i != j {
-                unsure = unsure || abs(b[j] - a[i]) <= ea[i] + eb[j];
-            }
-        }
-    }
-    return unsure;
-}
-
 // One pixel that matters of one vertex's cube map (VertexRays::cast_brute_force): each sub-ray
 // below the vertex's horizon escapes uncast; the others are cast to their stop.
 @compute @workgroup_size(64)
@@ -550,9 +533,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // Below the horizon: sure when every product is 0 (both machines get exactly 0) or the
         // dot product is clear of 0.
         let dn = d * n;
+        let above = dn.x + dn.y + dn.z;
         let e_dn = ROUNDING * (abs(dn.x) + abs(dn.y) + abs(dn.z));
-        unsure = unsure || abs(dn.x + dn.y + dn.z) <= e_dn && e_dn > 0.0;
-        if dot(d, n) <= 0.0 {
+        unsure = unsure || abs(above) <= e_dn && e_dn > 0.0;
+        if above <= 0.0 {
             escaping++;
             continue;
         }

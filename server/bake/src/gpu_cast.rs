@@ -162,14 +162,12 @@ impl Baker {
             .into_par_iter()
             .zip(starts)
             .zip(batch.vertices)
-            .map(|((faces, s), v)| {
+            .map(|((mut faces, s), v)| {
                 let rays = self.vertex_rays(v);
                 let mut next = counts.get(s..).unwrap_or_default().iter();
                 let (mut cast, mut again) = (0u64, 0u64);
-                let mut f = 0;
-                let map = faces.map(|index| {
-                    let face = f;
-                    f += 1;
+                let map = std::array::from_fn(|face| {
+                    let index = std::mem::take(&mut faces[face]);
                     if index.is_empty() {
                         return None;
                     }

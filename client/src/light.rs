@@ -16,8 +16,9 @@ use glam::{DAffine3, DVec3};
 
 use crate::texture::{LightFrame, LightTexture};
 
-/// Sides of the spherical polygon a round light (sphere, sun) is integrated as.
-pub const ROUND_SIDES: usize = 12;
+/// Sides of the spherical polygon a round light (sphere, sun) is integrated as (the GPU's
+/// shaders make the same polygon).
+pub const ROUND_SIDES: usize = bspvt_shaders::gpu::lights::ROUND_SIDES;
 
 /// What a light is, beyond its radiance.
 #[derive(Clone, Debug)]

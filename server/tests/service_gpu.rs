@@ -193,6 +193,13 @@ fn gpu_words_stream_the_same_trees_and_the_scene_bundle_holds_the_baked_scene() 
     assert_eq!(f32s(&doc["camera"]["position"]), [3.2f32, 3.0, 4.2]);
     let light = &doc["lights"][0];
     assert_eq!(light["vertices"].as_array().unwrap().len(), 4);
+    // Its shader record (bspvt_shaders::gpu::lights): a one-sided polygon, its corners.
+    assert_eq!(light["kind"], "polygon");
+    assert_eq!(light["count"], 4);
+    let record = &light["record"];
+    assert_eq!(record.as_array().unwrap().len(), 10);
+    assert_eq!(record[0][3], 0.0);
+    assert_eq!(f32s(&record[2])[..3], f32s(&light["vertices"][0])[..]);
     assert_eq!(f32s(&light["region"]["min"]), [-2.5f32, 2.0, -2.5]);
     assert_eq!(doc["not_shown"], serde_json::json!([]));
     let etag = bundle.header("etag").unwrap().to_string();
@@ -203,4 +210,66 @@ fn gpu_words_stream_the_same_trees_and_the_scene_bundle_holds_the_baked_scene() 
     )
     .unwrap();
     assert_eq!(again.status, 304);
+}
+
+/// A glTF room lit by a point light, a spot and a sun (`assets/rooms/punctual-room.gltf`):
+/// the bundle gives the page each as its shader record — the two spheres at their nodes with
+/// the spot's cone, the sun's disk toward the sun — and says what the page leaves out (the
+/// sun's shadows, which are the sky's bake).
+#[test]
+fn the_scene_bundle_holds_point_spot_and_sun_lights() {
+    let tmp = tempfile::tempdir().unwrap();
+    let srv = start(&tmp.path().join("data"), &[]);
+    let a = agent();
+    let gltf =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/rooms/punctual-room.gltf");
+    let bytes = std::fs::read(&gltf).unwrap();
+    let id = submit_ok(
+        &a,
+        &srv,
+        &[("mesh", Some("punctual-room.gltf"), &bytes)],
+        None,
+    );
+    let bundle = get(&a, &srv.url(&format!("/v1/scenes/{id}/gpu-scene")));
+    assert_eq!(bundle.status, 200);
+    let len = u32_at(&bundle.body, 4) as usize;
+    let doc: serde_json::Value = serde_json::from_slice(&bundle.body[8..8 + len]).unwrap();
+    let lights = doc["lights"].as_array().unwrap();
+    let kinds: Vec<&str> = lights.iter().map(|l| l["kind"].as_str().unwrap()).collect();
+    assert_eq!(kinds, ["sphere", "sphere", "sun"], "{doc}");
+    let word = |l: &serde_json::Value, w: usize, k: usize| l["record"][w][k].as_f64().unwrap();
+    for l in lights {
+        // Twelve: the sides of the round polygon the shaders make of a sphere or a disk.
+        assert_eq!(l["count"], 12);
+        let kind = if l["kind"] == "sun" { 3.0 } else { 2.0 };
+        assert_eq!(word(l, 0, 3), kind);
+    }
+    // The spheres sit at their nodes, of the default radius; the spot's cone is its own.
+    for l in &lights[..2] {
+        for k in 0..3 {
+            assert_eq!(word(l, 2, k), l["vertices"][0][k].as_f64().unwrap());
+        }
+        assert_eq!(
+            word(l, 2, 3) as f32,
+            bspvt_proto::scene::DEFAULT_SPHERE_RADIUS
+        );
+    }
+    assert_eq!(word(&lights[0], 4, 2), 0.0, "the bulb is not a spot");
+    assert_eq!(word(&lights[1], 4, 2), 1.0, "the spot is a spot");
+    assert!(
+        word(&lights[1], 4, 0) > word(&lights[1], 4, 1),
+        "cos inner > cos outer"
+    );
+    // The sun's direction is a unit vector, and its half angle the default's.
+    let toward: f64 = (0..3).map(|k| word(&lights[2], 2, k).powi(2)).sum();
+    assert!((toward - 1.0).abs() < 1e-6, "{toward}");
+    // The sun beside the lamps is drawn unshadowed (its shadows are the sky's bake).
+    let shadowed: Vec<bool> = lights
+        .iter()
+        .map(|l| l["shadowed"].as_bool().unwrap())
+        .collect();
+    assert_eq!(shadowed, [true, true, false]);
+    let not_shown = doc["not_shown"].to_string();
+    assert!(not_shown.contains("sun"), "{not_shown}");
+    assert!(!not_shown.contains("point or spot"), "{not_shown}");
 }

@@ -238,24 +238,21 @@ class Viewer {
     this.dirty = true;
   }
 
-  /** Lamp k posed: the scene's, moved by the offset the user dragged it by. */
-  light(k) {
-    const l = this.doc.lights[k];
-    if (!l) return null;
-    return { ...l, vertices: l.vertices.map((p) => add(p, this.lightOffsets[k])) };
-  }
-
-  /** `LightRecord` of client/src/gpu/vertex.rs for lamp k: 40 words, and the vertex count (0: none). */
+  /**
+   * `LightRecord` of bspvt_shaders::gpu::lights for light k, as the service built it, moved by
+   * the offset the user dragged it by (a polygon's corners, a sphere's centre; a sun stays):
+   * 40 words, and the count the shaders take (0: none).
+   */
   lightRecord(k) {
     const words = new Float32Array(40);
-    const l = this.light(k);
+    const l = this.doc.lights[k];
     if (!l) return { words, count: 0 };
-    words.set([...l.normal, l.two_sided ? 1 : 0], 0);
-    words.set([...l.radiance, 0], 4);
-    const vs = l.vertices.slice(0, 8);
-    vs.forEach((p, k) => words.set([...p, 1], 8 + 4 * k));
-    const finite = l.vertices.flat().concat(l.normal, l.radiance).every(Number.isFinite);
-    return { words, count: finite && l.vertices.length <= 8 ? l.vertices.length : 0 };
+    words.set(l.record.flat());
+    const o = this.lightOffsets[k];
+    const moving = l.kind === 'polygon' ? l.count : l.kind === 'sphere' ? 1 : 0;
+    for (let i = 0; i < moving; i++) for (let a = 0; a < 3; a++) words[8 + 4 * i + a] += o[a];
+    const finite = words.every(Number.isFinite);
+    return { words, count: finite ? l.count : 0 };
   }
 
   /** The shading passes' parameters for lamp k; `layer`: 1 adds its frame to the lamps' before it. */
@@ -321,20 +318,23 @@ class Viewer {
    */
   draw() {
     const d = this.device;
-    const roots = this.method === 'bspvt' ? this.roots : this.rootsNone;
     const visView = this.visibility.createView();
-    // The same buffers for every lamp: the groups are made once a frame.
-    const shadeGroup = this.group(this.shadePipe, [
-      this.shadeParams,
-      this.verts,
-      this.jobs,
-      roots,
-      this.nodes,
-      this.lineNormals,
-      this.ltc,
-      this.results,
-      this.lightTexture,
-    ]);
+    // The same buffers for every lamp: the groups are made once a frame, one for the lights
+    // the trees shadow and one for those they do not (unshadowed LTC; a sun beside lamps).
+    const shadeGroup = (roots) =>
+      this.group(this.shadePipe, [
+        this.shadeParams,
+        this.verts,
+        this.jobs,
+        roots,
+        this.nodes,
+        this.lineNormals,
+        this.ltc,
+        this.results,
+        this.lightTexture,
+      ]);
+    const shadowed = shadeGroup(this.method === 'bspvt' ? this.roots : this.rootsNone);
+    const unshadowed = shadeGroup(this.rootsNone);
     const resolveGroup = this.group(this.resolvePipe, [
       this.resolveParams,
       this.verts,
@@ -356,7 +356,7 @@ class Viewer {
       {
         const pass = enc.beginComputePass();
         pass.setPipeline(this.shadePipe);
-        pass.setBindGroup(0, shadeGroup);
+        pass.setBindGroup(0, this.doc.lights[k]?.shadowed === false ? unshadowed : shadowed);
         pass.dispatchWorkgroups(Math.ceil(this.n / 64));
         pass.end();
       }
@@ -623,12 +623,12 @@ async function main() {
   for (const s of doc.not_shown) $('not-shown').append(Object.assign(document.createElement('li'), { textContent: `not shown: ${s}` }));
   if (doc.lights.length > 1) {
     $('light-pick').hidden = false;
-    doc.lights.forEach((_, k) => $('light').append(new Option(`#${k}`, String(k))));
+    doc.lights.forEach((l, k) => $('light').append(new Option(`#${k} ${l.kind}${l.name ? `: ${l.name}` : ''}`, String(k))));
     $('light').addEventListener('change', () => {
       viewer.lightIndex = Number($('light').value);
     });
   }
-  if (doc.lights.length === 0) say('the scene has no polygon light: the GPU path draws it black');
+  if (doc.lights.length === 0) say('the scene has no light: the GPU path draws it black');
   $('method').value = viewer.method;
   $('mode').value = viewer.mode;
   $('method').addEventListener('change', () => {

@@ -120,7 +120,8 @@ fn view(
     }
 }
 
-/// `bspvt render SOURCE --method bspvt --mode pixel` at `w` × `h` into `out`, with `extra`.
+/// `bspvt render SOURCE --mode pixel` at `w` × `h` into `out`, with `extra` (`--method
+/// bspvt` unless `extra` names another).
 fn render(
     source: &[&std::ffi::OsStr],
     (w, h): (u32, u32),
@@ -131,7 +132,11 @@ fn render(
     let st = Command::new(BIN)
         .arg("render")
         .args(source)
-        .args(["--method", "bspvt", "--mode", "pixel"])
+        .args(if extra.contains(&"--method") {
+            &["--mode", "pixel"][..]
+        } else {
+            &["--method", "bspvt", "--mode", "pixel"][..]
+        })
         .args(["--width", &w.to_string(), "--height", &h.to_string()])
         .args(extra)
         .arg("--cache")
@@ -265,5 +270,69 @@ fn the_browser_viewer_draws_every_lamp() {
     assert!(
         to_first > 0.05,
         "the browser's frame is the first lamp's alone ({to_first})"
+    );
+}
+
+/// A glTF room lit by a point light and a spot (`assets/rooms/punctual-room.gltf` without its
+/// sun, whose shadows are the sky's bake, which the service does not stream): the viewer draws
+/// each as the native client does, a sphere's round polygon cut by the trees, the spot's cone
+/// and falloff, and matches `bspvt render`; the shadows are in it (it differs from the
+/// unshadowed frame).
+#[test]
+fn the_browser_viewer_draws_point_and_spot_lights() {
+    let Some(chromium) = bspvt_tests::browser::chromium_or_skip("the viewer in Chromium") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let room = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/punctual-room.gltf");
+    let mut doc: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&room).unwrap()).unwrap();
+    for node in doc["nodes"].as_array_mut().unwrap() {
+        if node["name"] == "sun" {
+            node.as_object_mut().unwrap().remove("extensions");
+        }
+    }
+    let gltf = tmp.path().join("point-spot-room.gltf");
+    std::fs::write(&gltf, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
+    let a = agent();
+    let bytes = std::fs::read(&gltf).unwrap();
+    let id = submit_ok(
+        &a,
+        &srv,
+        &[("mesh", Some("point-spot-room.gltf"), &bytes)],
+        None,
+    );
+    wait_done(&a, &srv, &id);
+    let size = (160, 120);
+    let cache = tmp.path().join("cache");
+    let source = [std::ffi::OsStr::new("--mesh"), gltf.as_os_str()];
+    let reference = tmp.path().join("ref.png");
+    let unshadowed = tmp.path().join("ltc.png");
+    render(&source, size, &cache, &reference, &[]);
+    render(&source, size, &cache, &unshadowed, &["--method", "ltc"]);
+    let seen = view(&chromium, &srv, &id, size, tmp.path(), &["--drag", "no"]);
+    let web = seen.dir.join("web.png");
+    if let Some(dir) = std::env::var_os("BSPVT_BROWSER_OUT") {
+        let dir = PathBuf::from(dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::copy(&reference, dir.join("point-spot-ref.png")).unwrap();
+        std::fs::copy(&web, dir.join("point-spot-web.png")).unwrap();
+    }
+    let (diff, kept) = compare(&reference, &web);
+    let (shadows, _) = compare(&unshadowed, &web);
+    eprintln!(
+        "point and spot: browser vs bspvt render {diff:.4} over {:.1} % of the pixels; vs the \
+         unshadowed frame {shadows:.4}",
+        kept * 100.0
+    );
+    assert!(kept > 0.8, "edges cover too much of the frame: {kept}");
+    assert!(
+        diff <= 0.02,
+        "the browser's point and spot lights differ from bspvt render's by {diff}"
+    );
+    assert!(
+        shadows > 2.0 * diff && shadows > 0.005,
+        "the browser's frame is as near the unshadowed one ({shadows}) as bspvt render's ({diff})"
     );
 }

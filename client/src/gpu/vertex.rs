@@ -4,12 +4,12 @@
 use anyhow::{Result, bail};
 use bspvt_proto::bspvt::{LineCodec, VertexTrees};
 use bspvt_proto::scene::Material;
-use bspvt_shaders::gpu::records;
+use bspvt_shaders::gpu::{lights, records};
 use glam::{DVec3, Vec3};
 
 use super::context::Gpu;
 use super::trees::GpuTrees;
-use crate::light::Light;
+use crate::light::{Light, Shape};
 use crate::ltc::table::LtcTable;
 use crate::render::renderer::Trees;
 
@@ -57,45 +57,30 @@ pub(crate) fn vertex_record(p: &ShadePoint) -> [[f32; 4]; 4] {
     records::vertex_record(p.p, p.n, &p.material, None)
 }
 
-/// The light as the shaders read it (`light_normal`, `radiance`, `light` of their uniforms):
-/// the emitting side's unit normal (w: 1 when two-sided), the radiance (w: 1 when textured)
-/// and up to 8 vertices.
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-pub(crate) struct LightRecord {
-    normal: [f32; 4],
-    radiance: [f32; 4],
-    vertices: [[f32; 4]; 8],
-}
+/// The light as the shaders read it (`bspvt_shaders::gpu::lights`).
+pub(crate) type LightRecord = lights::LightRecord;
 
-/// `light`'s record and its vertex count for the shaders: 0 for a light that is not finite,
-/// which then sends nothing (shade::light_directions).
+/// `light`'s record and its vertex count for the shaders (a round light: its polygon's
+/// sides): 0 for a light that is not finite, which then sends nothing
+/// (common.wgsl `light_directions`).
 pub(crate) fn light_record(light: &Light) -> (LightRecord, u32) {
-    let mut r = LightRecord {
-        normal: light
-            .normal
-            .as_vec3()
-            .extend(if light.two_sided { 1.0 } else { 0.0 })
-            .to_array(),
-        radiance: light
-            .radiance
-            .as_vec3()
-            .extend(if light.texture.is_some() { 1.0 } else { 0.0 })
-            .to_array(),
-        vertices: [[0.0; 4]; 8],
-    };
-    for (k, v) in light.vertices.iter().enumerate().take(8) {
-        r.vertices[k] = v.as_vec3().extend(1.0).to_array();
+    let radiance = light.radiance.as_vec3();
+    match &light.shape {
+        Shape::Polygon => {
+            let corners: Vec<Vec3> = light.vertices.iter().map(|v| v.as_vec3()).collect();
+            lights::polygon(
+                &corners,
+                light.normal.as_vec3(),
+                radiance,
+                light.two_sided,
+                light.texture.is_some(),
+            )
+        }
+        Shape::Sphere(l) => lights::sphere(l, radiance),
+        Shape::Distant { toward, half_angle } => {
+            lights::sun(toward.as_vec3(), *half_angle as f32, radiance)
+        }
     }
-    let finite = light.vertices.iter().all(|v| v.is_finite())
-        && light.normal.is_finite()
-        && light.radiance.is_finite();
-    let count = if finite {
-        light.vertices.len() as u32
-    } else {
-        0
-    };
-    (r, count)
 }
 
 #[repr(C)]
@@ -107,15 +92,10 @@ struct Params {
     codec: [f32; 4],
 }
 
-/// Whether the GPU shades this light: a polygon of at most 8 vertices.
+/// Whether the GPU shades this light: a polygon of at most 8 vertices, a point or spot
+/// light's sphere, a sun's disk.
 pub(crate) fn supports(light: &Light) -> Result<()> {
-    if !light.is_polygon() {
-        bail!(
-            "point, spot and sun lights are shaded on the CPU (the GPU's shaders take polygon \
-             lights)"
-        );
-    }
-    if light.vertices.len() > 8 {
+    if light.is_polygon() && light.vertices.len() > 8 {
         bail!("lights of more than 8 vertices are shaded on the CPU");
     }
     Ok(())

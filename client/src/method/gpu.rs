@@ -1,7 +1,8 @@
 //! The GPU path of the methods that have one (`bspvt`, `ltc`): frames drawn by
 //! [`crate::gpu::frame::GpuFrames`] when [`Settings::backend`] asks for the GPU; the lights the
-//! GPU's shaders do not take (a point, spot or sun light; a polygon of more than 8 vertices:
-//! said once) are drawn by the CPU and added.
+//! GPU's shaders do not take (a polygon of more than 8 vertices: said once; a sun whose shadows
+//! are in the sky's bake, [`bspvt_proto::Scene::suns_in_sky_bake`]) are drawn by the CPU and
+//! added.
 
 use anyhow::Result;
 
@@ -9,7 +10,7 @@ use super::{Frame, FrameInput, Settings};
 use crate::frame::image::Image;
 use crate::gpu::frame::GpuFrames;
 use crate::gpu::{Backend, Gpu};
-use crate::light::Light;
+use crate::light::{Light, Shape};
 use crate::render::renderer::{FrameCounts, Trees};
 
 /// MSAA samples of the GPU's frames.
@@ -61,10 +62,12 @@ impl GpuPath {
                 Err(e) => return Ok(self.refuse(format!("{e:#}"))),
             }
         }
-        let (on_gpu, on_cpu): (Vec<Light>, Vec<Light>) = lights
-            .iter()
-            .cloned()
-            .partition(|l| crate::gpu::vertex::supports(l).is_ok());
+        // A sun baked with the sky is shadowed by the sky's trees, which the GPU does not hold.
+        let sky_suns = trees.is_some() && f.scene.scene.suns_in_sky_bake();
+        let (on_gpu, on_cpu): (Vec<Light>, Vec<Light>) = lights.iter().cloned().partition(|l| {
+            crate::gpu::vertex::supports(l).is_ok()
+                && !(sky_suns && matches!(l.shape, Shape::Distant { .. }))
+        });
         if let Some(e) = on_cpu
             .iter()
             .find_map(|l| crate::gpu::vertex::supports(l).err())

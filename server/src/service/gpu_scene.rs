@@ -7,15 +7,15 @@
 //! `verts` (4 × vec4f per vertex: position, (normal, u), (albedo, α), (F0, v)), `tris`
 //! (vec4u per triangle: corners and material), `materials` (vec4f records),
 //! `surface_textures` (u32 words), `cut` (u32 words), `ltc` (vec4f, two per table node). The
-//! JSON also carries the camera, the polygon lights (points, normal, radiance, region), the
-//! bounds, and `not_shown`: what of the scene the browser's GPU path leaves out, one sentence
-//! each.
+//! JSON also carries the camera, the lights (each its kind, its shader record of
+//! `bspvt_shaders::gpu::lights` and count; a lamp also its corners and region), the bounds,
+//! and `not_shown`: what of the scene the browser's GPU path leaves out, one sentence each.
 
 use axum::extract::{Path, State};
 use axum::http::HeaderMap;
 use axum::response::Response;
 use bspvt_proto::Scene;
-use bspvt_shaders::gpu::{materials, records};
+use bspvt_shaders::gpu::{lights, materials, records};
 use bspvt_shaders::ltc_table::LtcTable;
 use serde_json::json;
 
@@ -111,20 +111,7 @@ pub(crate) fn bundle(scene: &Scene) -> anyhow::Result<Vec<u8>> {
         table_of_sections.insert((*name).into(), json!([offset, bytes.len()]));
         offset += bytes.len();
     }
-    let lights: Vec<_> = scene
-        .lights
-        .iter()
-        .map(|l| {
-            json!({
-                "vertices": l.points().iter().map(|p| p.to_array()).collect::<Vec<_>>(),
-                "normal": l.normal().to_array(),
-                "radiance": l.radiance,
-                "two_sided": l.two_sided,
-                "region": l.region.as_ref().map(|r| json!({"min": r.min, "max": r.max})),
-                "moves_in_plane": l.moves_in_plane,
-            })
-        })
-        .collect();
+    let lights = light_docs(scene);
     let bounds = mesh.bounds();
     let doc = json!({
         "version": VERSION,
@@ -155,18 +142,57 @@ pub(crate) fn bundle(scene: &Scene) -> anyhow::Result<Vec<u8>> {
     Ok(out)
 }
 
+/// Every light the GPU path shades, each with its shader record
+/// (`bspvt_shaders::gpu::lights`: 10 × 4 floats, and the vertex count the shaders take) and
+/// whether the streamed trees shadow it: the polygon lamps (their corners and region: the page
+/// drags them), then the point and spot lights' spheres, then the suns.
+fn light_docs(scene: &Scene) -> Vec<serde_json::Value> {
+    let doc =
+        |kind: &str, (record, count): (lights::LightRecord, u32), extra: serde_json::Value| {
+            let mut d = json!({"kind": kind, "record": record, "count": count, "shadowed": true});
+            if let (Some(d), serde_json::Value::Object(extra)) = (d.as_object_mut(), extra) {
+                d.extend(extra);
+            }
+            d
+        };
+    let polygons = scene.lights.iter().map(|l| {
+        let radiance = glam::Vec3::from(l.radiance);
+        doc(
+            "polygon",
+            lights::polygon(&l.points(), l.normal(), radiance, l.two_sided, false),
+            json!({
+                "vertices": l.points().iter().map(|p| p.to_array()).collect::<Vec<_>>(),
+                "region": l.region.as_ref().map(|r| json!({"min": r.min, "max": r.max})),
+                "moves_in_plane": l.moves_in_plane,
+            }),
+        )
+    });
+    let spheres = scene.punctual.iter().map(|l| {
+        doc(
+            "sphere",
+            lights::scene_sphere(l),
+            json!({"name": l.name, "vertices": [l.position]}),
+        )
+    });
+    // A sun beside lamps is shadowed by the sky's bake, which is not streamed: drawn unshadowed.
+    let sun_shadowed = !scene.suns_in_sky_bake();
+    let suns = scene.suns.iter().map(|l| {
+        doc(
+            "sun",
+            lights::scene_sun(l),
+            json!({"name": l.name, "vertices": [], "shadowed": sun_shadowed}),
+        )
+    });
+    polygons.chain(spheres).chain(suns).collect()
+}
+
 /// What of `scene` the browser's GPU path does not draw, one sentence each.
 fn not_shown(scene: &Scene) -> Vec<String> {
     let mut out = Vec::new();
-    if !scene.punctual.is_empty() {
+    if scene.suns_in_sky_bake() {
         out.push(format!(
-            "{} point or spot light(s): the GPU path shades polygon lights only",
-            scene.punctual.len()
-        ));
-    }
-    if !scene.suns.is_empty() {
-        out.push(format!(
-            "{} sun(s): the GPU path shades polygon lights only",
+            "the shadows of {} sun(s): a sun lit beside lamps is shadowed by the sky's bake, \
+             which the page does not stream (drawn unshadowed)",
             scene.suns.len()
         ));
     }

@@ -1,6 +1,6 @@
 // Shared by the compute and the raster shaders: the LTC table lookup [Heitz16], the stable
 // polygon integral of client/src/ltc/polygon.rs, the light's directions and its texture, in
-// f32. Each shader defines the accessors ltc_size, ltc_a, ltc_b, light_count, light_vertex,
+// f32. Each shader defines the accessors ltc_size, ltc_a, ltc_b, light_count, light_word,
 // light_normal, light_textured and light_tex over its own bindings.
 //
 // Stability as on the CPU: θ = atan2(|p × q|, p·q), p × q computed as p × (q − p), and each
@@ -282,24 +282,96 @@ fn clip_src(n: vec3f, count: u32) -> u32 {
     return k;
 }
 
-// shade::light_directions: the light polygon as unit directions from p, clipped to the upper
-// hemisphere of n, into `dirs`; 0 when below the horizon or behind a one-sided light.
+// The kinds of light (light_normal().w; bspvt_shaders::gpu::lights): a polygon (0 one-sided,
+// 1 two-sided; words its corners), a point or spot light's sphere (word 0 its centre and
+// radius, word 1 its spot direction and range, word 2 cos inner, cos outer, 1 when a spot),
+// a sun's disk at infinity (word 0 the unit direction toward it and half its diameter).
+const LIGHT_SPHERE: f32 = 2.0;
+const LIGHT_SUN: f32 = 3.0;
+// light::ROUND_SIDES: a sphere or a disk is shaded as this regular spherical polygon.
+const ROUND_SIDES: u32 = 12u;
+
+fn light_vertex(i: u32) -> vec3f {
+    return light_word(i).xyz;
+}
+
+// light::round_directions into ig_src[0..ROUND_SIDES]: the regular spherical polygon around
+// `axis` with the solid angle Ω = 4π sin²(α/2) of the cap of half-angle α (sin_half =
+// sin(α/2)). Each of its N isosceles triangles (apex angle C = 2π/N, sides β) has area Ω/N
+// with tan(Ω/2N) = t² sin C / (1 + t² cos C), t = tan(β/2) (Todhunter §101). false where
+// the input is degenerate.
+fn round_directions(axis: vec3f, sin_half: f32) -> bool {
+    let c = 2.0 * PI / f32(ROUND_SIDES);
+    let omega = 4.0 * PI * sin_half * sin_half;
+    let big_t = tan(0.5 * omega / f32(ROUND_SIDES));
+    let t2 = big_t / (sin(c) - big_t * cos(c));
+    let al = length(axis);
+    if !(t2 > 0.0) || !finite(t2) || !(al > 0.0) || !finite(al) {
+        return false;
+    }
+    let beta = 2.0 * atan(sqrt(t2));
+    let sb = sin(beta);
+    let cb = cos(beta);
+    let a = axis / al;
+    // glam's any_orthonormal_pair (its signum: the sign bit), so that the polygon's corners
+    // are where the CPU puts them.
+    let sg = select(1.0, -1.0, (bitcast<u32>(a.z) >> 31u) != 0u);
+    let k = -1.0 / (sg + a.z);
+    let b = a.x * a.y * k;
+    let u = vec3f(1.0 + sg * a.x * a.x * k, sg * b, -sg * a.x);
+    let v = vec3f(b, sg + a.y * a.y * k, -a.y);
+    for (var i = 0u; i < ROUND_SIDES; i++) {
+        // Clockwise about a seen from outside = counter-clockwise from the centre.
+        let phi = -c * f32(i);
+        ig_src[i] = a * cb + (u * cos(phi) + v * sin(phi)) * sb;
+    }
+    return true;
+}
+
+// Light::directions for a sphere or a disk into ig_src; false where p sees none of it
+// (inside the sphere) or the input is degenerate.
+fn round_light(p: vec3f) -> bool {
+    let w0 = light_word(0u);
+    if light_normal().w == LIGHT_SUN {
+        return round_directions(w0.xyz, sin(0.5 * w0.w));
+    }
+    let to = w0.xyz - p;
+    let d = length(to);
+    let r = w0.w;
+    if !(d > r) || !finite(d) {
+        return false;
+    }
+    // sin(α/2) from sin α = r / d, stable for tiny α.
+    let sin_a = r / d;
+    let cos_a = sqrt(max(1.0 - sin_a * sin_a, 0.0));
+    return round_directions(to / d, min(sin_a / sqrt(2.0 * (1.0 + cos_a)), 1.0));
+}
+
+// shade::light_directions: the light as unit directions from p (a polygon's corners; a
+// sphere's or a disk's round polygon), clipped to the upper hemisphere of n, into `dirs`; 0
+// when below the horizon or behind a one-sided light.
 fn light_directions(p: vec3f, n: vec3f) -> u32 {
     let count = light_count();
     let ln = light_normal();
-    if count < 3u || count > 8u {
-        return 0u;
-    }
-    if ln.w == 0.0 && !(dot(ln.xyz, p - light_vertex(0u)) > 0.0) {
-        return 0u;
-    }
-    for (var i = 0u; i < count; i++) {
-        let d = light_vertex(i) - p;
-        let l2 = dot(d, d);
-        if !(l2 > 0.0) || !finite(l2) {
+    if ln.w == LIGHT_SPHERE || ln.w == LIGHT_SUN {
+        if count != ROUND_SIDES || !round_light(p) {
             return 0u;
         }
-        ig_src[i] = d * inverseSqrt(l2);
+    } else {
+        if count < 3u || count > 8u {
+            return 0u;
+        }
+        if ln.w == 0.0 && !(dot(ln.xyz, p - light_vertex(0u)) > 0.0) {
+            return 0u;
+        }
+        for (var i = 0u; i < count; i++) {
+            let d = light_vertex(i) - p;
+            let l2 = dot(d, d);
+            if !(l2 > 0.0) || !finite(l2) {
+                return 0u;
+            }
+            ig_src[i] = d * inverseSqrt(l2);
+        }
     }
     let k = clip_src(n, count);
     for (var i = 0u; i < k; i++) {
@@ -308,6 +380,35 @@ fn light_directions(p: vec3f, n: vec3f) -> u32 {
     return k;
 }
 
+// PunctualLight::falloff of a sphere toward p (1 for the other kinds): the spot's smooth
+// cone, saturate((cos − cos outer) / (cos inner − cos outer))², and the range window,
+// saturate(1 − (d / range)⁴)², as KHR_lights_punctual recommends.
+fn light_falloff(p: vec3f) -> f32 {
+    if light_normal().w != LIGHT_SPHERE {
+        return 1.0;
+    }
+    let to = p - light_word(0u).xyz;
+    let d = length(to);
+    if !(d > 0.0) || !finite(d) {
+        return 0.0;
+    }
+    let spot = light_word(1u);
+    let cone = light_word(2u);
+    var f = 1.0;
+    if cone.z != 0.0 {
+        let cos_to = dot(spot.xyz, to / d);
+        let scale = 1.0 / max(cone.x - cone.y, 0.001);
+        let a = clamp(cos_to * scale - cone.y * scale, 0.0, 1.0);
+        f *= a * a;
+    }
+    if spot.w > 0.0 {
+        let x = d / spot.w;
+        let x2 = x * x;
+        let w = clamp(1.0 - x2 * x2, 0.0, 1.0);
+        f *= w * w;
+    }
+    return select(0.0, f, finite(f));
+}
 
 // Textured lights [Heitz16 §5.3] (client/src/texture.rs): the prefiltered pyramid read through
 // light_tex (LightTexture::gpu_words: [0] = (levels, size), [1 + l] = (width, height, offset)

@@ -19,10 +19,11 @@ struct ResolveParams {
     forward: vec4f,
     right: vec4f,
     up: vec4f,
-    // xyz: the emitting side's unit normal; w: 1 when two-sided.
+    // xyz: a polygon's emitting side's unit normal; w: the light's kind (common.wgsl).
     light_normal: vec4f,
     // w: 1 when textured (light_tex holds the texture).
     radiance: vec4f,
+    // The light's shape (bspvt_shaders::gpu::lights).
     light: array<vec4f, 8>,
     // light vertices, mode (0 per vertex, 1 per pixel), LTC table size, materials.
     counts: vec4u,
@@ -69,8 +70,8 @@ struct VertexOut {
 fn light_count() -> u32 {
     return fp.counts.x;
 }
-fn light_vertex(i: u32) -> vec3f {
-    return fp.light[i].xyz;
+fn light_word(i: u32) -> vec4f {
+    return fp.light[i];
 }
 fn light_normal() -> vec4f {
     return fp.light_normal;
@@ -430,7 +431,8 @@ fn shade(t: u32, x: f32, y: f32) -> vec3f {
         + w.z * shading[i2].ratio_d, vec3f(0.0), vec3f(1.0));
     let rs = clamp(w.x * shading[i0].ratio_s + w.y * shading[i1].ratio_s
         + w.z * shading[i2].ratio_s, vec3f(0.0), vec3f(1.0));
-    let c = fp.radiance.xyz * (albedo.xyz * pc.d.xyz * rd + spec * pc.s.xyz * rs);
+    let c = fp.radiance.xyz * light_falloff(pos)
+        * (albedo.xyz * pc.d.xyz * rd + spec * pc.s.xyz * rs);
     return select(vec3f(0.0), c, finite3(c));
 }
 

@@ -14,10 +14,11 @@ const LEAF: u32 = 0x80000000u;
 
 struct Params {
     eye: vec4f,
-    // xyz: the emitting side's unit normal; w: 1 when two-sided.
+    // xyz: a polygon's emitting side's unit normal; w: the light's kind (common.wgsl).
     light_normal: vec4f,
     // w: 1 when textured (light_tex holds the texture).
     radiance: vec4f,
+    // The light's shape (bspvt_shaders::gpu::lights).
     light: array<vec4f, 8>,
     // light vertices, jobs (visible vertices), codec offsets O, LTC table size.
     counts: vec4u,
@@ -56,8 +57,8 @@ struct VertexOut {
 fn light_count() -> u32 {
     return params.counts.x;
 }
-fn light_vertex(i: u32) -> vec3f {
-    return params.light[i].xyz;
+fn light_word(i: u32) -> vec4f {
+    return params.light[i];
 }
 fn light_normal() -> vec4f {
     return params.light_normal;
@@ -152,7 +153,8 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
     let theta = atan2(length(cross(n, wo)), dot(n, wo));
     let lt = ltc_lookup(albedo.w, theta);
     let spec = f0 * lt.magnitude + (vec3f(1.0) - f0) * lt.fresnel;
-    let radiance = params.radiance.xyz;
+    // Light::radiance_toward: a spot's cone and a range's window scale a sphere's.
+    let radiance = params.radiance.xyz * light_falloff(p);
 
     var res: VertexOut;
     res.colour = vec4f(0.0);

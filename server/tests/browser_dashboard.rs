@@ -104,6 +104,7 @@ fn the_page_and_its_files_are_served_with_a_strict_policy() {
     for (file, kind) in [
         ("dashboard.js", "text/javascript"),
         ("upload.js", "text/javascript"),
+        ("cpu.js", "text/javascript"),
         ("style.css", "text/css"),
         ("icon.svg", "image/svg+xml"),
     ] {

@@ -2,7 +2,11 @@
 // shaders the native client compiles, served by the service from bspvt-shaders) on buffers the
 // service builds with the native client's code (`gpu-scene`), the trees streamed as GPU words
 // (`trees?format=gpu`), the camera's chunks first; vertices whose trees have not arrived are
-// shaded unshadowed. Every URL is relative to this module, so it works behind a path prefix.
+// shaded unshadowed. Without WebGPU (or with `graphics=cpu`) the CPU path of cpu.js draws the
+// same frame per vertex. Every URL is relative to this module, so it works behind a path
+// prefix.
+
+import { rasterize, shadeVertex, toneMap, verticesSeen } from './cpu.js';
 
 const root = new URL('../', import.meta.url);
 const api = (path) => new URL(path, root).href;
@@ -121,10 +125,13 @@ async function fetchShader(name) {
 
 // ---- the viewer
 
-class Viewer {
-  constructor(device, context, format, doc, sources, size) {
-    this.device = device;
-    this.context = context;
+/**
+ * What both graphics paths share: the scene bundle, the camera and the lights as the user
+ * moved them, and the trees streamed in (the camera's chunks first). A path takes the trees'
+ * words through `putLineNormals`, `putNodes` and `putRoots`.
+ */
+class Frames {
+  constructor(doc, size) {
     this.doc = doc;
     this.n = doc.vertices;
     this.width = size.width;
@@ -141,12 +148,125 @@ class Viewer {
     this.chunksIn = 0;
     this.chunkCount = Math.ceil(this.n / doc.chunk_vertices);
     this.codec = null;
+    this.nodeLen = 0;
     this.dirty = true;
     const b = doc.bounds;
     this.diagonal = Math.hypot(...sub(b.max, b.min));
     const cam = doc.camera;
     this.camera = { eye: cam.position, target: cam.target, up: cam.up, fov: cam.fov_y_deg };
     this.setView();
+  }
+
+  setView() {
+    const c = this.camera;
+    this.view = makeView(c.eye, c.target, c.up, c.fov, this.width, this.height);
+    this.dirty = true;
+  }
+
+  /**
+   * `LightRecord` of bspvt_shaders::gpu::lights for light k, as the service built it, moved by
+   * the offset the user dragged it by (a polygon's corners, a sphere's centre; a sun stays):
+   * 40 words, and the count the shaders take (0: none).
+   */
+  lightRecord(k) {
+    const words = new Float32Array(40);
+    const l = this.doc.lights[k];
+    if (!l) return { words, count: 0 };
+    words.set(l.record.flat());
+    const o = this.lightOffsets[k];
+    const moving = l.kind === 'polygon' ? l.count : l.kind === 'sphere' ? 1 : 0;
+    for (let i = 0; i < moving; i++) for (let a = 0; a < 3; a++) words[8 + 4 * i + a] += o[a];
+    const finite = words.every(Number.isFinite);
+    return { words, count: finite ? l.count : 0 };
+  }
+
+  // ---- trees
+
+  /** The `format=gpu` header: codec and line normals (server/src/service/stream.rs). */
+  takeHeader(buf, at) {
+    const dv = new DataView(buf);
+    if (new TextDecoder().decode(new Uint8Array(buf, at, 4)) !== 'BVGT') throw new Error('tree stream: no BVGT header');
+    const angles = dv.getUint32(at + 20, true);
+    const end = at + 28 + angles * 8;
+    if (!this.codec) {
+      this.codec = { offsets: dv.getUint32(at + 16, true), halfStep: dv.getFloat32(at + 24, true) };
+      this.putLineNormals(new Uint8Array(buf, at + 28, angles * 8).slice());
+    }
+    return end;
+  }
+
+  /** One `BVGC` chunk: its nodes appended, its vertices' roots pointed at them. */
+  takeChunk(buf, at) {
+    const dv = new DataView(buf);
+    if (new TextDecoder().decode(new Uint8Array(buf, at, 4)) !== 'BVGC') throw new Error('tree stream: no BVGC chunk');
+    const first = dv.getUint32(at + 4, true);
+    const count = dv.getUint32(at + 8, true);
+    const nodes = dv.getUint32(at + 12, true);
+    const roots = new Uint32Array(buf, at + 16, count * 6).slice();
+    const words = new Uint32Array(buf, at + 16 + count * 24, nodes * 2).slice();
+    for (let i = 0; i < roots.length; i++) if (roots[i] !== ABSENT) roots[i] += this.nodeLen;
+    this.putNodes(this.nodeLen, words);
+    this.putRoots(first, roots);
+    this.nodeLen += nodes;
+    this.treesIn += count;
+    this.chunksIn += 1;
+    this.dirty = true;
+    return at + 16 + count * 24 + nodes * 8;
+  }
+
+  /** Chunks in the order to fetch them: most vertices in the camera's view first. */
+  chunkOrder() {
+    const m = viewProj(this.view, this.diagonal);
+    const p = new Float32Array(this.doc.sectionBytes.verts.buffer, this.doc.sectionBytes.verts.byteOffset, this.n * 16);
+    const seen = new Array(this.chunkCount).fill(0);
+    for (let v = 0; v < this.n; v++) {
+      const [x, y, z] = [p[v * 16], p[v * 16 + 1], p[v * 16 + 2]];
+      const cx = m[0] * x + m[4] * y + m[8] * z + m[12];
+      const cy = m[1] * x + m[5] * y + m[9] * z + m[13];
+      const cw = m[3] * x + m[7] * y + m[11] * z + m[15];
+      if (cw > 0 && Math.abs(cx) <= cw && Math.abs(cy) <= cw) seen[Math.floor(v / this.doc.chunk_vertices)] += 1;
+    }
+    return [...seen.keys()].sort((a, b) => seen[b] - seen[a] || a - b);
+  }
+
+  /** Streams every chunk, `PARALLEL` requests at a time; a dropped request is retried. */
+  async stream() {
+    const order = this.chunkOrder();
+    const cv = this.doc.chunk_vertices;
+    const next = () => order.shift();
+    const worker = async () => {
+      for (let c = next(); c !== undefined; c = next()) {
+        const range = `${c * cv}..${Math.min(this.n, (c + 1) * cv)}`;
+        for (let attempt = 0; ; attempt++) {
+          try {
+            const url = api(`v1/scenes/${sceneId}/trees?format=gpu&vertices=${range}`);
+            const r = await fetch(url);
+            if (r.status === 409 || r.status === 410) throw Object.assign(new Error(await errorOf(r)), { final: true });
+            if (!r.ok) throw new Error(await errorOf(r));
+            const buf = await r.arrayBuffer();
+            this.decoded += buf.byteLength;
+            this.fetched += transferred(url, buf.byteLength);
+            let at = this.takeHeader(buf, 0);
+            while (at < buf.byteLength) at = this.takeChunk(buf, at);
+            break;
+          } catch (e) {
+            if (e.final) throw e;
+            // Resume: the chunk is asked for again (a chunk is whole or not at all).
+            say(`trees: ${e.message}; retrying`);
+            await new Promise((ok) => setTimeout(ok, Math.min(5000, 250 * 2 ** attempt)));
+          }
+        }
+      }
+    };
+    await Promise.all(Array.from({ length: PARALLEL }, worker));
+  }
+}
+
+class GpuViewer extends Frames {
+  constructor(device, context, format, doc, sources, size) {
+    super(doc, size);
+    this.device = device;
+    this.context = context;
 
     const S = GPUBufferUsage.STORAGE;
     const D = GPUBufferUsage.COPY_DST;
@@ -172,7 +292,6 @@ class Viewer {
     this.roots = init(none);
     this.rootsNone = init(none);
     this.nodeCap = 1 << 16;
-    this.nodeLen = 0;
     this.nodes = zeros(this.nodeCap * 8, S | GPUBufferUsage.COPY_SRC);
     this.lineNormals = zeros(16);
     this.shadeParams = zeros(208);
@@ -230,29 +349,6 @@ class Viewer {
         primitive: { topology: 'triangle-list' },
       }),
     ]);
-  }
-
-  setView() {
-    const c = this.camera;
-    this.view = makeView(c.eye, c.target, c.up, c.fov, this.width, this.height);
-    this.dirty = true;
-  }
-
-  /**
-   * `LightRecord` of bspvt_shaders::gpu::lights for light k, as the service built it, moved by
-   * the offset the user dragged it by (a polygon's corners, a sphere's centre; a sun stays):
-   * 40 words, and the count the shaders take (0: none).
-   */
-  lightRecord(k) {
-    const words = new Float32Array(40);
-    const l = this.doc.lights[k];
-    if (!l) return { words, count: 0 };
-    words.set(l.record.flat());
-    const o = this.lightOffsets[k];
-    const moving = l.kind === 'polygon' ? l.count : l.kind === 'sphere' ? 1 : 0;
-    for (let i = 0; i < moving; i++) for (let a = 0; a < 3; a++) words[8 + 4 * i + a] += o[a];
-    const finite = words.every(Number.isFinite);
-    return { words, count: finite ? l.count : 0 };
   }
 
   /** The shading passes' parameters for lamp k; `layer`: 1 adds its frame to the lamps' before it. */
@@ -400,42 +496,21 @@ class Viewer {
 
   // ---- trees
 
-  /** The `format=gpu` header: codec and line normals (server/src/service/stream.rs). */
-  takeHeader(buf, at) {
-    const dv = new DataView(buf);
-    if (new TextDecoder().decode(new Uint8Array(buf, at, 4)) !== 'BVGT') throw new Error('tree stream: no BVGT header');
-    const angles = dv.getUint32(at + 20, true);
-    const end = at + 28 + angles * 8;
-    if (!this.codec) {
-      this.codec = { offsets: dv.getUint32(at + 16, true), halfStep: dv.getFloat32(at + 24, true) };
-      const normals = new Uint8Array(buf, at + 28, angles * 8);
-      this.lineNormals = this.device.createBuffer({
-        size: Math.max(16, normals.byteLength),
-        usage: GPUBufferUsage.STORAGE | GPUBufferUsage.COPY_DST,
-      });
-      this.device.queue.writeBuffer(this.lineNormals, 0, normals);
-    }
-    return end;
+  putLineNormals(bytesIn) {
+    this.lineNormals = this.device.createBuffer({
+      size: Math.max(16, bytesIn.byteLength),
+      usage: GPUBufferUsage.STORAGE | GPUBufferUsage.COPY_DST,
+    });
+    this.device.queue.writeBuffer(this.lineNormals, 0, bytesIn);
   }
 
-  /** One `BVGC` chunk: its nodes appended, its vertices' roots pointed at them. */
-  takeChunk(buf, at) {
-    const dv = new DataView(buf);
-    if (new TextDecoder().decode(new Uint8Array(buf, at, 4)) !== 'BVGC') throw new Error('tree stream: no BVGC chunk');
-    const first = dv.getUint32(at + 4, true);
-    const count = dv.getUint32(at + 8, true);
-    const nodes = dv.getUint32(at + 12, true);
-    const roots = new Uint32Array(buf, at + 16, count * 6).slice();
-    const words = new Uint32Array(buf, at + 16 + count * 24, nodes * 2);
-    this.reserve(this.nodeLen + nodes);
-    this.device.queue.writeBuffer(this.nodes, this.nodeLen * 8, words);
-    for (let i = 0; i < roots.length; i++) if (roots[i] !== ABSENT) roots[i] += this.nodeLen;
+  putNodes(at, words) {
+    this.reserve(at + words.length / 2);
+    this.device.queue.writeBuffer(this.nodes, at * 8, words);
+  }
+
+  putRoots(first, roots) {
     this.device.queue.writeBuffer(this.roots, first * 24, roots);
-    this.nodeLen += nodes;
-    this.treesIn += count;
-    this.chunksIn += 1;
-    this.dirty = true;
-    return at + 16 + count * 24 + nodes * 8;
   }
 
   reserve(nodes) {
@@ -451,52 +526,76 @@ class Viewer {
     this.nodes = bigger;
     this.nodeCap = cap;
   }
+}
 
-  /** Chunks in the order to fetch them: most vertices in the camera's view first. */
-  chunkOrder() {
-    const m = viewProj(this.view, this.diagonal);
-    const p = new Float32Array(this.doc.sectionBytes.verts.buffer, this.doc.sectionBytes.verts.byteOffset, this.n * 16);
-    const seen = new Array(this.chunkCount).fill(0);
-    for (let v = 0; v < this.n; v++) {
-      const [x, y, z] = [p[v * 16], p[v * 16 + 1], p[v * 16 + 2]];
-      const cx = m[0] * x + m[4] * y + m[8] * z + m[12];
-      const cy = m[1] * x + m[5] * y + m[9] * z + m[13];
-      const cw = m[3] * x + m[7] * y + m[11] * z + m[15];
-      if (cw > 0 && Math.abs(cx) <= cw && Math.abs(cy) <= cw) seen[Math.floor(v / this.doc.chunk_vertices)] += 1;
-    }
-    return [...seen.keys()].sort((a, b) => seen[b] - seen[a] || a - b);
+/** The CPU path (cpu.js), for a browser without WebGPU: per vertex, onto a 2-D canvas. */
+class CpuViewer extends Frames {
+  constructor(context, doc, size) {
+    super(doc, size);
+    this.context = context;
+    this.mode = 'vertex';
+    const s = doc.sectionBytes;
+    const f32 = (b) => new Float32Array(b.buffer, b.byteOffset, b.byteLength / 4);
+    this.scene = {
+      verts: f32(s.verts),
+      tris: new Uint32Array(s.tris.buffer, s.tris.byteOffset, s.tris.byteLength / 4),
+      triangles: doc.triangles,
+      ltc: f32(s.ltc),
+      ltcSize: doc.ltc_size,
+    };
+    this.trees = {
+      roots: new Uint32Array(this.n * 6).fill(NO_TREES),
+      nodes: new Uint32Array(1 << 17),
+      nodeLen: 0,
+      lineNormals: new Float32Array(0),
+      codec: { offsets: 1, halfStep: 0 },
+    };
+    this.linear = new Float64Array(this.width * this.height * 3);
+    this.pixels = new ImageData(this.width, this.height);
   }
 
-  /** Streams every chunk, `PARALLEL` requests at a time; a dropped request is retried. */
-  async stream() {
-    const order = this.chunkOrder();
-    const cv = this.doc.chunk_vertices;
-    const next = () => order.shift();
-    const worker = async () => {
-      for (let c = next(); c !== undefined; c = next()) {
-        const range = `${c * cv}..${Math.min(this.n, (c + 1) * cv)}`;
-        for (let attempt = 0; ; attempt++) {
-          try {
-            const url = api(`v1/scenes/${sceneId}/trees?format=gpu&vertices=${range}`);
-            const r = await fetch(url);
-            if (r.status === 409 || r.status === 410) throw Object.assign(new Error(await errorOf(r)), { final: true });
-            if (!r.ok) throw new Error(await errorOf(r));
-            const buf = await r.arrayBuffer();
-            this.decoded += buf.byteLength;
-            this.fetched += transferred(url, buf.byteLength);
-            let at = this.takeHeader(buf, 0);
-            while (at < buf.byteLength) at = this.takeChunk(buf, at);
-            break;
-          } catch (e) {
-            if (e.final) throw e;
-            // Resume: the chunk is asked for again (a chunk is whole or not at all).
-            say(`trees: ${e.message}; retrying`);
-            await new Promise((ok) => setTimeout(ok, Math.min(5000, 250 * 2 ** attempt)));
-          }
-        }
+  /** Nothing to compile. */
+  async compile() {}
+
+  putLineNormals(bytesIn) {
+    this.trees.lineNormals = new Float32Array(bytesIn.buffer, bytesIn.byteOffset, bytesIn.byteLength / 4);
+    this.trees.codec = this.codec;
+  }
+
+  putNodes(at, words) {
+    const need = 2 * at + words.length;
+    if (need > this.trees.nodes.length) {
+      const bigger = new Uint32Array(Math.max(need, 2 * this.trees.nodes.length));
+      bigger.set(this.trees.nodes.subarray(0, 2 * at));
+      this.trees.nodes = bigger;
+    }
+    this.trees.nodes.set(words, 2 * at);
+    this.trees.nodeLen = at + words.length / 2;
+  }
+
+  putRoots(first, roots) {
+    this.trees.roots.set(roots, first * 6);
+  }
+
+  /** One frame: every lamp at the vertices the camera sees, summed, then interpolated. */
+  async draw() {
+    const colour = new Float64Array(this.n * 3);
+    const seen = verticesSeen(this.scene, this.view);
+    const lamps = this.doc.lights.length;
+    for (let k = 0; k < lamps; k++) {
+      const { words, count } = this.lightRecord(k);
+      const shadowed = this.method === 'bspvt' && this.doc.lights[k].shadowed !== false;
+      for (let i = 0; i < seen.length; i++) {
+        const v = seen[i];
+        const c = shadeVertex(this.scene, this.trees, v, words, count, this.view.eye, shadowed);
+        for (let a = 0; a < 3; a++) colour[3 * v + a] += c[a];
+        // Let the page breathe (input, progress) between slices of vertices.
+        if (i % 4096 === 4095) await new Promise((ok) => setTimeout(ok, 0));
       }
-    };
-    await Promise.all(Array.from({ length: PARALLEL }, worker));
+    }
+    rasterize(this.scene, this.view, colour, this.linear);
+    toneMap(this.linear, this.exposure, this.pixels.data);
+    this.context.putImageData(this.pixels, 0, 0);
   }
 }
 
@@ -577,38 +676,34 @@ async function main() {
     fail(`"${sceneId}" is not a scene id`);
     return;
   }
-  if (!navigator.gpu) {
-    html.dataset.graphics = 'none';
-    $('graphics').textContent = 'none';
-    fail('This browser offers no WebGPU, which this viewer needs. Use Chromium or Chrome 113+, or the native client: bspvt view URL.');
-    html.dataset.state = 'unsupported';
-    return;
+  // WebGPU where the browser has an adapter; else (or with `graphics=cpu`) the CPU path.
+  const forced = query.get('graphics') === 'cpu';
+  let adapter = null;
+  let why = 'asked for by graphics=cpu';
+  if (!forced) {
+    adapter = navigator.gpu ? await navigator.gpu.requestAdapter().catch(() => null) : null;
+    why = navigator.gpu ? 'WebGPU offers no adapter here' : 'this browser has no WebGPU';
   }
-  const adapter = await navigator.gpu.requestAdapter();
-  if (!adapter) {
-    html.dataset.graphics = 'none';
-    $('graphics').textContent = 'none';
-    fail('WebGPU is there but offers no adapter (no GPU, or it is blocked). Use the native client: bspvt view URL.');
-    html.dataset.state = 'unsupported';
-    return;
+  let device = null;
+  let graphics;
+  if (adapter) {
+    const info = adapter.info ?? {};
+    graphics = `WebGPU: ${[info.vendor, info.architecture, info.description].filter(Boolean).join(' ') || 'adapter'}`;
+    device = await adapter.requestDevice({
+      requiredLimits: { maxStorageBuffersPerShaderStage: Math.min(12, adapter.limits.maxStorageBuffersPerShaderStage) },
+    });
+    device.lost.then((l) => fail(`the GPU device was lost: ${l.message}`));
+    device.addEventListener('uncapturederror', (e) => fail(`WebGPU: ${e.error.message}`));
+  } else {
+    graphics = `CPU (JavaScript, per vertex; ${why})`;
   }
-  const info = adapter.info ?? {};
-  const graphics = `WebGPU: ${[info.vendor, info.architecture, info.description].filter(Boolean).join(' ') || 'adapter'}`;
   html.dataset.graphics = graphics;
   $('graphics').textContent = graphics;
-  const device = await adapter.requestDevice({
-    requiredLimits: { maxStorageBuffersPerShaderStage: Math.min(12, adapter.limits.maxStorageBuffersPerShaderStage) },
-  });
-  device.lost.then((l) => fail(`the GPU device was lost: ${l.message}`));
-  device.addEventListener('uncapturederror', (e) => fail(`WebGPU: ${e.error.message}`));
 
   const t0 = performance.now();
-  const [doc, shade, visibility, resolve, present] = await Promise.all([
+  const [doc, ...wgsl] = await Promise.all([
     fetchScene(),
-    fetchShader('shade.wgsl'),
-    fetchShader('visibility.wgsl'),
-    fetchShader('resolve.wgsl'),
-    fetchShader('present.wgsl'),
+    ...(device ? ['shade.wgsl', 'visibility.wgsl', 'resolve.wgsl', 'present.wgsl'].map(fetchShader) : []),
   ]);
   const canvas = $('frame');
   const width = Number(query.get('width')) || 960;
@@ -616,10 +711,21 @@ async function main() {
   const height = Number(query.get('height')) || Math.round(width / aspect);
   canvas.width = width;
   canvas.height = height;
-  const context = canvas.getContext('webgpu');
-  const format = navigator.gpu.getPreferredCanvasFormat();
-  context.configure({ device, format, alphaMode: 'opaque' });
-  const viewer = new Viewer(device, context, format, doc, { shade, visibility, resolve, present }, { width, height });
+  let viewer;
+  if (device) {
+    const context = canvas.getContext('webgpu');
+    const format = navigator.gpu.getPreferredCanvasFormat();
+    context.configure({ device, format, alphaMode: 'opaque' });
+    const [shade, visibility, resolve, present] = wgsl;
+    viewer = new GpuViewer(device, context, format, doc, { shade, visibility, resolve, present }, { width, height });
+  } else {
+    viewer = new CpuViewer(canvas.getContext('2d'), doc, { width, height });
+    // The CPU path shades per vertex only.
+    $('mode').querySelector('option[value="pixel"]').disabled = true;
+    say(`No WebGPU (${why}): drawn on the CPU in JavaScript, per vertex, slower than the GPU path.`);
+    // A scene with alpha cut-outs has more than the one zero word of `cut`.
+    if (doc.sectionBytes.cut.byteLength > 4) doc.not_shown.push('alpha cut-outs: the CPU path draws masked surfaces whole');
+  }
   for (const s of doc.not_shown) $('not-shown').append(Object.assign(document.createElement('li'), { textContent: `not shown: ${s}` }));
   if (doc.lights.length > 1) {
     $('light-pick').hidden = false;
@@ -628,7 +734,7 @@ async function main() {
       viewer.lightIndex = Number($('light').value);
     });
   }
-  if (doc.lights.length === 0) say('the scene has no light: the GPU path draws it black');
+  if (doc.lights.length === 0) say('the scene has no light: it is drawn black');
   $('method').value = viewer.method;
   $('mode').value = viewer.mode;
   $('method').addEventListener('change', () => {
@@ -636,7 +742,7 @@ async function main() {
     viewer.dirty = true;
   });
   $('mode').addEventListener('change', () => {
-    viewer.mode = $('mode').value;
+    viewer.mode = device ? $('mode').value : 'vertex';
     viewer.dirty = true;
   });
   html.dataset.step = 'compiling';

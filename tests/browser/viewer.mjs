@@ -4,10 +4,12 @@
 // that frame drawn), saves the canvas, times a few frames, shift-drags the light across the
 // canvas and saves the frame after. With `--cut-trees N` the proxy cuts the first N tree
 // responses mid-body (a dropped link): the viewer must ask for those chunks again and still
-// complete.
+// complete. With `--webgpu no` Chromium starts without the flags that give it WebGPU: the page
+// must find no adapter and draw on its CPU path.
 //
 //   node viewer.mjs --url http://127.0.0.1:PORT --id ID --width W --height H --mode vertex|pixel
 //                   --out DIR [--chromium /usr/bin/chromium] [--cut-trees N] [--drag no]
+//                   [--webgpu no]
 //
 // Writes DIR/web.png and DIR/web-moved.png; prints one JSON line with what it saw (graphics
 // path, time to first frame, ms per frame, bytes fetched); exits non-zero on any failure.
@@ -33,7 +35,7 @@ function fail(msg) {
   throw new Error(msg);
 }
 
-const { proxy, base, browser } = await open(args.url, args.chromium, WEBGPU_FLAGS, {
+const { proxy, base, browser } = await open(args.url, args.chromium, args.webgpu === 'no' ? [] : WEBGPU_FLAGS, {
   cutTrees: Number(args['cut-trees'] ?? 0),
 });
 const problems = [];

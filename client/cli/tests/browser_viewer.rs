@@ -71,8 +71,9 @@ struct Seen {
     dir: PathBuf,
 }
 
-/// Opens scene `id` of `srv` in the viewer at `w` × `h`, per pixel, with `extra` arguments to
-/// the script; panics with the script's output and the server's log when it fails.
+/// Opens scene `id` of `srv` in the viewer at `w` × `h`, per pixel (per vertex with `--webgpu
+/// no`: the CPU path), with `extra` arguments to the script; panics with the script's output
+/// and the server's log when it fails.
 fn view(
     chromium: &Path,
     srv: &Server,
@@ -84,7 +85,12 @@ fn view(
     let run = Command::new("node")
         .current_dir(bspvt_tests::browser::scripts())
         .arg("viewer.mjs")
-        .args(["--url", &srv.base, "--id", id, "--mode", "pixel"])
+        .args(["--url", &srv.base, "--id", id])
+        .args(if extra.contains(&"--webgpu") {
+            ["--mode", "vertex"]
+        } else {
+            ["--mode", "pixel"]
+        })
         .args(["--width", &w.to_string(), "--height", &h.to_string()])
         .args(extra)
         .arg("--out")
@@ -107,11 +113,14 @@ fn view(
          frame, {} bytes fetched",
         json["browser"], json["graphics"], json["firstFrameMs"], json["bench_ms"], json["bytes"]
     );
+    // `--webgpu no`: Chromium without WebGPU, the page on its CPU path.
+    let path = if extra.contains(&"--webgpu") {
+        "CPU"
+    } else {
+        "WebGPU"
+    };
     assert!(
-        json["graphics"]
-            .as_str()
-            .unwrap_or("")
-            .starts_with("WebGPU"),
+        json["graphics"].as_str().unwrap_or("").starts_with(path),
         "{json}"
     );
     Seen {
@@ -120,8 +129,8 @@ fn view(
     }
 }
 
-/// `bspvt render SOURCE --mode pixel` at `w` × `h` into `out`, with `extra` (`--method
-/// bspvt` unless `extra` names another).
+/// `bspvt render SOURCE` at `w` × `h` into `out`, with `extra` (`--method bspvt` and `--mode
+/// pixel` unless `extra` names others).
 fn render(
     source: &[&std::ffi::OsStr],
     (w, h): (u32, u32),
@@ -133,9 +142,14 @@ fn render(
         .arg("render")
         .args(source)
         .args(if extra.contains(&"--method") {
-            &["--mode", "pixel"][..]
+            &[][..]
         } else {
-            &["--method", "bspvt", "--mode", "pixel"][..]
+            &["--method", "bspvt"][..]
+        })
+        .args(if extra.contains(&"--mode") {
+            &[][..]
+        } else {
+            &["--mode", "pixel"][..]
         })
         .args(["--width", &w.to_string(), "--height", &h.to_string()])
         .args(extra)
@@ -335,4 +349,78 @@ fn the_browser_viewer_draws_point_and_spot_lights() {
         shadows > 2.0 * diff && shadows > 0.005,
         "the browser's frame is as near the unshadowed one ({shadows}) as bspvt render's ({diff})"
     );
+    // The page's CPU path (no WebGPU) draws the spheres and the spot's cone per vertex.
+    let per_vertex = tmp.path().join("ref-vertex.png");
+    render(&source, size, &cache, &per_vertex, &["--mode", "vertex"]);
+    let cpu_dir = tmp.path().join("cpu");
+    std::fs::create_dir_all(&cpu_dir).unwrap();
+    let seen = view(
+        &chromium,
+        &srv,
+        &id,
+        size,
+        &cpu_dir,
+        &["--drag", "no", "--webgpu", "no"],
+    );
+    let (diff, kept) = compare(&per_vertex, &seen.dir.join("web.png"));
+    eprintln!(
+        "point and spot, the CPU path: vs bspvt render --mode vertex {diff:.4} over {:.1} % of the pixels",
+        kept * 100.0
+    );
+    assert!(
+        kept > 0.8 && diff <= 0.02,
+        "the CPU path's point and spot lights differ from bspvt render's by {diff} ({kept})"
+    );
+}
+
+/// A browser without WebGPU (Chromium started without the flags that give it an adapter): the
+/// page says so, draws on its CPU path (cpu.js: BSPVT per vertex in JavaScript) and matches
+/// `bspvt render --mode vertex` of the same scene; the light still moves.
+#[test]
+fn the_browser_viewer_draws_on_the_cpu_without_webgpu() {
+    let Some(chromium) = bspvt_tests::browser::chromium_or_skip("the viewer in Chromium") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = plate_small(tmp.path(), "plate", 16, 256);
+    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
+    let a = agent();
+    let scene_json = std::fs::read(&scene).unwrap();
+    let id = submit_ok(
+        &a,
+        &srv,
+        &[("scene", Some("plate.json"), &scene_json)],
+        None,
+    );
+    wait_done(&a, &srv, &id);
+    let size = (192, 144);
+    let reference = tmp.path().join("ref.png");
+    render(
+        &[scene.as_os_str()],
+        size,
+        &tmp.path().join("cache"),
+        &reference,
+        &["--mode", "vertex"],
+    );
+    let seen = view(&chromium, &srv, &id, size, tmp.path(), &["--webgpu", "no"]);
+    let web = seen.dir.join("web.png");
+    if let Some(dir) = std::env::var_os("BSPVT_BROWSER_OUT") {
+        let dir = PathBuf::from(dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::copy(&reference, dir.join("cpu-ref.png")).unwrap();
+        std::fs::copy(&web, dir.join("cpu-web.png")).unwrap();
+    }
+    let (diff, kept) = compare(&reference, &web);
+    eprintln!(
+        "CPU path ({}): vs bspvt render --mode vertex {diff:.4} over {:.1} % of the pixels",
+        seen.json["graphics"],
+        kept * 100.0
+    );
+    assert!(kept > 0.8, "edges cover too much of the frame: {kept}");
+    assert!(
+        diff <= 0.02,
+        "the CPU path's frame differs from bspvt render's by {diff}"
+    );
+    let (change, _) = compare(&web, &seen.dir.join("web-moved.png"));
+    assert!(change > 0.002, "the frame did not change: {change}");
 }

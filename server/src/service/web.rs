@@ -59,6 +59,11 @@ const ASSETS: &[Asset] = &[
         bytes: include_bytes!("../../web/viewer.js"),
     },
     Asset {
+        name: "cpu.js",
+        media_type: "text/javascript; charset=utf-8",
+        bytes: include_bytes!("../../web/cpu.js"),
+    },
+    Asset {
         name: "upload.js",
         media_type: "text/javascript; charset=utf-8",
         bytes: include_bytes!("../../web/upload.js"),

@@ -120,7 +120,7 @@ impl SkyPieces {
                 has_sun |= total > 0.0 && sun && c.depth >= SUN_DEPTH;
                 let varied = c.depth < MAX_VARIATION_DEPTH
                     && *w > VARIATION_SHARE * share * total
-                    && p.texture.quadrant_variation() > SPLIT_VARIATION;
+                    && crate::texture::quadrant_variation(&p.texture) > SPLIT_VARIATION;
                 total > 0.0 && (sun || varied)
             });
             built = keep;

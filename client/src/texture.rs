@@ -6,174 +6,46 @@
 //! Light parameterisation: (u, v) are coordinates in the basis (p₁ − p₀, pₙ₋₁ − p₀) of the
 //! light's plane, so a quad's texture covers it exactly; other polygons use the parallelogram
 //! spanned by their first and last edges. Outside [0, 1]² the texture is clamped to its edge.
+//! The pyramid itself ([`LightTexture`]) is bspvt-shaders', shared with the service, which
+//! uploads it for the browser viewer.
 
-use anyhow::{Result, bail};
 use glam::{DMat3, DVec2, DVec3};
 
-/// One level of the pyramid.
-#[derive(Clone, Debug)]
-struct Level {
-    w: usize,
-    h: usize,
-    texels: Vec<DVec3>,
-}
+pub use bspvt_shaders::light_texture::LightTexture;
 
-impl Level {
-    fn at(&self, x: isize, y: isize) -> DVec3 {
-        let x = x.clamp(0, self.w as isize - 1) as usize;
-        let y = y.clamp(0, self.h as isize - 1) as usize;
-        self.texels[y * self.w + x]
+/// How much the texture varies at its coarsest useful scale: (max − min) / mean of the
+/// luminances of its four quadrants' means (finest level); 0 for a texture too small to
+/// have quadrants or with a zero mean.
+pub(crate) fn quadrant_variation(texture: &LightTexture) -> f64 {
+    let (w, h, texels) = texture.finest();
+    if w < 2 || h < 2 {
+        return 0.0;
     }
-
-    /// Bilinear, clamp-to-edge; `uv` in [0, 1]² (v down the image).
-    fn bilinear(&self, uv: DVec2) -> DVec3 {
-        let x = uv.x * self.w as f64 - 0.5;
-        let y = uv.y * self.h as f64 - 0.5;
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let (x0, y0) = (x0 as isize, y0 as isize);
-        let top = self.at(x0, y0).lerp(self.at(x0 + 1, y0), fx);
-        let bottom = self.at(x0, y0 + 1).lerp(self.at(x0 + 1, y0 + 1), fx);
-        top.lerp(bottom, fy)
-    }
-
-    /// Half resolution with a [1 3 3 1]/8 binomial filter per axis (a Gaussian-like
-    /// prefilter, so every level is smooth at its own scale).
-    fn reduce(&self) -> Level {
-        let (w, h) = (self.w.div_ceil(2).max(1), self.h.div_ceil(2).max(1));
-        let k = [1.0, 3.0, 3.0, 1.0];
-        let mut texels = Vec::with_capacity(w * h);
-        for y in 0..h {
-            for x in 0..w {
-                let mut s = DVec3::ZERO;
-                for (j, ky) in k.iter().enumerate() {
-                    for (i, kx) in k.iter().enumerate() {
-                        let sx = 2 * x as isize + i as isize - 1;
-                        let sy = 2 * y as isize + j as isize - 1;
-                        s += kx * ky * self.at(sx, sy);
-                    }
-                }
-                texels.push(s / 64.0);
-            }
-        }
-        Level { w, h, texels }
-    }
-}
-
-/// A prefiltered light texture (linear RGB multipliers of the light's radiance).
-#[derive(Clone, Debug)]
-pub struct LightTexture {
-    levels: Vec<Level>,
-}
-
-impl LightTexture {
-    /// From linear RGB texels (row-major from the top). Rejects empty or non-finite data.
-    pub fn from_texels(w: usize, h: usize, texels: &[[f32; 3]]) -> Result<LightTexture> {
-        if w == 0 || h == 0 || texels.len() != w * h {
-            bail!("texture is empty or its size does not match its data");
-        }
-        if texels.iter().flatten().any(|c| !c.is_finite() || *c < 0.0) {
-            bail!("texture has negative, NaN or infinite texels");
-        }
-        let mut levels = vec![Level {
-            w,
-            h,
-            texels: texels
-                .iter()
-                .map(|t| glam::Vec3::from(*t).as_dvec3())
-                .collect(),
-        }];
-        while levels.last().is_some_and(|l| l.w > 1 || l.h > 1) {
-            let next = levels.last().map(Level::reduce);
-            levels.extend(next);
-        }
-        Ok(LightTexture { levels })
-    }
-
-    /// The pyramid as the GPU shaders read it (`common.wgsl`, `tex_*`), one vec4 each: [0] =
-    /// (levels, size) and [1 + l] = (width, height, offset) of level l, as u32 bits; then the
-    /// texels of every level, row-major (f32: the f64 pyramid rounded once).
-    pub(crate) fn gpu_words(&self) -> Vec<[f32; 4]> {
-        let bits = |x: usize| f32::from_bits(x as u32);
-        let mut out = vec![[bits(self.levels.len()), bits(self.size()), 0.0, 0.0]];
-        let mut offset = 1 + self.levels.len();
-        for l in &self.levels {
-            out.push([bits(l.w), bits(l.h), bits(offset), 0.0]);
-            offset += l.texels.len();
-        }
-        for l in &self.levels {
-            out.extend(l.texels.iter().map(|t| t.as_vec3().extend(0.0).to_array()));
-        }
-        out
-    }
-
-    /// Resolution of the finest level (the larger side).
-    pub(crate) fn size(&self) -> usize {
-        self.levels[0].w.max(self.levels[0].h)
-    }
-
-    /// Trilinear lookup at `uv`, level `lod` (0 = finest; clamped).
-    pub(crate) fn sample(&self, uv: DVec2, lod: f64) -> DVec3 {
-        let top = (self.levels.len() - 1) as f64;
-        let lod = if lod.is_nan() {
-            top
-        } else {
-            lod.clamp(0.0, top)
-        };
-        let uv = if uv.is_finite() {
-            uv
-        } else {
-            DVec2::splat(0.5)
-        };
-        let l0 = lod.floor() as usize;
-        let f = lod - l0 as f64;
-        let a = self.levels[l0].bilinear(uv);
-        if f > 0.0 && l0 + 1 < self.levels.len() {
-            a.lerp(self.levels[l0 + 1].bilinear(uv), f)
-        } else {
-            a
+    let mut sums = [0.0f64; 4];
+    let mut counts = [0usize; 4];
+    for y in 0..h {
+        for x in 0..w {
+            let q = usize::from(2 * x >= w) + 2 * usize::from(2 * y >= h);
+            let t = texels[y * w + x];
+            sums[q] += crate::frame::stats::luminance(t.x, t.y, t.z);
+            counts[q] += 1;
         }
     }
-
-    /// The texture's mean (the coarsest level).
-    pub(crate) fn average(&self) -> DVec3 {
-        self.levels[self.levels.len() - 1].texels[0]
-    }
-
-    /// How much the texture varies at its coarsest useful scale: (max − min) / mean of the
-    /// luminances of its four quadrants' means (finest level); 0 for a texture too small to
-    /// have quadrants or with a zero mean.
-    pub(crate) fn quadrant_variation(&self) -> f64 {
-        let l = &self.levels[0];
-        if l.w < 2 || l.h < 2 {
-            return 0.0;
-        }
-        let mut sums = [0.0f64; 4];
-        let mut counts = [0usize; 4];
-        for y in 0..l.h {
-            for x in 0..l.w {
-                let q = usize::from(2 * x >= l.w) + 2 * usize::from(2 * y >= l.h);
-                let t = l.texels[y * l.w + x];
-                sums[q] += crate::frame::stats::luminance(t.x, t.y, t.z);
-                counts[q] += 1;
-            }
-        }
-        let means: Vec<f64> = sums
-            .iter()
-            .zip(counts)
-            .map(|(s, c)| s / c.max(1) as f64)
-            .collect();
-        let mean = means.iter().sum::<f64>() / 4.0;
-        let (lo, hi) = means
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &m| {
-                (a.min(m), b.max(m))
-            });
-        if mean > 0.0 && (hi - lo).is_finite() {
-            (hi - lo) / mean
-        } else {
-            0.0
-        }
+    let means: Vec<f64> = sums
+        .iter()
+        .zip(counts)
+        .map(|(s, c)| s / c.max(1) as f64)
+        .collect();
+    let mean = means.iter().sum::<f64>() / 4.0;
+    let (lo, hi) = means
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &m| {
+            (a.min(m), b.max(m))
+        });
+    if mean > 0.0 && (hi - lo).is_finite() {
+        (hi - lo) / mean
+    } else {
+        0.0
     }
 }
 
@@ -322,17 +194,6 @@ mod tests {
             })
             .collect();
         LightTexture::from_texels(n, n, &t).expect("texture")
-    }
-
-    #[test]
-    fn pyramid_preserves_the_mean_and_ends_in_one_texel() {
-        let t = checker(32);
-        assert_eq!(t.levels.last().map(|l| (l.w, l.h)), Some((1, 1)));
-        assert!((t.average().x - 0.5).abs() < 0.05, "{}", t.average());
-        let s = t.sample(DVec2::new(0.3, 0.7), 1e9);
-        assert!((s - t.average()).length() < 1e-12);
-        assert!(LightTexture::from_texels(2, 2, &[[f32::NAN; 3]; 4]).is_err());
-        assert!(LightTexture::from_texels(0, 2, &[]).is_err());
     }
 
     #[test]

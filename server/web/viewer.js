@@ -285,7 +285,9 @@ class GpuViewer extends Frames {
     this.cut = init(s.cut);
     this.ltc = init(s.ltc);
     this.frames = zeros(16);
-    this.lightTexture = zeros(16);
+    // Each textured lamp's prefiltered pyramid (LightTexture::gpu_words); a placeholder else.
+    this.noTexture = zeros(16);
+    this.lightTextures = doc.lights.map((l) => (l.texture ? init(s[l.texture]) : this.noTexture));
     this.jobs = init(Uint32Array.from({ length: this.n }, (_, i) => i));
     this.results = zeros(this.n * 48);
     const none = new Uint32Array(this.n * 6).fill(NO_TREES);
@@ -415,35 +417,34 @@ class GpuViewer extends Frames {
   draw() {
     const d = this.device;
     const visView = this.visibility.createView();
-    // The same buffers for every lamp: the groups are made once a frame, one for the lights
-    // the trees shadow and one for those they do not (unshadowed LTC; a sun beside lamps).
-    const shadeGroup = (roots) =>
+    // Per lamp: the trees that shadow it (none for unshadowed LTC, and for a sun beside lamps)
+    // and its texture.
+    const shadeGroup = (k) =>
       this.group(this.shadePipe, [
         this.shadeParams,
         this.verts,
         this.jobs,
-        roots,
+        this.method === 'bspvt' && this.doc.lights[k]?.shadowed !== false ? this.roots : this.rootsNone,
         this.nodes,
         this.lineNormals,
         this.ltc,
         this.results,
-        this.lightTexture,
+        this.lightTextures[k] ?? this.noTexture,
       ]);
-    const shadowed = shadeGroup(this.method === 'bspvt' ? this.roots : this.rootsNone);
-    const unshadowed = shadeGroup(this.rootsNone);
-    const resolveGroup = this.group(this.resolvePipe, [
-      this.resolveParams,
-      this.verts,
-      this.tris,
-      this.materials,
-      this.results,
-      this.ltc,
-      this.image,
-      visView,
-      this.lightTexture,
-      this.surfaceTextures,
-      this.frames,
-    ]);
+    const resolveGroup = (k) =>
+      this.group(this.resolvePipe, [
+        this.resolveParams,
+        this.verts,
+        this.tris,
+        this.materials,
+        this.results,
+        this.ltc,
+        this.image,
+        visView,
+        this.lightTextures[k] ?? this.noTexture,
+        this.surfaceTextures,
+        this.frames,
+      ]);
     this.writeFrameParams();
     const lamps = Math.max(1, this.doc.lights.length);
     for (let k = 0; k < lamps; k++) {
@@ -452,7 +453,7 @@ class GpuViewer extends Frames {
       {
         const pass = enc.beginComputePass();
         pass.setPipeline(this.shadePipe);
-        pass.setBindGroup(0, this.doc.lights[k]?.shadowed === false ? unshadowed : shadowed);
+        pass.setBindGroup(0, shadeGroup(k));
         pass.dispatchWorkgroups(Math.ceil(this.n / 64));
         pass.end();
       }
@@ -474,7 +475,7 @@ class GpuViewer extends Frames {
       {
         const pass = enc.beginComputePass();
         pass.setPipeline(this.resolvePipe);
-        pass.setBindGroup(0, resolveGroup);
+        pass.setBindGroup(0, resolveGroup(k));
         pass.dispatchWorkgroups(Math.ceil(this.width / 8), Math.ceil(this.height / 8));
         pass.end();
       }
@@ -552,6 +553,15 @@ class CpuViewer extends Frames {
     };
     this.linear = new Float64Array(this.width * this.height * 3);
     this.pixels = new ImageData(this.width, this.height);
+    // A textured lamp's mean colour: its pyramid's coarsest texel (LightTexture::gpu_words:
+    // [0] = (levels, …), [1 + l] = (w, h, offset) of level l, as u32 bits).
+    this.textureMeans = doc.lights.map((l) => {
+      if (!l.texture) return null;
+      const b = s[l.texture];
+      const u = new Uint32Array(b.buffer, b.byteOffset, b.byteLength / 4);
+      const at = u[4 * u[0] + 2];
+      return Array.from(f32(b).subarray(4 * at, 4 * at + 3));
+    });
   }
 
   /** Nothing to compile. */
@@ -584,6 +594,7 @@ class CpuViewer extends Frames {
     const lamps = this.doc.lights.length;
     for (let k = 0; k < lamps; k++) {
       const { words, count } = this.lightRecord(k);
+      this.textureMeans[k]?.forEach((m, a) => (words[4 + a] *= m));
       const shadowed = this.method === 'bspvt' && this.doc.lights[k].shadowed !== false;
       for (let i = 0; i < seen.length; i++) {
         const v = seen[i];
@@ -725,6 +736,7 @@ async function main() {
     say(`No WebGPU (${why}): drawn on the CPU in JavaScript, per vertex, slower than the GPU path.`);
     // A scene with alpha cut-outs has more than the one zero word of `cut`.
     if (doc.sectionBytes.cut.byteLength > 4) doc.not_shown.push('alpha cut-outs: the CPU path draws masked surfaces whole');
+    if (doc.lights.some((l) => l.texture)) doc.not_shown.push("light textures: the CPU path draws a textured lamp with its texture's mean");
   }
   for (const s of doc.not_shown) $('not-shown').append(Object.assign(document.createElement('li'), { textContent: `not shown: ${s}` }));
   if (doc.lights.length > 1) {

@@ -424,3 +424,64 @@ fn the_browser_viewer_draws_on_the_cpu_without_webgpu() {
     let (change, _) = compare(&web, &seen.dir.join("web-moved.png"));
     assert!(change > 0.002, "the frame did not change: {change}");
 }
+
+/// A glTF lamp with an emissive texture over a checker floor (`assets/rooms/textured-floor.gltf`):
+/// the page uploads the lamp's prefiltered texture (the service builds it with the native
+/// client's code) and fetches it per piece as the native shaders do; per pixel it matches
+/// `bspvt render`, and differs from the lamp drawn with its plain radiance.
+#[test]
+fn the_browser_viewer_draws_a_textured_lamp() {
+    let Some(chromium) = bspvt_tests::browser::chromium_or_skip("the viewer in Chromium") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/textured-floor.gltf");
+    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
+    let a = agent();
+    let bytes = std::fs::read(&gltf).unwrap();
+    let id = submit_ok(
+        &a,
+        &srv,
+        &[("mesh", Some("textured-floor.gltf"), &bytes)],
+        None,
+    );
+    wait_done(&a, &srv, &id);
+    let size = (160, 120);
+    let cache = tmp.path().join("cache");
+    let source = [std::ffi::OsStr::new("--mesh"), gltf.as_os_str()];
+    let reference = tmp.path().join("ref.png");
+    render(&source, size, &cache, &reference, &[]);
+    let seen = view(&chromium, &srv, &id, size, tmp.path(), &["--drag", "no"]);
+    let web = seen.dir.join("web.png");
+    let (diff, kept) = compare(&reference, &web);
+    eprintln!(
+        "textured lamp: browser vs bspvt render {diff:.4} over {:.1} % of the pixels",
+        kept * 100.0
+    );
+    assert!(kept > 0.8, "edges cover too much of the frame: {kept}");
+    assert!(
+        diff <= 0.02,
+        "the browser's textured lamp differs from bspvt render's by {diff}"
+    );
+    // The same room with the lamp's emissive texture taken off: its plain radiance.
+    let mut doc: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+    for m in doc["materials"].as_array_mut().unwrap() {
+        m.as_object_mut().unwrap().remove("emissiveTexture");
+    }
+    let plain_gltf = tmp.path().join("plain-lamp.gltf");
+    std::fs::write(&plain_gltf, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let plain = tmp.path().join("plain.png");
+    render(
+        &[std::ffi::OsStr::new("--mesh"), plain_gltf.as_os_str()],
+        size,
+        &cache,
+        &plain,
+        &[],
+    );
+    let (untextured, _) = compare(&plain, &web);
+    eprintln!("textured lamp: browser vs the lamp without its texture {untextured:.4}");
+    assert!(
+        untextured > 2.0 * diff && untextured > 0.005,
+        "the texture changes nothing: {untextured} against {diff}"
+    );
+}

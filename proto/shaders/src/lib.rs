@@ -6,6 +6,7 @@
 //! - [`ggx`]: the GGX microfacet BRDF (Walter et al. 2007; Heitz 2014, 2018);
 //! - [`ltc_table`]: the project's LTC GGX table (Heitz et al. 2016, fitted by `bspvt ltc-fit`)
 //!   and its lookup;
+//! - [`light_texture`]: a textured light's prefiltered pyramid (Heitz et al. 2016, §5.3);
 //! - [`gpu`]: the GPU path's WGSL shaders and the records they read (vertices, materials,
 //!   trees, the LTC table), built here once for wgpu (client/src/gpu) and for WebGPU in the
 //!   browser (the service's `/view/{id}`).
@@ -17,4 +18,5 @@
 
 pub mod ggx;
 pub mod gpu;
+pub mod light_texture;
 pub mod ltc_table;

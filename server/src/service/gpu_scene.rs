@@ -6,7 +6,8 @@
 //! then the sections the JSON's `sections` lists as `[offset, bytes]` from the end of the JSON:
 //! `verts` (4 × vec4f per vertex: position, (normal, u), (albedo, α), (F0, v)), `tris`
 //! (vec4u per triangle: corners and material), `materials` (vec4f records),
-//! `surface_textures` (u32 words), `cut` (u32 words), `ltc` (vec4f, two per table node). The
+//! `surface_textures` (u32 words), `cut` (u32 words), `ltc` (vec4f, two per table node),
+//! `light_texture_K` (vec4f: textured lamp K's prefiltered pyramid, `LightTexture::gpu_words`). The
 //! JSON also carries the camera, the lights (each its kind, its shader record of
 //! `bspvt_shaders::gpu::lights` and count; a lamp also its corners and region), the bounds,
 //! and `not_shown`: what of the scene the browser's GPU path leaves out, one sentence each.
@@ -16,6 +17,7 @@ use axum::http::HeaderMap;
 use axum::response::Response;
 use bspvt_proto::Scene;
 use bspvt_shaders::gpu::{lights, materials, records};
+use bspvt_shaders::light_texture::LightTexture;
 use bspvt_shaders::ltc_table::LtcTable;
 use serde_json::json;
 
@@ -81,7 +83,24 @@ pub(crate) fn bundle(scene: &Scene) -> anyhow::Result<Vec<u8>> {
         .map_or(vec![0u32], |c| c.gpu_words_by_triangle());
     let table = LtcTable::builtin();
     let ltc = table.gpu_nodes();
-    let sections: Vec<(&str, Vec<u8>)> = vec![
+    // Each textured lamp's prefiltered pyramid, as the native client uploads it.
+    let light_textures: Vec<Option<(String, Vec<u8>)>> = scene
+        .lights
+        .iter()
+        .enumerate()
+        .map(|(k, l)| {
+            let image = l.image.as_ref()?;
+            let t = LightTexture::from_texels(
+                image.width as usize,
+                image.height as usize,
+                &image.texels,
+            )
+            .ok()?;
+            let words: Vec<f32> = t.gpu_words().into_iter().flatten().collect();
+            Some((format!("light_texture_{k}"), le(&words, f32::to_le_bytes)))
+        })
+        .collect();
+    let mut sections: Vec<(String, Vec<u8>)> = vec![
         ("verts", le(&verts, f32::to_le_bytes)),
         ("tris", le(&tris, u32::to_le_bytes)),
         (
@@ -104,14 +123,22 @@ pub(crate) fn bundle(scene: &Scene) -> anyhow::Result<Vec<u8>> {
                 f32::to_le_bytes,
             ),
         ),
-    ];
+    ]
+    .into_iter()
+    .map(|(name, bytes)| (name.to_string(), bytes))
+    .collect();
+    sections.extend(light_textures.iter().flatten().cloned());
     let mut offset = 0usize;
     let mut table_of_sections = serde_json::Map::new();
     for (name, bytes) in &sections {
-        table_of_sections.insert((*name).into(), json!([offset, bytes.len()]));
+        table_of_sections.insert(name.clone(), json!([offset, bytes.len()]));
         offset += bytes.len();
     }
-    let lights = light_docs(scene);
+    let textures: Vec<Option<&str>> = light_textures
+        .iter()
+        .map(|t| t.as_ref().map(|(name, _)| name.as_str()))
+        .collect();
+    let lights = light_docs(scene, &textures);
     let bounds = mesh.bounds();
     let doc = json!({
         "version": VERSION,
@@ -145,8 +172,9 @@ pub(crate) fn bundle(scene: &Scene) -> anyhow::Result<Vec<u8>> {
 /// Every light the GPU path shades, each with its shader record
 /// (`bspvt_shaders::gpu::lights`: 10 × 4 floats, and the vertex count the shaders take) and
 /// whether the streamed trees shadow it: the polygon lamps (their corners and region: the page
-/// drags them), then the point and spot lights' spheres, then the suns.
-fn light_docs(scene: &Scene) -> Vec<serde_json::Value> {
+/// drags them; a textured one the section of its texture, `textures[k]`), then the point and
+/// spot lights' spheres, then the suns.
+fn light_docs(scene: &Scene, textures: &[Option<&str>]) -> Vec<serde_json::Value> {
     let doc =
         |kind: &str, (record, count): (lights::LightRecord, u32), extra: serde_json::Value| {
             let mut d = json!({"kind": kind, "record": record, "count": count, "shadowed": true});
@@ -155,12 +183,20 @@ fn light_docs(scene: &Scene) -> Vec<serde_json::Value> {
             }
             d
         };
-    let polygons = scene.lights.iter().map(|l| {
+    let polygons = scene.lights.iter().enumerate().map(|(k, l)| {
         let radiance = glam::Vec3::from(l.radiance);
+        let texture = textures.get(k).copied().flatten();
         doc(
             "polygon",
-            lights::polygon(&l.points(), l.normal(), radiance, l.two_sided, false),
+            lights::polygon(
+                &l.points(),
+                l.normal(),
+                radiance,
+                l.two_sided,
+                texture.is_some(),
+            ),
             json!({
+                "texture": texture,
                 "vertices": l.points().iter().map(|p| p.to_array()).collect::<Vec<_>>(),
                 "region": l.region.as_ref().map(|r| json!({"min": r.min, "max": r.max})),
                 "moves_in_plane": l.moves_in_plane,
@@ -195,9 +231,6 @@ fn not_shown(scene: &Scene) -> Vec<String> {
              which the page does not stream (drawn unshadowed)",
             scene.suns.len()
         ));
-    }
-    if scene.lights.iter().any(|l| l.image.is_some()) {
-        out.push("light textures: a textured light is drawn with its radiance".into());
     }
     if scene.lights.iter().any(|l| l.vertices.len() > 8) {
         out.push("lights of more than 8 vertices".into());

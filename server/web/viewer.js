@@ -154,7 +154,46 @@ class Frames {
     this.diagonal = Math.hypot(...sub(b.max, b.min));
     const cam = doc.camera;
     this.camera = { eye: cam.position, target: cam.target, up: cam.up, fov: cam.fov_y_deg };
+    // The vertex records (16 floats a vertex). A normal-mapped scene (`frames` holds more than
+    // one zero vec4: per vertex its unbent normal and tangent) has them bent as seen from the
+    // side its normals face; `vertexRecords` turns them to the viewer's side.
+    const vb = doc.sectionBytes.verts;
+    this.baseRecords = new Float32Array(vb.buffer, vb.byteOffset, vb.byteLength / 4);
+    const fb = doc.sectionBytes.frames;
+    this.tangentFrames = fb && fb.byteLength > 16 ? new Float32Array(fb.buffer, fb.byteOffset, fb.byteLength / 4) : null;
+    this.records = this.tangentFrames ? this.baseRecords.slice() : this.baseRecords;
+    this.recordsEye = null;
     this.setView();
+  }
+
+  /**
+   * The vertex records for the current eye, and whether they changed since the last call.
+   * Where normal maps bend the normals, a vertex seen from behind has its frame turned over
+   * and a bent normal is kept facing the viewer (Renderer::vertex_surface, NormalMaps::facing:
+   * n′ ← normalize(n′ + (ε − n′·ω_o) ω_o) below n′·ω_o = ε = 0.02).
+   */
+  vertexRecords() {
+    const eye = this.view.eye;
+    if (!this.tangentFrames || (this.recordsEye && eye.every((x, i) => x === this.recordsEye[i]))) {
+      return { records: this.records, changed: false };
+    }
+    this.recordsEye = [...eye];
+    const B = this.baseRecords;
+    const F = this.tangentFrames;
+    const R = this.records;
+    const EPS = 0.02;
+    for (let v = 0; v < this.n; v++) {
+      const p = [B[16 * v], B[16 * v + 1], B[16 * v + 2]];
+      const n = normalizeOr([F[8 * v], F[8 * v + 1], F[8 * v + 2]], [0, 1, 0]);
+      const front = [B[16 * v + 4], B[16 * v + 5], B[16 * v + 6]];
+      const wo = normalizeOr(sub(eye, p), n);
+      const side = dot(n, wo) < 0 ? -1 : 1;
+      let bent = scale(front, side);
+      const d = dot(bent, wo);
+      if (d < EPS && side * dot(n, wo) > EPS) bent = normalizeOr(add(bent, scale(wo, EPS - d)), scale(n, side));
+      R.set(bent, 16 * v + 4);
+    }
+    return { records: R, changed: true };
   }
 
   setView() {
@@ -284,7 +323,7 @@ class GpuViewer extends Frames {
     this.surfaceTextures = init(s.surface_textures);
     this.cut = init(s.cut);
     this.ltc = init(s.ltc);
-    this.frames = zeros(16);
+    this.frames = init(s.frames);
     // Each textured lamp's prefiltered pyramid (LightTexture::gpu_words); a placeholder else.
     this.noTexture = zeros(16);
     this.lightTextures = doc.lights.map((l) => (l.texture ? init(s[l.texture]) : this.noTexture));
@@ -416,6 +455,8 @@ class GpuViewer extends Frames {
    */
   draw() {
     const d = this.device;
+    const { records, changed } = this.vertexRecords();
+    if (changed) d.queue.writeBuffer(this.verts, 0, records);
     const visView = this.visibility.createView();
     // Per lamp: the trees that shadow it (none for unshadowed LTC, and for a sun beside lamps)
     // and its texture.
@@ -589,6 +630,7 @@ class CpuViewer extends Frames {
 
   /** One frame: every lamp at the vertices the camera sees, summed, then interpolated. */
   async draw() {
+    this.scene.verts = this.vertexRecords().records;
     const colour = new Float64Array(this.n * 3);
     const seen = verticesSeen(this.scene, this.view);
     const lamps = this.doc.lights.length;

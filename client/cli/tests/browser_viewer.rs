@@ -72,8 +72,8 @@ struct Seen {
 }
 
 /// Opens scene `id` of `srv` in the viewer at `w` × `h`, per pixel (per vertex with `--webgpu
-/// no`: the CPU path), with `extra` arguments to the script; panics with the script's output
-/// and the server's log when it fails.
+/// no`: the CPU path; `--mode` in `extra` chooses), with `extra` arguments to the script;
+/// panics with the script's output and the server's log when it fails.
 fn view(
     chromium: &Path,
     srv: &Server,
@@ -86,10 +86,12 @@ fn view(
         .current_dir(bspvt_tests::browser::scripts())
         .arg("viewer.mjs")
         .args(["--url", &srv.base, "--id", id])
-        .args(if extra.contains(&"--webgpu") {
-            ["--mode", "vertex"]
+        .args(if extra.contains(&"--mode") {
+            &[][..]
+        } else if extra.contains(&"--webgpu") {
+            &["--mode", "vertex"][..]
         } else {
-            ["--mode", "pixel"]
+            &["--mode", "pixel"][..]
         })
         .args(["--width", &w.to_string(), "--height", &h.to_string()])
         .args(extra)
@@ -484,4 +486,86 @@ fn the_browser_viewer_draws_a_textured_lamp() {
         untextured > 2.0 * diff && untextured > 0.005,
         "the texture changes nothing: {untextured} against {diff}"
     );
+}
+
+/// A normal-mapped floor (`assets/rooms/normal-floor.gltf`): the page bends the normals as the
+/// native client does — per pixel in the resolve pass from the bundle's tangent frames, per
+/// vertex from the service's bent vertex normals turned to the viewer's side — on WebGPU and
+/// on the CPU path; each frame matches `bspvt render` and differs from the floor without its
+/// normal map.
+#[test]
+fn the_browser_viewer_bends_normals_by_their_maps() {
+    let Some(chromium) = bspvt_tests::browser::chromium_or_skip("the viewer in Chromium") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/normal-floor.gltf");
+    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
+    let a = agent();
+    let bytes = std::fs::read(&gltf).unwrap();
+    let id = submit_ok(
+        &a,
+        &srv,
+        &[("mesh", Some("normal-floor.gltf"), &bytes)],
+        None,
+    );
+    wait_done(&a, &srv, &id);
+    let mut doc: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+    for m in doc["materials"].as_array_mut().unwrap() {
+        m.as_object_mut().unwrap().remove("normalTexture");
+    }
+    let flat_gltf = tmp.path().join("flat-floor.gltf");
+    std::fs::write(&flat_gltf, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let size = (160, 120);
+    let cache = tmp.path().join("cache");
+    for (name, mode, extra) in [
+        ("WebGPU per pixel", "pixel", &["--drag", "no"][..]),
+        (
+            "WebGPU per vertex",
+            "vertex",
+            &["--drag", "no", "--mode", "vertex"][..],
+        ),
+        (
+            "the CPU path",
+            "vertex",
+            &["--drag", "no", "--webgpu", "no"][..],
+        ),
+    ] {
+        let reference = tmp.path().join(format!("ref-{mode}.png"));
+        let flat = tmp.path().join(format!("flat-{mode}.png"));
+        render(
+            &[std::ffi::OsStr::new("--mesh"), gltf.as_os_str()],
+            size,
+            &cache,
+            &reference,
+            &["--mode", mode],
+        );
+        render(
+            &[std::ffi::OsStr::new("--mesh"), flat_gltf.as_os_str()],
+            size,
+            &cache,
+            &flat,
+            &["--mode", mode],
+        );
+        let dir = tmp.path().join(name.replace(' ', "-"));
+        std::fs::create_dir_all(&dir).unwrap();
+        let seen = view(&chromium, &srv, &id, size, &dir, extra);
+        let web = seen.dir.join("web.png");
+        let (diff, kept) = compare(&reference, &web);
+        let (to_flat, _) = compare(&flat, &web);
+        eprintln!(
+            "normal map, {name}: vs bspvt render {diff:.4} over {:.1} % of the pixels; vs the \
+             floor without its map {to_flat:.4}",
+            kept * 100.0
+        );
+        assert!(
+            kept > 0.5,
+            "{name}: edges cover too much of the frame: {kept}"
+        );
+        assert!(diff <= 0.02, "{name}: differs from bspvt render by {diff}");
+        assert!(
+            to_flat > 2.0 * diff && to_flat > 0.005,
+            "{name}: the normal map changes nothing ({to_flat} against {diff})"
+        );
+    }
 }

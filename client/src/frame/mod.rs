@@ -9,6 +9,6 @@ pub mod camera;
 pub mod canvas;
 pub mod gbuffer;
 pub mod image;
-pub(crate) mod normal_map;
 pub(crate) mod shading;
+pub(crate) use bspvt_shaders::normal_map;
 pub mod stats;

@@ -72,7 +72,7 @@ pub struct GpuFrames {
     /// The textures the materials sample (`materials::tables`).
     surface_textures: wgpu::Buffer,
     /// Per vertex, where a material is normal-mapped: the unbent normal and the tangent
-    /// ([`tangent_frames`]); one zero vec4 otherwise.
+    /// (`records::tangent_frames`); one zero vec4 otherwise.
     frames: wgpu::Buffer,
     materials_key: Option<u64>,
     ltc: wgpu::Buffer,
@@ -204,7 +204,10 @@ impl GpuFrames {
             ),
             frames: init(
                 "tangent frames",
-                bytemuck::cast_slice(&tangent_frames(mesh, &scene.materials)),
+                bytemuck::cast_slice(&bspvt_shaders::gpu::records::tangent_frames(
+                    mesh,
+                    &scene.materials,
+                )),
                 U::STORAGE,
             ),
             surface_textures: init(
@@ -514,23 +517,6 @@ impl GpuImage {
         let data = gpu.read_buffer(&self.buffer, bytes)?;
         Ok(image_from_bytes((self.width, self.height), &data))
     }
-}
-
-/// The resolve pass's tangent frames: per vertex (unbent unit normal, 0) and (MikkTSpace
-/// tangent, bitangent sign) — `frame::normal_map`'s — where a material is normal-mapped;
-/// empty (so the pass bends nothing) otherwise.
-fn tangent_frames(
-    mesh: &bspvt_proto::Mesh,
-    materials: &[bspvt_proto::scene::Material],
-) -> Vec<[f32; 4]> {
-    let Some(maps) = crate::frame::normal_map::NormalMaps::of(mesh, materials) else {
-        return Vec::new();
-    };
-    mesh.normals
-        .iter()
-        .zip(maps.tangents())
-        .flat_map(|(n, t)| [n.extend(0.0).to_array(), t.to_array()])
-        .collect()
 }
 
 /// An image from the resolve pass's little-endian `vec4<f32>` texels.

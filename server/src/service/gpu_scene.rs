@@ -7,7 +7,9 @@
 //! `verts` (4 × vec4f per vertex: position, (normal, u), (albedo, α), (F0, v)), `tris`
 //! (vec4u per triangle: corners and material), `materials` (vec4f records),
 //! `surface_textures` (u32 words), `cut` (u32 words), `ltc` (vec4f, two per table node),
-//! `light_texture_K` (vec4f: textured lamp K's prefiltered pyramid, `LightTexture::gpu_words`). The
+//! `frames` (vec4f: a normal-mapped scene's unbent normal and tangent per vertex; one zero vec4
+//! otherwise), `light_texture_K` (vec4f: textured lamp K's prefiltered pyramid,
+//! `LightTexture::gpu_words`). The
 //! JSON also carries the camera, the lights (each its kind, its shader record of
 //! `bspvt_shaders::gpu::lights` and count; a lamp also its corners and region), the bounds,
 //! and `not_shown`: what of the scene the browser's GPU path leaves out, one sentence each.
@@ -81,6 +83,12 @@ pub(crate) fn bundle(scene: &Scene) -> anyhow::Result<Vec<u8>> {
     let (material_records, textures) = materials::tables(&scene.materials, uvs, true);
     let cut = bspvt_raytrace::Cutouts::of(mesh, &scene.materials)
         .map_or(vec![0u32], |c| c.gpu_words_by_triangle());
+    // A normal-mapped scene's unbent normals and tangents (one zero vec4 otherwise: the
+    // resolve pass then bends nothing).
+    let mut frames = records::tangent_frames(mesh, &scene.materials);
+    if frames.is_empty() {
+        frames.push([0.0; 4]);
+    }
     let table = LtcTable::builtin();
     let ltc = table.gpu_nodes();
     // Each textured lamp's prefiltered pyramid, as the native client uploads it.
@@ -116,6 +124,13 @@ pub(crate) fn bundle(scene: &Scene) -> anyhow::Result<Vec<u8>> {
         ),
         ("surface_textures", le(&textures, u32::to_le_bytes)),
         ("cut", le(&cut, u32::to_le_bytes)),
+        (
+            "frames",
+            le(
+                &frames.iter().flatten().copied().collect::<Vec<_>>(),
+                f32::to_le_bytes,
+            ),
+        ),
         (
             "ltc",
             le(
@@ -234,9 +249,6 @@ fn not_shown(scene: &Scene) -> Vec<String> {
     }
     if scene.lights.iter().any(|l| l.vertices.len() > 8) {
         out.push("lights of more than 8 vertices".into());
-    }
-    if scene.materials.iter().any(|m| m.normal_map.is_some()) {
-        out.push("normal maps: surfaces are shaded with their mesh normals".into());
     }
     out
 }

@@ -5,6 +5,8 @@ use bspvt_proto::Mesh;
 use bspvt_proto::scene::Material;
 use glam::{Vec2, Vec3};
 
+use crate::normal_map::NormalMaps;
+
 /// Per triangle: its three corners and its material (`tris` of visibility.wgsl and
 /// resolve.wgsl).
 pub fn triangles(mesh: &Mesh) -> Vec<[u32; 4]> {
@@ -54,10 +56,13 @@ pub fn vertex_record(p: Vec3, n: Vec3, m: &Material, uv: Option<Vec2>) -> [[f32;
 
 /// The records of every vertex of a mesh at rest: the vertex's material (its first
 /// triangle's, clamped to the list; textured ones evaluated at the vertex's UV) and its
-/// unbent normal — what a viewer without normal maps or a roughness override shades.
+/// normal — bent by its material's normal map at its UV where it has one, as seen from the
+/// side the mesh normal faces (a viewer seeing a vertex from behind turns the frame over:
+/// `Renderer::vertex_surface`, the browser's `Frames::vertexNormals`). No roughness override.
 pub fn mesh_vertex_records(mesh: &Mesh, materials: &[Material]) -> Vec<[[f32; 4]; 4]> {
     let fallback = Material::default();
     let ids = vertex_materials(mesh);
+    let maps = NormalMaps::of(mesh, materials);
     (0..mesh.vertex_count())
         .map(|v| {
             let id = ids[v] as usize;
@@ -66,7 +71,26 @@ pub fn mesh_vertex_records(mesh: &Mesh, materials: &[Material]) -> Vec<[[f32; 4]
                 .unwrap_or(&fallback);
             let uv = mesh.uvs.get(v).copied();
             let n = mesh.normals.get(v).copied().unwrap_or(Vec3::Y);
-            vertex_record(mesh.positions[v], n.normalize_or(Vec3::Y), &m.at(uv), uv)
+            let n = n.normalize_or(Vec3::Y);
+            let n = maps.as_ref().map_or(n, |maps| {
+                maps.bend_vertex(mesh, v as u32, id as u32, n.as_dvec3())
+                    .as_vec3()
+            });
+            vertex_record(mesh.positions[v], n, &m.at(uv), uv)
         })
+        .collect()
+}
+
+/// The per-pixel pass's tangent frames: per vertex (unbent unit normal, 0) and (MikkTSpace
+/// tangent, bitangent sign) where a material is normal-mapped; empty (the pass then bends
+/// nothing) otherwise.
+pub fn tangent_frames(mesh: &Mesh, materials: &[Material]) -> Vec<[f32; 4]> {
+    let Some(maps) = NormalMaps::of(mesh, materials) else {
+        return Vec::new();
+    };
+    mesh.normals
+        .iter()
+        .zip(maps.tangents())
+        .flat_map(|(n, t)| [n.extend(0.0).to_array(), t.to_array()])
         .collect()
 }

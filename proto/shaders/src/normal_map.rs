@@ -15,7 +15,7 @@ use glam::{DVec3, Vec3, Vec4};
 
 /// A scene's normal maps and the tangent frames they are read in.
 #[derive(Debug)]
-pub(crate) struct NormalMaps {
+pub struct NormalMaps {
     /// Per vertex: the unit tangent (xyz) and the sign of the bitangent B = w · N × T.
     tangents: Vec<Vec4>,
     /// Per material: its normal map, if any.
@@ -25,7 +25,7 @@ pub(crate) struct NormalMaps {
 impl NormalMaps {
     /// The normal maps of `materials` over `mesh`, or `None` when no material has one or the
     /// mesh has no UVs (nothing is bent: the cost on such scenes is nil).
-    pub(crate) fn of(mesh: &Mesh, materials: &[Material]) -> Option<Arc<NormalMaps>> {
+    pub fn of(mesh: &Mesh, materials: &[Material]) -> Option<Arc<NormalMaps>> {
         if mesh.uvs.len() != mesh.positions.len()
             || mesh.normals.len() != mesh.positions.len()
             || !materials.iter().any(|m| m.normal_map.is_some())
@@ -39,12 +39,12 @@ impl NormalMaps {
     }
 
     /// The per-vertex tangents (xyz, bitangent sign in w), for the GPU.
-    pub(crate) fn tangents(&self) -> &[Vec4] {
+    pub fn tangents(&self) -> &[Vec4] {
         &self.tangents
     }
 
     /// Material `id`'s normal map.
-    pub(crate) fn map(&self, id: u32) -> Option<&NormalMap> {
+    pub fn map(&self, id: u32) -> Option<&NormalMap> {
         self.maps.get(id as usize)?.as_ref()
     }
 
@@ -52,7 +52,7 @@ impl NormalMaps {
     /// interpolated unit normal is `n`: the triangle's material's map read at the point's UV
     /// in the interpolated tangent frame; `n` itself where there is no map.
     /// `duv`: the pixel's texture footprint (the map mipmapped), `None` for a point.
-    pub(crate) fn bend(
+    pub fn bend(
         &self,
         mesh: &Mesh,
         tri: u32,
@@ -87,7 +87,7 @@ impl NormalMaps {
     /// unit `wo`, brought back to just this side of the silhouette where the map's slope is
     /// steeper than the view is grazing: n′ ← normalize(n′ + (ε − n′·ω_o) ω_o), as real-time
     /// engines do, rather than a black pixel.
-    pub(crate) fn facing(bent: DVec3, n: DVec3, wo: DVec3) -> DVec3 {
+    pub fn facing(bent: DVec3, n: DVec3, wo: DVec3) -> DVec3 {
         /// n′·ω_o a bent normal keeps at least.
         const SILHOUETTE: f64 = 0.02;
         let d = bent.dot(wo);
@@ -100,7 +100,7 @@ impl NormalMaps {
 
     /// The shading normal at vertex `v` (of material `id`, unit normal `n`): its map read at
     /// the vertex's UV, as per-vertex frames read a texture.
-    pub(crate) fn bend_vertex(&self, mesh: &Mesh, v: u32, id: u32, n: DVec3) -> DVec3 {
+    pub fn bend_vertex(&self, mesh: &Mesh, v: u32, id: u32, n: DVec3) -> DVec3 {
         let (Some(map), Some(uv), Some(t)) = (
             self.map(id),
             mesh.uvs.get(v as usize),
@@ -116,7 +116,7 @@ impl NormalMaps {
 /// n′ = normalize(x·T + y·B + z·N), (x, y, z) the tangent-space normal `m`, T the tangent made
 /// orthogonal to the unit normal `n` (Gram–Schmidt), B = sign · N × T (glTF 2.0 §3.7.2.1,
 /// `TANGENT`). `n` where T is degenerate (parallel to N, zero or not finite) or the result is.
-pub(crate) fn bend(n: DVec3, t: DVec3, sign: f64, m: Vec3) -> DVec3 {
+pub fn bend(n: DVec3, t: DVec3, sign: f64, m: Vec3) -> DVec3 {
     let t = t - n * n.dot(t);
     let Some(t) = t.try_normalize() else {
         return n;

@@ -172,6 +172,15 @@ fn compare(a: &Path, b: &Path) -> (f64, f64) {
     mean_difference_off_edges(aw, ah, &a, &b)
 }
 
+/// `bspvt serve` on loopback (data in `dir`/data) with `bytes` submitted as form field
+/// `field` (`mesh` or `scene`) named `name`, and baked: the server and the scene's id.
+fn served(dir: &Path, field: &str, name: &str, bytes: &[u8]) -> (Server, String) {
+    let srv = start(&dir.join("data"), "127.0.0.1:0", &[]);
+    let id = submit_ok(&agent(), &srv, &[(field, Some(name), bytes)], None);
+    wait_done(&agent(), &srv, &id);
+    (srv, id)
+}
+
 #[test]
 fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
     let Some(chromium) = bspvt_tests::browser::chromium_or_skip("the viewer in Chromium") else {
@@ -179,16 +188,12 @@ fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
     };
     let tmp = tempfile::tempdir().unwrap();
     let scene = plate_small(tmp.path(), "plate", 16, 256);
-    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
-    let a = agent();
-    let scene_json = std::fs::read(&scene).unwrap();
-    let id = submit_ok(
-        &a,
-        &srv,
-        &[("scene", Some("plate.json"), &scene_json)],
-        None,
+    let (srv, id) = served(
+        tmp.path(),
+        "scene",
+        "plate.json",
+        &std::fs::read(&scene).unwrap(),
     );
-    wait_done(&a, &srv, &id);
     let size = (192, 144);
     let reference = tmp.path().join("ref.png");
     render(
@@ -256,11 +261,8 @@ fn the_browser_viewer_draws_every_lamp() {
     };
     let tmp = tempfile::tempdir().unwrap();
     let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/two-lamps.gltf");
-    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
-    let a = agent();
     let bytes = std::fs::read(&gltf).unwrap();
-    let id = submit_ok(&a, &srv, &[("mesh", Some("two-lamps.gltf"), &bytes)], None);
-    wait_done(&a, &srv, &id);
+    let (srv, id) = served(tmp.path(), "mesh", "two-lamps.gltf", &bytes);
     let size = (128, 128);
     let cache = tmp.path().join("cache");
     let source = [std::ffi::OsStr::new("--mesh"), gltf.as_os_str()];
@@ -310,16 +312,8 @@ fn the_browser_viewer_draws_point_and_spot_lights() {
     }
     let gltf = tmp.path().join("point-spot-room.gltf");
     std::fs::write(&gltf, serde_json::to_vec(&doc).unwrap()).unwrap();
-    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
-    let a = agent();
     let bytes = std::fs::read(&gltf).unwrap();
-    let id = submit_ok(
-        &a,
-        &srv,
-        &[("mesh", Some("point-spot-room.gltf"), &bytes)],
-        None,
-    );
-    wait_done(&a, &srv, &id);
+    let (srv, id) = served(tmp.path(), "mesh", "point-spot-room.gltf", &bytes);
     let size = (160, 120);
     let cache = tmp.path().join("cache");
     let source = [std::ffi::OsStr::new("--mesh"), gltf.as_os_str()];
@@ -385,16 +379,12 @@ fn the_browser_viewer_draws_on_the_cpu_without_webgpu() {
     };
     let tmp = tempfile::tempdir().unwrap();
     let scene = plate_small(tmp.path(), "plate", 16, 256);
-    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
-    let a = agent();
-    let scene_json = std::fs::read(&scene).unwrap();
-    let id = submit_ok(
-        &a,
-        &srv,
-        &[("scene", Some("plate.json"), &scene_json)],
-        None,
+    let (srv, id) = served(
+        tmp.path(),
+        "scene",
+        "plate.json",
+        &std::fs::read(&scene).unwrap(),
     );
-    wait_done(&a, &srv, &id);
     let size = (192, 144);
     let reference = tmp.path().join("ref.png");
     render(
@@ -438,16 +428,8 @@ fn the_browser_viewer_draws_a_textured_lamp() {
     };
     let tmp = tempfile::tempdir().unwrap();
     let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/textured-floor.gltf");
-    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
-    let a = agent();
     let bytes = std::fs::read(&gltf).unwrap();
-    let id = submit_ok(
-        &a,
-        &srv,
-        &[("mesh", Some("textured-floor.gltf"), &bytes)],
-        None,
-    );
-    wait_done(&a, &srv, &id);
+    let (srv, id) = served(tmp.path(), "mesh", "textured-floor.gltf", &bytes);
     let size = (160, 120);
     let cache = tmp.path().join("cache");
     let source = [std::ffi::OsStr::new("--mesh"), gltf.as_os_str()];
@@ -500,16 +482,8 @@ fn the_browser_viewer_bends_normals_by_their_maps() {
     };
     let tmp = tempfile::tempdir().unwrap();
     let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/normal-floor.gltf");
-    let srv = start(&tmp.path().join("data"), "127.0.0.1:0", &[]);
-    let a = agent();
     let bytes = std::fs::read(&gltf).unwrap();
-    let id = submit_ok(
-        &a,
-        &srv,
-        &[("mesh", Some("normal-floor.gltf"), &bytes)],
-        None,
-    );
-    wait_done(&a, &srv, &id);
+    let (srv, id) = served(tmp.path(), "mesh", "normal-floor.gltf", &bytes);
     let mut doc: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
     for m in doc["materials"].as_array_mut().unwrap() {
         m.as_object_mut().unwrap().remove("normalTexture");

@@ -147,23 +147,14 @@ impl LightTexture {
 mod tests {
     use super::*;
 
-    fn checker(n: usize) -> LightTexture {
-        let t: Vec<[f32; 3]> = (0..n * n)
-            .map(|i| {
-                let (x, y) = (i % n, i / n);
-                if (x / 4 + y / 4) % 2 == 0 {
-                    [1.0; 3]
-                } else {
-                    [0.0; 3]
-                }
-            })
-            .collect();
-        LightTexture::from_texels(n, n, &t).expect("texture")
-    }
-
     #[test]
     fn pyramid_preserves_the_mean_and_ends_in_one_texel() {
-        let t = checker(32);
+        // Bright left half, dark right half: mean ½.
+        let n = 32;
+        let texels: Vec<[f32; 3]> = (0..n * n)
+            .map(|i| if i % n < n / 2 { [1.0; 3] } else { [0.0; 3] })
+            .collect();
+        let t = LightTexture::from_texels(n, n, &texels).expect("texture");
         assert_eq!(t.levels.last().map(|l| (l.w, l.h)), Some((1, 1)));
         assert!((t.average().x - 0.5).abs() < 0.05, "{}", t.average());
         let s = t.sample(DVec2::new(0.3, 0.7), 1e9);

@@ -5,8 +5,10 @@
 //! draws the same scene, camera and light on the CPU. The two must agree away from edges (mean
 //! difference ≤ 2 % of full scale), and a shift-drag must move the light and change the frame.
 //! The proxy cuts the first two tree responses mid-body (a dropped link): the viewer must ask
-//! for those chunks again, and the frame it completes is still the one compared.
-//! Skipped with a message where Node.js, Chromium or `tests/browser/node_modules` is missing
+//! for those chunks again, and the frame it completes is still the one compared. Chromium
+//! without WebGPU gets the page's CPU path (cpu.js), compared with `bspvt render --mode vertex`.
+//! The project's glTF rooms check what users' assets bring: several lamps, point and spot
+//! lights, a textured lamp, a normal map. Skipped with a message where Node.js, Chromium or `tests/browser/node_modules` is missing
 //! (`.ci/run` installs them).
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -250,6 +252,38 @@ fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
             .is_some_and(|o| o != "0.000,0.000,0.000")
     );
     assert!(change > 0.002, "the frame did not change: {change}");
+
+    // A browser without WebGPU (Chromium started without the flags that give it an adapter):
+    // the page says so, draws on its CPU path (cpu.js: BSPVT per vertex in JavaScript) and
+    // matches `bspvt render --mode vertex` of the same scene; the light still moves.
+    let per_vertex = tmp.path().join("ref-vertex.png");
+    render(
+        &[scene.as_os_str()],
+        size,
+        &tmp.path().join("cache"),
+        &per_vertex,
+        &["--mode", "vertex"],
+    );
+    let cpu_dir = tmp.path().join("cpu");
+    std::fs::create_dir_all(&cpu_dir).unwrap();
+    let seen = view(&chromium, &srv, &id, size, &cpu_dir, &["--webgpu", "no"]);
+    let web = seen.dir.join("web.png");
+    let (diff, kept) = compare(&per_vertex, &web);
+    eprintln!(
+        "CPU path ({}): vs bspvt render --mode vertex {diff:.4} over {:.1} % of the pixels",
+        seen.json["graphics"],
+        kept * 100.0
+    );
+    assert!(kept > 0.8, "edges cover too much of the frame: {kept}");
+    assert!(
+        diff <= 0.02,
+        "the CPU path's frame differs from bspvt render's by {diff}"
+    );
+    let (change, _) = compare(&web, &seen.dir.join("web-moved.png"));
+    assert!(
+        change > 0.002,
+        "the CPU path's frame did not change: {change}"
+    );
 }
 
 /// A glTF room lit by two emissive lamps (`assets/rooms/two-lamps.gltf`): the viewer draws
@@ -367,54 +401,6 @@ fn the_browser_viewer_draws_point_and_spot_lights() {
         kept > 0.8 && diff <= 0.02,
         "the CPU path's point and spot lights differ from bspvt render's by {diff} ({kept})"
     );
-}
-
-/// A browser without WebGPU (Chromium started without the flags that give it an adapter): the
-/// page says so, draws on its CPU path (cpu.js: BSPVT per vertex in JavaScript) and matches
-/// `bspvt render --mode vertex` of the same scene; the light still moves.
-#[test]
-fn the_browser_viewer_draws_on_the_cpu_without_webgpu() {
-    let Some(chromium) = bspvt_tests::browser::chromium_or_skip("the viewer in Chromium") else {
-        return;
-    };
-    let tmp = tempfile::tempdir().unwrap();
-    let scene = plate_small(tmp.path(), "plate", 16, 256);
-    let (srv, id) = served(
-        tmp.path(),
-        "scene",
-        "plate.json",
-        &std::fs::read(&scene).unwrap(),
-    );
-    let size = (192, 144);
-    let reference = tmp.path().join("ref.png");
-    render(
-        &[scene.as_os_str()],
-        size,
-        &tmp.path().join("cache"),
-        &reference,
-        &["--mode", "vertex"],
-    );
-    let seen = view(&chromium, &srv, &id, size, tmp.path(), &["--webgpu", "no"]);
-    let web = seen.dir.join("web.png");
-    if let Some(dir) = std::env::var_os("BSPVT_BROWSER_OUT") {
-        let dir = PathBuf::from(dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        std::fs::copy(&reference, dir.join("cpu-ref.png")).unwrap();
-        std::fs::copy(&web, dir.join("cpu-web.png")).unwrap();
-    }
-    let (diff, kept) = compare(&reference, &web);
-    eprintln!(
-        "CPU path ({}): vs bspvt render --mode vertex {diff:.4} over {:.1} % of the pixels",
-        seen.json["graphics"],
-        kept * 100.0
-    );
-    assert!(kept > 0.8, "edges cover too much of the frame: {kept}");
-    assert!(
-        diff <= 0.02,
-        "the CPU path's frame differs from bspvt render's by {diff}"
-    );
-    let (change, _) = compare(&web, &seen.dir.join("web-moved.png"));
-    assert!(change > 0.002, "the frame did not change: {change}");
 }
 
 /// A glTF lamp with an emissive texture over a checker floor (`assets/rooms/textured-floor.gltf`):

@@ -206,7 +206,7 @@ impl GpuFrames {
                 "tangent frames",
                 bytemuck::cast_slice(&bspvt_shaders::gpu::records::tangent_frames(
                     mesh,
-                    &scene.materials,
+                    crate::frame::normal_map::NormalMaps::of(mesh, &scene.materials).as_deref(),
                 )),
                 U::STORAGE,
             ),

@@ -21,6 +21,7 @@ use bspvt_proto::Scene;
 use bspvt_shaders::gpu::{lights, materials, records};
 use bspvt_shaders::light_texture::LightTexture;
 use bspvt_shaders::ltc_table::LtcTable;
+use bspvt_shaders::normal_map::NormalMaps;
 use serde_json::json;
 
 use super::api::scene_derived;
@@ -73,7 +74,9 @@ fn le<T: Copy>(words: &[T], to: impl Fn(T) -> [u8; 4]) -> Vec<u8> {
 pub(crate) fn bundle(scene: &Scene) -> anyhow::Result<Vec<u8>> {
     let mesh = &scene.mesh;
     let uvs = mesh.uvs.len() == mesh.vertex_count();
-    let verts: Vec<f32> = records::mesh_vertex_records(mesh, &scene.materials)
+    // MikkTSpace once: the bent vertex normals and the per-pixel tangent frames.
+    let maps = NormalMaps::of(mesh, &scene.materials);
+    let verts: Vec<f32> = records::mesh_vertex_records(mesh, &scene.materials, maps.as_deref())
         .iter()
         .flatten()
         .flatten()
@@ -85,7 +88,7 @@ pub(crate) fn bundle(scene: &Scene) -> anyhow::Result<Vec<u8>> {
         .map_or(vec![0u32], |c| c.gpu_words_by_triangle());
     // A normal-mapped scene's unbent normals and tangents (one zero vec4 otherwise: the
     // resolve pass then bends nothing).
-    let mut frames = records::tangent_frames(mesh, &scene.materials);
+    let mut frames = records::tangent_frames(mesh, maps.as_deref());
     if frames.is_empty() {
         frames.push([0.0; 4]);
     }

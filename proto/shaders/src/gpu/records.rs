@@ -59,10 +59,14 @@ pub fn vertex_record(p: Vec3, n: Vec3, m: &Material, uv: Option<Vec2>) -> [[f32;
 /// normal — bent by its material's normal map at its UV where it has one, as seen from the
 /// side the mesh normal faces (a viewer seeing a vertex from behind turns the frame over:
 /// `Renderer::vertex_surface`, the browser's `Frames::vertexNormals`). No roughness override.
-pub fn mesh_vertex_records(mesh: &Mesh, materials: &[Material]) -> Vec<[[f32; 4]; 4]> {
+/// `maps`: the scene's [`NormalMaps::of`].
+pub fn mesh_vertex_records(
+    mesh: &Mesh,
+    materials: &[Material],
+    maps: Option<&NormalMaps>,
+) -> Vec<[[f32; 4]; 4]> {
     let fallback = Material::default();
     let ids = vertex_materials(mesh);
-    let maps = NormalMaps::of(mesh, materials);
     (0..mesh.vertex_count())
         .map(|v| {
             let id = ids[v] as usize;
@@ -72,7 +76,7 @@ pub fn mesh_vertex_records(mesh: &Mesh, materials: &[Material]) -> Vec<[[f32; 4]
             let uv = mesh.uvs.get(v).copied();
             let n = mesh.normals.get(v).copied().unwrap_or(Vec3::Y);
             let n = n.normalize_or(Vec3::Y);
-            let n = maps.as_ref().map_or(n, |maps| {
+            let n = maps.map_or(n, |maps| {
                 maps.bend_vertex(mesh, v as u32, id as u32, n.as_dvec3())
                     .as_vec3()
             });
@@ -82,10 +86,10 @@ pub fn mesh_vertex_records(mesh: &Mesh, materials: &[Material]) -> Vec<[[f32; 4]
 }
 
 /// The per-pixel pass's tangent frames: per vertex (unbent unit normal, 0) and (MikkTSpace
-/// tangent, bitangent sign) where a material is normal-mapped; empty (the pass then bends
-/// nothing) otherwise.
-pub fn tangent_frames(mesh: &Mesh, materials: &[Material]) -> Vec<[f32; 4]> {
-    let Some(maps) = NormalMaps::of(mesh, materials) else {
+/// tangent, bitangent sign) where a material is normal-mapped (`maps`: the scene's
+/// [`NormalMaps::of`]); empty (the pass then bends nothing) otherwise.
+pub fn tangent_frames(mesh: &Mesh, maps: Option<&NormalMaps>) -> Vec<[f32; 4]> {
+    let Some(maps) = maps else {
         return Vec::new();
     };
     mesh.normals

@@ -16,6 +16,7 @@ use serde::Serialize;
 
 use bspvt_client::envmap::EnvLight;
 use bspvt_client::frame::image::Image;
+use bspvt_client::gpu::frame::GpuFrames;
 use bspvt_client::groundtruth::render_mc_env;
 use bspvt_client::method::trees::cached_sky_bake;
 use bspvt_client::render::renderer::{Mode, Renderer, Trees};
@@ -56,6 +57,10 @@ pub struct BenchSkyArgs {
     /// SG lobes of the comparison.
     #[arg(long, value_delimiter = ',', default_values_t = vec![16usize, 32])]
     pub(crate) lobes: Vec<usize>,
+    /// Also measure the cells on the GPU (`bspvt-env --backend gpu` per vertex; each frame
+    /// read back): the first frame (the terms), the map turning, the camera moving.
+    #[arg(long)]
+    pub(crate) gpu: bool,
     /// Timed frames per configuration (median reported).
     #[arg(long, default_value_t = 3)]
     pub(crate) frames: usize,
@@ -317,6 +322,54 @@ pub fn run(a: &BenchSkyArgs) -> Result<Report> {
         };
         push(row, &img, format!("bspvt-env-cells-b{bands}-moving.png"))?;
     }
+    // The same cells on the GPU: the first frame makes every visible vertex's terms (after a
+    // frame of the other camera, so that compiling the pipelines and uploading the trees are
+    // not in it), then the map turns with the camera still (one gather pass a frame), then the
+    // camera moves too (the terms again every frame). Every frame is read back.
+    if a.gpu {
+        let gpu = bspvt_client::gpu::Gpu::shared()?;
+        println!("GPU: {}", gpu.adapter);
+        let mut on_gpu = GpuFrames::new(gpu, &scene, 1)?;
+        for &bands in a.cells.iter().filter(|&&b| b > 0) {
+            let cells = SkyCells::new(&env, bands, 1.0)?;
+            let mut frame = |r: &Renderer, turn: f64| {
+                on_gpu.sky_frame(gpu, r, &cells, &cells.radiance(turn), Some(&trees))
+            };
+            frame(&r2, 0.0)?;
+            let t = Instant::now();
+            let (img, _) = frame(&r, 0.0)?;
+            let first = t.elapsed().as_secs_f64() * 1e3;
+            let mut turn = 0.0;
+            let (ms, _) = median_ms(frames.max(5), || {
+                turn += 1.0;
+                frame(&r, turn)
+            })?;
+            let err = errors(&img);
+            let row = Row {
+                sky_pieces: Some(cells.len()),
+                bands: Some(bands),
+                first_frame_ms: Some(first),
+                ..Row::new("bspvt-env-cells GPU", Mode::Vertex, ms, err)
+            };
+            push(row, &img, format!("bspvt-env-cells-b{bands}-gpu.png"))?;
+            let mut i = 0;
+            let (ms, _) = median_ms(frames.max(5), || {
+                turn += 1.0;
+                i += 1;
+                frame(if i % 2 == 0 { &r } else { &r2 }, turn)
+            })?;
+            let row = Row {
+                sky_pieces: Some(cells.len()),
+                bands: Some(bands),
+                ..Row::new("bspvt-env-cells GPU, camera moving", Mode::Vertex, ms, err)
+            };
+            push(
+                row,
+                &img,
+                format!("bspvt-env-cells-b{bands}-gpu-moving.png"),
+            )?;
+        }
+    }
     // Without the trees: what the shadows are worth.
     let sky = SkyPieces::new(&env, 2, DEFAULT_THRESHOLD, 1.0)?;
     let (ms, (img, _)) = median_ms(1, || Ok(r.sky(&sky.posed(0.0), None, Mode::Pixel)))?;
@@ -435,6 +488,7 @@ mod tests {
             pieces: vec![1, 2],
             cells: vec![4],
             lobes: vec![4],
+            gpu: false,
             frames: 1,
             spp: 64,
             cache: dir.path().join("cache"),

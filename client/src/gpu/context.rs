@@ -22,6 +22,8 @@ pub struct Gpu {
     pub software: bool,
     /// The per-vertex shading pipeline, compiled once (`vertex.rs`).
     pub(crate) shade_pipeline: OnceLock<wgpu::ComputePipeline>,
+    /// The sky's pipelines (terms, gather), compiled once (`sky.rs`).
+    pub(crate) sky_pipelines: OnceLock<(wgpu::ComputePipeline, wgpu::ComputePipeline)>,
     /// The frame pipelines (raster, resolve) by MSAA samples, compiled once each (`frame.rs`:
     /// the resolve shader takes ~25 s to compile on lavapipe).
     pub(crate) frame_pipelines:
@@ -56,6 +58,7 @@ impl Gpu {
             device: ctx.device,
             queue: ctx.queue,
             shade_pipeline: OnceLock::new(),
+            sky_pipelines: OnceLock::new(),
             frame_pipelines: std::sync::Mutex::new(Vec::new()),
             busy: std::sync::Mutex::new(()),
         })

@@ -15,10 +15,12 @@ use glam::DMat4;
 use bspvt_shaders::gpu::{materials, wgsl};
 
 use super::context::{Gpu, buffer_entries};
+use super::sky::GpuSky;
 use super::vertex::{LightRecord, VertexShader, light_record, ltc_buffer, supports};
 use crate::frame::image::Image;
 use crate::light::Light;
 use crate::render::renderer::{FrameCounts, Mode, Renderer, Trees};
+use crate::sky_cells::SkyCells;
 
 /// `visibility.wgsl`'s uniform.
 #[repr(C)]
@@ -79,6 +81,8 @@ pub struct GpuFrames {
     triangles: u32,
     samples: u32,
     target: Option<Target>,
+    /// The sky's cells and terms (made on the first sky frame).
+    sky: Option<GpuSky>,
 }
 
 /// The raster and resolve pipelines for `samples` per pixel, compiled once per process.
@@ -220,6 +224,7 @@ impl GpuFrames {
             triangles: mesh.triangles.len() as u32,
             samples,
             target: None,
+            sky: None,
         })
     }
 
@@ -358,11 +363,63 @@ impl GpuFrames {
         mode: Mode,
     ) -> Result<(wgpu::CommandEncoder, FrameCounts)> {
         supports(light)?;
-        let view = &renderer.view;
-        let (w, h) = (view.width, view.height);
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         self.shader
             .shade_renderer(gpu, &mut enc, renderer, &mut self.key, light, trees)?;
+        let counts = self.draw(gpu, &mut enc, renderer, light_record(light), mode);
+        Ok((enc, counts))
+    }
+
+    /// One per-vertex frame of the sky in `cells` with this frame's cell radiances
+    /// `radiance` ([`SkyCells::radiance`]) through the sky's `trees` (vertices without theirs
+    /// unshadowed), read back as linear radiance; the terms are kept while the camera, the
+    /// materials and the trees stay ([`crate::render::sky_cells`] is the CPU's).
+    pub fn sky_frame(
+        &mut self,
+        gpu: &Gpu,
+        renderer: &Renderer,
+        cells: &SkyCells,
+        radiance: &[glam::DVec3],
+        trees: Option<&Trees>,
+    ) -> Result<(Image, FrameCounts)> {
+        let _queue = gpu.exclusive();
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        self.shader.sync_renderer(gpu, renderer, &mut self.key);
+        let sky = match &mut self.sky {
+            Some(s) => s,
+            None => self
+                .sky
+                .insert(GpuSky::new(gpu, renderer.scene.mesh.vertex_count())?),
+        };
+        sky.encode(
+            gpu,
+            &mut enc,
+            &self.shader,
+            renderer,
+            (cells, radiance),
+            trees,
+        )?;
+        let none = (bytemuck::Zeroable::zeroed(), 0);
+        let counts = self.draw(gpu, &mut enc, renderer, none, Mode::Vertex);
+        let t = self.made_target()?;
+        enc.copy_buffer_to_buffer(&t.image, 0, &t.readback, 0, t.image.size());
+        gpu.queue.submit([enc.finish()]);
+        let bytes = gpu.map_read(&t.readback)?;
+        Ok((image_from_bytes(t.size, &bytes), counts))
+    }
+
+    /// Records the raster and resolve passes over the per-vertex results into the target's
+    /// radiance buffer, with the light `(record, count)` for per-pixel shading.
+    fn draw(
+        &mut self,
+        gpu: &Gpu,
+        enc: &mut wgpu::CommandEncoder,
+        renderer: &Renderer,
+        (record, count): (LightRecord, u32),
+        mode: Mode,
+    ) -> FrameCounts {
+        let view = &renderer.view;
+        let (w, h) = (view.width, view.height);
         let mkey = renderer.shading_key();
         if self.materials_key != Some(mkey) {
             let mesh = &renderer.scene.mesh;
@@ -377,7 +434,6 @@ impl GpuFrames {
         };
         gpu.queue
             .write_buffer(&self.raster_params, 0, bytemuck::bytes_of(&raster));
-        let (record, count) = light_record(light);
         let v3 = |v: glam::DVec3, w: f64| v.as_vec3().extend(w as f32).to_array();
         let resolve = ResolveParams {
             eye: v3(view.eye, view.tan_half_fov),
@@ -485,7 +541,7 @@ impl GpuFrames {
             pass.set_bind_group(0, &group, &[]);
             pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
         }
-        let counts = FrameCounts {
+        FrameCounts {
             vertices_shaded: renderer.visible_vertices.len(),
             pixels_shaded: if mode == Mode::Pixel {
                 renderer.gbuffer.covered()
@@ -493,8 +549,7 @@ impl GpuFrames {
                 0
             },
             ..FrameCounts::default()
-        };
-        Ok((enc, counts))
+        }
     }
 }
 

@@ -7,6 +7,7 @@ pub mod backend;
 pub mod context;
 pub mod frame;
 pub mod present;
+pub(crate) mod sky;
 pub(crate) mod trees;
 pub mod vertex;
 

@@ -83,13 +83,16 @@ pub(crate) fn light_record(light: &Light) -> (LightRecord, u32) {
     }
 }
 
+/// `shade.wgsl`'s parameters (also the sky's, `sky.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct Params {
-    eye: [f32; 4],
-    light: LightRecord,
-    counts: [u32; 4],
-    codec: [f32; 4],
+pub(crate) struct Params {
+    pub(crate) eye: [f32; 4],
+    pub(crate) light: LightRecord,
+    /// Light vertices (the sky: cells), jobs, the codec's offsets, the LTC table's size.
+    pub(crate) counts: [u32; 4],
+    /// x: the codec's half step.
+    pub(crate) codec: [f32; 4],
 }
 
 /// Whether the GPU shades this light: a polygon of at most 8 vertices, a point or spot
@@ -117,9 +120,9 @@ pub(crate) fn ltc_buffer(gpu: &Gpu) -> wgpu::Buffer {
 pub struct VertexShader {
     pipeline: wgpu::ComputePipeline,
     params: wgpu::Buffer,
-    ltc: wgpu::Buffer,
+    pub(crate) ltc: wgpu::Buffer,
     pub(crate) verts: wgpu::Buffer,
-    jobs: wgpu::Buffer,
+    pub(crate) jobs: wgpu::Buffer,
     jobs_len: u32,
     /// The results, indexed by vertex (also the raster pass's per-vertex attributes).
     pub(crate) out: wgpu::Buffer,
@@ -214,6 +217,11 @@ impl VertexShader {
         gpu.queue
             .write_buffer(&self.jobs, 0, bytemuck::cast_slice(&jobs));
         self.jobs_len = jobs.len() as u32;
+    }
+
+    /// The vertices to shade (the jobs' count).
+    pub(crate) fn jobs_len(&self) -> u32 {
+        self.jobs_len
     }
 
     /// Uploads the trees that arrived since the last call ([`GpuTrees::sync`]).
@@ -337,6 +345,19 @@ impl VertexShader {
         light: &Light,
         trees: Option<&Trees>,
     ) -> Result<()> {
+        self.sync_renderer(gpu, renderer, key);
+        self.sync_trees(gpu, trees);
+        self.encode(gpu, enc, light, renderer.view.eye)
+    }
+
+    /// Uploads the vertex records and the jobs when the camera or the materials changed
+    /// (`key`: the renderer's shading key of the last upload).
+    pub(crate) fn sync_renderer(
+        &mut self,
+        gpu: &Gpu,
+        renderer: &crate::render::renderer::Renderer,
+        key: &mut Option<u64>,
+    ) {
         let k = renderer.shading_key();
         if *key != Some(k) {
             let records: Vec<_> = (0..self.vertices as u32)
@@ -350,7 +371,5 @@ impl VertexShader {
             self.set_jobs(gpu, &renderer.gpu_shaded_vertices());
             *key = Some(k);
         }
-        self.sync_trees(gpu, trees);
-        self.encode(gpu, enc, light, renderer.view.eye)
     }
 }

@@ -4,10 +4,12 @@
 //! same frame. The map turns at run time: only the pieces move ([`FrameInput::env_rotation_deg`]).
 //! Per vertex, unless the map has a sun, the sky is shaded in world-fixed cells instead
 //! ([`crate::sky_cells`]): the trees cut them once per vertex, and a turning map only changes
-//! their radiance.
+//! their radiance. With `--backend gpu` (or `auto` on a hardware GPU), per vertex, the cells and
+//! the lamps are shaded on the GPU ([`crate::gpu::sky`]; the sky's pieces stay on the CPU).
 
 use anyhow::Result;
 
+use super::gpu::GpuPath;
 use super::{Frame, FrameInput, FrameMethod, MethodState, Needs, SceneData, Settings};
 use crate::frame::image::Image;
 use crate::render::renderer::{FrameCounts, Mode, Trees};
@@ -53,6 +55,7 @@ impl FrameMethod for BspvtEnv {
             transfer: CellTransfer::default(),
             rotation_deg: e.rotation_deg,
             cached: None,
+            gpu: GpuPath::new(settings)?,
         }))
     }
 }
@@ -68,6 +71,8 @@ struct State {
     /// the materials and the sky trees stay, the sky is reused and only the lamps are
     /// shaded (moving a lamp costs what it costs in `bspvt`).
     cached: Option<(SkyKey, Image, FrameCounts)>,
+    /// The GPU's frames, where the settings ask for the GPU.
+    gpu: Option<GpuPath>,
 }
 
 #[derive(Clone, Copy, PartialEq)]
@@ -91,12 +96,28 @@ impl MethodState for State {
             Some((k, image, counts)) if *k == key => (image.clone(), *counts),
             _ => {
                 let (image, counts) = match (&self.cells, f.mode) {
-                    (Some(cells), Mode::Vertex) => f.renderer.sky_cells(
-                        cells,
-                        &cells.radiance(rotation),
-                        f.sky_trees,
-                        &mut self.transfer,
-                    ),
+                    (Some(cells), Mode::Vertex) => {
+                        let radiance = cells.radiance(rotation);
+                        let on_gpu = self
+                            .gpu
+                            .as_mut()
+                            .and_then(|g| g.sky_cells(f, cells, &radiance, f.sky_trees));
+                        match on_gpu {
+                            Some(image) => (
+                                image,
+                                FrameCounts {
+                                    vertices_shaded: f.renderer.visible_vertices.len(),
+                                    ..FrameCounts::default()
+                                },
+                            ),
+                            None => f.renderer.sky_cells(
+                                cells,
+                                &radiance,
+                                f.sky_trees,
+                                &mut self.transfer,
+                            ),
+                        }
+                    }
                     _ => f
                         .renderer
                         .sky(&self.sky.posed(rotation), f.sky_trees, f.mode),
@@ -107,9 +128,23 @@ impl MethodState for State {
         };
         // The lamps, shadowed by their own trees (unshadowed until those arrive).
         if !f.lights.is_empty() {
-            let (lamps, c) = f
-                .renderer
-                .bspvt_lights(f.lights, f.trees, f.sky_trees, f.mode);
+            let cpu = |lights: &[crate::light::Light]| {
+                f.renderer
+                    .bspvt_lights(lights, f.trees, f.sky_trees, f.mode)
+            };
+            // The GPU's frame is read back here (the sky is added to it).
+            let read_back = FrameInput {
+                on_gpu: false,
+                ..*f
+            };
+            let on_gpu = match self.gpu.as_mut() {
+                Some(g) => g.frame(&read_back, f.lights, f.trees, &cpu)?,
+                None => None,
+            };
+            let (lamps, c) = match on_gpu {
+                Some(frame) => (frame.image, frame.counts),
+                None => cpu(f.lights),
+            };
             image.add(&lamps);
             counts = FrameCounts {
                 vertices_shaded: counts.vertices_shaded.max(c.vertices_shaded),

@@ -12,6 +12,8 @@ use crate::gpu::frame::GpuFrames;
 use crate::gpu::{Backend, Gpu};
 use crate::light::{Light, Shape};
 use crate::render::renderer::{FrameCounts, Trees};
+use crate::sky_cells::SkyCells;
+use glam::DVec3;
 
 /// MSAA samples of the GPU's frames.
 pub(crate) const SAMPLES: u32 = 4;
@@ -24,6 +26,8 @@ pub(crate) struct GpuPath {
     refused: Option<String>,
     /// Some light was left to the CPU (said once).
     said: bool,
+    /// The sky's cells do not fit this GPU (said once; the CPU draws the sky).
+    sky_refused: bool,
 }
 
 impl GpuPath {
@@ -38,6 +42,7 @@ impl GpuPath {
             frames: None,
             refused: None,
             said: false,
+            sky_refused: false,
         }))
     }
 
@@ -53,14 +58,8 @@ impl GpuPath {
         trees: Option<&Trees>,
         cpu: &dyn Fn(&[Light]) -> (Image, FrameCounts),
     ) -> Result<Option<Frame>> {
-        if self.refused.is_some() {
+        if !self.made(f) {
             return Ok(None);
-        }
-        if self.frames.is_none() {
-            match GpuFrames::new(self.gpu, f.scene.scene, SAMPLES) {
-                Ok(fr) => self.frames = Some(fr),
-                Err(e) => return Ok(self.refuse(format!("{e:#}"))),
-            }
         }
         // A sun baked with the sky is shadowed by the sky's trees, which the GPU does not hold.
         let sky_suns = trees.is_some() && f.scene.scene.suns_in_sky_bake();
@@ -120,6 +119,47 @@ impl GpuPath {
         }
         let (image, counts) = frames.frame(self.gpu, f.renderer, light, trees, f.mode)?;
         Ok(Some(Frame::new(image, counts)))
+    }
+
+    /// The GPU's per-vertex frame of the sky in `cells` with this frame's cell radiances,
+    /// through the sky's `trees` (`None`: the CPU must draw it; a GPU that cannot hold the
+    /// terms says why once and leaves the sky to the CPU).
+    pub(crate) fn sky_cells(
+        &mut self,
+        f: &FrameInput,
+        cells: &SkyCells,
+        radiance: &[DVec3],
+        trees: Option<&Trees>,
+    ) -> Option<Image> {
+        if self.sky_refused || !self.made(f) {
+            return None;
+        }
+        let frames = self.frames.as_mut()?;
+        match frames.sky_frame(self.gpu, f.renderer, cells, radiance, trees) {
+            Ok((image, _)) => Some(image),
+            Err(e) => {
+                tracing::warn!("GPU backend: {e:#}; the sky is drawn on the CPU");
+                self.sky_refused = true;
+                None
+            }
+        }
+    }
+
+    /// Whether the scene's GPU frames are made (made now if not; `false`: refused).
+    fn made(&mut self, f: &FrameInput) -> bool {
+        if self.refused.is_some() {
+            return false;
+        }
+        if self.frames.is_none() {
+            match GpuFrames::new(self.gpu, f.scene.scene, SAMPLES) {
+                Ok(fr) => self.frames = Some(fr),
+                Err(e) => {
+                    self.refuse(format!("{e:#}"));
+                    return false;
+                }
+            }
+        }
+        true
     }
 
     fn refuse(&mut self, why: String) -> Option<Frame> {

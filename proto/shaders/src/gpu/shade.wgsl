@@ -129,64 +129,54 @@ fn ratio3(s: vec3f, u: vec3f) -> vec3f {
     return select(vec3f(1.0), clamp(s / u, vec3f(0.0), vec3f(1.0)), u > vec3f(0.0));
 }
 
-@compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) gid: vec3u) {
-    if gid.x >= params.counts.y {
-        return;
-    }
-    let v = jobs[gid.x];
-    let p = verts[4u * v].xyz;
+// A vertex's surface and lobes (shade::Lobes::new): where, the unit normal, the material,
+// the view's frame and the specular LTC.
+struct Surface {
+    p: vec3f,
+    n: vec3f,
+    albedo: vec3f,
+    spec: vec3f,
+    frame: mat3x3f,
+    lt: Ltc,
+}
+
+fn surface(v: u32) -> Surface {
+    var s: Surface;
+    s.p = verts[4u * v].xyz;
     // The renderer's normals are unit in f64 (render::renderer::vertex_surface); in f32
     // they are normalised again.
     let n0 = verts[4u * v + 1u].xyz;
     let nl = length(n0);
-    let n = select(vec3f(0.0, 1.0, 0.0), n0 / nl, nl > 0.0 && finite(nl));
+    s.n = select(vec3f(0.0, 1.0, 0.0), n0 / nl, nl > 0.0 && finite(nl));
     let albedo = verts[4u * v + 2u];
     let f0 = verts[4u * v + 3u].xyz;
-    flags = 0u;
-
-    // shade::Lobes::new: the view, the frame, the LTC of (α, θ_view).
-    var wo = params.eye.xyz - p;
+    s.albedo = albedo.xyz;
+    // The view, the frame, the LTC of (α, θ_view).
+    var wo = params.eye.xyz - s.p;
     let lo = length(wo);
-    wo = select(n, wo / lo, lo > 0.0 && finite(lo));
-    let frame = to_local(n, wo);
-    let theta = atan2(length(cross(n, wo)), dot(n, wo));
-    let lt = ltc_lookup(albedo.w, theta);
-    let spec = f0 * lt.magnitude + (vec3f(1.0) - f0) * lt.fresnel;
-    // Light::radiance_toward: a spot's cone and a range's window scale a sphere's.
-    let radiance = params.radiance.xyz * light_falloff(p);
+    wo = select(s.n, wo / lo, lo > 0.0 && finite(lo));
+    s.frame = to_local(s.n, wo);
+    let theta = atan2(length(cross(s.n, wo)), dot(s.n, wo));
+    s.lt = ltc_lookup(albedo.w, theta);
+    s.spec = f0 * s.lt.magnitude + (vec3f(1.0) - f0) * s.lt.fresnel;
+    return s;
+}
 
-    var res: VertexOut;
-    res.colour = vec4f(0.0);
-    res.ratio_d = vec3f(1.0);
-    res.ratio_s = vec3f(1.0);
-    res.pieces = 0u;
-    res.dropped = 0u;
+// Σ v̄ᵢ × each piece's integrals (with the light's colour) over the pieces vertex v's trees
+// cut from dirs[0..nd]; `specular`: false for the diffuse integral alone (ss stays 0).
+struct Walk {
+    sd: vec3f,
+    ss: vec3f,
+    pieces: u32,
+    dropped: u32,
+}
 
-    let nd = light_directions(p, n);
-    if nd < 3u {
-        results[v] = res;
-        return;
-    }
-    let em = emitter(p, frame, lt);
-    let un = shade_piece(nd, em);
-    let ud = un.d.w;
-    let us = un.s.w;
-    let root0 = roots[6u * v];
-    if root0 == NO_TREES {
-        // Trees not streamed in yet: unshadowed (render::renderer::Trees::has).
-        res.colour = vec4f(radiance * (albedo.xyz * un.d.xyz + spec * un.s.xyz), 0.0);
-        results[v] = res;
-        return;
-    }
-    if !(ud > 0.0) && !(us > 0.0) {
-        results[v] = res;
-        return;
-    }
-
-    // Σ v̄ᵢ × each piece's integrals with the light's colour.
-    var sd = vec3f(0.0);
-    var ss = vec3f(0.0);
+fn walk(v: u32, nd: u32, em: Emitter, specular: bool) -> Walk {
+    var out: Walk;
+    out.sd = vec3f(0.0);
+    out.ss = vec3f(0.0);
+    out.pieces = 0u;
+    out.dropped = 0u;
     let node_count = arrayLength(&nodes);
     for (var f = 0u; f < 6u; f++) {
         // tree::clip_to_face: |d·a| ≤ d·w, |d·b| ≤ d·w.
@@ -205,10 +195,8 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
         let root = roots[6u * v + f];
         if root == ABSENT {
             // bspvt::ABSENT_FACE_VALUE: visible.
-            res.pieces += 1u;
-            let pc = shade_piece(count, em);
-            sd += pc.d.xyz;
-            ss += pc.s.xyz;
+            out.pieces += 1u;
+            add_piece(&out, count, em, specular, 1.0);
             continue;
         }
         sp = 0u;
@@ -226,13 +214,10 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
             if (word.x & LEAF) != 0u {
                 let value = word.x & 0xffu;
                 if value == 0u {
-                    res.dropped += 1u;
+                    out.dropped += 1u;
                 } else {
-                    res.pieces += 1u;
-                    let vbar = f32(value) / 255.0;
-                    let pc = shade_piece(count, em);
-                    sd += vbar * pc.d.xyz;
-                    ss += vbar * pc.s.xyz;
+                    out.pieces += 1u;
+                    add_piece(&out, count, em, specular, f32(value) / 255.0);
                 }
                 next_piece = true;
             } else {
@@ -303,14 +288,69 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
             }
         }
     }
+    return out;
+}
 
-    var c = radiance * (albedo.xyz * sd + spec * ss);
+// Adds the piece ig_src[0..count] weighted by v̄ to `out`.
+fn add_piece(out: ptr<function, Walk>, count: u32, em: Emitter, specular: bool, vbar: f32) {
+    if specular {
+        let pc = shade_piece(count, em);
+        (*out).sd += vbar * pc.d.xyz;
+        (*out).ss += vbar * pc.s.xyz;
+    } else {
+        (*out).sd += vec3f(vbar * integrate_poly(em.frame, count));
+    }
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3u) {
+    if gid.x >= params.counts.y {
+        return;
+    }
+    let v = jobs[gid.x];
+    let s = surface(v);
+    flags = 0u;
+    // Light::radiance_toward: a spot's cone and a range's window scale a sphere's.
+    let radiance = params.radiance.xyz * light_falloff(s.p);
+
+    var res: VertexOut;
+    res.colour = vec4f(0.0);
+    res.ratio_d = vec3f(1.0);
+    res.ratio_s = vec3f(1.0);
+    res.pieces = 0u;
+    res.dropped = 0u;
+
+    let nd = light_directions(s.p, s.n);
+    if nd < 3u {
+        results[v] = res;
+        return;
+    }
+    let em = emitter(s.p, s.frame, s.lt);
+    let un = shade_piece(nd, em);
+    let ud = un.d.w;
+    let us = un.s.w;
+    let root0 = roots[6u * v];
+    if root0 == NO_TREES {
+        // Trees not streamed in yet: unshadowed (render::renderer::Trees::has).
+        res.colour = vec4f(radiance * (s.albedo * un.d.xyz + s.spec * un.s.xyz), 0.0);
+        results[v] = res;
+        return;
+    }
+    if !(ud > 0.0) && !(us > 0.0) {
+        results[v] = res;
+        return;
+    }
+
+    let cut = walk(v, nd, em, true);
+    res.pieces = cut.pieces;
+    res.dropped = cut.dropped;
+    var c = radiance * (s.albedo * cut.sd + s.spec * cut.ss);
     if !finite3(c) {
         c = vec3f(0.0);
         flags |= OVERFLOW;
     }
     res.colour = vec4f(c, f32(flags));
-    res.ratio_d = ratio3(sd, un.d.xyz);
-    res.ratio_s = ratio3(ss, un.s.xyz);
+    res.ratio_d = ratio3(cut.sd, un.d.xyz);
+    res.ratio_s = ratio3(cut.ss, un.s.xyz);
     results[v] = res;
 }

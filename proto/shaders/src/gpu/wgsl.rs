@@ -10,6 +10,12 @@ pub fn shade() -> String {
     [COMMON, include_str!("shade.wgsl")].concat()
 }
 
+/// The sky's world-fixed cells per vertex (issue 37 item 3): `shade` + `sky` (entry points
+/// `sky_terms`, `sky_gather`).
+pub fn sky() -> String {
+    [COMMON, include_str!("shade.wgsl"), include_str!("sky.wgsl")].concat()
+}
+
 /// The raster pass of frames: a visibility buffer of triangle ids, with the alpha test of
 /// the scene's cut-outs (`bspvt_raytrace::CUTOUT_WGSL`, shared with the ray caster).
 pub fn visibility() -> String {

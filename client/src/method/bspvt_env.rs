@@ -102,21 +102,10 @@ impl MethodState for State {
                             .gpu
                             .as_mut()
                             .and_then(|g| g.sky_cells(f, cells, &radiance, f.sky_trees));
-                        match on_gpu {
-                            Some(image) => (
-                                image,
-                                FrameCounts {
-                                    vertices_shaded: f.renderer.visible_vertices.len(),
-                                    ..FrameCounts::default()
-                                },
-                            ),
-                            None => f.renderer.sky_cells(
-                                cells,
-                                &radiance,
-                                f.sky_trees,
-                                &mut self.transfer,
-                            ),
-                        }
+                        on_gpu.unwrap_or_else(|| {
+                            f.renderer
+                                .sky_cells(cells, &radiance, f.sky_trees, &mut self.transfer)
+                        })
                     }
                     _ => f
                         .renderer

@@ -130,13 +130,13 @@ impl GpuPath {
         cells: &SkyCells,
         radiance: &[DVec3],
         trees: Option<&Trees>,
-    ) -> Option<Image> {
+    ) -> Option<(Image, FrameCounts)> {
         if self.sky_refused || !self.made(f) {
             return None;
         }
         let frames = self.frames.as_mut()?;
         match frames.sky_frame(self.gpu, f.renderer, cells, radiance, trees) {
-            Ok((image, _)) => Some(image),
+            Ok(frame) => Some(frame),
             Err(e) => {
                 tracing::warn!("GPU backend: {e:#}; the sky is drawn on the CPU");
                 self.sky_refused = true;

@@ -432,6 +432,9 @@ pub(crate) struct VertexRays<'a> {
     /// Hits nearer than this are not counted ([`crate::RAY_T_MIN_SCALE`] of the scene's
     /// diagonal).
     pub t_min: f32,
+    /// Geometry this far below the horizon plane through `origin` is culled
+    /// ([`crate::RAY_HORIZON_MARGIN_SCALE`] of the scene's diagonal; `frustum::Pyramid`).
+    pub horizon_margin: f32,
     /// Where rays end (at the first stop they reach); a direction matters when it can reach
     /// one of them ([`LightStop::reachable`]), every direction when there are none (the sky's
     /// bake).
@@ -512,8 +515,8 @@ impl VertexRays<'_> {
             })
             .collect();
         let mut any = false;
-        for (p, (m, &d)) in out.iter_mut().zip(centre).enumerate() {
-            let (i, j) = (p % res, p / res);
+        let pixels = (0..res).flat_map(|j| (0..res).map(move |i| (i, j)));
+        for (p, ((m, &d), (i, j))) in out.iter_mut().zip(centre).zip(pixels).enumerate() {
             *m = d.dot(self.normal) > 0.0
                 && (reach.is_empty()
                     || reach.iter().any(|r| match r {
@@ -674,6 +677,8 @@ impl BlockWalk<'_> {
                 fr.b - v0 * fr.w,
                 v1 * fr.w - fr.b,
             ],
+            horizon: self.rays.normal,
+            below: self.rays.horizon_margin,
         }
     }
 
@@ -926,6 +931,7 @@ mod tests {
                 normal: vertex_normal,
                 vertex: 0,
                 t_min: 0.0,
+                horizon_margin: 0.0,
                 stops: &stops,
             };
             let table = RayTable::new(res, 1);
@@ -958,6 +964,7 @@ mod tests {
                 normal: Vec3::new(0.6, 0.0, 0.8),
                 vertex: 0,
                 t_min: 0.0,
+                horizon_margin: 0.0,
                 stops,
             };
             let mut mask = vec![false; 64];

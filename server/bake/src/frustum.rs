@@ -8,6 +8,13 @@
 //! conservative (they may keep something outside, never drop something inside), so culled
 //! blocks give exactly what casting their rays would: rays pass through pixel (sub-)centres,
 //! strictly inside the pyramid.
+//!
+//! A fifth plane is the vertex's horizon: only rays with d·n > 0 are cast (the others escape,
+//! `VertexRays::escapes_below_horizon`), and every point o + t d of such a ray lies above the
+//! plane through o with normal n, so nothing wholly below it can block one. Its test keeps a
+//! margin ([`Pyramid::below`]) far above the f32 ray test's rounding and far below the origin's
+//! lift off its surface, so the vertex's own neighbourhood, which the lift puts below the
+//! plane, is culled on a flat or convex surface.
 
 use bspvt_proto::Mesh;
 use bspvt_raytrace::Occluder;
@@ -23,29 +30,36 @@ pub(crate) struct FrustumCuller {
     occ_prim: Vec<u32>,
 }
 
-/// A pyramid of directions from an apex: four inward plane normals through the apex.
+/// A pyramid of directions from an apex: four inward plane normals through the apex, cut by
+/// the horizon plane through it.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Pyramid {
     pub apex: Vec3,
     pub normals: [Vec3; 4],
+    /// The horizon's unit normal: every ray cast has d · `horizon` > 0.
+    pub horizon: Vec3,
+    /// A point lies below the horizon when `horizon` · (x − apex) < −`below`.
+    pub below: f32,
 }
 
 impl Pyramid {
     /// Whether the box [min, max] lies entirely behind one of the planes.
     #[inline]
     fn excludes_box(&self, min: Vec3, max: Vec3) -> bool {
-        self.normals.iter().any(|n| {
-            let far = Vec3::select(n.cmpge(Vec3::ZERO), max, min);
-            n.dot(far - self.apex) < 0.0
-        })
+        let far = |n: Vec3| Vec3::select(n.cmpge(Vec3::ZERO), max, min) - self.apex;
+        self.horizon.dot(far(self.horizon)) < -self.below
+            || self.normals.iter().any(|&n| n.dot(far(n)) < 0.0)
     }
 
     /// Whether the triangle lies entirely behind one of the planes.
     #[inline]
     fn excludes_triangle(&self, p: &[Vec3; 3]) -> bool {
-        self.normals
-            .iter()
-            .any(|n| p.iter().all(|&q| n.dot(q - self.apex) < 0.0))
+        p.iter()
+            .all(|&q| self.horizon.dot(q - self.apex) < -self.below)
+            || self
+                .normals
+                .iter()
+                .any(|n| p.iter().all(|&q| n.dot(q - self.apex) < 0.0))
     }
 }
 
@@ -157,5 +171,51 @@ impl FrustumCuller {
         list.iter()
             .map(|&p| self.occ_prim[p as usize])
             .find(|&q| occ.primitive_hit(q as usize, ray) < f32::INFINITY)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use obvhs::rt_triangle::RtTriangle;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// The horizon plane culls only what no cast ray can hit: a triangle wholly more than
+        /// the margin below the plane through the apex is missed, by the bake's own closed
+        /// ray test, by every ray above the horizon — here those passing just above the
+        /// triangle, grazing the plane, where rounding is worst. A scene of diagonal 2 (the
+        /// margin is [`crate::RAY_HORIZON_MARGIN_SCALE`] of it, t_min
+        /// [`crate::RAY_T_MIN_SCALE`]), triangles up to its size.
+        #[test]
+        fn what_the_horizon_culls_no_cast_ray_hits(
+            o in prop::array::uniform3(-1.0f32..1.0),
+            n in prop::array::uniform3(-1.0f32..1.0),
+            corners in prop::array::uniform3(prop::array::uniform2(-1.0f32..1.0)),
+            depths in prop::array::uniform3(1.0001f32..10.0),
+            at in prop::array::uniform2(0.0f32..1.0),
+            above in prop_oneof![Just(0.0f32), 0.0f32..1e-6, 0.0f32..1e-3],
+        ) {
+            let diagonal = 2.0;
+            let margin = crate::RAY_HORIZON_MARGIN_SCALE * diagonal;
+            let (o, n) = (Vec3::from(o), Vec3::from(n));
+            prop_assume!(n.length() > 0.1);
+            let n = n.normalize();
+            let (t1, t2) = n.any_orthonormal_pair();
+            let p: [Vec3; 3] = std::array::from_fn(|k| {
+                o + corners[k][0] * t1 + corners[k][1] * t2 - depths[k] * margin * n
+            });
+            let pyr = Pyramid { apex: o, normals: [Vec3::ZERO; 4], horizon: n, below: margin };
+            prop_assume!(pyr.excludes_triangle(&p));
+            // A point of the triangle, lifted to `above` over the horizon plane.
+            let (a, b) = if at[0] + at[1] > 1.0 { (1.0 - at[0], 1.0 - at[1]) } else { (at[0], at[1]) };
+            let q = p[0] + a * (p[1] - p[0]) + b * (p[2] - p[0]);
+            let d = (q + (n.dot(o - q) + above) * n - o).normalize_or_zero();
+            prop_assume!(d.dot(n) > 0.0);
+            let tri = RtTriangle::from(&Triangle { v0: p[0].into(), v1: p[1].into(), v2: p[2].into() });
+            let t_min = crate::RAY_T_MIN_SCALE * diagonal;
+            let ray = Ray::new(o.into(), d.into(), t_min, f32::INFINITY);
+            prop_assert_eq!(bspvt_raytrace::hit(&tri, &ray), f32::INFINITY);
+        }
     }
 }

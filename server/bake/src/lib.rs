@@ -63,6 +63,12 @@ pub(crate) const RAY_OFFSET_SCALE: f32 = 1e-4;
 /// that leave it, and must not shadow them. 1 % of the normal offset.
 pub(crate) const RAY_T_MIN_SCALE: f32 = 1e-6;
 
+/// Geometry this fraction of the scene's diagonal below a vertex's horizon plane (through its
+/// ray origin) cannot block its rays and is culled (`frustum::Pyramid`): ten times
+/// [`RAY_T_MIN_SCALE`], a tenth of [`RAY_OFFSET_SCALE`] (the lift that puts the vertex's own
+/// flat or convex neighbourhood below the plane).
+pub(crate) const RAY_HORIZON_MARGIN_SCALE: f32 = 1e-5;
+
 /// Everything a bake shares across vertices.
 pub struct Baker {
     mesh: Mesh,
@@ -81,6 +87,8 @@ pub struct Baker {
     origins: Vec<Vec3>,
     /// See [`RAY_T_MIN_SCALE`].
     t_min: f32,
+    /// See [`RAY_HORIZON_MARGIN_SCALE`].
+    horizon_margin: f32,
     header: BakeHeader,
 }
 
@@ -207,6 +215,7 @@ impl Baker {
         let codec = LineCodec::for_resolution(settings.face_res);
         let origins = origin::ray_origins(&mesh, RAY_OFFSET_SCALE * mesh.bounds().diagonal());
         let t_min = RAY_T_MIN_SCALE * mesh.bounds().diagonal();
+        let horizon_margin = RAY_HORIZON_MARGIN_SCALE * mesh.bounds().diagonal();
         let header = BakeHeader::new(&settings, mesh.vertex_count() as u32, mesh.content_hash());
         Baker {
             mesh,
@@ -220,6 +229,7 @@ impl Baker {
             codec,
             origins,
             t_min,
+            horizon_margin,
             header,
         }
     }
@@ -263,6 +273,7 @@ impl Baker {
             normal: self.mesh.normals[v as usize],
             vertex: v,
             t_min: self.t_min,
+            horizon_margin: self.horizon_margin,
             stops: &self.stops,
         }
     }

@@ -32,10 +32,20 @@ const INTERIOR: f64 = 1e-3;
 
 /// Edge adjacency of the occluder's primitives (in its order).
 pub(crate) struct SurfaceWalk {
-    /// Per primitive: its vertices and vertex indices.
-    tris: Vec<([Vec3; 3], [u32; 3])>,
-    /// Per primitive: the primitive across the edge opposite vertex k (k = 0, 1, 2).
-    across: Vec<[u32; 3]>,
+    tris: Vec<WalkTriangle>,
+}
+
+/// What a step of the walk reads of a primitive, in one cache line (a step is a cache miss
+/// on a large mesh).
+#[derive(Clone, Copy)]
+#[repr(align(64))]
+struct WalkTriangle {
+    /// Its vertices.
+    v: [Vec3; 3],
+    /// Its vertex indices.
+    idx: [u32; 3],
+    /// The primitive across the edge opposite vertex k (k = 0, 1, 2).
+    across: [u32; 3],
 }
 
 impl SurfaceWalk {
@@ -68,14 +78,18 @@ impl SurfaceWalk {
                 }
             }
         }
-        SurfaceWalk { tris, across }
+        let tris = tris
+            .into_iter()
+            .zip(across)
+            .map(|((v, idx), across)| WalkTriangle { v, idx, across })
+            .collect();
+        SurfaceWalk { tris }
     }
 
     /// Whether the line from `o` along `d` crosses primitive `prim` at least [`INTERIOR`]
     /// inside each of its edges (in f64 from the f32 vertices: rounding far below the margin).
     pub(crate) fn interior(&self, prim: u32, o: Vec3, d: Vec3) -> bool {
-        let (v, _) = &self.tris[prim as usize];
-        let [a, b, c] = v.map(|p| (p - o).as_dvec3());
+        let [a, b, c] = self.tris[prim as usize].v.map(|p| (p - o).as_dvec3());
         let d = d.as_dvec3();
         let l = [d.dot(b.cross(c)), d.dot(c.cross(a)), d.dot(a.cross(b))];
         let sum = l[0] + l[1] + l[2];
@@ -91,8 +105,8 @@ impl SurfaceWalk {
         let mut cur = start;
         let mut facing = 0.0;
         for _ in 0..MAX_STEPS {
-            let (v, idx) = &self.tris[cur as usize];
-            let [a, b, c] = v.map(|p| p - o);
+            let t = &self.tris[cur as usize];
+            let [a, b, c] = t.v.map(|p| p - o);
             // Edge functions: d · (B × C) etc., signed so that all are ≥ 0 when the ray (on
             // the side t > 0) passes inside the triangle.
             let sign = a.dot(b.cross(c)).signum();
@@ -113,12 +127,12 @@ impl SurfaceWalk {
                 .min_by(|x, y| x.1.total_cmp(y.1))
                 .unwrap_or((0, &0.0));
             if m >= 0.0 {
-                let blocks = !idx.contains(&skip)
+                let blocks = !t.idx.contains(&skip)
                     && occ.primitive_blocks(cur, ray)
                     && self.interior(cur, o, d);
                 return blocks.then_some(cur);
             }
-            cur = self.across[cur as usize][k];
+            cur = t.across[k];
             if cur == NONE {
                 return None;
             }

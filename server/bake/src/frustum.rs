@@ -181,6 +181,9 @@ mod tests {
     use proptest::prelude::*;
 
     proptest! {
+        // Rays that graze the plane closely are often rounded below it and skipped: allow it.
+        #![proptest_config(ProptestConfig { max_global_rejects: 1 << 20, ..ProptestConfig::default() })]
+
         /// The horizon plane culls only what no cast ray can hit: a triangle wholly more than
         /// the margin below the plane through the apex is missed, by the bake's own closed
         /// ray test, by every ray above the horizon — here those passing just above the
@@ -194,7 +197,7 @@ mod tests {
             corners in prop::array::uniform3(prop::array::uniform2(-1.0f32..1.0)),
             depths in prop::array::uniform3(1.0001f32..10.0),
             at in prop::array::uniform2(0.0f32..1.0),
-            above in prop_oneof![Just(0.0f32), 0.0f32..1e-6, 0.0f32..1e-3],
+            above in prop_oneof![1e-9f32..1e-6, 1e-6f32..1e-3],
         ) {
             let diagonal = 2.0;
             let margin = crate::RAY_HORIZON_MARGIN_SCALE * diagonal;

@@ -669,17 +669,18 @@ impl BlockWalk<'_> {
         let fr = FaceFrame::of(self.face);
         let e = |i: u32| 2.0 * i as f32 / r - 1.0;
         let (u0, u1, v0, v1) = (e(i0), e(i0 + size), e(j0), e(j0 + size));
-        Pyramid {
-            apex: self.origin,
-            normals: [
-                fr.a - u0 * fr.w,
-                u1 * fr.w - fr.a,
-                fr.b - v0 * fr.w,
-                v1 * fr.w - fr.b,
-            ],
-            horizon: self.rays.normal,
-            below: self.rays.horizon_margin,
-        }
+        let normals = [
+            fr.a - u0 * fr.w,
+            u1 * fr.w - fr.a,
+            fr.b - v0 * fr.w,
+            v1 * fr.w - fr.b,
+        ];
+        Pyramid::new(
+            self.origin,
+            normals,
+            self.rays.normal,
+            self.rays.horizon_margin,
+        )
     }
 
     /// `parent`: the parent block's candidate list, when it was kept.

@@ -18,7 +18,7 @@
 
 use bspvt_proto::Mesh;
 use bspvt_raytrace::Occluder;
-use glam::Vec3;
+use glam::{BVec4A, Vec3, Vec4};
 use obvhs::{BvhBuildParams, bvh2::Bvh2, ray::Ray, triangle::Triangle};
 
 /// A BVH2 (obvhs) over the triangles, for pyramid queries.
@@ -31,35 +31,76 @@ pub(crate) struct FrustumCuller {
 }
 
 /// A pyramid of directions from an apex: four inward plane normals through the apex, cut by
-/// the horizon plane through it.
+/// the horizon plane through it. The four side planes are held across the lanes of a `Vec4`
+/// per coordinate, so one box or triangle is tested against all four at once (with the
+/// arithmetic of the scalar dot products, so the same answers bit for bit).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Pyramid {
-    pub apex: Vec3,
-    pub normals: [Vec3; 4],
+    apex: Vec3,
+    /// The side planes' normals, x, y and z of plane k in lane k.
+    nx: Vec4,
+    ny: Vec4,
+    nz: Vec4,
+    /// Per side plane and coordinate, whether the normal's component is ≥ 0 (a box's
+    /// farthest corner along the normal takes `max` there).
+    px: BVec4A,
+    py: BVec4A,
+    pz: BVec4A,
     /// The horizon's unit normal: every ray cast has d · `horizon` > 0.
-    pub horizon: Vec3,
+    horizon: Vec3,
     /// A point lies below the horizon when `horizon` · (x − apex) < −`below`.
-    pub below: f32,
+    below: f32,
 }
 
 impl Pyramid {
+    pub(crate) fn new(apex: Vec3, normals: [Vec3; 4], horizon: Vec3, below: f32) -> Pyramid {
+        let lane = |c: fn(Vec3) -> f32| Vec4::from(normals.map(c));
+        let (nx, ny, nz) = (lane(|n| n.x), lane(|n| n.y), lane(|n| n.z));
+        Pyramid {
+            apex,
+            nx,
+            ny,
+            nz,
+            px: nx.cmpge(Vec4::ZERO),
+            py: ny.cmpge(Vec4::ZERO),
+            pz: nz.cmpge(Vec4::ZERO),
+            horizon,
+            below,
+        }
+    }
+
+    /// Per side plane, n · d.
+    #[inline]
+    fn side_dots(&self, d: Vec3) -> Vec4 {
+        self.nx * d.x + self.ny * d.y + self.nz * d.z
+    }
+
     /// Whether the box [min, max] lies entirely behind one of the planes.
     #[inline]
     fn excludes_box(&self, min: Vec3, max: Vec3) -> bool {
-        let far = |n: Vec3| Vec3::select(n.cmpge(Vec3::ZERO), max, min) - self.apex;
-        self.horizon.dot(far(self.horizon)) < -self.below
-            || self.normals.iter().any(|&n| n.dot(far(n)) < 0.0)
+        let far = |pos: BVec4A, hi: f32, lo: f32, o: f32| {
+            Vec4::select(pos, Vec4::splat(hi), Vec4::splat(lo)) - o
+        };
+        let (a, fx, fy, fz) = (
+            self.apex,
+            far(self.px, max.x, min.x, self.apex.x),
+            far(self.py, max.y, min.y, self.apex.y),
+            far(self.pz, max.z, min.z, self.apex.z),
+        );
+        let h = self.horizon;
+        (self.nx * fx + self.ny * fy + self.nz * fz)
+            .cmplt(Vec4::ZERO)
+            .any()
+            || h.dot(Vec3::select(h.cmpge(Vec3::ZERO), max, min) - a) < -self.below
     }
 
     /// Whether the triangle lies entirely behind one of the planes.
     #[inline]
     fn excludes_triangle(&self, p: &[Vec3; 3]) -> bool {
-        p.iter()
-            .all(|&q| self.horizon.dot(q - self.apex) < -self.below)
-            || self
-                .normals
-                .iter()
-                .any(|n| p.iter().all(|&q| n.dot(q - self.apex) < 0.0))
+        let d = p.map(|q| q - self.apex);
+        let behind = |d: Vec3| self.side_dots(d).cmplt(Vec4::ZERO);
+        (behind(d[0]) & behind(d[1]) & behind(d[2])).any()
+            || d.iter().all(|&d| self.horizon.dot(d) < -self.below)
     }
 }
 
@@ -208,7 +249,7 @@ mod tests {
             let p: [Vec3; 3] = std::array::from_fn(|k| {
                 o + corners[k][0] * t1 + corners[k][1] * t2 - depths[k] * margin * n
             });
-            let pyr = Pyramid { apex: o, normals: [Vec3::ZERO; 4], horizon: n, below: margin };
+            let pyr = Pyramid::new(o, [Vec3::ZERO; 4], n, margin);
             prop_assume!(pyr.excludes_triangle(&p));
             // A point of the triangle, lifted to `above` over the horizon plane.
             let (a, b) = if at[0] + at[1] > 1.0 { (1.0 - at[0], 1.0 - at[1]) } else { (at[0], at[1]) };

@@ -225,6 +225,30 @@ mod tests {
         // Rays that graze the plane closely are often rounded below it and skipped: allow it.
         #![proptest_config(ProptestConfig { max_global_rejects: 1 << 20, ..ProptestConfig::default() })]
 
+        /// The four side planes in `Vec4` lanes decide as the scalar dot products do, bit
+        /// for bit (the claim that makes culling the same as before the lanes).
+        #[test]
+        fn lanes_decide_as_scalar_planes(
+            apex in prop::array::uniform3(-2.0f32..2.0),
+            normals in prop::array::uniform4(prop::array::uniform3(-1.0f32..1.0)),
+            h in prop::array::uniform3(-1.0f32..1.0),
+            pts in prop::array::uniform3(prop::array::uniform3(-3.0f32..3.0)),
+            below in 0.0f32..1e-3,
+        ) {
+            let (apex, h) = (Vec3::from(apex), Vec3::from(h));
+            let normals = normals.map(Vec3::from);
+            let p = pts.map(Vec3::from);
+            let pyr = Pyramid::new(apex, normals, h, below);
+            let far = |n: Vec3, min: Vec3, max: Vec3| Vec3::select(n.cmpge(Vec3::ZERO), max, min) - apex;
+            let (min, max) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+            let scalar_box = h.dot(far(h, min, max)) < -below
+                || normals.iter().any(|&n| n.dot(far(n, min, max)) < 0.0);
+            let scalar_tri = p.iter().all(|&q| h.dot(q - apex) < -below)
+                || normals.iter().any(|n| p.iter().all(|&q| n.dot(q - apex) < 0.0));
+            prop_assert_eq!(pyr.excludes_box(min, max), scalar_box);
+            prop_assert_eq!(pyr.excludes_triangle(&p), scalar_tri);
+        }
+
         /// The horizon plane culls only what no cast ray can hit: a triangle wholly more than
         /// the margin below the plane through the apex is missed, by the bake's own closed
         /// ray test, by every ray above the horizon — here those passing just above the

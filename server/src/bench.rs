@@ -59,7 +59,8 @@ pub struct BenchArgs {
     /// the GPU backend's cast (every ray that matters, in a wgpu compute shader).
     #[arg(long, value_delimiter = ',', default_value = "full,adaptive")]
     pub casts: Vec<String>,
-    /// Passes of each cast, interleaved; the fastest is reported (for a shared machine).
+    /// Passes of each cast (interleaved) and of each fit; the fastest of each is reported (for
+    /// a shared machine).
     #[arg(long, default_value_t = 1)]
     pub repeat: usize,
     /// Split methods to compare.
@@ -363,15 +364,26 @@ pub fn run(a: &BenchArgs) -> Result<()> {
             let ray_vs_first = first.as_ref().map_or(1.0, |f| ray_s / f.1);
             let mut nm_fit = None;
             for &method in &methods {
-                let fits: Vec<_> = pool.install(|| {
-                    maps.par_iter()
-                        .map(|(faces, _, _)| {
-                            let t = Instant::now();
-                            let (trees, st) = baker.fit_faces(faces, method);
-                            (trees, st, t.elapsed().as_secs_f64())
-                        })
-                        .collect()
-                });
+                // Fitted `--repeat` times too, the fastest pass kept (the trees are the same).
+                let fit_pass = || -> Vec<_> {
+                    pool.install(|| {
+                        maps.par_iter()
+                            .map(|(faces, _, _)| {
+                                let t = Instant::now();
+                                let (trees, st) = baker.fit_faces(faces, method);
+                                (trees, st, t.elapsed().as_secs_f64())
+                            })
+                            .collect()
+                    })
+                };
+                let fit_seconds = |f: &[(_, _, f64)]| f.iter().map(|x| x.2).sum::<f64>();
+                let mut fits = fit_pass();
+                for _ in 1..a.repeat.max(1) {
+                    let again = fit_pass();
+                    if fit_seconds(&again) < fit_seconds(&fits) {
+                        fits = again;
+                    }
+                }
                 let mut totals = Totals::default();
                 let mut trees = Vec::with_capacity(fits.len());
                 for ((_, counts, rs), (tr, st, fs)) in maps.iter().zip(fits) {

@@ -213,9 +213,10 @@ impl Baker {
         let walk = walk::SurfaceWalk::new(&mesh, &occluder);
         let table = RayTable::new(settings.face_res, settings.supersampling);
         let codec = LineCodec::for_resolution(settings.face_res);
-        let origins = origin::ray_origins(&mesh, RAY_OFFSET_SCALE * mesh.bounds().diagonal());
-        let t_min = RAY_T_MIN_SCALE * mesh.bounds().diagonal();
-        let horizon_margin = RAY_HORIZON_MARGIN_SCALE * mesh.bounds().diagonal();
+        let diagonal = mesh.bounds().diagonal();
+        let origins = origin::ray_origins(&mesh, RAY_OFFSET_SCALE * diagonal);
+        let t_min = RAY_T_MIN_SCALE * diagonal;
+        let horizon_margin = RAY_HORIZON_MARGIN_SCALE * diagonal;
         let header = BakeHeader::new(&settings, mesh.vertex_count() as u32, mesh.content_hash());
         Baker {
             mesh,

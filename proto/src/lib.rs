@@ -42,6 +42,7 @@ pub mod motion;
 pub mod paths;
 pub mod scene;
 pub mod sphere;
+pub mod srgb;
 pub mod texture;
 
 pub use error::{DecodeError, MeshError, SceneError};

@@ -23,6 +23,8 @@ use std::sync::{Arc, OnceLock};
 
 use glam::Vec2;
 
+use crate::srgb::linear_to_srgb8;
+
 /// Most texels per side of one texture.
 pub const MAX_TEXTURE_SIDE: u32 = 8192;
 /// Most texels of one texture (4096², 64 MiB as RGBA8).
@@ -141,23 +143,6 @@ fn bilinear(
     })
 }
 
-/// The 8-bit sRGB encoding of linear `c` (IEC 61966-2-1), the nearest code; NaN → 0. The
-/// inverse of the table colour textures are read through (and what PNG frames are written
-/// with).
-pub fn linear_to_srgb8(c: f32) -> u8 {
-    let c = if c.is_finite() {
-        c.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let e = if c <= 0.003_130_8 {
-        12.92 * c
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    };
-    (e * 255.0).round().clamp(0.0, 255.0) as u8
-}
-
 /// Texel (x, y) of RGBA8 `rgba` `width` texels wide.
 fn texel_of(rgba: &[u8], width: u32, x: usize, y: usize, srgb: bool) -> [f32; 4] {
     let i = 4 * (y * width as usize + x);
@@ -166,7 +151,7 @@ fn texel_of(rgba: &[u8], width: u32, x: usize, y: usize, srgb: bool) -> [f32; 4]
     };
     let lin = |b: u8| {
         if srgb {
-            srgb_table()[b as usize]
+            crate::srgb::decode(b)
         } else {
             f32::from(b) / 255.0
         }
@@ -298,21 +283,6 @@ impl UvTransform {
         let [a, b, c, d, tx, ty] = self.matrix();
         Vec2::new(a * uv.x + b * uv.y + tx, c * uv.x + d * uv.y + ty)
     }
-}
-
-/// The sRGB → linear table for 8-bit values (IEC 61966-2-1).
-fn srgb_table() -> &'static [f32; 256] {
-    static TABLE: OnceLock<[f32; 256]> = OnceLock::new();
-    TABLE.get_or_init(|| {
-        std::array::from_fn(|i| {
-            let c = i as f32 / 255.0;
-            if c <= 0.04045 {
-                c / 12.92
-            } else {
-                ((c + 0.055) / 1.055).powf(2.4)
-            }
-        })
-    })
 }
 
 impl Texture {
@@ -495,14 +465,13 @@ impl LightImage {
             .map_err(|_| "not a PNG, JPEG, OpenEXR or Radiance HDR image".to_string())?;
         if matches!(format, image::ImageFormat::Png | image::ImageFormat::Jpeg) {
             let t = Texture::decode(bytes, "")?;
-            let lut = srgb_table();
             return Ok(LightImage {
                 width: t.width,
                 height: t.height,
                 texels: t
                     .rgba
                     .chunks_exact(4)
-                    .map(|c| [lut[c[0] as usize], lut[c[1] as usize], lut[c[2] as usize]])
+                    .map(|c| [c[0], c[1], c[2]].map(crate::srgb::decode))
                     .collect(),
             });
         }

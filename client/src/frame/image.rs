@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
+use rayon::prelude::*;
 
 /// A linear-RGB image, row-major from the top left.
 #[derive(Clone, Debug, PartialEq)]
@@ -70,16 +71,20 @@ impl Image {
     /// Tone-mapped 8-bit sRGB: exposure, the ACES filmic curve (Narkowicz 2015 fit), sRGB OETF.
     pub fn to_srgb8(&self, exposure: f32) -> image::RgbImage {
         let mut out = image::RgbImage::new(self.width, self.height);
-        for (o, p) in out.pixels_mut().zip(&self.pixels) {
-            o.0 = p.map(|c| encode_srgb(aces(c * exposure)));
-        }
+        out.par_chunks_exact_mut(3)
+            .zip(&self.pixels)
+            .for_each(|(o, p)| {
+                for (o, &c) in o.iter_mut().zip(p) {
+                    *o = encode_srgb(aces(c * exposure));
+                }
+            });
         out
     }
 
     /// [`Image::to_srgb8`] as 0x00RRGGBB words, row by row (a window's framebuffer).
     pub fn to_0rgb(&self, exposure: f32) -> Vec<u32> {
         self.pixels
-            .iter()
+            .par_iter()
             .map(|p| {
                 let [r, g, b] = p.map(|c| u32::from(encode_srgb(aces(c * exposure))));
                 (r << 16) | (g << 8) | b
@@ -106,7 +111,7 @@ fn aces(x: f32) -> f32 {
 }
 
 fn encode_srgb(c: f32) -> u8 {
-    bspvt_proto::texture::linear_to_srgb8(c)
+    bspvt_proto::srgb::linear_to_srgb8(c)
 }
 
 #[cfg(test)]

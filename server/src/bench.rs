@@ -340,7 +340,6 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                 }
             }
         };
-        let pass_seconds = |m: &[(CubeMap, CastCounts, f64)]| m.iter().map(|x| x.2).sum::<f64>();
         let mut passes: Vec<Option<Vec<(CubeMap, CastCounts, f64)>>> = vec![None; casts.len()];
         for _ in 0..a.repeat.max(1) {
             for (slot, &cast) in passes.iter_mut().zip(&casts) {
@@ -376,11 +375,10 @@ pub fn run(a: &BenchArgs) -> Result<()> {
                             .collect()
                     })
                 };
-                let fit_seconds = |f: &[(_, _, f64)]| f.iter().map(|x| x.2).sum::<f64>();
                 let mut fits = fit_pass();
                 for _ in 1..a.repeat.max(1) {
                     let again = fit_pass();
-                    if fit_seconds(&again) < fit_seconds(&fits) {
+                    if pass_seconds(&again) < pass_seconds(&fits) {
                         fits = again;
                     }
                 }
@@ -492,4 +490,9 @@ fn print_table(rows: &[BenchRow], a: &BenchArgs, threads: usize) {
              cast's thread-seconds."
         );
     }
+}
+
+/// Seconds of a timed pass: the sum of its items' times (the last field).
+fn pass_seconds<A, B>(pass: &[(A, B, f64)]) -> f64 {
+    pass.iter().map(|x| x.2).sum()
 }

@@ -19,6 +19,8 @@ pub mod fit;
 mod frustum;
 #[cfg(feature = "gpu")]
 pub mod gpu_cast;
+#[cfg(feature = "gpu")]
+pub mod gpu_fit;
 mod origin;
 pub mod refine;
 pub mod stats;

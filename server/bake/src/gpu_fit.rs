@@ -742,6 +742,46 @@ mod tests {
         assert!(flagged * 2 < total, "{flagged} of {total} flagged");
     }
 
+    /// Real faces: the cube maps of the built-in scene (plate-small) at 16², 32² and 64², one
+    /// and four rays per pixel.
+    #[test]
+    fn real_faces_fit_as_on_the_cpu() {
+        let Some(ctx) = gpu() else { return };
+        let gpu = GpuFitter::new(ctx).expect("fit pipeline");
+        let (mut total, mut flagged, mut differ) = (0, 0, 0);
+        for (res, ss) in [(16u32, 1u32), (32, 1), (64, 1), (32, 2), (64, 2)] {
+            let mut scene = bspvt_proto::builtin::scene("plate-small").expect("built-in scene");
+            scene.bake.face_res = res;
+            scene.bake.supersampling = ss;
+            let b = crate::Baker::new(&scene);
+            let n = b.mesh().vertex_count() as u32;
+            let mut faces = Vec::new();
+            for v in (0..n).step_by((n / 40).max(1) as usize) {
+                let (maps, _) = b.cube_map(v);
+                faces.extend(maps.into_iter().flatten().map(|f| (f.index, f.visible)));
+            }
+            let f = Fitter {
+                codec: &b.codec,
+                res,
+                uv: &b.table.uv,
+                samples: b.table.samples,
+                epsilon_pixels: f64::from(b.settings.epsilon) * f64::from(res * res),
+                method: b.settings.split,
+            };
+            let (t, fl, d) = compare(
+                &gpu,
+                &f,
+                &faces,
+                &format!("plate-small {res}² S={}", ss * ss),
+            );
+            total += t;
+            flagged += fl;
+            differ += d;
+        }
+        eprintln!("real faces: {total} compared, {flagged} flagged for the CPU, {differ} differ");
+        assert_eq!(differ, 0, "faces differ");
+    }
+
     /// The comparison sees a wrong shader: ties of E broken the other way change trees.
     #[test]
     fn wrong_ties_are_caught() {

@@ -491,9 +491,6 @@ impl Layout {
 
 /// A face's tree and statistics from the shader's words, or why the CPU must fit it.
 fn decode(fitter: &Fitter, layout: &Layout, w: &[u32]) -> GpuFaceFit {
-    if std::env::var_os("BSPVT_FIT_DEBUG").is_some() {
-        eprintln!("face header {:?}", &w[..HEADER]);
-    }
     match w[0] {
         0 => {}
         1 => return Err(Refit::Budget),
@@ -742,15 +739,24 @@ mod tests {
         assert!(flagged * 2 < total, "{flagged} of {total} flagged");
     }
 
-    /// Real faces: the cube maps of the built-in scene (plate-small) at 16², 32² and 64², one
-    /// and four rays per pixel.
+    /// Real faces: the cube maps of built-in scenes (plate-small, the room, the two-lamp room)
+    /// at 16², 32² and 64², one and four rays per pixel.
     #[test]
     fn real_faces_fit_as_on_the_cpu() {
         let Some(ctx) = gpu() else { return };
         let gpu = GpuFitter::new(ctx).expect("fit pipeline");
         let (mut total, mut flagged, mut differ) = (0, 0, 0);
-        for (res, ss) in [(16u32, 1u32), (32, 1), (64, 1), (32, 2), (64, 2)] {
-            let mut scene = bspvt_proto::builtin::scene("plate-small").expect("built-in scene");
+        for (name, res, ss) in [
+            ("plate-small", 16u32, 1u32),
+            ("plate-small", 32, 1),
+            ("plate-small", 64, 1),
+            ("plate-small", 32, 2),
+            ("plate-small", 64, 2),
+            ("room", 32, 1),
+            ("room", 64, 1),
+            ("two-lamps", 64, 2),
+        ] {
+            let mut scene = bspvt_proto::builtin::scene(name).expect("built-in scene");
             scene.bake.face_res = res;
             scene.bake.supersampling = ss;
             let b = crate::Baker::new(&scene);
@@ -768,12 +774,7 @@ mod tests {
                 epsilon_pixels: f64::from(b.settings.epsilon) * f64::from(res * res),
                 method: b.settings.split,
             };
-            let (t, fl, d) = compare(
-                &gpu,
-                &f,
-                &faces,
-                &format!("plate-small {res}² S={}", ss * ss),
-            );
+            let (t, fl, d) = compare(&gpu, &f, &faces, &format!("{name} {res}² S={}", ss * ss));
             total += t;
             flagged += fl;
             differ += d;

@@ -48,9 +48,11 @@ pub use bspvt_raytrace::gpu::{GpuContext, GpuError};
 
 use crate::fit::{FitStats, Fitter};
 
-/// Loop iterations a face may spend before the nodes left go to the CPU: below llvmpipe's
-/// 65,535 by more than the shader's bound of one node's cost.
-const BUDGET: u32 = 60_000;
+/// Loop iterations a face may spend, as the shader counts them (an upper bound of what
+/// llvmpipe's limiter counts): a node that could pass it is not started, and the face goes to
+/// the CPU. Just below llvmpipe's 65,535; should the count fall short, the shader's canary
+/// loop still sees the limiter run out and flags the face.
+const BUDGET: u32 = 65_000;
 
 /// The largest face resolution fitted on the GPU (u32 moments and leaf values, 257 bins).
 pub const MAX_GPU_RES: u32 = 64;
@@ -77,6 +79,9 @@ pub enum Refit {
     Nodes,
     /// The depth-first stack would overflow.
     Stack,
+    /// llvmpipe's loop limiter ran out although the shader's count said it would not (the
+    /// canary loop saw it): a loop may have been cut short.
+    Limit,
     /// The shader's answer did not decode to a tree (a defensive check).
     Malformed,
 }
@@ -496,6 +501,7 @@ fn decode(fitter: &Fitter, layout: &Layout, w: &[u32]) -> GpuFaceFit {
         1 => return Err(Refit::Budget),
         2 => return Err(Refit::Nodes),
         3 => return Err(Refit::Stack),
+        4 => return Err(Refit::Limit),
         _ => return Err(Refit::Malformed),
     }
     let count = w[1] as usize;

@@ -17,7 +17,9 @@
 
 use bspvt_bake::fit::{FitStats, Fitter};
 use bspvt_proto::SplitMethod;
-use bspvt_proto::bspvt::{FaceTree, LineCodec, MAX_DEPTH, Node, QLine, VertexTrees, quantise};
+use bspvt_proto::bspvt::{
+    FaceTree, LineCodec, MAX_DEPTH, Node, QLine, VertexTrees, quantise, quantise_ratio,
+};
 use bspvt_proto::cubemap::{FACES, pixel_centres};
 use bspvt_tests::{Rng, check_split, node_depths, random_face};
 use glam::{DVec3, Vec2};
@@ -111,8 +113,9 @@ fn check_fit(
             return Err(format!("leaf {i} (value {value}) receives no pixel"));
         }
         let mean = a.s1 as f64 / (a.n as f64 * samples);
-        let want = quantise(mean);
-        if value != want || want != (mean * 255.0).round() as u8 {
+        // The integer rule (round half up of 255 Σk / (n S)), and the nearest 8-bit value.
+        let want = quantise_ratio(a.s1, a.n * u64::from(f.samples));
+        if value != want || (f64::from(want) - mean * 255.0).abs() > 0.5 + 1e-9 {
             return Err(format!(
                 "leaf {i}: value {value}, mean of its {} pixels {mean} → {want}",
                 a.n

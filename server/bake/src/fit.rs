@@ -4,6 +4,9 @@
 //! most `ε · res²`; otherwise it is split by the line l minimising
 //! E(P, l) = Σ_p (H0(d(p)) − V(p))² (eq. 3). Visibility is kept as integer escape counts
 //! k ∈ 0..=S per pixel (V = k / S), so every sum below is exact and the bake is deterministic.
+//! Every decision is made in integers — E, the leaf test (D·2¹⁶ ≤ T·n with D = n Σk² − (Σk)²),
+//! the children's squared deviation as an exact ratio, the leaf value by integer rounding — so
+//! a device without f64 (a GPU fit) can make the same ones.
 //!
 //! Split searches ([`SplitMethod`]):
 //! - `Exhaustive`: for every quantised angle θ in [0, π), a histogram of the pixels over the
@@ -23,7 +26,7 @@
 //!   the baseline's trees are less accurate.
 
 use bspvt_proto::SplitMethod;
-use bspvt_proto::bspvt::{FaceTree, LineCodec, MAX_DEPTH, Node, QLine, quantise};
+use bspvt_proto::bspvt::{FaceTree, LineCodec, MAX_DEPTH, Node, QLine, quantise_ratio};
 use glam::Vec2;
 
 /// Builder settings for one bake.
@@ -149,14 +152,68 @@ impl Moments {
     fn err_as_one(&self, s: u64) -> u64 {
         self.n * s * s + self.s2 - 2 * s * self.s1
     }
-    /// S² · Σ (V − v̄)² = Σk² − (Σk)²/n.
-    fn ssd_scaled(&self) -> f64 {
+    /// n · S² · Σ (V − v̄)² = n Σk² − (Σk)², exact (≥ 0 by Cauchy–Schwarz; < 2⁴⁹ for a
+    /// face of at most 2¹⁸ pixels of k ≤ 2⁶).
+    fn deviation_times_n(&self) -> u64 {
+        self.n * self.s2 - self.s1 * self.s1
+    }
+    /// S² · Σ (V − v̄)² = Σk² − (Σk)²/n as an exact ratio.
+    fn ssd(&self) -> Ratio {
         if self.n == 0 {
-            return 0.0;
+            return Ratio::ZERO;
         }
-        self.s2 as f64 - (self.s1 as f64).powi(2) / self.n as f64
+        Ratio {
+            num: u128::from(self.deviation_times_n()),
+            den: u128::from(self.n),
+        }
     }
 }
+
+/// A non-negative rational `num / den` compared exactly (cross-multiplied), so the fit's
+/// decisions are the same on every device (the GPU fit, `gpu_fit.rs`, has no f64). `den = 0`
+/// is +∞. Holds sums of two squared deviations: num < 2⁶⁷, den ≤ 2³⁶, products < 2¹⁰⁴.
+#[derive(Clone, Copy, Debug)]
+struct Ratio {
+    num: u128,
+    den: u128,
+}
+
+impl Ratio {
+    const ZERO: Ratio = Ratio { num: 0, den: 1 };
+    const INFINITY: Ratio = Ratio { num: 1, den: 0 };
+
+    fn whole(n: u64) -> Ratio {
+        Ratio {
+            num: u128::from(n),
+            den: 1,
+        }
+    }
+
+    /// a/b + c/d = (a d + c b) / (b d), for finite ratios.
+    fn plus(self, o: Ratio) -> Ratio {
+        Ratio {
+            num: self.num * o.den + o.num * self.den,
+            den: self.den * o.den,
+        }
+    }
+}
+
+impl Ord for Ratio {
+    fn cmp(&self, o: &Ratio) -> std::cmp::Ordering {
+        (self.num * o.den).cmp(&(o.num * self.den))
+    }
+}
+impl PartialOrd for Ratio {
+    fn partial_cmp(&self, o: &Ratio) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl PartialEq for Ratio {
+    fn eq(&self, o: &Ratio) -> bool {
+        self.cmp(o).is_eq()
+    }
+}
+impl Eq for Ratio {}
 
 impl Fitter<'_> {
     /// Builds the tree of one face from its pixels that matter (`index`, escape counts),
@@ -306,8 +363,7 @@ impl Fitter<'_> {
         scratch: &mut Scratch,
     ) {
         let m = Self::moments(&cells);
-        let s = self.samples as f64;
-        let is_leaf = m.ssd_scaled() <= self.epsilon_pixels * s * s || depth >= MAX_DEPTH;
+        let is_leaf = depth >= MAX_DEPTH || self.within_epsilon(m);
         let split = if is_leaf {
             None
         } else {
@@ -374,23 +430,40 @@ impl Fitter<'_> {
         (left, right)
     }
 
-    fn leaf(&self, cells: &[Cell], m: Moments, nodes: &mut Vec<Node>, stats: &mut FitStats) {
+    /// The leaf threshold S² · ε · res² in units of 2⁻¹⁶ (rounded down), the integer the
+    /// leaf test compares against ([`Self::within_epsilon`]).
+    pub(crate) fn leaf_threshold(&self) -> u64 {
         let s = self.samples as f64;
-        let mean = if m.n > 0 {
-            m.s1 as f64 / (m.n as f64 * s)
+        (self.epsilon_pixels * s * s * 65536.0).floor() as u64
+    }
+
+    /// The leaf test Σ (V − v̄)² ≤ ε · res² [paper000 §3.2], exactly in integers:
+    /// D / n ≤ T / 2¹⁶ ⇔ D · 2¹⁶ ≤ T · n, D = n Σk² − (Σk)², T = [`Self::leaf_threshold`].
+    fn within_epsilon(&self, m: Moments) -> bool {
+        u128::from(m.deviation_times_n()) << 16
+            <= u128::from(self.leaf_threshold()) * u128::from(m.n)
+    }
+
+    fn leaf(&self, cells: &[Cell], m: Moments, nodes: &mut Vec<Node>, stats: &mut FitStats) {
+        let s = u64::from(self.samples);
+        // v̄ = Σk / (n S), quantised by the integer rule (an empty set: fully visible).
+        let value = if m.n > 0 {
+            quantise_ratio(m.s1, m.n * s)
         } else {
-            1.0
+            255
         };
-        let value = quantise(mean);
-        let vq = value as f64 / 255.0;
+        // |V − v̄_q| = |255 k − v S| / (255 S): summed as integers, divided once.
+        let (mut abs_num, mut misclassified) = (0u64, 0u64);
         for c in cells {
-            let w = (c.size as u64).pow(2);
-            let err = (c.k as f64 / s - vq).abs();
-            stats.abs_error += err * w as f64;
-            if err > 0.5 {
-                stats.misclassified += w;
+            let w = u64::from(c.size).pow(2);
+            let d = (255 * u64::from(c.k)).abs_diff(u64::from(value) * s);
+            abs_num += w * d;
+            if 2 * d > 255 * s {
+                misclassified += w;
             }
         }
+        stats.abs_error += abs_num as f64 / (255 * s) as f64;
+        stats.misclassified += misclassified;
         stats.pixels += m.n;
         stats.leaves += 1;
         nodes.push(Node::Leaf { value });
@@ -432,16 +505,16 @@ impl Fitter<'_> {
         let s = self.samples as u64;
         let constant = total.err_as_zero().min(total.err_as_one(s));
         // Rank an angle by E where E improves on a constant, else by the children's deviation.
-        let score = |b: &Best| -> (u64, u64) {
+        let score = |b: &Best| -> (u8, Ratio) {
             if b.err < constant {
-                (0, b.err)
+                (0, Ratio::whole(b.err))
             } else {
-                (1, (b.ssd * 1024.0) as u64)
+                (1, b.ssd)
             }
         };
         let mut best = Best::default();
         // The best coarse angle: the lowest (score, angle).
-        let mut start: Option<((u64, u64), u32)> = None;
+        let mut start: Option<((u8, Ratio), u32)> = None;
         for a in (0..half).step_by(step_coarse as usize) {
             let mut b = Best::default();
             self.sweep(cells, total, a as u16, &mut b, stats, scratch);
@@ -547,7 +620,7 @@ impl Fitter<'_> {
                 let (b, next) = (pair[0], pair[1]);
                 left = left.plus(moments(b));
                 let right = total.minus(left);
-                best.offer_ssd(left.ssd_scaled() + right.ssd_scaled(), line(b, next));
+                best.offer_ssd(left.ssd().plus(right.ssd()), line(b, next));
             }
         }
         for &b in bins.iter() {
@@ -677,7 +750,7 @@ impl Scratch {
 struct Best {
     err: u64,
     line: Option<QLine>,
-    ssd: f64,
+    ssd: Ratio,
     ssd_line: Option<QLine>,
 }
 
@@ -686,7 +759,7 @@ impl Default for Best {
         Best {
             err: u64::MAX,
             line: None,
-            ssd: f64::INFINITY,
+            ssd: Ratio::INFINITY,
             ssd_line: None,
         }
     }
@@ -701,7 +774,7 @@ impl Best {
         }
     }
     #[inline]
-    fn offer_ssd(&mut self, ssd: f64, line: QLine) {
+    fn offer_ssd(&mut self, ssd: Ratio, line: QLine) {
         if ssd < self.ssd {
             self.ssd = ssd;
             self.ssd_line = Some(line);
@@ -734,6 +807,107 @@ impl Best {
 mod tests {
     use super::*;
     use bspvt_proto::cubemap::pixel_centres;
+
+    /// Moments of `n` pixels with random escape counts in 0..=s.
+    fn random_moments(seed: &mut u64, n: u64, s: u64) -> Moments {
+        let mut m = Moments::default();
+        for _ in 0..n {
+            *seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let k = (*seed >> 33) % (s + 1);
+            m = m.plus(Moments {
+                n: 1,
+                s1: k,
+                s2: k * k,
+            });
+        }
+        m
+    }
+
+    /// The exact ratios order the children's squared deviations as the reals do: against f64
+    /// wherever f64 can tell them apart, equal sums of different shape compare equal, and ∞
+    /// is above every finite sum.
+    #[test]
+    fn ratios_order_as_reals() {
+        let mut seed = 7u64;
+        let mut compared = 0;
+        for _ in 0..4000 {
+            let sum = |seed: &mut u64| {
+                let s = 1 + (*seed >> 40) % 16;
+                let (a, b) = (1 + (*seed >> 20) % 300, 1 + (*seed >> 30) % 300);
+                let (l, r) = (random_moments(seed, a, s), random_moments(seed, b, s));
+                let real = |m: Moments| m.s2 as f64 - (m.s1 as f64).powi(2) / m.n as f64;
+                (l.ssd().plus(r.ssd()), real(l) + real(r))
+            };
+            let ((x, fx), (y, fy)) = (sum(&mut seed), sum(&mut seed));
+            assert!(x < Ratio::INFINITY && Ratio::ZERO <= x);
+            if (fx - fy).abs() > 1e-9 * fx.abs().max(fy.abs()).max(1.0) {
+                assert_eq!(x < y, fx < fy, "{x:?} {fx} vs {y:?} {fy}");
+                compared += 1;
+            }
+        }
+        assert!(compared > 3000, "{compared}");
+        // Equal values in different terms are equal (the search's ties keep the first line).
+        let (l, r) = (
+            random_moments(&mut seed, 30, 4),
+            random_moments(&mut seed, 50, 4),
+        );
+        assert_eq!(l.ssd().plus(r.ssd()), r.ssd().plus(l.ssd()));
+        let half = Ratio { num: 3, den: 6 };
+        assert_eq!(half.plus(half), Ratio::whole(1));
+        assert!(Ratio::whole(1) < Ratio::INFINITY && Ratio::INFINITY == Ratio::INFINITY);
+    }
+
+    /// The integer leaf test is Σ (V − v̄)² ≤ ε·res²: the f64 rule wherever f64 is clear of
+    /// the threshold's 2⁻¹⁶ rounding.
+    #[test]
+    fn leaf_test_is_the_threshold() {
+        let codec = LineCodec::for_resolution(16);
+        let uv = pixel_centres(16);
+        let mut seed = 11u64;
+        let (mut leaves, mut splits) = (0, 0);
+        for i in 0..3000 {
+            let samples = [1u32, 4, 16, 64][i % 4];
+            let eps = [0.0, 1e-4, 1e-3, 1e-2][(i / 4) % 4];
+            let f = Fitter {
+                codec: &codec,
+                res: 16,
+                uv: &uv,
+                samples,
+                epsilon_pixels: eps * 256.0,
+                method: SplitMethod::Default,
+            };
+            // Mostly uniform sets with a few odd pixels, so both answers occur.
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let n = 1 + (seed >> 50) % 200;
+            let odd = (seed >> 45) % 16;
+            let mut m = random_moments(&mut seed, odd, u64::from(samples));
+            let k = (seed >> 37) % (u64::from(samples) + 1);
+            m = m.plus(Moments {
+                n,
+                s1: n * k,
+                s2: n * k * k,
+            });
+            let s = f64::from(samples);
+            let ssd = m.s2 as f64 - (m.s1 as f64).powi(2) / m.n as f64;
+            let limit = f.epsilon_pixels * s * s;
+            if (ssd - limit).abs() > 1e-4 * s * s {
+                assert_eq!(f.within_epsilon(m), ssd <= limit, "{ssd} vs {limit}");
+                if ssd <= limit {
+                    leaves += 1;
+                } else {
+                    splits += 1;
+                }
+            }
+        }
+        assert!(
+            leaves > 300 && splits > 300,
+            "{leaves} leaves, {splits} splits"
+        );
+    }
 
     /// Every pixel that matters reaches exactly one leaf, at resolutions that are not multiples
     /// of the largest cell (16) too.

@@ -73,8 +73,10 @@ struct Params {
 // fit.rs `pack`), and Σk².
 var<workgroup> h_w: array<atomic<u32>, 1028>;
 var<workgroup> h_s2: array<atomic<u32>, 1028>;
-// Per slot q and invocation at [q·WG + lid]: its run's (n | Σk << 13, Σk²), then the scan.
-var<workgroup> part: array<vec2<u32>, 256>;
+// Per slot q and invocation at [q·WG + lid]: its run's (n | Σk << 13, Σk²), then the scan
+// (two halves of SCAN words, read from one while the other is written).
+const SCAN: u32 = 256u;
+var<workgroup> part: array<vec2<u32>, 512>;
 var<workgroup> red_e: array<atomic<u32>, 4>;
 var<workgroup> red_key: array<atomic<u32>, 4>;
 // The wrong-ties test hook's key (the last least E instead of the first), + 1.
@@ -493,30 +495,33 @@ fn sweep_pass(lid: u32, angles: vec4<u32>, arena: u32, base: u32, count: u32, to
     part[2u * WG + lid] = own[2];
     part[3u * WG + lid] = own[3];
     workgroupBarrier();
+    // Hillis–Steele, double-buffered (one barrier a step): 6 steps, from half 0 back to 0.
+    var src = 0u;
     for (var d = 1u; d < WG; d <<= 1u) {
-        var v0 = part[lid];
-        var v1 = part[WG + lid];
-        var v2 = part[2u * WG + lid];
-        var v3 = part[3u * WG + lid];
+        let dst = SCAN - src;
+        var v0 = part[src + lid];
+        var v1 = part[src + WG + lid];
+        var v2 = part[src + 2u * WG + lid];
+        var v3 = part[src + 3u * WG + lid];
         if lid >= d {
-            v0 += part[lid - d];
-            v1 += part[WG + lid - d];
-            v2 += part[2u * WG + lid - d];
-            v3 += part[3u * WG + lid - d];
+            v0 += part[src + lid - d];
+            v1 += part[src + WG + lid - d];
+            v2 += part[src + 2u * WG + lid - d];
+            v3 += part[src + 3u * WG + lid - d];
         }
+        part[dst + lid] = v0;
+        part[dst + WG + lid] = v1;
+        part[dst + 2u * WG + lid] = v2;
+        part[dst + 3u * WG + lid] = v3;
         workgroupBarrier();
-        part[lid] = v0;
-        part[WG + lid] = v1;
-        part[2u * WG + lid] = v2;
-        part[3u * WG + lid] = v3;
-        workgroupBarrier();
+        src = dst;
     }
     spent += 7u;
     var before = array<vec3<u32>, 4>(
-        unpack_w(part[lid].x - own[0].x, part[lid].y - own[0].y),
-        unpack_w(part[WG + lid].x - own[1].x, part[WG + lid].y - own[1].y),
-        unpack_w(part[2u * WG + lid].x - own[2].x, part[2u * WG + lid].y - own[2].y),
-        unpack_w(part[3u * WG + lid].x - own[3].x, part[3u * WG + lid].y - own[3].y),
+        unpack_w(part[src + lid].x - own[0].x, part[src + lid].y - own[0].y),
+        unpack_w(part[src + WG + lid].x - own[1].x, part[src + WG + lid].y - own[1].y),
+        unpack_w(part[src + 2u * WG + lid].x - own[2].x, part[src + 2u * WG + lid].y - own[2].y),
+        unpack_w(part[src + 3u * WG + lid].x - own[3].x, part[src + 3u * WG + lid].y - own[3].y),
     );
     var l0 = before[0];
     var l1 = before[1];

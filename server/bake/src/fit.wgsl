@@ -439,6 +439,16 @@ fn slot_lines(s: Sweep, q: u32, a: u32, err: u32, key: u32, sb: u32) -> Sweep {
     return r;
 }
 
+// Zeroes every histogram bin (before the first pass of a face).
+fn clear_histograms(lid: u32) {
+    for (var b = lid; b < SLOTS * MAX_BINS; b += WG) {
+        atomicStore(&h_w[b], 0u);
+        atomicStore(&h_s2[b], 0u);
+    }
+    spent += share(SLOTS * MAX_BINS) + 1u;
+    workgroupBarrier();
+}
+
 struct Pass {
     s: array<Sweep, 4>,
 }
@@ -451,17 +461,7 @@ struct Pass {
 fn sweep_pass(lid: u32, angles: vec4<u32>, arena: u32, base: u32, count: u32, total: vec3<u32>) -> Pass {
     let nb = params.offsets + 1u;
     let chunk = share(nb);
-    for (var b = lid; b < nb; b += WG) {
-        atomicStore(&h_w[b], 0u);
-        atomicStore(&h_s2[b], 0u);
-        atomicStore(&h_w[MAX_BINS + b], 0u);
-        atomicStore(&h_s2[MAX_BINS + b], 0u);
-        atomicStore(&h_w[2u * MAX_BINS + b], 0u);
-        atomicStore(&h_s2[2u * MAX_BINS + b], 0u);
-        atomicStore(&h_w[3u * MAX_BINS + b], 0u);
-        atomicStore(&h_s2[3u * MAX_BINS + b], 0u);
-    }
-    spent += chunk + 1u;
+    // The histograms are zero here (`clear_histograms`, then each pass's last loop).
     if lid < SLOTS {
         atomicStore(&red_e[lid], NONE);
         atomicStore(&red_key[lid], NONE);
@@ -630,11 +630,20 @@ fn sweep_pass(lid: u32, angles: vec4<u32>, arena: u32, base: u32, count: u32, to
     }
     spent += select(0u, SLOTS + 1u, any(ssd));
     // The next non-empty bin after each winner: the line sits mid-gap.
+    // The last reads of the invocation's own bins: it zeroes them for the next pass.
     for (var b = b0; b < b1; b++) {
         next_step(0u, b, eb.x, sb.x);
         next_step(1u, b, eb.y, sb.y);
         next_step(2u, b, eb.z, sb.z);
         next_step(3u, b, eb.w, sb.w);
+        atomicStore(&h_w[b], 0u);
+        atomicStore(&h_s2[b], 0u);
+        atomicStore(&h_w[MAX_BINS + b], 0u);
+        atomicStore(&h_s2[MAX_BINS + b], 0u);
+        atomicStore(&h_w[2u * MAX_BINS + b], 0u);
+        atomicStore(&h_s2[2u * MAX_BINS + b], 0u);
+        atomicStore(&h_w[3u * MAX_BINS + b], 0u);
+        atomicStore(&h_s2[3u * MAX_BINS + b], 0u);
     }
     spent += chunk + 1u;
     workgroupBarrier();
@@ -753,7 +762,7 @@ fn node_bound(count: u32) -> u32 {
     let cells = share(count);
     let chunk = share(params.offsets + 1u);
     let passes = 1u + firstTrailingBit(params.half / 4u);
-    let per_pass = 5u * chunk + cells + SLOTS * (chunk + 9u) + 48u;
+    let per_pass = 4u * chunk + cells + SLOTS * (chunk + 9u) + 48u;
     return passes * per_pass + 4u * cells + 2048u;
 }
 
@@ -902,6 +911,7 @@ fn main(@builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: v
     let scratch = arena + res * res;
     let ob = face * params.out_words;
     let count = build_cells(lid, face, lv, arena);
+    clear_histograms(lid);
     let root = vec3<u32>(atomicLoad(&mom[0]), atomicLoad(&mom[1]), atomicLoad(&mom[2]));
     workgroupBarrier();
     // The stack: base, count, depth, n, Σk, Σk², node to patch with this node's index.

@@ -92,7 +92,8 @@ var<workgroup> ctr: array<atomic<u32>, 8>;
 var<workgroup> mom: array<atomic<u32>, 6>;
 
 // Loop iterations so far, the same in every invocation (strided loops count their longest
-// share): an upper bound on what llvmpipe's limiter has counted. The limiter counts a loop's
+// share): meant as an upper bound of what llvmpipe's limiter has counted (a model, measured on
+// lavapipe; the canary in `main` catches it falling short). The limiter counts a loop's
 // last pass too (the one that finds the condition false and breaks: lanes are masked off, the
 // vector still reaches the loop's end), so every loop counts one more than its iterations.
 var<private> spent: u32;

@@ -259,7 +259,8 @@ impl Baker {
     /// [`Baker::fit_chunk`] with the trees fitted on the GPU ([`GpuFitter`]: the CPU's trees
     /// to the bit; the faces it leaves, and every face where the GPU fit does not apply —
     /// faces above [`MAX_GPU_RES`]², another split search, `BSPVT_GPU_FIT=0` — fitted on the
-    /// CPU, on the current rayon pool).
+    /// CPU, on the current rayon pool). `Totals::fit_seconds` is then the wall-clock seconds of
+    /// the GPU fit and the refits, not thread-seconds; the GPU's busy clock does not count it.
     fn fit_chunk_gpu(
         &self,
         gpu: &GpuCaster,

@@ -29,6 +29,8 @@ use rayon::prelude::*;
 pub use bspvt_raytrace::gpu::{GpuContext, GpuError};
 
 use crate::cubemap::{CastCounts, CubeMap, FacePixels, LightStop};
+use crate::fit::FitStats;
+use crate::gpu_fit::{FaceInput, GpuFitter, MAX_GPU_RES};
 use crate::{BakeOutput, Baker, Cancelled, Totals};
 
 /// A baker's occluder and cube-map table uploaded to a GPU.
@@ -36,6 +38,27 @@ pub struct GpuCaster {
     ctx: Arc<GpuContext>,
     occ: GpuOccluder,
     table: GpuCubeTable,
+    /// The tree fit's pipeline ([`GpuFitter`]), built on the first GPU bake that uses it;
+    /// `None` where the device refused it (the trees are then fitted on the CPU).
+    fit: std::sync::OnceLock<Option<GpuFitter>>,
+}
+
+impl GpuCaster {
+    /// The GPU tree fit, unless `BSPVT_GPU_FIT=0` or the device refused its pipeline.
+    fn fitter(&self) -> Option<&GpuFitter> {
+        if std::env::var_os("BSPVT_GPU_FIT").is_some_and(|v| v == "0") {
+            return None;
+        }
+        self.fit
+            .get_or_init(|| match GpuFitter::new(self.ctx.clone()) {
+                Ok(f) => Some(f),
+                Err(e) => {
+                    eprintln!("the GPU tree fit is unavailable ({e}): fitting on the CPU");
+                    None
+                }
+            })
+            .as_ref()
+    }
 }
 
 /// Why a GPU bake stopped.
@@ -97,7 +120,12 @@ impl Baker {
             .collect();
         let pixels = (FACES as u32) * t.res * t.res;
         let table = occ.cube_table(&ctx, &dirs, pixels, t.samples, &stops)?;
-        Ok(GpuCaster { ctx, occ, table })
+        Ok(GpuCaster {
+            ctx,
+            occ,
+            table,
+            fit: std::sync::OnceLock::new(),
+        })
     }
 
     /// The GPU's input for `vertices` (the pixels that matter found in parallel on the current
@@ -228,11 +256,78 @@ impl Baker {
         Ok((frame, t))
     }
 
+    /// [`Baker::fit_chunk`] with the trees fitted on the GPU ([`GpuFitter`]: the CPU's trees
+    /// to the bit; the faces it leaves, and every face where the GPU fit does not apply —
+    /// faces above [`MAX_GPU_RES`]², another split search, `BSPVT_GPU_FIT=0` — fitted on the
+    /// CPU, on the current rayon pool). `Totals::fit_seconds` is then the wall-clock seconds of
+    /// the GPU fit and the refits, not thread-seconds; the GPU's busy clock does not count it.
+    fn fit_chunk_gpu(
+        &self,
+        gpu: &GpuCaster,
+        c: u32,
+        maps: &[CubeMap],
+    ) -> Result<(Vec<u8>, Totals), GpuError> {
+        let fitter = self.fitter(self.settings.split);
+        let usable = self.settings.split == bspvt_proto::SplitMethod::Default
+            && self.settings.face_res <= MAX_GPU_RES;
+        let Some(gpu_fit) = gpu.fitter().filter(|_| usable) else {
+            return Ok(self.fit_chunk(c, maps));
+        };
+        let t0 = Instant::now();
+        let faces: Vec<FaceInput> = maps
+            .iter()
+            .flat_map(|m| m.iter().flatten())
+            .map(|p| FaceInput {
+                index: &p.index,
+                visible: &p.visible,
+            })
+            .collect();
+        let (fits, refit) = gpu_fit.fit_or_refit(&fitter, &faces)?;
+        let mut fits = fits.into_iter();
+        let mut totals = Totals::default();
+        let mut trees = Vec::with_capacity(maps.len());
+        for m in maps {
+            let mut vt = bspvt_proto::bspvt::VertexTrees::default();
+            let mut fit = FitStats::default();
+            for (f, px) in m.iter().enumerate() {
+                if px.is_some() {
+                    let Some((tree, st)) = fits.next() else {
+                        return Err(GpuError::Failed(
+                            "the GPU fit returned too few trees".into(),
+                        ));
+                    };
+                    vt.faces[f] = Some(tree);
+                    fit += st;
+                }
+            }
+            totals += Totals {
+                vertices: 1,
+                fit,
+                ..Totals::default()
+            };
+            trees.push(vt);
+        }
+        totals.fit_seconds = t0.elapsed().as_secs_f64();
+        if std::env::var_os("BSPVT_GPU_TIMING").is_some() {
+            eprintln!(
+                "gpu chunk {c}: {} faces fitted on the GPU, {refit} of them again on the CPU, in {:.2} ms",
+                faces.len(),
+                totals.fit_seconds * 1e3
+            );
+        }
+        let frame =
+            bspvt_proto::encoding::encode_chunk(self.chunk_range(c).start, &trees, &self.codec);
+        totals.bytes = frame.len() as u64;
+        Ok((frame, totals))
+    }
+
     /// [`Baker::bake_all`] with the rays cast on the GPU, pipelined: while the GPU casts chunk
     /// c, the current rayon pool finds chunk c + 1's pixels that matter, then assembles and
     /// fits chunk c's trees while the GPU casts chunk c + 1. A GPU thread only uploads,
     /// dispatches and reads back; all CPU work stays on the caller's pool (so `--threads`
-    /// holds). The same chunk frames as the CPU bake where the cube maps are the same.
+    /// holds). The trees are fitted on the GPU too where the GPU fit applies
+    /// (`fit_chunk_gpu`), from the main thread, as the GPU thread casts the next chunk.
+    /// The same chunk frames as the CPU bake where the cube maps are the same.
     /// `Totals::ray_seconds` sums the wall-clock seconds of finding the pixels, the GPU
     /// thread's upload–cast–read-back and the assembly of the cube maps (overlapping the fit),
     /// not thread-seconds.
@@ -299,7 +394,7 @@ impl Baker {
                 let (maps, counts) = self.gpu_assemble(batch, &occluded?);
                 let seconds = seconds + t0.elapsed().as_secs_f64();
                 let t1 = Instant::now();
-                let (frame, mut t) = self.fit_chunk(c, &maps);
+                let (frame, mut t) = self.fit_chunk_gpu(gpu, c, &maps)?;
                 if timing {
                     eprintln!(
                         "gpu chunk {c}: assembled in {:.2} ms, fitted in {:.2} ms",

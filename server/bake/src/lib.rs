@@ -19,6 +19,8 @@ pub mod fit;
 mod frustum;
 #[cfg(feature = "gpu")]
 pub mod gpu_cast;
+#[cfg(feature = "gpu")]
+pub mod gpu_fit;
 mod origin;
 pub mod refine;
 pub mod stats;
@@ -318,20 +320,25 @@ impl Baker {
         }
     }
 
-    /// Fits one tree per face of a cube map with the given split search.
-    pub fn fit_faces(
-        &self,
-        faces: &[Option<cubemap::FacePixels>; 6],
-        method: SplitMethod,
-    ) -> (VertexTrees, FitStats) {
-        let fitter = Fitter {
+    /// This bake's tree builder with the given split search.
+    pub(crate) fn fitter(&self, method: SplitMethod) -> Fitter<'_> {
+        Fitter {
             codec: &self.codec,
             res: self.settings.face_res,
             uv: &self.table.uv,
             samples: self.table.samples,
             epsilon_pixels: self.settings.epsilon as f64 * (self.settings.face_res as f64).powi(2),
             method,
-        };
+        }
+    }
+
+    /// Fits one tree per face of a cube map with the given split search.
+    pub fn fit_faces(
+        &self,
+        faces: &[Option<cubemap::FacePixels>; 6],
+        method: SplitMethod,
+    ) -> (VertexTrees, FitStats) {
+        let fitter = self.fitter(method);
         let mut trees = VertexTrees::default();
         let mut fit = FitStats::default();
         for (f, px) in faces.iter().enumerate() {

@@ -91,8 +91,8 @@ struct Spells {
     done: f64,
 }
 
-/// Holds a [`BusyClock`] busy until dropped.
-pub(crate) struct Busy<'a>(&'a BusyClock);
+/// Holds the device's busy clock ([`GpuContext::busy_seconds`]) busy until dropped.
+pub struct Busy<'a>(&'a BusyClock);
 
 impl BusyClock {
     fn lock(&self) -> std::sync::MutexGuard<'_, Spells> {
@@ -161,14 +161,15 @@ impl GpuContext {
     }
 
     /// Seconds during which this device had at least one of the bake's dispatches in flight
-    /// (upload to read-back, [`crate::GpuOccluder::cube_counts`]) since it was made: its rate is
-    /// the GPU's utilisation by the bake (the service's `bspvt_gpu_busy_seconds_total`).
+    /// (upload to read-back: [`crate::GpuOccluder::cube_counts`], the bake's tree fit) since it
+    /// was made: its rate is the GPU's utilisation by the bake (the service's
+    /// `bspvt_gpu_busy_seconds_total`).
     pub fn busy_seconds(&self) -> f64 {
         self.busy.seconds()
     }
 
     /// Marks the device busy until the guard is dropped.
-    pub(crate) fn busy(&self) -> Busy<'_> {
+    pub fn busy(&self) -> Busy<'_> {
         self.busy.enter()
     }
 

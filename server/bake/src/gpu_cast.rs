@@ -242,13 +242,14 @@ impl Baker {
         Ok(self.gpu_assemble(batch, &counts))
     }
 
-    /// [`Baker::bake_chunk`] with the rays cast on the GPU (the service's GPU workers: several
-    /// workers keep the GPU and the fit threads busy).
+    /// [`Baker::bake_chunk`] with the rays cast on the GPU and the trees fitted there where the
+    /// GPU fit applies (`fit_chunk_gpu`; the service's GPU workers: several workers keep the
+    /// GPU and the refit threads busy).
     pub fn bake_chunk_gpu(&self, gpu: &GpuCaster, c: u32) -> Result<(Vec<u8>, Totals), GpuError> {
         let t0 = Instant::now();
         let (maps, counts) = self.gpu_cube_maps(gpu, &self.chunk_range(c).collect::<Vec<_>>())?;
         let ray_seconds = t0.elapsed().as_secs_f64();
-        let (frame, mut t) = self.fit_chunk(c, &maps);
+        let (frame, mut t) = self.fit_chunk_gpu(gpu, c, &maps)?;
         t.rays = counts.rays;
         t.traversals = counts.traversals;
         t.recast = counts.recast;
@@ -260,7 +261,8 @@ impl Baker {
     /// to the bit; the faces it leaves, and every face where the GPU fit does not apply —
     /// faces above [`MAX_GPU_RES`]², another split search, `BSPVT_GPU_FIT=0` — fitted on the
     /// CPU, on the current rayon pool). `Totals::fit_seconds` is then the wall-clock seconds of
-    /// the GPU fit and the refits, not thread-seconds; the GPU's busy clock does not count it.
+    /// the GPU fit and the refits, not thread-seconds; the GPU's busy clock counts the fit's
+    /// dispatches.
     fn fit_chunk_gpu(
         &self,
         gpu: &GpuCaster,

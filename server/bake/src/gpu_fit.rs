@@ -362,6 +362,8 @@ impl GpuFitter {
         }
         let ctx = &self.ctx;
         let device = &ctx.device;
+        // Upload to read-back counts on the device's busy clock, as the cast does.
+        let _busy = ctx.busy();
         let res = fitter.res as usize;
         let mut grid = vec![0xffu8; faces.len() * layout.grid_words as usize * 4];
         for (f, face) in faces.iter().enumerate() {

@@ -18,20 +18,6 @@ use bspvt_bake::gpu_cast::GpuContext;
 use bspvt_bake::{Baker, CastMode};
 use bspvt_proto::{BakeSettings, Scene};
 
-/// The GPU, or `None` (with a message) when wgpu finds no adapter.
-fn gpu() -> Option<Arc<GpuContext>> {
-    match GpuContext::new() {
-        Ok(ctx) => {
-            eprintln!("GPU: {}", ctx.describe());
-            Some(Arc::new(ctx))
-        }
-        Err(e) => {
-            eprintln!("skipped: {e}");
-            None
-        }
-    }
-}
-
 fn mesh_baker(file: &str, res: u32, ss: u32) -> Option<Baker> {
     let dir = bspvt_proto::paths::meshes_dir();
     let path = dir.join(file);
@@ -159,7 +145,9 @@ const MESHES: [&str; 3] = ["bunny_res4.ply", "teapot.obj", "dragon_res4.ply"];
 
 #[test]
 fn gpu_equals_full_cpu_cast() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = GpuContext::for_test() else {
+        return;
+    };
     let mut total = Seen::default();
     // The bake accepts 4..=512: the smallest, odd, non-power-of-two and power-of-two sizes up
     // to the default (64), with and without supersampling, then larger ones on fewer vertices.
@@ -205,7 +193,9 @@ fn gpu_equals_full_cpu_cast() {
 
 #[test]
 fn gpu_bake_writes_the_cpu_bytes() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = GpuContext::for_test() else {
+        return;
+    };
     let mut bakers = vec![("plate-small".to_string(), plate_baker(16, 1))];
     for file in ["teapot.obj", "bunny_res4.ply"] {
         if let Some(b) = mesh_baker(file, 8, 1) {
@@ -229,7 +219,9 @@ fn gpu_bake_writes_the_cpu_bytes() {
 /// Every third vertex at 8², every ninth at 16².
 #[test]
 fn gpu_equals_full_cpu_cast_on_the_room() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = GpuContext::for_test() else {
+        return;
+    };
     for (res, step) in [(8, 3), (16, 9)] {
         let mut scene = bspvt_proto::builtin::scene("room").expect("built-in room");
         scene.bake.face_res = res;
@@ -246,7 +238,9 @@ fn gpu_equals_full_cpu_cast_on_the_room() {
 /// (`SphereStop`, the WGSL `ray_end`'s sphere), the same on both (issue 34).
 #[test]
 fn gpu_equals_full_cpu_cast_on_the_punctual_room() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = GpuContext::for_test() else {
+        return;
+    };
     let mut scene = bspvt_proto::builtin::scene("punctual-room").expect("built-in room");
     scene.bake.face_res = 16;
     if let Some(r) = &mut scene.bake.refine {
@@ -264,7 +258,9 @@ fn gpu_equals_full_cpu_cast_on_the_punctual_room() {
 /// CPU bake's contract), with the GPU thread still busy on the next chunk.
 #[test]
 fn gpu_bake_reports_progress_and_cancels() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = GpuContext::for_test() else {
+        return;
+    };
     let mut scene = bspvt_proto::builtin::scene("plate-small").expect("built-in scene");
     scene.bake.face_res = 8;
     scene.bake.chunk_vertices = 512;
@@ -306,7 +302,9 @@ fn gpu_bake_reports_progress_and_cancels() {
 /// holes on both; and more than the opaque canopy's rays escape (issue 35).
 #[test]
 fn gpu_equals_full_cpu_cast_through_cutouts() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = GpuContext::for_test() else {
+        return;
+    };
     let rooms = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/rooms");
     let mut scene = bspvt_proto::Scene::from_mesh_path(&rooms.join("checker-canopy.gltf"))
         .expect("checker canopy");

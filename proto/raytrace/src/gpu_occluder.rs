@@ -11,7 +11,7 @@ use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
 use crate::Occluder;
-use crate::gpu::{GpuContext, GpuError};
+use crate::gpu::{GpuContext, GpuError, scope_result};
 
 /// One vertex of a cube-map batch: where its rays start, the nearest hit that counts, its
 /// normal (sub-rays below its horizon escape uncast) and its index (its own triangles are
@@ -118,14 +118,6 @@ impl GpuCubeTable {
 
 const WORKGROUP: u32 = 64;
 
-/// The error an error scope caught, if any.
-fn scope_error(scope: wgpu::ErrorScopeGuard) -> Result<(), GpuError> {
-    match crate::gpu::block_on(scope.pop()) {
-        Some(e) => Err(GpuError::Failed(e.to_string())),
-        None => Ok(()),
-    }
-}
-
 /// An occluder on the GPU: visibility cube maps of batches of vertices.
 pub struct GpuOccluder {
     pipeline: wgpu::ComputePipeline,
@@ -181,53 +173,10 @@ impl GpuOccluder {
             None => vec![0u32],
         };
         let cut = storage("cut-outs", bytemuck::cast_slice(&cut_words));
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("occlusion.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(
-                [include_str!("occlusion.wgsl"), crate::CUTOUT_WGSL]
-                    .concat()
-                    .into(),
-            ),
-        });
-        let entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let read = wgpu::BufferBindingType::Storage { read_only: true };
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("occlusion"),
-            entries: &[
-                entry(0, read),
-                entry(1, read),
-                entry(2, read),
-                entry(3, read),
-                entry(4, read),
-                entry(5, read),
-                entry(6, read),
-                entry(7, wgpu::BufferBindingType::Storage { read_only: false }),
-                entry(8, read),
-                entry(9, read),
-            ],
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("occlusion"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("occlusion"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let wgsl = [include_str!("occlusion.wgsl"), crate::CUTOUT_WGSL].concat();
+        // The BVH, triangles, … read; binding 7 (the counts) written.
+        let read_only = [true, true, true, true, true, true, true, false, true, true];
+        let (pipeline, layout) = ctx.storage_pipeline("occlusion", &wgsl, &read_only);
         let limits = device.limits();
         let by_dispatch = limits.max_compute_workgroups_per_dimension as usize
             * limits.max_compute_workgroups_per_dimension as usize
@@ -236,8 +185,8 @@ impl GpuOccluder {
             .min(limits.max_buffer_size as usize / 4)
             .min(by_dispatch)
             .min(1 << 24);
-        scope_error(validation)?;
-        scope_error(memory)?;
+        scope_result(validation)?;
+        scope_result(memory)?;
         Ok(GpuOccluder {
             pipeline,
             layout,
@@ -344,8 +293,8 @@ impl GpuOccluder {
             skew: 0,
             plain: false,
         };
-        scope_error(validation)?;
-        scope_error(memory)?;
+        scope_result(validation)?;
+        scope_result(memory)?;
         Ok(table)
     }
 
@@ -506,8 +455,8 @@ impl GpuOccluder {
         enc.copy_buffer_to_buffer(&result, 0, &readback, 0, bytes);
         let t_upload = t0.elapsed();
         ctx.queue.submit([enc.finish()]);
-        scope_error(validation)?;
-        scope_error(memory)?;
+        scope_result(validation)?;
+        scope_result(memory)?;
         let (tx, rx) = std::sync::mpsc::channel();
         readback.map_async(wgpu::MapMode::Read, .., move |r| {
             let _ = tx.send(r);

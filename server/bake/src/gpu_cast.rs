@@ -442,17 +442,6 @@ impl GpuBatch {
 mod tests {
     use super::*;
 
-    /// The GPU of this machine (lavapipe in CI), or `None`, saying so.
-    fn gpu() -> Option<Arc<GpuContext>> {
-        match GpuContext::new() {
-            Ok(ctx) => Some(Arc::new(ctx)),
-            Err(e) => {
-                eprintln!("skipped: no GPU adapter ({e})");
-                None
-            }
-        }
-    }
-
     /// Another device's rounding cannot change a cube map. With every reciprocal and quotient
     /// of the shader skewed by a few ULP (as WGSL lets a device divide), the plain answers —
     /// the shader's without the unsure flag — differ from the CPU's on the refined room, whose
@@ -462,7 +451,9 @@ mod tests {
     /// checker canopy (rays through an alpha cut-out).
     #[test]
     fn rounding_of_another_device_never_changes_a_cube_map() {
-        let Some(ctx) = gpu() else { return };
+        let Some(ctx) = GpuContext::for_test() else {
+            return;
+        };
         let rooms = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms");
         let mut scenes = Vec::new();
         for (name, res, step) in [("room", 8, 3), ("punctual-room", 16, 5)] {

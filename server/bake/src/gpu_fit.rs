@@ -51,6 +51,7 @@ use bspvt_proto::SplitMethod;
 use bspvt_proto::bspvt::{FaceTree, Node, QLine};
 use wgpu::util::DeviceExt;
 
+use bspvt_raytrace::gpu::scope_result;
 pub use bspvt_raytrace::gpu::{GpuContext, GpuError};
 
 use crate::fit::{FitStats, Fitter};
@@ -227,59 +228,15 @@ pub struct GpuFitter {
     wrong_ties: bool,
 }
 
-/// The error an error scope caught, if any.
-fn scope_error(scope: wgpu::ErrorScopeGuard) -> Result<(), GpuError> {
-    match bspvt_raytrace::gpu::block_on(scope.pop()) {
-        Some(e) => Err(GpuError::Failed(e.to_string())),
-        None => Ok(()),
-    }
-}
-
 impl GpuFitter {
     /// Builds the pipeline on `ctx`'s device.
     pub fn new(ctx: Arc<GpuContext>) -> Result<GpuFitter, GpuError> {
         let device = &ctx.device;
         let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("fit.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("fit.wgsl").into()),
-        });
-        let entry = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("fit"),
-            entries: &[
-                entry(0, true),
-                entry(1, true),
-                entry(2, true),
-                entry(3, true),
-                entry(4, true),
-                entry(5, false),
-                entry(6, false),
-            ],
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("fit"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("fit"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        scope_error(validation)?;
+        // The parameters, tables and grids read; the work area and the trees written.
+        let read_only = [true, true, true, true, true, false, false];
+        let (pipeline, layout) = ctx.storage_pipeline("fit", include_str!("fit.wgsl"), &read_only);
+        scope_result(validation)?;
         Ok(GpuFitter {
             ctx,
             pipeline,
@@ -453,8 +410,8 @@ impl GpuFitter {
         }
         enc.copy_buffer_to_buffer(&result, 0, &readback, 0, bytes);
         ctx.queue.submit([enc.finish()]);
-        scope_error(validation)?;
-        scope_error(memory)?;
+        scope_result(validation)?;
+        scope_result(memory)?;
         let (tx, rx) = std::sync::mpsc::channel();
         readback.map_async(wgpu::MapMode::Read, .., move |r| {
             let _ = tx.send(r);
@@ -556,20 +513,6 @@ mod tests {
     use bspvt_proto::bspvt::LineCodec;
     use bspvt_proto::cubemap::pixel_centres;
     use glam::Vec2;
-
-    /// The GPU of this machine (lavapipe in CI), or `None`, saying so.
-    fn gpu() -> Option<Arc<GpuContext>> {
-        match GpuContext::new() {
-            Ok(ctx) => {
-                eprintln!("GPU: {}", ctx.describe());
-                Some(Arc::new(ctx))
-            }
-            Err(e) => {
-                eprintln!("skipped: no GPU adapter ({e})");
-                None
-            }
-        }
-    }
 
     /// SplitMix64: reproducible faces without a dependency.
     struct Rng(u64);
@@ -733,7 +676,9 @@ mod tests {
     /// take (12²: its cells' quadtree would halve to odd sides) is all left to the CPU.
     #[test]
     fn random_faces_fit_as_on_the_cpu() {
-        let Some(ctx) = gpu() else { return };
+        let Some(ctx) = GpuContext::for_test() else {
+            return;
+        };
         let gpu = GpuFitter::new(ctx).expect("fit pipeline");
         let mut rng = Rng(7);
         let (mut total, mut flagged, mut differ) = (0, 0, 0);
@@ -787,7 +732,9 @@ mod tests {
     /// at 16², 32² and 64², one and four rays per pixel.
     #[test]
     fn real_faces_fit_as_on_the_cpu() {
-        let Some(ctx) = gpu() else { return };
+        let Some(ctx) = GpuContext::for_test() else {
+            return;
+        };
         let gpu = GpuFitter::new(ctx).expect("fit pipeline");
         let (mut total, mut flagged, mut differ) = (0, 0, 0);
         for (name, res, ss) in [
@@ -830,7 +777,9 @@ mod tests {
     /// The comparison sees a wrong shader: ties of E broken the other way change trees.
     #[test]
     fn wrong_ties_are_caught() {
-        let Some(ctx) = gpu() else { return };
+        let Some(ctx) = GpuContext::for_test() else {
+            return;
+        };
         let mut gpu = GpuFitter::new(ctx).expect("fit pipeline");
         gpu.set_wrong_ties(true);
         let mut rng = Rng(11);

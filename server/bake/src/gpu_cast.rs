@@ -30,7 +30,7 @@ pub use bspvt_raytrace::gpu::{GpuContext, GpuError};
 
 use crate::cubemap::{CastCounts, CubeMap, FacePixels, LightStop};
 use crate::fit::FitStats;
-use crate::gpu_fit::{FaceInput, GpuFitter, MAX_GPU_RES};
+use crate::gpu_fit::{self, FaceInput, GpuFitter};
 use crate::{BakeOutput, Baker, Cancelled, Totals};
 
 /// A baker's occluder and cube-map table uploaded to a GPU.
@@ -258,8 +258,9 @@ impl Baker {
     }
 
     /// [`Baker::fit_chunk`] with the trees fitted on the GPU ([`GpuFitter`]: the CPU's trees
-    /// to the bit; the faces it leaves, and every face where the GPU fit does not apply —
-    /// faces above [`MAX_GPU_RES`]², another split search, `BSPVT_GPU_FIT=0` — fitted on the
+    /// to the bit; the faces it leaves, and every face where the GPU fit does not apply
+    /// (`gpu_fit::supported`: faces above `MAX_GPU_RES`², another split search…, or
+    /// `BSPVT_GPU_FIT=0`) fitted on the
     /// CPU, on the current rayon pool). `Totals::fit_seconds` is then the wall-clock seconds of
     /// the GPU fit and the refits, not thread-seconds; the GPU's busy clock counts the fit's
     /// dispatches.
@@ -270,9 +271,7 @@ impl Baker {
         maps: &[CubeMap],
     ) -> Result<(Vec<u8>, Totals), GpuError> {
         let fitter = self.fitter(self.settings.split);
-        let usable = self.settings.split == bspvt_proto::SplitMethod::Default
-            && self.settings.face_res <= MAX_GPU_RES;
-        let Some(gpu_fit) = gpu.fitter().filter(|_| usable) else {
+        let Some(gpu_fit) = gpu.fitter().filter(|_| gpu_fit::supported(&fitter)) else {
             return Ok(self.fit_chunk(c, maps));
         };
         let t0 = Instant::now();

@@ -207,8 +207,9 @@ impl Tables {
     }
 }
 
-/// Whether the shader handles `fitter`'s settings.
-fn supported(fitter: &Fitter) -> bool {
+/// Whether the shader handles `fitter`'s settings (otherwise every face is
+/// [`Refit::Unsupported`]; the bake then fits on the CPU without calling the GPU).
+pub(crate) fn supported(fitter: &Fitter) -> bool {
     let res = fitter.res;
     let top = res.min(16);
     fitter.method == SplitMethod::Default

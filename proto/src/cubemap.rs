@@ -85,6 +85,14 @@ pub fn face_uv(d: Vec3) -> Option<(usize, Vec2)> {
     Some((face, Vec2::new(d.dot(f.a) * inv, d.dot(f.b) * inv)))
 }
 
+/// The pixel (`j · res + i`) of a face of resolution `res` that face coordinates `uv` fall in:
+/// pixel i spans u ∈ [2i/res − 1, 2(i+1)/res − 1) (the inverse of [`pixel_centres`]), clamped to
+/// the face.
+pub fn pixel_index(uv: Vec2, res: u32) -> usize {
+    let cell = |x: f32| (((x + 1.0) * 0.5 * res as f32) as u32).min(res.saturating_sub(1)) as usize;
+    cell(uv.y) * res as usize + cell(uv.x)
+}
+
 /// Pixel-centre coordinates of a face of resolution `res`, indexed `j · res + i`.
 pub fn pixel_centres(res: u32) -> Vec<Vec2> {
     let r = res as f32;
@@ -114,6 +122,22 @@ mod tests {
                 assert_eq!(g, f);
                 assert!((back - uv).length() < 1e-6);
             }
+        }
+    }
+
+    #[test]
+    fn pixels_are_found_from_their_coordinates() {
+        for res in [1, 7, 64] {
+            let h = 1.0 / res as f32;
+            for (p, uv) in pixel_centres(res).into_iter().enumerate() {
+                for o in [Vec2::ZERO, Vec2::splat(0.9 * h), Vec2::splat(-0.9 * h)] {
+                    assert_eq!(pixel_index(uv + o, res), p, "res {res}, {uv} + {o}");
+                }
+            }
+            // The face's edges and beyond stay on the face.
+            assert_eq!(pixel_index(Vec2::splat(1.0), res), (res * res - 1) as usize);
+            assert_eq!(pixel_index(Vec2::splat(-1.5), res), 0);
+            assert_eq!(pixel_index(Vec2::splat(f32::NAN), res), 0);
         }
     }
 

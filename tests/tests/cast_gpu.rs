@@ -202,6 +202,11 @@ fn gpu_bake_writes_the_cpu_bytes() {
             bakers.push((file.to_string(), b));
         }
     }
+    // The punctual room's bulbs: the faces that hold a bulb's few pixels are fitted with a
+    // tighter tolerance, on the CPU (`Fitter::for_face`), the others on the GPU.
+    let mut room = bspvt_proto::builtin::scene("punctual-room").expect("built-in room");
+    room.bake.face_res = 16;
+    bakers.push(("punctual room at 16²".to_string(), Baker::new(&room)));
     for (label, b) in bakers {
         let none = AtomicBool::new(false);
         let cpu = b.bake_all(&|_, _| {}, &none).expect("CPU bake");

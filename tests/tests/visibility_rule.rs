@@ -365,3 +365,43 @@ fn leaving_out_unreachable_directions_keeps_the_error_where_the_light_can_be() {
     );
     assert!(e_kept <= e_prev * 1.05, "{e_kept} > {e_prev}");
 }
+
+/// A bulb smaller than a cube-map pixel is sampled where it is, not at its pixel's centre
+/// (`VertexRays::aim_at_spheres`): from the floor's centre, at 8² faces, a bulb of radius 0.02
+/// 1.5 above the floor lies wholly inside the pixel whose centre is at direction
+/// (0.125, 1, 0.125), 0.05 off that centre; a small board at y = 1 blocks the pixel's centre
+/// ray but not the bulb. The bulb is visible. The control: the same bulb moved onto the
+/// pixel's centre ray is shadowed by the board.
+#[test]
+fn a_bulb_is_sampled_where_it_is_not_at_its_pixels_centre() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut obj = room_obj(false);
+    // The board: x, z ∈ [0.09, 0.2] at y = 1, facing down (vertices 14–17).
+    obj += "v 0.09 1 0.09\nv 0.2 1 0.09\nv 0.2 1 0.2\nv 0.09 1 0.2\n";
+    obj += "f 14 15 16\nf 14 16 17\n";
+    std::fs::write(dir.path().join("room.obj"), obj).expect("write obj");
+    let visibility = |t: f32| {
+        let bulb = Vec3::new(t, 1.0, t) * 1.5;
+        let json = format!(
+            r#"{{"meshes": [{{"path": "room.obj"}}],
+                "punctual": [{{"name": "bulb", "position": [{}, {}, {}], "intensity": [1, 1, 1], "radius": 0.02}}],
+                "camera": {{"position": [0, 1, 5], "target": [0, 0, 0]}},
+                "bake": {{"face_res": 8}}}}"#,
+            bulb.x, bulb.y, bulb.z
+        );
+        let scene = Scene::from_json(&json, dir.path()).expect("scene");
+        let baker = Baker::new(&scene);
+        let trees: VertexTrees = baker.bake_vertex(0).trees;
+        trees.visibility(baker.codec(), bulb.normalize())
+    };
+    let beside = visibility(0.05);
+    let behind = visibility(0.125);
+    assert_eq!(
+        beside, 1.0,
+        "the bulb beside its pixel's centre ray is visible"
+    );
+    assert_eq!(
+        behind, 0.0,
+        "on the pixel's centre ray the board shadows it"
+    );
+}

@@ -69,12 +69,27 @@ pub fn subpixel_offsets(res: u32, s: u32) -> Vec<Vec2> {
 }
 
 /// The pixels of one face that matter, with the number of their rays that escape (0..=samples).
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FacePixels {
     /// Pixel indices (`j · res + i`), ascending.
     pub index: Vec<u32>,
     /// Escaping rays of each pixel: V(p) = visible / samples [paper000 §3.1].
     pub visible: Vec<u16>,
+    /// How many of these pixels the smallest light seen on the face reaches (`u32::MAX`:
+    /// no light stops, the sky's bake): it bounds the fit's tolerance on the face
+    /// (`Fitter::for_face`).
+    pub light_pixels: u32,
+}
+
+impl Default for FacePixels {
+    /// No pixels, and no light to tighten the fit's tolerance.
+    fn default() -> Self {
+        FacePixels {
+            index: Vec::new(),
+            visible: Vec::new(),
+            light_pixels: u32::MAX,
+        }
+    }
 }
 
 /// A vertex's cube map: per face, its pixels that matter (`None`: none).
@@ -467,7 +482,7 @@ impl VertexRays<'_> {
             .fold(f32::INFINITY, f32::min)
     }
 
-    /// Which pixels of face `f` can matter (`out[p]`, one per pixel); returns whether any can.
+    /// Which pixels of face `f` can matter (`out[p]`, one per pixel).
     ///
     /// A pixel matters when its centre is above the horizon and it can reach a light's stop
     /// (every pixel above the horizon when there are none: the sky's bake):
@@ -481,7 +496,10 @@ impl VertexRays<'_> {
     ///   (w + u a + v b)·k, linear and separable in u and v; the pixel's cone is spanned by its
     ///   corners, so it crosses the plane iff w·k + max over its two u of u a·k + max over its
     ///   two v of v b·k > 0. An origin on the plane keeps every direction.
-    pub(crate) fn face_mask(&self, table: &RayTable, f: usize, out: &mut [bool]) -> bool {
+    ///
+    /// Returns `None` when no pixel matters, else how many pixels the light that reaches the
+    /// fewest (and some) reaches (`u32::MAX` without stops) ([`FacePixels::light_pixels`]).
+    pub(crate) fn face_mask(&self, table: &RayTable, f: usize, out: &mut [bool]) -> Option<u32> {
         let res = table.res as usize;
         let centre = &table.centre[f];
         let fr = FaceFrame::of(f);
@@ -515,19 +533,33 @@ impl VertexRays<'_> {
             })
             .collect();
         let mut any = false;
+        // Per stop, the pixels that reach it.
+        let mut reached = vec![0u32; reach.len()];
         let pixels = (0..res).flat_map(|j| (0..res).map(move |i| (i, j)));
         for (p, ((m, &d), (i, j))) in out.iter_mut().zip(centre).zip(pixels).enumerate() {
-            *m = d.dot(self.normal) > 0.0
-                && (reach.is_empty()
-                    || reach.iter().any(|r| match r {
+            let above = d.dot(self.normal) > 0.0;
+            *m = above && reach.is_empty();
+            if above {
+                for (r, n) in reach.iter().zip(&mut reached) {
+                    let hit = match r {
                         Reach::Region(b) => b.hit_by_ray(self.origin, d),
                         Reach::Plane(w, u, v) => w + u[i] + v[j] > 0.0,
                         Reach::Lamp(l, may) => may[p] && l.distance(self.origin, d).is_some(),
                         Reach::Sphere(l) => l.reaches(self.origin, d),
-                    }));
+                    };
+                    *n += u32::from(hit);
+                    *m |= hit;
+                }
+            }
             any |= *m;
         }
-        any
+        any.then(|| {
+            reached
+                .into_iter()
+                .filter(|&n| n > 0)
+                .min()
+                .unwrap_or(u32::MAX)
+        })
     }
 
     /// Casts the rays of every pixel that matters; returns per-face pixel sets (`None` for
@@ -557,10 +589,8 @@ impl VertexRays<'_> {
             CastMode::Adaptive => vec![NO_BLOCKER; res * res],
         };
         let mut stack = Vec::new();
-        let faces = std::array::from_fn(|f| {
-            if !self.face_mask(table, f, &mut matters) {
-                return None;
-            }
+        let mut faces = std::array::from_fn(|f| {
+            let light_pixels = self.face_mask(table, f, &mut matters)?;
             blocker.fill(NO_BLOCKER);
             let mut vis = vec![0u16; res * res];
             let mut walk = BlockWalk {
@@ -580,7 +610,10 @@ impl VertexRays<'_> {
             };
             walk.block(0, 0, res as u32, None);
             counts += walk.counts;
-            let mut px = FacePixels::default();
+            let mut px = FacePixels {
+                light_pixels,
+                ..FacePixels::default()
+            };
             for (p, &m) in matters.iter().enumerate() {
                 if m {
                     px.index.push(p as u32);
@@ -589,6 +622,9 @@ impl VertexRays<'_> {
             }
             Some(px)
         });
+        let aimed = self.aim_at_spheres(occ, table, &mut faces);
+        counts.rays += aimed;
+        counts.traversals += aimed;
         (faces, counts)
     }
 
@@ -599,15 +635,20 @@ impl VertexRays<'_> {
         table: &RayTable,
     ) -> [Option<FacePixels>; FACES] {
         let mut matters = vec![false; table.centre[0].len()];
-        std::array::from_fn(|f| {
-            let mut px = FacePixels::default();
-            self.face_mask(table, f, &mut matters);
+        let mut map = std::array::from_fn(|f| {
+            let light_pixels = self.face_mask(table, f, &mut matters)?;
+            let mut px = FacePixels {
+                light_pixels,
+                ..FacePixels::default()
+            };
             for p in (0..matters.len()).filter(|&p| matters[p]) {
                 px.index.push(p as u32);
                 px.visible.push(self.reference_pixel(occ, table, f, p));
             }
-            (!px.index.is_empty()).then_some(px)
-        })
+            Some(px)
+        });
+        self.aim_at_spheres(occ, table, &mut map);
+        map
     }
 
     /// The escaping sub-rays of pixel `p` of face `f`, every one cast against the BVH (the
@@ -625,6 +666,87 @@ impl VertexRays<'_> {
             let t_max = self.t_max(origin, d);
             occ.occluded_between(origin, d, self.t_min, t_max, self.vertex)
         })
+    }
+}
+
+/// Rays aimed at a point or spot light's sphere from one vertex ([`VertexRays::aim_at_spheres`]):
+/// an n × n grid over its disk's square, n = 4 · tan α · res (four rays a pixel across the
+/// disk) within these bounds.
+const AIM_GRID: (usize, usize) = (8, 32);
+
+impl VertexRays<'_> {
+    /// The pixels a point or spot light's sphere covers, cast again toward the sphere itself.
+    ///
+    /// A bulb is usually smaller than a cube-map pixel (5 cm at 2 m: 0.025 rad against
+    /// ≈ 0.03), so a pixel's own sub-rays sample it at the pixel's offsets, not where the bulb
+    /// is: from one vertex to the next the bulb's shadow would be cast from points up to half a
+    /// pixel apart (a dotted shadow edge, docs/bake.md). Here the sphere's disk as the vertex
+    /// sees it (half-angle α, tan α = r / √(|c − o|² − r²)) is sampled by a grid of rays
+    /// toward the sphere; each pixel that matters and holds some of them gets the share of them
+    /// that reach the sphere, as a count out of the pixel's samples S (rounded half up): the
+    /// visibility of the part of the bulb that lies in the pixel, which is what the shading
+    /// weighs that pixel's piece of the bulb by. Rays below the horizon are left out (the
+    /// cosine clips them), and a pixel none of them falls in keeps its own rays. Every cast
+    /// (culled, adaptive, brute force, GPU) applies this after its own, so all give one cube
+    /// map. Returns the rays cast.
+    pub(crate) fn aim_at_spheres(
+        &self,
+        occ: &Occluder,
+        table: &RayTable,
+        map: &mut CubeMap,
+    ) -> u64 {
+        // (face, index in the face's pixels) → (rays that reach the sphere, rays).
+        let mut tally: std::collections::BTreeMap<(usize, usize), (u32, u32)> = Default::default();
+        let mut rays = 0;
+        for stop in self.stops {
+            let LightStop::Sphere(l) = stop else {
+                continue;
+            };
+            let oc = l.centre - self.origin;
+            let d2 = oc.length_squared();
+            let r2 = l.radius * l.radius;
+            if !(d2 > r2) || !d2.is_finite() {
+                continue;
+            }
+            let w = oc / d2.sqrt();
+            let tan_a = l.radius / (d2 - r2).sqrt();
+            let (e1, e2) = w.any_orthonormal_pair();
+            let n =
+                ((4.0 * tan_a * table.res as f32).ceil() as usize).clamp(AIM_GRID.0, AIM_GRID.1);
+            let at = |k: usize| (2 * k + 1) as f32 / n as f32 - 1.0;
+            for (x, y) in (0..n).flat_map(|y| (0..n).map(move |x| (at(x), at(y)))) {
+                if x * x + y * y > 1.0 {
+                    continue;
+                }
+                let d = (w + tan_a * (x * e1 + y * e2)).normalize();
+                if self.escapes_below_horizon(d) {
+                    continue;
+                }
+                let Some((f, uv)) = bspvt_proto::cubemap::face_uv(d) else {
+                    continue;
+                };
+                let p = bspvt_proto::cubemap::pixel_index(uv, table.res) as u32;
+                let Some(k) = map[f]
+                    .as_ref()
+                    .and_then(|px| px.index.binary_search(&p).ok())
+                else {
+                    continue;
+                };
+                rays += 1;
+                let t_max = self.t_max(self.origin, d);
+                let blocked = occ.occluded_between(self.origin, d, self.t_min, t_max, self.vertex);
+                let e = tally.entry((f, k)).or_default();
+                e.0 += u32::from(!blocked);
+                e.1 += 1;
+            }
+        }
+        let s = table.samples;
+        for ((f, k), (seen, all)) in tally {
+            if let Some(px) = map[f].as_mut() {
+                px.visible[k] = ((2 * seen * s + all) / (2 * all)) as u16;
+            }
+        }
+        rays
     }
 }
 

@@ -29,6 +29,11 @@ use bspvt_proto::SplitMethod;
 use bspvt_proto::bspvt::{FaceTree, LineCodec, MAX_DEPTH, Node, QLine, quantise_ratio};
 use glam::Vec2;
 
+/// The leaf tolerance on a face is at most this share of the pixels of the smallest light
+/// seen there, in pixels of squared deviation ([`Fitter::for_face`]): a leaf that mixes the
+/// pixels of a light that small with others must be split.
+pub(crate) const LIGHT_SHARE: f64 = 0.1;
+
 /// Builder settings for one bake.
 pub struct Fitter<'a> {
     /// The quantisation of the candidate lines.
@@ -215,7 +220,7 @@ impl PartialEq for Ratio {
 }
 impl Eq for Ratio {}
 
-impl Fitter<'_> {
+impl<'a> Fitter<'a> {
     /// Builds the tree of one face from its pixels that matter (`index`, escape counts),
     /// splitting by the line that minimises E(P, l) [paper000 §3.2 eq. 3].
     pub fn fit(&self, index: &[u32], visible: &[u16]) -> (FaceTree, FitStats) {
@@ -428,6 +433,22 @@ impl Fitter<'_> {
             }
         }
         (left, right)
+    }
+
+    /// The fitter for a face whose smallest light reaches `light_pixels` of its pixels
+    /// (`FacePixels::light_pixels`): the leaf tolerance ε · res² is a share of the whole face
+    /// [paper000 §3.2], up to ~4 pixels of squared deviation at 64², which is a whole bulb (a
+    /// point light's sphere covers 1–4 pixels) — averaged with another light's pixels in one
+    /// leaf it takes their visibility (a dotted shadow edge). So on a face the tolerance is also
+    /// at most [`LIGHT_SHARE`] of the smallest light's pixels there; lights of ≥ ε · res² /
+    /// LIGHT_SHARE pixels (41 at 64²) leave it as it is.
+    pub(crate) fn for_face(&self, light_pixels: u32) -> Fitter<'a> {
+        Fitter {
+            epsilon_pixels: self
+                .epsilon_pixels
+                .min(LIGHT_SHARE * f64::from(light_pixels)),
+            ..*self
+        }
     }
 
     /// The leaf threshold S² · ε · res² in units of 2⁻¹⁶ (rounded down), the integer the
@@ -907,6 +928,46 @@ mod tests {
             leaves > 300 && splits > 300,
             "{leaves} leaves, {splits} splits"
         );
+    }
+
+    /// Two bulbs of 4 pixels each on a 64² face, one shadowed and one lit: the face's
+    /// tolerance (ε · res² ≈ 4.1 pixels of squared deviation) takes the 8 pixels as one leaf
+    /// of 0.5 (a squared deviation of 2), both bulbs half lit; bounded by a tenth of the
+    /// smaller light's 4 pixels (`for_face`), each keeps its own visibility. A light of
+    /// ≥ 41 pixels leaves the tolerance as it is.
+    #[test]
+    fn a_small_light_keeps_its_own_leaves() {
+        let (res, samples) = (64u32, 1u32);
+        let codec = LineCodec::for_resolution(res);
+        let uv = pixel_centres(res);
+        let f = Fitter {
+            codec: &codec,
+            res,
+            uv: &uv,
+            samples,
+            epsilon_pixels: 1e-3 * f64::from(res * res),
+            method: SplitMethod::Default,
+        };
+        // Bulb A: a 2×2 block at (10, 10), shadowed; bulb B: at (40, 30), lit.
+        let block = |i0: u32, j0: u32| [(i0, j0), (i0 + 1, j0), (i0, j0 + 1), (i0 + 1, j0 + 1)];
+        let mut px: Vec<(u32, u16)> = block(10, 10)
+            .into_iter()
+            .map(|(i, j)| (j * res + i, 0))
+            .chain(block(40, 30).into_iter().map(|(i, j)| (j * res + i, 1)))
+            .collect();
+        px.sort();
+        let (index, visible): (Vec<u32>, Vec<u16>) = px.into_iter().unzip();
+        let values = |f: &Fitter| -> Vec<u8> {
+            let (tree, _) = f.fit(&index, &visible);
+            index
+                .iter()
+                .map(|&p| tree.query(&codec, uv[p as usize]))
+                .collect()
+        };
+        assert!(values(&f).iter().all(|&v| v == 128), "{:?}", values(&f));
+        assert_eq!(values(&f.for_face(u32::MAX)), values(&f));
+        assert_eq!(values(&f.for_face(41)), values(&f));
+        assert_eq!(values(&f.for_face(4)), vec![0, 0, 0, 0, 255, 255, 255, 255]);
     }
 
     /// Every pixel that matters reaches exactly one leaf, at resolutions that are not multiples

@@ -82,8 +82,11 @@ struct GpuBatch {
     vertices: Vec<u32>,
     sources: Vec<CubeSource>,
     masks: Vec<u32>,
-    faces: Vec<[Vec<u32>; FACES]>,
+    faces: Vec<FaceIndices>,
 }
+
+/// Per face of a vertex: the pixels that matter and `FacePixels::light_pixels`.
+type FaceIndices = [(Vec<u32>, u32); FACES];
 
 impl Baker {
     /// Uploads this bake's BVH, its cube map's sub-ray directions and its lights' stops to the
@@ -134,7 +137,7 @@ impl Baker {
         let t = &self.table;
         let res2 = (t.res * t.res) as usize;
         let words = (FACES * res2).div_ceil(32);
-        let per_vertex: Vec<(CubeSource, Vec<u32>, [Vec<u32>; FACES])> = vertices
+        let per_vertex: Vec<(CubeSource, Vec<u32>, FaceIndices)> = vertices
             .par_iter()
             .map(|&v| {
                 let r = self.vertex_rays(v);
@@ -142,13 +145,15 @@ impl Baker {
                 let mut matters = vec![false; res2];
                 let faces = std::array::from_fn(|f| {
                     let mut index = Vec::new();
-                    r.face_mask(t, f, &mut matters);
+                    let Some(light_pixels) = r.face_mask(t, f, &mut matters) else {
+                        return (index, 0);
+                    };
                     for p in (0..res2).filter(|&p| matters[p]) {
                         let bit = f * res2 + p;
                         mask[bit / 32] |= 1 << (bit % 32);
                         index.push(p as u32);
                     }
-                    index
+                    (index, light_pixels)
                 });
                 (CubeSource::new(r.origin, r.t_min, r.normal, v), mask, faces)
             })
@@ -180,7 +185,7 @@ impl Baker {
             .iter()
             .map(|faces| {
                 let s = start;
-                start += faces.iter().map(Vec::len).sum::<usize>();
+                start += faces.iter().map(|f| f.0.len()).sum::<usize>();
                 s
             })
             .collect();
@@ -194,8 +199,8 @@ impl Baker {
                 let rays = self.vertex_rays(v);
                 let mut next = counts.get(s..).unwrap_or_default().iter();
                 let (mut cast, mut again) = (0u64, 0u64);
-                let map = std::array::from_fn(|face| {
-                    let index = std::mem::take(&mut faces[face]);
+                let mut map = std::array::from_fn(|face| {
+                    let (index, light_pixels) = std::mem::take(&mut faces[face]);
                     if index.is_empty() {
                         return None;
                     }
@@ -212,8 +217,14 @@ impl Baker {
                             }
                         })
                         .collect();
-                    Some(FacePixels { index, visible })
+                    Some(FacePixels {
+                        index,
+                        visible,
+                        light_pixels,
+                    })
                 });
+                // The pixels of a point or spot light, aimed at it on the CPU as every cast does.
+                cast += rays.aim_at_spheres(&self.occluder, &self.table, &mut map);
                 (map, cast, again)
             })
             .collect();
@@ -275,9 +286,15 @@ impl Baker {
             return Ok(self.fit_chunk(c, maps));
         };
         let t0 = Instant::now();
+        // A face whose smallest light tightens the tolerance (`Fitter::for_face`) is fitted on
+        // the CPU: the GPU fit takes one threshold a dispatch.
+        let on_gpu = |p: &FacePixels| {
+            fitter.for_face(p.light_pixels).epsilon_pixels == fitter.epsilon_pixels
+        };
         let faces: Vec<FaceInput> = maps
             .iter()
             .flat_map(|m| m.iter().flatten())
+            .filter(|p| on_gpu(p))
             .map(|p| FaceInput {
                 index: &p.index,
                 visible: &p.visible,
@@ -291,15 +308,18 @@ impl Baker {
             let mut vt = bspvt_proto::bspvt::VertexTrees::default();
             let mut fit = FitStats::default();
             for (f, px) in m.iter().enumerate() {
-                if px.is_some() {
-                    let Some((tree, st)) = fits.next() else {
-                        return Err(GpuError::Failed(
-                            "the GPU fit returned too few trees".into(),
-                        ));
-                    };
-                    vt.faces[f] = Some(tree);
-                    fit += st;
-                }
+                let Some(px) = px else {
+                    continue;
+                };
+                let (tree, st) = if on_gpu(px) {
+                    fits.next().ok_or_else(|| {
+                        GpuError::Failed("the GPU fit returned too few trees".into())
+                    })?
+                } else {
+                    fitter.for_face(px.light_pixels).fit(&px.index, &px.visible)
+                };
+                vt.faces[f] = Some(tree);
+                fit += st;
             }
             totals += Totals {
                 vertices: 1,
@@ -426,7 +446,7 @@ impl GpuBatch {
         let counts = gpu
             .occ
             .cube_counts(&gpu.ctx, &gpu.table, &self.sources, &self.masks)?;
-        let wanted: usize = self.faces.iter().flatten().map(Vec::len).sum();
+        let wanted: usize = self.faces.iter().flatten().map(|f| f.0.len()).sum();
         if counts.len() != wanted {
             return Err(GpuError::Failed(format!(
                 "the GPU returned {} counts for {wanted} pixels",

@@ -53,8 +53,10 @@ use fit::{FitStats, Fitter};
 /// (`bspvt_raytrace::hit`): a ray through an edge two triangles share no longer slips between
 /// them. 7: nor past the BVH's box test, when that edge is a leaf box's face (the occluder's
 /// boxes reach a margin past their triangles: `bspvt_raytrace::Occluder`; the room's bake
-/// changed, the pinned ones did not).
-pub const ALGORITHM_VERSION: u32 = 7;
+/// changed, the pinned ones did not). 8: the pixels a point or spot light's sphere covers are
+/// cast toward the sphere itself (`VertexRays::aim_at_spheres`; bakes with such lights change,
+/// the pinned ones did not).
+pub const ALGORITHM_VERSION: u32 = 8;
 
 /// Ray origins are offset along the normal by this fraction of the scene's diagonal.
 pub(crate) const RAY_OFFSET_SCALE: f32 = 1e-4;
@@ -343,7 +345,7 @@ impl Baker {
         let mut fit = FitStats::default();
         for (f, px) in faces.iter().enumerate() {
             if let Some(px) = px {
-                let (tree, st) = fitter.fit(&px.index, &px.visible);
+                let (tree, st) = fitter.for_face(px.light_pixels).fit(&px.index, &px.visible);
                 trees.faces[f] = Some(tree);
                 fit += st;
             }

@@ -1016,7 +1016,7 @@ mod tests {
     }
 
     /// A sun's pixel, lit, in an 8 × 8 shadowed block of a 64² face: the face's tolerance
-    /// (ε · res² ≈ 4.1 pixels of squared deviation) takes the block as one leaf of 0 (a squared
+    /// (ε · res² ≈ 4.1 pixels of squared deviation) takes the block as one leaf of 1/64 (a squared
     /// deviation of 63/64), the sun shadowed; protected (`fit_protected`), its leaf must be pure
     /// and the sun keeps its own visibility, for every split search. A protected pixel among
     /// pixels of its own count changes nothing, nor does an empty protected set.
@@ -1047,7 +1047,7 @@ mod tests {
                 let (tree, _) = f.fit_protected(&index, &visible, protected);
                 tree.query(&codec, uv[sun as usize])
             };
-            assert_eq!(at_sun(&[]), 0, "{method:?}");
+            assert!(at_sun(&[]) < 128, "{method:?}: the sun averaged away");
             assert_eq!(
                 f.fit(&index, &visible),
                 f.fit_protected(&index, &visible, &[])

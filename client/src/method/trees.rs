@@ -72,7 +72,7 @@ pub fn cutout_hash(scene: &Scene) -> u64 {
 /// The bake of `scene` in `cache` (`NAME-HASH.bspvt`, HASH over the bake's
 /// [`bspvt_bake::ALGORITHM_VERSION`], the mesh's content hash, its cut-outs, the bake settings and the
 /// lights — their regions, planes, polygons and spheres, and whether a sun makes every direction matter, decide which directions matter and where rays end; none:
-/// the sky's), baking it first when absent. `progress(done, total)` follows the
+/// the sky's, whose rays are aimed at its suns at rest), baking it first when absent. `progress(done, total)` follows the
 /// vertices while it bakes.
 pub fn cached_bake(
     name: &str,

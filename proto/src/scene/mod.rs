@@ -624,11 +624,12 @@ impl Scene {
     /// refinement) without its polygonal lights, so every direction above a vertex's horizon
     /// matters and every ray runs to infinity. Environment lighting through the trees
     /// (`bspvt-env`) shades with this bake; the lamps keep theirs, whose rays end at the lamp.
+    /// The suns stay (they stop no ray): the bake aims at each one at rest
+    /// (`bspvt_bake::SunDisk`), so they are part of its identity (a cache's key).
     pub fn sky(&self) -> Scene {
         let mut s = self.clone();
         s.lights.clear();
         s.punctual.clear();
-        s.suns.clear();
         s.bake.refine = None;
         s.warnings.clear();
         s

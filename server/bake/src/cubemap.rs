@@ -79,6 +79,11 @@ pub struct FacePixels {
     /// no light stops, the sky's bake): it bounds the fit's tolerance on the face
     /// (`Fitter::for_face`).
     pub light_pixels: u32,
+    /// Pixel indices (`j · res + i`, ascending, each one of `index`) whose count was aimed at
+    /// a sun at rest ([`VertexRays::aim`]): a leaf that holds one must be pure, all its
+    /// pixels' counts equal (`Fitter::fit_protected`). Empty but in the sky's bake of a scene
+    /// with suns.
+    pub protected: Vec<u32>,
 }
 
 impl Default for FacePixels {
@@ -88,6 +93,7 @@ impl Default for FacePixels {
             index: Vec::new(),
             visible: Vec::new(),
             light_pixels: u32::MAX,
+            protected: Vec::new(),
         }
     }
 }
@@ -454,6 +460,47 @@ pub(crate) struct VertexRays<'a> {
     /// one of them ([`LightStop::reachable`]), every direction when there are none (the sky's
     /// bake).
     pub stops: &'a [LightStop],
+    /// The suns at rest the sky's bake aims at ([`VertexRays::aim`]; empty elsewhere).
+    pub suns: &'a [SunDisk],
+}
+
+/// A sun at rest as the sky's bake sees it: a disk at infinity ([`VertexRays::aim`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SunDisk {
+    /// Unit direction toward the sun.
+    pub toward: Vec3,
+    /// tan of the disk's half-angle.
+    pub tan_half_angle: f32,
+}
+
+impl SunDisk {
+    /// The suns of `scene` at rest (those whose direction is a direction).
+    pub fn of_scene(scene: &bspvt_proto::Scene) -> Vec<SunDisk> {
+        scene
+            .suns
+            .iter()
+            .filter_map(|s| {
+                let toward = s.toward();
+                let tan_half_angle = s.half_angle().tan();
+                (toward != Vec3::ZERO && tan_half_angle > 0.0 && tan_half_angle.is_finite())
+                    .then_some(SunDisk {
+                        toward,
+                        tan_half_angle,
+                    })
+            })
+            .collect()
+    }
+}
+
+/// A disk a vertex's rays are aimed at ([`VertexRays::aim_at_disks`]).
+#[derive(Clone, Copy, Debug)]
+struct Disk {
+    /// Unit direction to its centre.
+    w: Vec3,
+    /// tan of its half-angle as the vertex sees it.
+    tan_a: f32,
+    /// Whether the pixels it falls in are kept pure by the fit ([`FacePixels::protected`]).
+    protect: bool,
 }
 
 impl VertexRays<'_> {
@@ -622,7 +669,7 @@ impl VertexRays<'_> {
             }
             Some(px)
         });
-        let aimed = self.aim_at_spheres(occ, table, &mut faces);
+        let aimed = self.aim(occ, table, &mut faces);
         counts.rays += aimed;
         counts.traversals += aimed;
         (faces, counts)
@@ -647,7 +694,7 @@ impl VertexRays<'_> {
             }
             Some(px)
         });
-        self.aim_at_spheres(occ, table, &mut map);
+        self.aim(occ, table, &mut map);
         map
     }
 
@@ -669,47 +716,73 @@ impl VertexRays<'_> {
     }
 }
 
-/// Rays aimed at a point or spot light's sphere from one vertex ([`VertexRays::aim_at_spheres`]):
-/// an n × n grid over its disk's square, n = 4 · tan α · res (four rays a pixel across the
-/// disk) within these bounds.
+/// Rays aimed at a disk (a point or spot light's sphere, a sun) from one vertex
+/// ([`VertexRays::aim_at_disks`]): an n × n grid over its disk's square, n = 4 · tan α · res
+/// (four rays a pixel across the disk) within these bounds.
 const AIM_GRID: (usize, usize) = (8, 32);
 
 impl VertexRays<'_> {
-    /// The pixels a point or spot light's sphere covers, cast again toward the sphere itself.
-    ///
-    /// A bulb is usually smaller than a cube-map pixel (5 cm at 2 m: 0.025 rad against
-    /// ≈ 0.03), so a pixel's own sub-rays sample it at the pixel's offsets, not where the bulb
-    /// is: from one vertex to the next the bulb's shadow would be cast from points up to half a
-    /// pixel apart (a dotted shadow edge, docs/bake.md). Here the sphere's disk as the vertex
-    /// sees it (half-angle α, tan α = r / √(|c − o|² − r²)) is sampled by a grid of rays
-    /// toward the sphere; each pixel that matters and holds some of them gets the share of them
-    /// that reach the sphere, as a count out of the pixel's samples S (rounded half up): the
-    /// visibility of the part of the bulb that lies in the pixel, which is what the shading
-    /// weighs that pixel's piece of the bulb by. Rays below the horizon are left out (the
-    /// cosine clips them), and a pixel none of them falls in keeps its own rays. Every cast
-    /// (culled, adaptive, brute force, GPU) applies this after its own, so all give one cube
-    /// map. Returns the rays cast.
-    pub(crate) fn aim_at_spheres(
-        &self,
-        occ: &Occluder,
-        table: &RayTable,
-        map: &mut CubeMap,
-    ) -> u64 {
-        // (face, index in the face's pixels) → (rays that reach the sphere, rays).
-        let mut tally: std::collections::BTreeMap<(usize, usize), (u32, u32)> = Default::default();
-        let mut rays = 0;
-        for stop in self.stops {
+    /// Every cast's last step: the pixels the point and spot lights' spheres cover, and in the
+    /// sky's bake those its suns at rest cover, cast again toward the light itself
+    /// ([`Self::aim_at_disks`]). Returns the rays cast.
+    pub(crate) fn aim(&self, occ: &Occluder, table: &RayTable, map: &mut CubeMap) -> u64 {
+        let spheres = self.stops.iter().filter_map(|stop| {
             let LightStop::Sphere(l) = stop else {
-                continue;
+                return None;
             };
             let oc = l.centre - self.origin;
             let d2 = oc.length_squared();
             let r2 = l.radius * l.radius;
             if !(d2 > r2) || !d2.is_finite() {
-                continue;
+                return None;
             }
-            let w = oc / d2.sqrt();
-            let tan_a = l.radius / (d2 - r2).sqrt();
+            Some(Disk {
+                w: oc / d2.sqrt(),
+                tan_a: l.radius / (d2 - r2).sqrt(),
+                protect: false,
+            })
+        });
+        let suns = self.suns.iter().map(|s| Disk {
+            w: s.toward,
+            tan_a: s.tan_half_angle,
+            protect: true,
+        });
+        let disks: Vec<Disk> = spheres.chain(suns).collect();
+        if disks.is_empty() {
+            return 0;
+        }
+        self.aim_at_disks(occ, table, map, &disks)
+    }
+
+    /// The pixels a light's disk covers, cast again toward the disk itself.
+    ///
+    /// A bulb is usually smaller than a cube-map pixel (5 cm at 2 m: 0.025 rad against
+    /// ≈ 0.03), and the sun's disk is a third of one (0.009 rad), so a pixel's own sub-rays
+    /// sample it at the pixel's offsets, not where the light is: from one vertex to the next
+    /// its shadow would be cast from points up to half a pixel apart (a dotted shadow edge,
+    /// docs/bake.md). Here the disk as the vertex sees it (half-angle α; a sphere's
+    /// tan α = r / √(|c − o|² − r²)) is sampled by a grid of rays toward it, each traced as
+    /// far as the pixel's own rays are (to the first stop, to infinity without one); each pixel
+    /// that matters and holds some of them gets the share of them that escape, as a count out
+    /// of the pixel's samples S (rounded half up): the visibility of the part of the light that
+    /// lies in the pixel, which is what the shading weighs that pixel's piece of the light by.
+    /// Rays below the horizon are left out (the cosine clips them), and a pixel none of them
+    /// falls in keeps its own rays. A sun's pixels are also marked [`FacePixels::protected`].
+    /// Every cast (culled, adaptive, brute force, GPU) applies this after its own, so all give
+    /// one cube map. Returns the rays cast.
+    fn aim_at_disks(
+        &self,
+        occ: &Occluder,
+        table: &RayTable,
+        map: &mut CubeMap,
+        disks: &[Disk],
+    ) -> u64 {
+        // (face, index in the face's pixels) → (rays that escape, rays, protected).
+        let mut tally: std::collections::BTreeMap<(usize, usize), (u32, u32, bool)> =
+            Default::default();
+        let mut rays = 0;
+        for disk in disks {
+            let (w, tan_a) = (disk.w, disk.tan_a);
             let (e1, e2) = w.any_orthonormal_pair();
             let n =
                 ((4.0 * tan_a * table.res as f32).ceil() as usize).clamp(AIM_GRID.0, AIM_GRID.1);
@@ -738,12 +811,17 @@ impl VertexRays<'_> {
                 let e = tally.entry((f, k)).or_default();
                 e.0 += u32::from(!blocked);
                 e.1 += 1;
+                e.2 |= disk.protect;
             }
         }
         let s = table.samples;
-        for ((f, k), (seen, all)) in tally {
+        for ((f, k), (seen, all, protect)) in tally {
             if let Some(px) = map[f].as_mut() {
                 px.visible[k] = ((2 * seen * s + all) / (2 * all)) as u16;
+                if protect {
+                    // The tally is ordered by (face, k): each face's protected pixels ascend.
+                    px.protected.push(px.index[k]);
+                }
             }
         }
         rays
@@ -1056,6 +1134,7 @@ mod tests {
                 t_min: 0.0,
                 horizon_margin: 0.0,
                 stops: &stops,
+                suns: &[],
             };
             let table = RayTable::new(res, 1);
             let r = res as usize;
@@ -1089,6 +1168,7 @@ mod tests {
                 t_min: 0.0,
                 horizon_margin: 0.0,
                 stops,
+                suns: &[],
             };
             let mut mask = vec![false; 64];
             for f in 0..FACES {

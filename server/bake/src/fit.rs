@@ -97,7 +97,14 @@ struct Cell {
     wk: u64,
     /// w·k² (at most 16² · 64² < 2³²).
     wk2: u32,
+    /// Every pixel of the cell is protected (a sun's, `FacePixels::protected`), or none is:
+    /// protected pixels merge only with each other ([`Fitter::cells`]).
+    protected: bool,
 }
+
+/// Added to a protected pixel's count in the merge's grid ([`Fitter::cells`]), so that it merges
+/// only with protected pixels of its count (counts are < 2¹⁶).
+const PROTECTED: i32 = 1 << 16;
 
 /// Count and Σk of a pixel set in one word, `n | Σk << 32`: a face has at most 512² = 2¹⁸
 /// pixels of k ≤ 8² (`BakeSettings::MAX_FACE_RES`, `MAX_SUPERSAMPLING`), so Σk < 2²⁴ and
@@ -224,7 +231,22 @@ impl<'a> Fitter<'a> {
     /// Builds the tree of one face from its pixels that matter (`index`, escape counts),
     /// splitting by the line that minimises E(P, l) [paper000 §3.2 eq. 3].
     pub fn fit(&self, index: &[u32], visible: &[u16]) -> (FaceTree, FitStats) {
-        let cells = self.cells(index, visible);
+        self.fit_protected(index, visible, &[])
+    }
+
+    /// [`Self::fit`] where the pixels `protected` (ascending, each one of `index`: the pixels a
+    /// sun's disk at rest falls in, `FacePixels::protected`) must end in pure leaves: a node
+    /// that holds one is a leaf only when all its pixels' counts are equal, besides the ε test
+    /// (the ε test lets a leaf average a pixel with its neighbours, which moves a sun smaller
+    /// than a pixel by a pixel or two between neighbouring vertices: a stair-stepped patch).
+    /// Without protected pixels every decision is [`Self::fit`]'s.
+    pub fn fit_protected(
+        &self,
+        index: &[u32],
+        visible: &[u16],
+        protected: &[u32],
+    ) -> (FaceTree, FitStats) {
+        let cells = self.cells(index, visible, protected);
         let mut nodes = Vec::new();
         let mut stats = FitStats::default();
         let mut scratch = Scratch::new(self.codec);
@@ -234,20 +256,27 @@ impl<'a> Fitter<'a> {
 
     /// Quadtree-merges uniform blocks (up to [`MAX_CELL`]²) of pixels that matter.
     /// `Exhaustive` keeps single pixels, so its search is exact over the stored lines.
-    fn cells(&self, index: &[u32], visible: &[u16]) -> Vec<Cell> {
+    /// A protected pixel merges only with protected pixels (of its count).
+    fn cells(&self, index: &[u32], visible: &[u16], protected: &[u32]) -> Vec<Cell> {
         let res = self.res as usize;
         if self.method == SplitMethod::Exhaustive {
             return index
                 .iter()
                 .zip(visible)
-                .map(|(&p, &k)| {
-                    self.cell((p as usize % res) as u16, (p as usize / res) as u16, 1, k)
+                .map(|(&p, &k)| Cell {
+                    protected: protected.binary_search(&p).is_ok(),
+                    ..self.cell((p as usize % res) as u16, (p as usize / res) as u16, 1, k)
                 })
                 .collect();
         }
         let mut grid = vec![-1i32; res * res];
         for (&i, &k) in index.iter().zip(visible) {
             grid[i as usize] = k as i32;
+        }
+        for &p in protected {
+            if let Some(g) = grid.get_mut(p as usize).filter(|g| **g >= 0) {
+                *g += PROTECTED;
+            }
         }
         let mut out = Vec::new();
         let r = self.res as u16;
@@ -276,7 +305,7 @@ impl<'a> Fitter<'a> {
         if size == 1 {
             let k = grid[j as usize * res + i as usize];
             if k >= 0 {
-                out.push(self.cell(i, j, size, k as u16));
+                out.push(self.grid_cell(i, j, size, k));
             }
             return k;
         }
@@ -294,7 +323,7 @@ impl<'a> Fitter<'a> {
                     .all(|&v| v == first)
             })
         {
-            out.push(self.cell(i, j, size, first as u16));
+            out.push(self.grid_cell(i, j, size, first));
             return first;
         }
         let mark = out.len();
@@ -316,14 +345,24 @@ impl<'a> Fitter<'a> {
         let uniform = vals[0] >= 0 && vals.iter().all(|&v| v == vals[0]);
         if uniform {
             out.truncate(mark);
-            out.push(self.cell(i, j, size, vals[0] as u16));
+            out.push(self.grid_cell(i, j, size, vals[0]));
             vals[0]
         } else {
             -1
         }
     }
 
-    /// The cell `[i, i+size) × [j, j+size)` of escape count `k`.
+    /// The cell `[i, i+size) × [j, j+size)` of the merge grid's value `g` (a count, plus
+    /// [`PROTECTED`] for protected pixels).
+    #[inline]
+    fn grid_cell(&self, i: u16, j: u16, size: u16, g: i32) -> Cell {
+        Cell {
+            protected: g >= PROTECTED,
+            ..self.cell(i, j, size, (g % PROTECTED) as u16)
+        }
+    }
+
+    /// The cell `[i, i+size) × [j, j+size)` of escape count `k` (not protected).
     #[inline]
     fn cell(&self, i: u16, j: u16, size: u16, k: u16) -> Cell {
         let w = size as u32 * size as u32;
@@ -335,6 +374,7 @@ impl<'a> Fitter<'a> {
             at: self.centre(i, j, size),
             wk: pack(w, w * k as u32),
             wk2: w * k as u32 * k as u32,
+            protected: false,
         }
     }
 
@@ -368,7 +408,9 @@ impl<'a> Fitter<'a> {
         scratch: &mut Scratch,
     ) {
         let m = Self::moments(&cells);
-        let is_leaf = depth >= MAX_DEPTH || self.within_epsilon(m);
+        // A node that holds a protected pixel is a leaf only when pure (n Σk² = (Σk)²).
+        let pure = || !cells.iter().any(|c| c.protected) || m.deviation_times_n() == 0;
+        let is_leaf = depth >= MAX_DEPTH || (self.within_epsilon(m) && pure());
         let split = if is_leaf {
             None
         } else {
@@ -427,7 +469,10 @@ impl<'a> Fitter<'a> {
                         (c.i, c.j + h),
                         (c.i + h, c.j + h),
                     ] {
-                        stack.push(self.cell(qi, qj, h, c.k));
+                        stack.push(Cell {
+                            protected: c.protected,
+                            ..self.cell(qi, qj, h, c.k)
+                        });
                     }
                 }
             }
@@ -968,6 +1013,53 @@ mod tests {
         assert_eq!(values(&f.for_face(u32::MAX)), values(&f));
         assert_eq!(values(&f.for_face(41)), values(&f));
         assert_eq!(values(&f.for_face(4)), vec![0, 0, 0, 0, 255, 255, 255, 255]);
+    }
+
+    /// A sun's pixel, lit, in an 8 × 8 shadowed block of a 64² face: the face's tolerance
+    /// (ε · res² ≈ 4.1 pixels of squared deviation) takes the block as one leaf of 1/64 (a squared
+    /// deviation of 63/64), the sun shadowed; protected (`fit_protected`), its leaf must be pure
+    /// and the sun keeps its own visibility, for every split search. A protected pixel among
+    /// pixels of its own count changes nothing, nor does an empty protected set.
+    #[test]
+    fn a_suns_pixel_keeps_its_own_leaf() {
+        let (res, samples) = (64u32, 1u32);
+        let codec = LineCodec::for_resolution(res);
+        let uv = pixel_centres(res);
+        for method in [
+            SplitMethod::Default,
+            SplitMethod::Exhaustive,
+            SplitMethod::NelderMead,
+        ] {
+            let f = Fitter {
+                codec: &codec,
+                res,
+                uv: &uv,
+                samples,
+                epsilon_pixels: 1e-3 * f64::from(res * res),
+                method,
+            };
+            let sun = 20 * res + 21;
+            let index: Vec<u32> = (16..24)
+                .flat_map(|j| (16..24).map(move |i| j * res + i))
+                .collect();
+            let visible: Vec<u16> = index.iter().map(|&p| u16::from(p == sun)).collect();
+            let at_sun = |protected: &[u32]| {
+                let (tree, _) = f.fit_protected(&index, &visible, protected);
+                tree.query(&codec, uv[sun as usize])
+            };
+            assert!(at_sun(&[]) < 128, "{method:?}: the sun averaged away");
+            assert_eq!(
+                f.fit(&index, &visible),
+                f.fit_protected(&index, &visible, &[])
+            );
+            if method != SplitMethod::NelderMead {
+                assert_eq!(at_sun(&[sun]), 255, "{method:?}");
+            }
+            // All lit: one leaf, protected or not.
+            let lit = vec![1u16; index.len()];
+            let (tree, _) = f.fit_protected(&index, &lit, &[sun]);
+            assert_eq!(tree, f.fit(&index, &lit).0, "{method:?}");
+        }
     }
 
     /// Every pixel that matters reaches exactly one leaf, at resolutions that are not multiples

@@ -221,10 +221,12 @@ impl Baker {
                         index,
                         visible,
                         light_pixels,
+                        protected: Vec::new(),
                     })
                 });
-                // The pixels of a point or spot light, aimed at it on the CPU as every cast does.
-                cast += rays.aim_at_spheres(&self.occluder, &self.table, &mut map);
+                // The pixels of a point or spot light or a sun, aimed at it on the CPU as every
+                // cast does.
+                cast += rays.aim(&self.occluder, &self.table, &mut map);
                 (map, cast, again)
             })
             .collect();
@@ -286,10 +288,12 @@ impl Baker {
             return Ok(self.fit_chunk(c, maps));
         };
         let t0 = Instant::now();
-        // A face whose smallest light tightens the tolerance (`Fitter::for_face`) is fitted on
-        // the CPU: the GPU fit takes one threshold a dispatch.
+        // A face whose smallest light tightens the tolerance (`Fitter::for_face`), or that holds
+        // a sun's protected pixels (`FacePixels::protected`), is fitted on the CPU: the GPU fit
+        // takes one threshold a dispatch and knows no protected pixels.
         let on_gpu = |p: &FacePixels| {
-            fitter.for_face(p.light_pixels).epsilon_pixels == fitter.epsilon_pixels
+            p.protected.is_empty()
+                && fitter.for_face(p.light_pixels).epsilon_pixels == fitter.epsilon_pixels
         };
         let faces: Vec<FaceInput> = maps
             .iter()
@@ -316,7 +320,11 @@ impl Baker {
                         GpuError::Failed("the GPU fit returned too few trees".into())
                     })?
                 } else {
-                    fitter.for_face(px.light_pixels).fit(&px.index, &px.visible)
+                    fitter.for_face(px.light_pixels).fit_protected(
+                        &px.index,
+                        &px.visible,
+                        &px.protected,
+                    )
                 };
                 vt.faces[f] = Some(tree);
                 fit += st;

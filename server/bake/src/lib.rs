@@ -38,7 +38,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use bspvt_raytrace::{Cutouts, Occluder};
-pub use cubemap::{CastCounts, CastMode, LampStop, LightStop, SphereStop};
+pub use cubemap::{CastCounts, CastMode, LampStop, LightStop, SphereStop, SunDisk};
 use cubemap::{RayTable, VertexRays};
 use fit::{FitStats, Fitter};
 
@@ -55,8 +55,10 @@ use fit::{FitStats, Fitter};
 /// boxes reach a margin past their triangles: `bspvt_raytrace::Occluder`; the room's bake
 /// changed, the pinned ones did not). 8: the pixels a point or spot light's sphere covers are
 /// cast toward the sphere itself (`VertexRays::aim_at_spheres`; bakes with such lights change,
-/// the pinned ones did not).
-pub const ALGORITHM_VERSION: u32 = 8;
+/// the pinned ones did not). 9: the sky's bake of a scene with suns casts the pixels each sun's
+/// disk at rest covers toward it, and the fit keeps those pixels in pure leaves
+/// (`VertexRays::aim`, `FacePixels::protected`; bakes without suns did not change).
+pub const ALGORITHM_VERSION: u32 = 9;
 
 /// Ray origins are offset along the normal by this fraction of the scene's diagonal.
 pub(crate) const RAY_OFFSET_SCALE: f32 = 1e-4;
@@ -79,6 +81,9 @@ pub struct Baker {
     settings: BakeSettings,
     /// Where the rays end: at the lights (see [`LightStop`]).
     stops: Vec<LightStop>,
+    /// The suns at rest the rays are aimed at: a scene's suns where nothing stops the rays (the
+    /// sky's bake, or a scene lit by suns alone), else none ([`SunDisk`]).
+    suns: Vec<SunDisk>,
     occluder: Occluder,
     culler: frustum::FrustumCuller,
     /// Mesh adjacency for the adaptive cast's walks.
@@ -184,13 +189,24 @@ pub enum Backend {
 
 impl Baker {
     /// Prepares a scene's bake (builds the BVH).
+    /// Where no light stops the rays (the sky's bake, `Scene::sky`, which keeps the suns, or a
+    /// scene lit by suns alone), the pixels of each sun's disk at rest are cast toward it and
+    /// kept in pure leaves ([`SunDisk`]).
     pub fn new(scene: &Scene) -> Baker {
-        Baker::build(
+        let stops = LightStop::of_scene(scene);
+        let suns = if stops.is_empty() {
+            SunDisk::of_scene(scene)
+        } else {
+            Vec::new()
+        };
+        let mut b = Baker::build(
             scene.mesh.clone(),
             scene.bake.clone(),
-            LightStop::of_scene(scene),
+            stops,
             Cutouts::of(&scene.mesh, &scene.materials),
-        )
+        );
+        b.suns = suns;
+        b
     }
 
     /// Prepares the bake of `mesh` with `settings`; `regions`: the boxes the lights may occupy
@@ -226,6 +242,7 @@ impl Baker {
             mesh,
             settings,
             stops,
+            suns: Vec::new(),
             occluder,
             culler,
             walk,
@@ -280,6 +297,7 @@ impl Baker {
             t_min: self.t_min,
             horizon_margin: self.horizon_margin,
             stops: &self.stops,
+            suns: &self.suns,
         }
     }
 
@@ -345,7 +363,11 @@ impl Baker {
         let mut fit = FitStats::default();
         for (f, px) in faces.iter().enumerate() {
             if let Some(px) = px {
-                let (tree, st) = fitter.for_face(px.light_pixels).fit(&px.index, &px.visible);
+                let (tree, st) = fitter.for_face(px.light_pixels).fit_protected(
+                    &px.index,
+                    &px.visible,
+                    &px.protected,
+                );
                 trees.faces[f] = Some(tree);
                 fit += st;
             }

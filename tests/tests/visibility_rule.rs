@@ -367,7 +367,7 @@ fn leaving_out_unreachable_directions_keeps_the_error_where_the_light_can_be() {
 }
 
 /// A bulb smaller than a cube-map pixel is sampled where it is, not at its pixel's centre
-/// (`VertexRays::aim_at_spheres`): from the floor's centre, at 8² faces, a bulb of radius 0.02
+/// (`VertexRays::aim`): from the floor's centre, at 8² faces, a bulb of radius 0.02
 /// 1.5 above the floor lies wholly inside the pixel whose centre is at direction
 /// (0.125, 1, 0.125), 0.05 off that centre; a small board at y = 1 blocks the pixel's centre
 /// ray but not the bulb. The bulb is visible. The control: the same bulb moved onto the

@@ -353,8 +353,8 @@ fn a_bulbs_shadow_is_its_own_at_every_vertex() {
 /// a stair-stepped patch on the floor. Now the sky's bake aims the sun's pixels at the sun and
 /// keeps them in pure leaves (`VertexRays::aim`, `FacePixels::protected`): of 6,007 vertices
 /// (1,158 lit, 353 in the penumbra), mean 0.024 and 63 off by more than half (the leaves' lines
-/// may still cut a sun's pixel between its centre and the disk). Before the change: not yet
-/// measured.
+/// may still cut a sun's pixel between its centre and the disk). Before the change (the same
+/// test on 66e91f6's bake): mean 0.049, 217 off by more than half.
 #[test]
 fn the_suns_patch_is_its_own_at_every_vertex() {
     let mut s = Scene::from_mesh_path(&room("punctual-room.gltf")).expect("punctual room");

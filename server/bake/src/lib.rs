@@ -54,7 +54,7 @@ use fit::{FitStats, Fitter};
 /// them. 7: nor past the BVH's box test, when that edge is a leaf box's face (the occluder's
 /// boxes reach a margin past their triangles: `bspvt_raytrace::Occluder`; the room's bake
 /// changed, the pinned ones did not). 8: the pixels a point or spot light's sphere covers are
-/// cast toward the sphere itself (`VertexRays::aim_at_spheres`; bakes with such lights change,
+/// cast toward the sphere itself (`VertexRays::aim`; bakes with such lights change,
 /// the pinned ones did not). 9: the sky's bake of a scene with suns casts the pixels each sun's
 /// disk at rest covers toward it, and the fit keeps those pixels in pure leaves
 /// (`VertexRays::aim`, `FacePixels::protected`; bakes without suns did not change).

@@ -17,6 +17,37 @@ use bspvt_proto::Scene;
 use bspvt_proto::encoding::decode_bake;
 use bspvt_raytrace::{Occluder, mesh_triangles};
 
+/// A round light's disk as a vertex sees it: a 12-gon of `radius` around `centre` (a direction
+/// from the vertex, not normalised), across the view.
+fn twelve_gon(centre: glam::DVec3, radius: f64) -> Vec<glam::DVec3> {
+    let (e1, e2) = centre.normalize().any_orthonormal_pair();
+    (0..12)
+        .map(|k| {
+            let phi = std::f64::consts::TAU * f64::from(k) / 12.0;
+            centre + radius * (phi.cos() * e1 + phi.sin() * e2)
+        })
+        .collect()
+}
+
+/// At vertex `v`: the trees' visible share of `disk` (directions from the vertex) clipped to
+/// the vertex's horizon, and the refinement's independent measure (rays to the light);
+/// `None` where the disk is below the horizon.
+fn baked_and_exact(
+    b: &bspvt_proto::encoding::Bake,
+    codec: &bspvt_proto::bspvt::LineCodec,
+    s: &Scene,
+    exact: &bspvt_bake::refine::Visibility,
+    v: usize,
+    disk: &[glam::DVec3],
+) -> Option<(f64, f64)> {
+    let (p, nrm) = (s.mesh.positions[v], s.mesh.normals[v]);
+    let dirs = bspvt_proto::sphere::clip(disk, nrm.as_dvec3());
+    (dirs.len() >= 3).then(|| {
+        let baked = b.trees[v].visible_fraction(codec, &dirs);
+        (baked, f64::from(exact.at(p, nrm, Some(v as u32))))
+    })
+}
+
 fn room(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../assets/rooms")
@@ -288,25 +319,14 @@ fn a_bulbs_shadow_is_its_own_at_every_vertex() {
         // (vertices, Σ |baked − exact|, off by more than half, in the penumbra)
         let mut flat = (0usize, 0.0, 0usize, 0usize);
         let mut curved = (0usize, 0.0, 0usize);
-        for (v, trees) in b.trees.iter().enumerate() {
-            let (p, nrm) = (s.mesh.positions[v], s.mesh.normals[v]);
-            // The bulb's disk as the vertex sees it: a 12-gon around the centre, across the view.
-            let w = (c - p.as_dvec3()).normalize();
-            let (e1, e2) = w.any_orthonormal_pair();
-            let disk: Vec<glam::DVec3> = (0..12)
-                .map(|k| {
-                    let phi = std::f64::consts::TAU * f64::from(k) / 12.0;
-                    c + r * (phi.cos() * e1 + phi.sin() * e2) - p.as_dvec3()
-                })
-                .collect();
-            let dirs = bspvt_proto::sphere::clip(&disk, nrm.as_dvec3());
-            if dirs.len() < 3 {
+        for v in 0..b.trees.len() {
+            // The bulb's disk as the vertex sees it.
+            let disk = twelve_gon(c - s.mesh.positions[v].as_dvec3(), r);
+            let Some((baked, truth)) = baked_and_exact(&b, &codec, &s, &exact, v, &disk) else {
                 continue;
-            }
-            let baked = trees.visible_fraction(&codec, &dirs);
-            let truth = f64::from(exact.at(p, nrm, Some(v as u32)));
+            };
             let d = (baked - truth).abs();
-            if nrm.abs().max_element() > 0.999 {
+            if s.mesh.normals[v].abs().max_element() > 0.999 {
                 flat.0 += 1;
                 flat.1 += d;
                 flat.2 += usize::from(d > 0.5);
@@ -389,25 +409,16 @@ fn the_suns_patch_is_its_own_at_every_vertex() {
         })
         .collect();
     let exact = bspvt_bake::refine::Visibility::new(&s.mesh, &[]).with_suns(&spread);
-    let disk: Vec<glam::DVec3> = (0..12)
-        .map(|k| {
-            let phi = std::f64::consts::TAU * f64::from(k) / 12.0;
-            w + tan_h * (phi.cos() * e1 + phi.sin() * e2)
-        })
-        .collect();
+    let disk = twelve_gon(w, tan_h);
     // (vertices, Σ |baked − exact|, off by more than half, in the penumbra, lit)
     let mut flat = (0usize, 0.0, 0usize, 0usize, 0usize);
-    for (v, trees) in b.trees.iter().enumerate() {
-        let (p, nrm) = (s.mesh.positions[v], s.mesh.normals[v]);
-        if nrm.abs().max_element() <= 0.999 {
+    for v in 0..b.trees.len() {
+        if s.mesh.normals[v].abs().max_element() <= 0.999 {
             continue;
         }
-        let dirs = bspvt_proto::sphere::clip(&disk, nrm.as_dvec3());
-        if dirs.len() < 3 {
+        let Some((baked, truth)) = baked_and_exact(&b, &codec, &s, &exact, v, &disk) else {
             continue;
-        }
-        let baked = trees.visible_fraction(&codec, &dirs);
-        let truth = f64::from(exact.at(p, nrm, Some(v as u32)));
+        };
         let d = (baked - truth).abs();
         flat.0 += 1;
         flat.1 += d;

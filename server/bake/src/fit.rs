@@ -975,6 +975,23 @@ mod tests {
         );
     }
 
+    /// The bake's fitter at one ray per pixel and the default ε = 10⁻³ of the face's pixels.
+    fn one_ray_fitter<'a>(
+        codec: &'a LineCodec,
+        uv: &'a [Vec2],
+        res: u32,
+        method: SplitMethod,
+    ) -> Fitter<'a> {
+        Fitter {
+            codec,
+            res,
+            uv,
+            samples: 1,
+            epsilon_pixels: 1e-3 * f64::from(res * res),
+            method,
+        }
+    }
+
     /// Two bulbs of 4 pixels each on a 64² face, one shadowed and one lit: the face's
     /// tolerance (ε · res² ≈ 4.1 pixels of squared deviation) takes the 8 pixels as one leaf
     /// of 0.5 (a squared deviation of 2), both bulbs half lit; bounded by a tenth of the
@@ -982,17 +999,10 @@ mod tests {
     /// ≥ 41 pixels leaves the tolerance as it is.
     #[test]
     fn a_small_light_keeps_its_own_leaves() {
-        let (res, samples) = (64u32, 1u32);
+        let res = 64u32;
         let codec = LineCodec::for_resolution(res);
         let uv = pixel_centres(res);
-        let f = Fitter {
-            codec: &codec,
-            res,
-            uv: &uv,
-            samples,
-            epsilon_pixels: 1e-3 * f64::from(res * res),
-            method: SplitMethod::Default,
-        };
+        let f = one_ray_fitter(&codec, &uv, res, SplitMethod::Default);
         // Bulb A: a 2×2 block at (10, 10), shadowed; bulb B: at (40, 30), lit.
         let block = |i0: u32, j0: u32| [(i0, j0), (i0 + 1, j0), (i0, j0 + 1), (i0 + 1, j0 + 1)];
         let mut px: Vec<(u32, u16)> = block(10, 10)
@@ -1022,7 +1032,7 @@ mod tests {
     /// pixels of its own count changes nothing, nor does an empty protected set.
     #[test]
     fn a_suns_pixel_keeps_its_own_leaf() {
-        let (res, samples) = (64u32, 1u32);
+        let res = 64u32;
         let codec = LineCodec::for_resolution(res);
         let uv = pixel_centres(res);
         for method in [
@@ -1030,14 +1040,7 @@ mod tests {
             SplitMethod::Exhaustive,
             SplitMethod::NelderMead,
         ] {
-            let f = Fitter {
-                codec: &codec,
-                res,
-                uv: &uv,
-                samples,
-                epsilon_pixels: 1e-3 * f64::from(res * res),
-                method,
-            };
+            let f = one_ray_fitter(&codec, &uv, res, method);
             let sun = 20 * res + 21;
             let index: Vec<u32> = (16..24)
                 .flat_map(|j| (16..24).map(move |i| j * res + i))

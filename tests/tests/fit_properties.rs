@@ -56,14 +56,7 @@ fn fitter<'a>(
     res: u32,
     method: SplitMethod,
 ) -> Fitter<'a> {
-    Fitter {
-        codec,
-        res,
-        uv,
-        samples: s * s,
-        epsilon_pixels: eps as f64 * (res as f64).powi(2),
-        method,
-    }
+    Fitter::new(codec, uv, res, s * s, f64::from(eps), method)
 }
 
 /// Fits and checks everything listed in the module documentation.

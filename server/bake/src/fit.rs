@@ -228,6 +228,26 @@ impl PartialEq for Ratio {
 impl Eq for Ratio {}
 
 impl<'a> Fitter<'a> {
+    /// The tree builder of `res`² faces at `samples` rays per pixel, a leaf's tolerance ε of
+    /// the face's pixels [paper000 §3.2].
+    pub fn new(
+        codec: &'a LineCodec,
+        uv: &'a [Vec2],
+        res: u32,
+        samples: u32,
+        epsilon: f64,
+        method: SplitMethod,
+    ) -> Fitter<'a> {
+        Fitter {
+            codec,
+            res,
+            uv,
+            samples,
+            epsilon_pixels: epsilon * (f64::from(res) * f64::from(res)),
+            method,
+        }
+    }
+
     /// Builds the tree of one face from its pixels that matter (`index`, escape counts),
     /// splitting by the line that minimises E(P, l) [paper000 §3.2 eq. 3].
     pub fn fit(&self, index: &[u32], visible: &[u16]) -> (FaceTree, FitStats) {
@@ -936,14 +956,7 @@ mod tests {
         for i in 0..3000 {
             let samples = [1u32, 4, 16, 64][i % 4];
             let eps = [0.0, 1e-4, 1e-3, 1e-2][(i / 4) % 4];
-            let f = Fitter {
-                codec: &codec,
-                res: 16,
-                uv: &uv,
-                samples,
-                epsilon_pixels: eps * 256.0,
-                method: SplitMethod::Default,
-            };
+            let f = Fitter::new(&codec, &uv, 16, samples, eps, SplitMethod::Default);
             // Mostly uniform sets with a few odd pixels, so both answers occur.
             seed = seed
                 .wrapping_mul(6364136223846793005)
@@ -982,14 +995,7 @@ mod tests {
         res: u32,
         method: SplitMethod,
     ) -> Fitter<'a> {
-        Fitter {
-            codec,
-            res,
-            uv,
-            samples: 1,
-            epsilon_pixels: 1e-3 * f64::from(res * res),
-            method,
-        }
+        Fitter::new(codec, uv, res, 1, 1e-3, method)
     }
 
     /// Two bulbs of 4 pixels each on a 64² face, one shadowed and one lit: the face's
@@ -1085,14 +1091,7 @@ mod tests {
                 })
                 .unzip();
             for method in [SplitMethod::Default, SplitMethod::Exhaustive] {
-                let f = Fitter {
-                    codec: &codec,
-                    res,
-                    uv: &uv,
-                    samples: 1,
-                    epsilon_pixels: 0.0,
-                    method,
-                };
+                let f = Fitter::new(&codec, &uv, res, 1, 0.0, method);
                 let (tree, stats) = f.fit(&index, &visible);
                 assert_eq!(stats.pixels, index.len() as u64, "{res}² {method:?}");
                 for (&i, &k) in index.iter().zip(&visible) {

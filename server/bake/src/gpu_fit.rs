@@ -662,14 +662,7 @@ mod tests {
         samples: u32,
         epsilon: f64,
     ) -> Fitter<'a> {
-        Fitter {
-            codec,
-            res,
-            uv,
-            samples,
-            epsilon_pixels: epsilon * f64::from(res * res),
-            method: SplitMethod::Default,
-        }
+        Fitter::new(codec, uv, res, samples, epsilon, SplitMethod::Default)
     }
 
     /// Random faces at 4² to 64², one and 16 rays per pixel, several ε: the GPU's trees are
@@ -758,14 +751,14 @@ mod tests {
                 let (maps, _) = b.cube_map(v);
                 faces.extend(maps.into_iter().flatten().map(|f| (f.index, f.visible)));
             }
-            let f = Fitter {
-                codec: &b.codec,
+            let f = Fitter::new(
+                &b.codec,
+                &b.table.uv,
                 res,
-                uv: &b.table.uv,
-                samples: b.table.samples,
-                epsilon_pixels: f64::from(b.settings.epsilon) * f64::from(res * res),
-                method: b.settings.split,
-            };
+                b.table.samples,
+                f64::from(b.settings.epsilon),
+                b.settings.split,
+            );
             let (t, fl, d) = compare(&gpu, &f, &faces, &format!("{name} {res}² S={}", ss * ss));
             total += t;
             flagged += fl;

@@ -342,14 +342,14 @@ impl Baker {
 
     /// This bake's tree builder with the given split search.
     pub(crate) fn fitter(&self, method: SplitMethod) -> Fitter<'_> {
-        Fitter {
-            codec: &self.codec,
-            res: self.settings.face_res,
-            uv: &self.table.uv,
-            samples: self.table.samples,
-            epsilon_pixels: self.settings.epsilon as f64 * (self.settings.face_res as f64).powi(2),
+        Fitter::new(
+            &self.codec,
+            &self.table.uv,
+            self.settings.face_res,
+            self.table.samples,
+            f64::from(self.settings.epsilon),
             method,
-        }
+        )
     }
 
     /// Fits one tree per face of a cube map with the given split search.

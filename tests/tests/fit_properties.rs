@@ -48,17 +48,6 @@ struct Figures {
     max_depth_leaves: u64,
 }
 
-fn fitter<'a>(
-    codec: &'a LineCodec,
-    uv: &'a [Vec2],
-    s: u32,
-    eps: f32,
-    res: u32,
-    method: SplitMethod,
-) -> Fitter<'a> {
-    Fitter::new(codec, uv, res, s * s, f64::from(eps), method)
-}
-
 /// Fits and checks everything listed in the module documentation.
 fn check_fit(
     f: &Fitter,
@@ -245,7 +234,7 @@ proptest! {
         let codec = LineCodec::for_resolution(res);
         let uv = pixel_centres(res);
         for (m, &method) in METHODS.iter().enumerate() {
-            let f = fitter(&codec, &uv, s, EPSILONS[eps], res, method);
+            let f = Fitter::new(&codec, &uv, res, s * s, f64::from(EPSILONS[eps]), method);
             // Nelder–Mead, the paper's baseline, makes a leaf when its search finds no line
             // that splits the node (documented in fit.rs), so its leaves may exceed ε: they are
             // counted and reported, everything else is checked.
@@ -284,7 +273,7 @@ fn uniform_input_is_one_leaf() {
                 let index: Vec<u32> = (0..res * res).filter(|_| rng.chance(0.6)).collect();
                 let visible = vec![k; index.len()];
                 for method in METHODS {
-                    let f = fitter(&codec, &uv, s, 0.0, res, method);
+                    let f = Fitter::new(&codec, &uv, res, s * s, 0.0, method);
                     let (tree, stats) = f.fit(&index, &visible);
                     let want = quantise(k as f64 / (s * s) as f64);
                     assert_eq!(
@@ -374,7 +363,7 @@ fn exhaustive_root_line_is_optimal() {
         let one: u64 = visible.iter().map(|&k| (samples - k as u64).pow(2)).sum();
         let constant = zero.min(one);
         for (m, method) in METHODS.iter().enumerate() {
-            let f = fitter(&codec, &uv, s, 0.0, res, *method);
+            let f = Fitter::new(&codec, &uv, res, s * s, 0.0, *method);
             let (tree, _) = f.fit(&index, &visible);
             let Node::Split { line, .. } = tree.nodes[0] else {
                 continue;
@@ -444,7 +433,7 @@ fn fitted_trees_split_polygons() {
                 let (index, visible, _) = random_face(&mut rng, res, s);
                 let eps = EPSILONS[rng.below(EPSILONS.len() as u64) as usize];
                 trees.faces[f] = Some(
-                    fitter(&codec, &uv, s, eps, res, method)
+                    Fitter::new(&codec, &uv, res, s * s, f64::from(eps), method)
                         .fit(&index, &visible)
                         .0,
                 );

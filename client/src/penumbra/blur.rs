@@ -7,11 +7,12 @@
 //! light's image scaled by (Z_r − Z_o)/Z_o, which is what the similar-triangles width
 //! describes: a box of that half-width for a square light along the screen's axes, here a tent
 //! of the same second moment (two boxes of half-width r/√2, [`blur`]), applied separably, with
-//! fractional coverage at the boxes' ends so the width varies smoothly. The box reads only the centre's run of one surface along
-//! the line — up to the first pair of neighbours not on one surface (depth off the tangent
-//! plane, or a different normal: [`Guide::same_surface`]) — so shadows do not bleed across
-//! depth or normal discontinuities; taps past the run's ends take the end's value (the surface
-//! goes on, hidden or off screen); prefix sums give each pixel's box in O(1) at any width.
+//! fractional coverage at the boxes' ends so the width varies smoothly. A box reads only the
+//! centre's run of one surface along the line — up to the first pair of neighbours not on one
+//! surface (depth off the tangent plane, or a different normal: [`Guide::same_surface`]) — so
+//! shadows do not bleed across depth or normal discontinuities; taps past the run's ends take
+//! the end's value (the surface goes on, hidden or off screen); prefix sums give each pixel's
+//! box in O(1) at any width.
 //!
 //! Only occluded pixels know a width (the occluder distance comes from their shadow ray). The
 //! penumbra is centred on the hard shadow's edge and extends onto the lit side too, and its
@@ -121,10 +122,11 @@ fn spread_pass(radius: &Widths, guide: &Guide, params: &Params, horizontal: bool
 ///
 /// Why not the box itself: the box's linear ramp is the penumbra of a square light whose
 /// sides run along the screen's axes; seen at other angles (and through perspective) the
-/// light's image blurs the ramp's ends, which the tent does. On `bench-penumbra` (2026-11-30)
-/// the tent lowers rt-penumbra's RMSE by 9–25 % (plate-small base 0.00508 → 0.00402, contact
-/// 0.00463 → 0.00348, teapot 0.00463 → 0.00421) and raises it 3 % where two penumbrae of
-/// different widths overlap; three boxes (closer to a Gaussian) are no better and cost more.
+/// light's image blurs the ramp's ends, which the tent does. On `bench-penumbra --ref-spp 512`
+/// (2026-11-30) the tent lowers rt-penumbra's RMSE by 2–25 % (plate-small base 0.00508 →
+/// 0.00402, contact 0.00463 → 0.00348, teapot 0.00459 → 0.00418, bunny 0.00403 → 0.00394)
+/// and raises it 3 % where two penumbrae of different widths overlap (0.00352 → 0.00362);
+/// three boxes (closer to a Gaussian) are no better and cost more.
 pub(crate) fn blur(values: &[f32], radius: &Widths, guide: &Guide, params: &Params) -> Vec<f32> {
     let half: Vec<f64> = radius
         .iter()

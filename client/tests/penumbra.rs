@@ -245,7 +245,7 @@ fn finite_in_degenerate_configurations() {
     let r = Renderer::new(&base, 96, 64);
     let occ = occluder(&base);
     let g = Guide::new(&r);
-    let b = rt::hard_shadows(&g, &near_light, &occ, 1e-4);
+    let b = rt::hard_shadows(&g, &near_light, &occ, 1e-4).unwrap();
     let huge = b.radius.iter().copied().fold(0.0, f64::max);
     assert!(
         huge > 10.0,

@@ -24,6 +24,8 @@ use crate::bench::{file_stem, load_named_scene, median_ms as timed, named_scene_
 use crate::compare::heatmap::{error_scale, heat_map};
 use crate::compare::metrics::{covered as covered_pixels, mean_image, rmse_mae as errors};
 use bspvt_client::frame::image::Image;
+use bspvt_client::gpu::Gpu;
+use bspvt_client::gpu::shadow_rays::GpuShadowRays;
 use bspvt_client::groundtruth::ltcvis::{builtin_lookup, render_ltc_exact_visibility};
 use bspvt_client::light::Light;
 use bspvt_client::penumbra::{self, Guide, Params, Technique};
@@ -62,6 +64,11 @@ pub struct BenchPenumbraArgs {
     /// Output folder: results.csv/.md/.json and the images.
     #[arg(long, default_value = "out/bench-penumbra")]
     pub out: PathBuf,
+    /// Also rt-penumbra and rt-hard with their shadow rays cast on the GPU (rows
+    /// `rt-penumbra-gpu`, `rt-hard-gpu`; the blur stays on the CPU). An error without an
+    /// adapter; a software one (lavapipe) is used when it is the only one.
+    #[arg(long)]
+    pub gpu: bool,
 }
 
 /// The settings a run resolves from [`BenchPenumbraArgs`].
@@ -100,8 +107,9 @@ impl Settings {
 pub struct Row {
     pub(crate) scene: String,
     pub(crate) case: String,
-    /// `rt-penumbra`, `rt-hard`, `pcf`, `vsm`, `pcss`, `unshadowed` or `ltc-exact`.
-    pub(crate) method: String,
+    /// `rt-penumbra`, `rt-hard`, `pcf`, `vsm`, `pcss`, `unshadowed` or `ltc-exact`
+    /// (`rt-penumbra-gpu`, `rt-hard-gpu` with `--gpu`).
+    pub method: String,
     /// Shadow rays per pixel (`ltc-exact` only).
     pub(crate) spp: Option<u32>,
     /// Median frame time, ms.
@@ -171,6 +179,8 @@ pub struct CaseReport {
     pub rows: Vec<Row>,
     /// rt-penumbra's speed-up over Monte Carlo at equal RMSE.
     pub speed_up: SpeedUp,
+    /// The same with its shadow rays on the GPU (`--gpu`).
+    pub speed_up_gpu: Option<SpeedUp>,
 }
 
 /// What `bspvt bench-penumbra` measured.
@@ -180,6 +190,8 @@ pub struct Report {
     pub settings: Settings,
     /// Worker threads.
     pub threads: usize,
+    /// The GPU adapter of the `-gpu` rows (`--gpu`).
+    pub adapter: Option<String>,
     /// Every scene and case.
     pub cases: Vec<CaseReport>,
     /// Scenes skipped (missing assets), with the reason.
@@ -195,9 +207,15 @@ pub fn run(a: &BenchPenumbraArgs) -> Result<Report> {
         .unwrap_or_else(|| bspvt_proto::paths::assets_dir().join("meshes"));
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let gpu = if a.gpu {
+        Some(Gpu::shared().context("bench-penumbra --gpu")?)
+    } else {
+        None
+    };
     let mut report = Report {
         settings: settings.clone(),
         threads: rayon::current_num_threads(),
+        adapter: gpu.map(|g| g.adapter.clone()),
         cases: Vec::new(),
         skipped: Vec::new(),
     };
@@ -213,8 +231,11 @@ pub fn run(a: &BenchPenumbraArgs) -> Result<Report> {
         };
         for case in cases(name, &scene, a.base_only) {
             eprintln!("bench-penumbra: {name} / {} …", case.name);
-            let c = measure_case(name, &case, &settings, &a.out)?;
+            let c = measure_case(name, &case, &settings, gpu, &a.out)?;
             eprintln!("  rt-penumbra vs MC: {}", c.speed_up.describe());
+            if let Some(s) = &c.speed_up_gpu {
+                eprintln!("  rt-penumbra, rays on the GPU, vs MC: {}", s.describe());
+            }
             report.cases.push(c);
         }
     }
@@ -335,7 +356,13 @@ const SEED_A: u64 = 0x5eed_0001;
 const SEED_B: u64 = 0x5eed_0002;
 const SEED_MC: u64 = 0x5eed_1000;
 
-fn measure_case(scene_name: &str, case: &Case, st: &Settings, out: &Path) -> Result<CaseReport> {
+fn measure_case(
+    scene_name: &str,
+    case: &Case,
+    st: &Settings,
+    gpu: Option<&'static Gpu>,
+    out: &Path,
+) -> Result<CaseReport> {
     let scene = &case.scene;
     let Some(pl) = scene.lights.first() else {
         bail!("{scene_name}: the scene has no light");
@@ -393,6 +420,20 @@ fn measure_case(scene_name: &str, case: &Case, st: &Settings, out: &Path) -> Res
         })?;
         rows.push(row(name, None, ms, &img)?);
     }
+    if let Some(g) = gpu {
+        // The BVH's upload and the pipeline's compilation are setup, as the CPU's BVH build
+        // is: outside the timed frames.
+        let rays = GpuShadowRays::new(g, &occ)?;
+        for (t, name) in [
+            (Technique::RtPenumbra, "rt-penumbra-gpu"),
+            (Technique::RtHard, "rt-hard-gpu"),
+        ] {
+            let (ms, img) = timed(st.frames, || {
+                penumbra::render(&r, &guide, &light, t, Some(&rays), &params)
+            })?;
+            rows.push(row(name, None, ms, &img)?);
+        }
+    }
     let (ms, img) = timed(st.frames, || {
         Ok(r.shade_pixels(std::slice::from_ref(&light), None))
     })?;
@@ -405,7 +446,11 @@ fn measure_case(scene_name: &str, case: &Case, st: &Settings, out: &Path) -> Res
         })?;
         rows.push(row("ltc-exact", Some(spp), ms, &img)?);
     }
-    let speed_up = equal_rmse_speed_up(&rows)?;
+    let speed_up = equal_rmse_speed_up(&rows, "rt-penumbra")?;
+    let speed_up_gpu = match gpu {
+        Some(_) => Some(equal_rmse_speed_up(&rows, "rt-penumbra-gpu")?),
+        None => None,
+    };
     Ok(CaseReport {
         scene: scene_name.to_string(),
         case: case.name.clone(),
@@ -415,18 +460,19 @@ fn measure_case(scene_name: &str, case: &Case, st: &Settings, out: &Path) -> Res
         ref_rmse: ref_between / 2.0,
         rows,
         speed_up,
+        speed_up_gpu,
     })
 }
 
-/// Equal-RMSE speed-up of rt-penumbra over MC (`ltc-exact` rows, increasing spp): with e the
-/// rt-penumbra RMSE and (e_i, t_i), (e_j, t_j) the MC points bracketing it,
+/// Equal-RMSE speed-up of `method`'s row (rt-penumbra) over MC (`ltc-exact` rows, increasing
+/// spp): with e the rt-penumbra RMSE and (e_i, t_i), (e_j, t_j) the MC points bracketing it,
 /// log t = log t_i + (log e − log e_i) / (log e_j − log e_i) · (log t_j − log t_i)
 /// (and the same for spp); factor = t / t_rt.
-pub(crate) fn equal_rmse_speed_up(rows: &[Row]) -> Result<SpeedUp> {
+pub(crate) fn equal_rmse_speed_up(rows: &[Row], method: &str) -> Result<SpeedUp> {
     let rt = rows
         .iter()
-        .find(|r| r.method == "rt-penumbra")
-        .context("no rt-penumbra row")?;
+        .find(|r| r.method == method)
+        .with_context(|| format!("no {method} row"))?;
     let mc: Vec<&Row> = rows.iter().filter(|r| r.method == "ltc-exact").collect();
     let (Some(first), Some(last)) = (mc.first(), mc.last()) else {
         bail!("no Monte Carlo rows");
@@ -528,6 +574,14 @@ fn markdown(report: &Report) -> String {
             "\nEqual-RMSE speed-up of rt-penumbra over MC area-light shadows: {}\n",
             c.speed_up.describe()
         );
+        if let Some(g) = &c.speed_up_gpu {
+            let _ = writeln!(
+                s,
+                "The same with its shadow rays on the GPU ({}): {}\n",
+                report.adapter.as_deref().unwrap_or("?"),
+                g.describe()
+            );
+        }
     }
     for k in &report.skipped {
         let _ = writeln!(s, "Skipped: {k}");
@@ -568,7 +622,7 @@ mod tests {
         let with = |rmse: f64| {
             let mut v = vec![row("rt-penumbra", None, 2.0, rmse)];
             v.extend(mc.iter().cloned());
-            equal_rmse_speed_up(&v).expect("rows")
+            equal_rmse_speed_up(&v, "rt-penumbra").expect("rows")
         };
         match with(0.1 / 2f64.sqrt()) {
             SpeedUp::Interpolated { spp, factor } => {

@@ -17,8 +17,25 @@ fn quick_bench_writes_finite_results() {
         base_only: false,
         meshes_dir: None,
         out: out.clone(),
+        // The shadow rays on the GPU too where there is an adapter (lavapipe in CI).
+        gpu: bspvt_client::gpu::Gpu::shared().is_ok(),
     };
+    let gpu = args.gpu;
+    eprintln!("GPU rows: {gpu}");
     let report = run(&args).unwrap();
+    if gpu {
+        for c in &report.cases {
+            let rmse = |m: &str| c.rows.iter().find(|r| r.method == m).unwrap().rmse;
+            // The same rays answered by another machine: the same error.
+            let (cpu, on_gpu) = (rmse("rt-penumbra"), rmse("rt-penumbra-gpu"));
+            assert!(
+                (cpu - on_gpu).abs() <= 0.02 * cpu,
+                "{}: rt-penumbra RMSE {cpu} on the CPU, {on_gpu} with the GPU's rays",
+                c.case
+            );
+            assert!(c.speed_up_gpu.is_some());
+        }
+    }
     // base, contact, overlap, big-light; the missing mesh is skipped, not an error.
     assert_eq!(report.cases.len(), 4);
     assert_eq!(report.skipped.len(), 1);
@@ -66,6 +83,7 @@ fn quick_bench_writes_finite_results() {
         }
         n += 1;
     }
-    // Per case: 5 methods + unshadowed + 5 MC spp counts (quick: 1..16) + reference noise.
-    assert_eq!(n, 4 * 12);
+    // Per case: 5 methods (+ 2 with GPU rays) + unshadowed + 5 MC spp counts (quick: 1..16)
+    // + reference noise.
+    assert_eq!(n, 4 * (12 + 2 * usize::from(gpu)));
 }

@@ -1,12 +1,14 @@
 //! GPU shading and frames with wgpu (Vulkan, Metal, DX12; Mesa's lavapipe where there is no
 //! GPU): BSPVT per vertex in a compute pass ([`vertex`], eq. 2 of paper 000), and the trees
-//! of all vertices in storage buffers ([`trees`]). The CPU path stays the reference; the
+//! of all vertices in storage buffers ([`trees`]), and rt-penumbra's hard shadow rays
+//! ([`shadow_rays`]). The CPU path stays the reference; the
 //! bound between the two is in docs/gpu.md.
 
 pub mod backend;
 pub mod context;
 pub mod frame;
 pub mod present;
+pub mod shadow_rays;
 pub(crate) mod sky;
 pub(crate) mod trees;
 pub mod vertex;

@@ -5,6 +5,8 @@
 use anyhow::Result;
 
 use super::{Frame, FrameInput, FrameMethod, MethodState, Needs, SceneData, Settings};
+use crate::gpu::shadow_rays::GpuShadowRays;
+use crate::penumbra::rt::ShadowCaster;
 use crate::penumbra::{self, GuideCache, Params, Technique};
 use crate::render::renderer::{FrameCounts, Mode};
 
@@ -34,18 +36,28 @@ impl FrameMethod for PointShadow {
             ..Needs::default()
         }
     }
+    /// The ray-traced techniques cast their hard shadow rays on the GPU.
+    fn gpu(&self) -> bool {
+        self.technique.needs_rays()
+    }
     fn fixed_mode(&self) -> Option<Mode> {
         Some(Mode::Pixel)
     }
-    /// The BVH is built now when the technique traces rays.
+    /// The BVH is built now when the technique traces rays, and uploaded when the backend
+    /// is a GPU.
     fn prepare(&self, scene: &SceneData, settings: &Settings) -> Result<Box<dyn MethodState>> {
+        let mut gpu = None;
         if self.technique.needs_rays() {
-            scene.occluder();
+            let occ = scene.occluder();
+            if let (Some(device), _) = settings.backend.resolve()? {
+                gpu = Some(GpuShadowRays::new(device, occ)?);
+            }
         }
         Ok(Box::new(State {
             technique: self.technique,
             params: settings.penumbra,
             guide: GuideCache::default(),
+            gpu,
         }))
     }
 }
@@ -54,11 +66,19 @@ struct State {
     technique: Technique,
     params: Params,
     guide: GuideCache,
+    /// The hard shadow rays on the GPU (`None`: on the CPU).
+    gpu: Option<GpuShadowRays>,
 }
 
 impl MethodState for State {
     fn frame(&mut self, f: &FrameInput) -> Result<Frame> {
-        let occ = self.technique.needs_rays().then(|| f.scene.occluder());
+        let occ: Option<&dyn ShadowCaster> = match &self.gpu {
+            Some(g) => Some(g),
+            None => self
+                .technique
+                .needs_rays()
+                .then(|| f.scene.occluder() as &dyn ShadowCaster),
+        };
         let guide = self.guide.get(f.renderer);
         let image = if f.renderer.scene.punctual.is_empty() {
             // Each polygon light as a point light at its centroid, summed (a sun has no

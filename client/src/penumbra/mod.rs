@@ -23,7 +23,6 @@ pub mod rt;
 pub(crate) mod shadowmap;
 
 use anyhow::{Result, bail};
-use bspvt_raytrace::Occluder;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -48,7 +47,7 @@ pub enum Technique {
 }
 
 impl Technique {
-    /// True when the technique traces rays (needs an [`Occluder`]).
+    /// True when the technique traces rays (needs a [`rt::ShadowCaster`]).
     pub(crate) fn needs_rays(self) -> bool {
         matches!(self, Technique::RtPenumbra | Technique::RtHard)
     }
@@ -60,7 +59,7 @@ pub fn shadow_factor(
     guide: &Guide,
     light: &Light,
     technique: Technique,
-    occluder: Option<&Occluder>,
+    occluder: Option<&dyn rt::ShadowCaster>,
     params: &Params,
 ) -> Result<Vec<f32>> {
     let filter = match technique {
@@ -69,7 +68,7 @@ pub fn shadow_factor(
                 bail!("{technique:?} needs an occluder (ray tracing)");
             };
             let eps = Shadows::for_scene(r.scene, None).epsilon;
-            let b = rt::hard_shadows(guide, light, occ, eps);
+            let b = rt::hard_shadows(guide, light, occ, eps)?;
             return Ok(if technique == Technique::RtHard {
                 b.hard
             } else {
@@ -99,7 +98,7 @@ pub fn render(
     guide: &Guide,
     light: &Light,
     technique: Technique,
-    occluder: Option<&Occluder>,
+    occluder: Option<&dyn rt::ShadowCaster>,
     params: &Params,
 ) -> Result<Image> {
     if !r.scene.punctual.is_empty() {
@@ -121,7 +120,7 @@ pub fn render_punctual(
     r: &Renderer,
     guide: &Guide,
     technique: Technique,
-    occluder: Option<&Occluder>,
+    occluder: Option<&dyn rt::ShadowCaster>,
     params: &Params,
 ) -> Result<Image> {
     let mut out = Image::new(r.gbuffer.width, r.gbuffer.height);

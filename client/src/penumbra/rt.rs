@@ -4,7 +4,8 @@
 //! screen pixels (W / the pixel's footprint on the receiver's tangent plane), capped at
 //! [`Params::max_radius`] pixels ([`super::blur`]).
 
-use bspvt_raytrace::Occluder;
+use anyhow::Result;
+use bspvt_raytrace::{Occluder, Segment};
 use rayon::prelude::*;
 
 use super::{Guide, Kernel, Params, blur, light_width, penumbra_width};
@@ -25,24 +26,43 @@ pub struct RtBuffers {
     pub radius: Vec<f64>,
 }
 
+/// Who casts the hard shadow rays: the CPU's BVH ([`Occluder`], the reference) or the GPU's
+/// ([`crate::gpu::shadow_rays::GpuShadowRays`]).
+pub trait ShadowCaster: Sync {
+    /// The closest hit of each segment (`None`: clear), as [`Occluder::first_hit`].
+    fn first_hits(&self, segments: &[Segment]) -> Result<Vec<Option<f32>>>;
+}
+
+impl ShadowCaster for Occluder {
+    fn first_hits(&self, segments: &[Segment]) -> Result<Vec<Option<f32>>> {
+        Ok(segments.par_iter().map(|s| s.first_hit(self)).collect())
+    }
+}
+
+/// A pixel's shadow ray: its receiver's distance to the light Z_receiver, and the segment
+/// cast with its length before the stop short of the light (`None`: nothing to cast).
+type PixelRay = (f64, Option<(Segment, f64)>);
+
 /// The hard shadow pass. `epsilon`: the shadow-ray offset (origins move by ε along the
 /// geometric normal toward the light's side, segments stop ε short of the light).
-pub fn hard_shadows(guide: &Guide, light: &Light, occluder: &Occluder, epsilon: f64) -> RtBuffers {
+pub fn hard_shadows(
+    guide: &Guide,
+    light: &Light,
+    caster: &dyn ShadowCaster,
+    epsilon: f64,
+) -> Result<RtBuffers> {
     let centre = light.centroid();
     let w_light = light_width(light);
-    type Px = (f32, f64, f64, f64);
-    let px: Vec<Px> = guide
+    let rays: Vec<Option<PixelRay>> = guide
         .pixels
         .par_iter()
         .map(|g| {
-            let Some(g) = g else {
-                return (1.0, f64::NAN, f64::NAN, 0.0);
-            };
+            let g = g.as_ref()?;
             let to_light = centre - g.position;
             let z_r = to_light.length();
             if !(z_r > epsilon) || !z_r.is_finite() {
                 // The receiver touches the point light: nothing can be in between.
-                return (1.0, z_r, f64::NAN, 0.0);
+                return Some((z_r, None));
             }
             let dir = to_light / z_r;
             let side = if g.geometric.dot(dir) >= 0.0 {
@@ -54,12 +74,37 @@ pub fn hard_shadows(guide: &Guide, light: &Light, occluder: &Occluder, epsilon: 
             let seg = centre - origin;
             let len = seg.length();
             let t_max = len - epsilon;
-            let hit = if t_max > 0.0 && len.is_finite() {
-                occluder.first_hit(origin.as_vec3(), (seg / len).as_vec3(), t_max as f32)
-            } else {
-                None
-            };
-            match hit {
+            let cast = (t_max > 0.0 && len.is_finite()).then(|| {
+                let s = Segment::new(origin.as_vec3(), (seg / len).as_vec3(), t_max as f32);
+                (s, len)
+            });
+            Some((z_r, cast))
+        })
+        .collect();
+    let segments: Vec<Segment> = rays
+        .iter()
+        .filter_map(|r| r.and_then(|(_, c)| c).map(|(s, _)| s))
+        .collect();
+    let hits = caster.first_hits(&segments)?;
+    if hits.len() != segments.len() {
+        anyhow::bail!(
+            "the shadow rays came back {} answers for {} segments",
+            hits.len(),
+            segments.len()
+        );
+    }
+    let mut hits = hits.into_iter();
+    let mut out = RtBuffers {
+        hard: Vec::with_capacity(rays.len()),
+        z_receiver: Vec::with_capacity(rays.len()),
+        z_occluder: Vec::with_capacity(rays.len()),
+        radius: Vec::with_capacity(rays.len()),
+    };
+    for ray in rays {
+        let (h, zr, zo, r) = match ray {
+            None => (1.0, f64::NAN, f64::NAN, 0.0),
+            Some((z_r, None)) => (1.0, z_r, f64::NAN, 0.0),
+            Some((z_r, Some((_, len)))) => match hits.next().flatten() {
                 None => (1.0, z_r, f64::NAN, 0.0),
                 Some(t) => {
                     // Z from the light: the hit lies len − t from the centroid.
@@ -67,22 +112,14 @@ pub fn hard_shadows(guide: &Guide, light: &Light, occluder: &Occluder, epsilon: 
                     let w = penumbra_width(z_r, z_o, w_light);
                     (0.0, z_r, z_o, 0.5 * w)
                 }
-            }
-        })
-        .collect();
-    let mut out = RtBuffers {
-        hard: Vec::with_capacity(px.len()),
-        z_receiver: Vec::with_capacity(px.len()),
-        z_occluder: Vec::with_capacity(px.len()),
-        radius: Vec::with_capacity(px.len()),
-    };
-    for (h, zr, zo, r) in px {
+            },
+        };
         out.hard.push(h);
         out.z_receiver.push(zr);
         out.z_occluder.push(zo);
         out.radius.push(r);
     }
-    out
+    Ok(out)
 }
 
 /// The soft shadow factor: the hard shadow blurred by the per-pixel radius spread from the

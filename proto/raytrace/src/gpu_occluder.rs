@@ -116,28 +116,19 @@ impl GpuCubeTable {
     }
 }
 
-const WORKGROUP: u32 = 64;
-
-/// An occluder on the GPU: visibility cube maps of batches of vertices.
-pub struct GpuOccluder {
-    pipeline: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
-    nodes: wgpu::Buffer,
-    tris: wgpu::Buffer,
-    prim_verts: wgpu::Buffer,
-    /// The cut-outs ([`Cutouts::gpu_words`]; one zero word: none).
-    cut: wgpu::Buffer,
-    /// Invocations (vertex × pixel) per dispatch: buffer and dispatch-size limits.
-    max_items: usize,
+/// An occluder's CWBVH, triangles, triangles' vertex indices and cut-outs in storage buffers:
+/// what every ray shader of this crate reads (`occlusion.wgsl`, `first_hit.wgsl`).
+pub(crate) struct MeshBuffers {
+    pub(crate) nodes: wgpu::Buffer,
+    pub(crate) tris: wgpu::Buffer,
+    pub(crate) prim_verts: wgpu::Buffer,
+    /// The cut-outs ([`crate::Cutouts::gpu_words`]; one zero word: none).
+    pub(crate) cut: wgpu::Buffer,
 }
 
-impl GpuOccluder {
-    /// Uploads `occ`'s BVH, triangles and vertex indices, and builds the pipeline (a device
-    /// that refuses either is an error, not a panic).
-    pub fn new(ctx: &GpuContext, occ: &Occluder) -> Result<GpuOccluder, GpuError> {
-        let device = &ctx.device;
-        let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+impl MeshBuffers {
+    /// Uploads `occ`'s BVH, triangles, vertex indices and cut-outs.
+    pub(crate) fn new(device: &wgpu::Device, occ: &Occluder) -> MeshBuffers {
         let storage = |label: &str, contents: &[u8]| {
             // wgpu refuses empty buffers: pad to one word.
             let contents = if contents.is_empty() {
@@ -173,6 +164,34 @@ impl GpuOccluder {
             None => vec![0u32],
         };
         let cut = storage("cut-outs", bytemuck::cast_slice(&cut_words));
+        MeshBuffers {
+            nodes,
+            tris,
+            prim_verts,
+            cut,
+        }
+    }
+}
+
+const WORKGROUP: u32 = 64;
+
+/// An occluder on the GPU: visibility cube maps of batches of vertices.
+pub struct GpuOccluder {
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    mesh: MeshBuffers,
+    /// Invocations (vertex × pixel) per dispatch: buffer and dispatch-size limits.
+    max_items: usize,
+}
+
+impl GpuOccluder {
+    /// Uploads `occ`'s BVH, triangles and vertex indices, and builds the pipeline (a device
+    /// that refuses either is an error, not a panic).
+    pub fn new(ctx: &GpuContext, occ: &Occluder) -> Result<GpuOccluder, GpuError> {
+        let device = &ctx.device;
+        let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let mesh = MeshBuffers::new(device, occ);
         let wgsl = [include_str!("occlusion.wgsl"), crate::CUTOUT_WGSL].concat();
         // The BVH, triangles, … read; binding 7 (the counts) written.
         let read_only = [true, true, true, true, true, true, true, false, true, true];
@@ -190,10 +209,7 @@ impl GpuOccluder {
         Ok(GpuOccluder {
             pipeline,
             layout,
-            nodes,
-            tris,
-            prim_verts,
-            cut,
+            mesh,
             max_items,
         })
     }
@@ -414,16 +430,16 @@ impl GpuOccluder {
             usage: wgpu::BufferUsages::STORAGE,
         });
         let buffers = [
-            &self.nodes,
-            &self.tris,
-            &self.prim_verts,
+            &self.mesh.nodes,
+            &self.mesh.tris,
+            &self.mesh.prim_verts,
             &src,
             &table.dirs,
             &mask,
             &table.stops,
             &result,
             &params_buffer,
-            &self.cut,
+            &self.mesh.cut,
         ];
         let entries: Vec<wgpu::BindGroupEntry> = buffers
             .iter()

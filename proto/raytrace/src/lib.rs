@@ -2,7 +2,9 @@
 //!
 //! Occlusion rays against a mesh: one CWBVH (obvhs) per mesh, any-hit and closest-hit queries.
 //! The one ray caster of the project: the bake's visibility cube maps, the Monte Carlo
-//! references, the point-light penumbrae and the exact SSDF all ask it.
+//! references, the point-light penumbrae and the exact SSDF all ask it. With the `gpu`
+//! feature, the bake's cube maps ([`GpuOccluder`]) and the penumbrae's closest hits
+//! ([`GpuFirstHit`]) run in wgpu compute shaders over the same BVH.
 //!
 //! Must not depend on: anything but `bspvt-proto`'s mesh, glam and obvhs (no I/O).
 
@@ -12,7 +14,11 @@ mod cutout;
 #[cfg(feature = "gpu")]
 pub mod gpu;
 #[cfg(feature = "gpu")]
+mod gpu_first_hit;
+#[cfg(feature = "gpu")]
 mod gpu_occluder;
+#[cfg(feature = "gpu")]
+pub use gpu_first_hit::{GpuFirstHit, Segment};
 #[cfg(feature = "gpu")]
 pub use gpu_occluder::{CubeSource, GpuCubeTable, GpuOccluder, GpuStop};
 

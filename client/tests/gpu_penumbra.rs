@@ -1,0 +1,148 @@
+//! rt-penumbra (paper 003) with its hard shadow rays on the GPU (`--backend gpu`:
+//! `first_hit.wgsl` over the scene's BVH) against the CPU's rays, on the built-in plate, the
+//! alpha-masked canopy and the room lit by glTF punctual lights: the same hard shadow up to
+//! the device's rounding on grazing rays, the same blurred frame, through the method registry
+//! as the CLI draws it. Skips (with a message) where no adapter exists.
+#![allow(clippy::unwrap_used)]
+
+use std::path::Path;
+
+use bspvt_client::frame::image::Image;
+use bspvt_client::gpu::shadow_rays::GpuShadowRays;
+use bspvt_client::gpu::{Backend, Gpu};
+use bspvt_client::light::Light;
+use bspvt_client::method::{FrameInput, SceneData, Settings, registry};
+use bspvt_client::penumbra::{Guide, rt};
+use bspvt_client::render::renderer::{Mode, Renderer};
+use bspvt_proto::Scene;
+use bspvt_raytrace::Occluder;
+
+fn gpu() -> Option<&'static Gpu> {
+    match Gpu::shared() {
+        Ok(g) => {
+            eprintln!("adapter: {}", g.adapter);
+            Some(g)
+        }
+        Err(e) => {
+            eprintln!(
+                "SKIPPED: no GPU adapter ({e:#}); CI installs lavapipe (mesa-vulkan-drivers)"
+            );
+            None
+        }
+    }
+}
+
+fn room(name: &str) -> Scene {
+    let rooms = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/rooms");
+    Scene::from_mesh_path(&rooms.join(name)).unwrap()
+}
+
+/// One frame of `method` with `backend` through the registry, as `bspvt render` draws it.
+fn frame(scene: &Scene, r: &Renderer, method: &str, backend: Backend) -> Image {
+    let data = SceneData::new(scene);
+    let settings = Settings {
+        backend,
+        ..Settings::default()
+    };
+    let mut state = registry::lookup(method)
+        .unwrap()
+        .prepare(&data, &settings)
+        .unwrap();
+    let lights: Vec<Light> = scene
+        .lights
+        .iter()
+        .map(|l| Light::load(l).unwrap())
+        .collect();
+    state
+        .frame(&FrameInput {
+            scene: &data,
+            renderer: r,
+            lights: &lights,
+            trees: None,
+            sky_trees: None,
+            env_rotation_deg: 0.0,
+            index: 0,
+            time: 0.0,
+            mode: Mode::Pixel,
+            on_gpu: false,
+        })
+        .unwrap()
+        .image
+}
+
+/// The share of pixels whose colour differs by more than 10⁻⁴ of the frame's peak, and the
+/// largest difference over the peak; panics on NaN or Inf.
+fn differences(cpu: &Image, gpu: &Image) -> (f64, f64) {
+    let peak = cpu
+        .pixels
+        .iter()
+        .flatten()
+        .fold(0.0f32, |m, &x| m.max(x))
+        .max(1e-20);
+    let mut off = 0usize;
+    let mut worst = 0.0f32;
+    for (a, b) in cpu.pixels.iter().zip(&gpu.pixels) {
+        assert!(b.iter().all(|x| x.is_finite()), "{b:?}");
+        let d = (0..3).map(|c| (a[c] - b[c]).abs()).fold(0.0, f32::max) / peak;
+        worst = worst.max(d);
+        if d > 1e-4 {
+            off += 1;
+        }
+    }
+    (off as f64 / cpu.pixels.len() as f64, f64::from(worst))
+}
+
+#[test]
+fn gpu_shadow_rays_give_the_cpus_penumbrae() {
+    let Some(gpu) = gpu() else {
+        return;
+    };
+    let cases = [
+        (
+            "plate-small",
+            bspvt_proto::builtin::scene("plate-small").unwrap(),
+        ),
+        ("checker-canopy.gltf", room("checker-canopy.gltf")),
+        ("punctual-room.gltf", room("punctual-room.gltf")),
+    ];
+    for (name, scene) in cases {
+        let r = Renderer::new(&scene, 128, 96);
+        let guide = Guide::new(&r);
+        let occ = Occluder::of_surfaces(&scene.mesh, &scene.materials);
+        let rays = GpuShadowRays::new(gpu, &occ).unwrap();
+        // The hard shadow pass from the first light polygon's centroid (the punctual room
+        // has none: its lights are points, drawn through the registry below).
+        if let Some(l) = scene.lights.first() {
+            let light = Light::load(l).unwrap();
+            let cpu_hard = rt::hard_shadows(&guide, &light, &occ, 1e-4).unwrap();
+            let gpu_hard = rt::hard_shadows(&guide, &light, &rays, 1e-4).unwrap();
+            let shadowed = cpu_hard.radius.iter().filter(|&&w| w > 0.0).count();
+            let flipped = cpu_hard
+                .radius
+                .iter()
+                .zip(&gpu_hard.radius)
+                .filter(|(a, b)| (**a > 0.0) != (**b > 0.0))
+                .count();
+            let n = cpu_hard.radius.len();
+            eprintln!("{name}: {shadowed} of {n} pixels in the hard shadow, {flipped} flipped");
+            assert!(
+                shadowed > n / 50,
+                "{name}: the light casts a shadow in view"
+            );
+            assert!(flipped * 1000 <= n, "{name}: {flipped} pixels flipped");
+        }
+        // Through the registry, as `bspvt render --method rt-penumbra --backend gpu`.
+        let cpu = frame(&scene, &r, "rt-penumbra", Backend::Cpu);
+        let on_gpu = frame(&scene, &r, "rt-penumbra", Backend::Gpu);
+        let (off, worst) = differences(&cpu, &on_gpu);
+        eprintln!(
+            "{name}: rt-penumbra, {:.3} % of pixels differ by > 1e-4 of the peak, largest {worst:.2e}",
+            100.0 * off
+        );
+        assert!(
+            off <= 0.002,
+            "{name}: {:.3} % of pixels differ",
+            100.0 * off
+        );
+    }
+}

@@ -14,16 +14,17 @@ if [ "$TESTS_ONLY" != --tests ]; then
   cargo build --release --locked -p bspvt -p bspvt-server
   for b in bspvt bspvt-server; do strip -o .dev/$b target/release/$b; gzip -9 .dev/$b; done
 fi
-test_bin() { # package test → path of its test binary
-  cargo test --locked -p "$1" --test "$2" --no-run --message-format=json 2>/dev/null \
+test_bin() { # package test [cargo flags…] → path of its test binary
+  cargo test --locked -p "$1" --test "$2" "${@:3}" --no-run --message-format=json 2>/dev/null \
     | python3 -c "import json,sys
 for l in sys.stdin:
     m=json.loads(l)
     if m.get('reason')=='compiler-artifact' and m['target']['name']=='$2' and m.get('executable'): print(m['executable'])"
 }
-for t in "bspvt-client gpu_shading" "bspvt-client gpu_frames" "bspvt-tests cast_gpu"; do
+for t in "bspvt-client gpu_shading" "bspvt-client gpu_frames" "bspvt-tests cast_gpu" \
+  "bspvt-client gpu_penumbra" "bspvt-raytrace first_hit_gpu --features gpu"; do
   set -- $t
-  strip -o ".dev/t_$2" "$(test_bin "$1" "$2")"
+  strip -o ".dev/t_$2" "$(test_bin "$@")"
   gzip -9 ".dev/t_$2"
 done
 # The bake's unit tests (with the GPU): the unsure flag under skewed rounding (issue 36).

@@ -1,8 +1,9 @@
-//! rt-penumbra (paper 003) with its hard shadow rays on the GPU (`--backend gpu`:
-//! `first_hit.wgsl` over the scene's BVH) against the CPU's rays, on the built-in plate, the
-//! alpha-masked canopy and the room lit by glTF punctual lights: the same hard shadow up to
-//! the device's rounding on grazing rays, the same blurred frame, through the method registry
-//! as the CLI draws it. Skips (with a message) where no adapter exists.
+//! rt-penumbra (paper 003) on the GPU (`--backend gpu`: the hard shadow rays in
+//! `first_hit.wgsl` over the scene's BVH, the edge-aware blur in `penumbra.wgsl`) against the
+//! CPU, on the built-in plate, the alpha-masked canopy and the room lit by glTF punctual
+//! lights: the same hard shadow up to the device's rounding on grazing rays, the same soft
+//! shadow up to f32's, the same frame through the method registry as the CLI draws it. Skips
+//! (with a message) where no adapter exists.
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
@@ -12,7 +13,7 @@ use bspvt_client::gpu::shadow_rays::GpuShadowRays;
 use bspvt_client::gpu::{Backend, Gpu};
 use bspvt_client::light::Light;
 use bspvt_client::method::{FrameInput, SceneData, Settings, registry};
-use bspvt_client::penumbra::{Guide, rt};
+use bspvt_client::penumbra::{self, Guide, Params, Technique, rt};
 use bspvt_client::render::renderer::{Mode, Renderer};
 use bspvt_proto::Scene;
 use bspvt_raytrace::Occluder;
@@ -109,7 +110,7 @@ fn gpu_shadow_rays_give_the_cpus_penumbrae() {
         let r = Renderer::new(&scene, 128, 96);
         let guide = Guide::new(&r);
         let occ = Occluder::of_surfaces(&scene.mesh, &scene.materials);
-        let rays = GpuShadowRays::new(gpu, &occ).unwrap();
+        let rays = GpuShadowRays::new(gpu, &occ, false).unwrap();
         // The hard shadow pass from the first light polygon's centroid (the punctual room
         // has none: its lights are points, drawn through the registry below).
         if let Some(l) = scene.lights.first() {
@@ -130,6 +131,31 @@ fn gpu_shadow_rays_give_the_cpus_penumbrae() {
                 "{name}: the light casts a shadow in view"
             );
             assert!(flipped * 1000 <= n, "{name}: {flipped} pixels flipped");
+            // The blur on the GPU (`penumbra.wgsl`, f32) against the CPU's (f64).
+            let params = Params::default();
+            let all = GpuShadowRays::new(gpu, &occ, true).unwrap();
+            let factor = |c: &dyn rt::ShadowCaster| {
+                penumbra::shadow_factor(&r, &guide, &light, Technique::RtPenumbra, Some(c), &params)
+                    .unwrap()
+            };
+            let (cpu_soft, gpu_soft) = (factor(&occ), factor(&all));
+            let soft = cpu_soft.iter().filter(|&&s| s > 0.01 && s < 0.99).count();
+            let mut worst = 0.0f32;
+            let mut off = 0;
+            for (a, b) in cpu_soft.iter().zip(&gpu_soft) {
+                assert!(
+                    b.is_finite() && (0.0..=1.0).contains(b),
+                    "{name}: factor {b}"
+                );
+                worst = worst.max((a - b).abs());
+                off += usize::from((a - b).abs() > 1e-3);
+            }
+            eprintln!(
+                "{name}: {soft} pixels in a penumbra; the GPU's blur: {off} pixels off by > 1e-3, \
+                 largest |Δ| {worst:.2e}"
+            );
+            assert!(soft > n / 100, "{name}: the blur makes penumbrae");
+            assert!(off * 1000 <= n, "{name}: {off} pixels blurred otherwise");
         }
         // Through the registry, as `bspvt render --method rt-penumbra --backend gpu`.
         let cpu = frame(&scene, &r, "rt-penumbra", Backend::Cpu);

@@ -64,9 +64,10 @@ pub struct BenchPenumbraArgs {
     /// Output folder: results.csv/.md/.json and the images.
     #[arg(long, default_value = "out/bench-penumbra")]
     pub out: PathBuf,
-    /// Also rt-penumbra and rt-hard with their shadow rays cast on the GPU (rows
-    /// `rt-penumbra-gpu`, `rt-hard-gpu`; the blur stays on the CPU). An error without an
-    /// adapter; a software one (lavapipe) is used when it is the only one.
+    /// Also rt-penumbra and rt-hard on the GPU: rows `rt-penumbra-gpu` (the shadow rays and
+    /// the blur there), `rt-penumbra-gpu-rays` (the rays there, the blur on the CPU) and
+    /// `rt-hard-gpu`; the unshadowed shading stays on the CPU. An error without an adapter; a
+    /// software one (lavapipe) is used when it is the only one.
     #[arg(long)]
     pub gpu: bool,
 }
@@ -108,7 +109,7 @@ pub struct Row {
     pub(crate) scene: String,
     pub(crate) case: String,
     /// `rt-penumbra`, `rt-hard`, `pcf`, `vsm`, `pcss`, `unshadowed` or `ltc-exact`
-    /// (`rt-penumbra-gpu`, `rt-hard-gpu` with `--gpu`).
+    /// (`rt-penumbra-gpu`, `rt-penumbra-gpu-rays`, `rt-hard-gpu` with `--gpu`).
     pub method: String,
     /// Shadow rays per pixel (`ltc-exact` only).
     pub(crate) spp: Option<u32>,
@@ -179,7 +180,7 @@ pub struct CaseReport {
     pub rows: Vec<Row>,
     /// rt-penumbra's speed-up over Monte Carlo at equal RMSE.
     pub speed_up: SpeedUp,
-    /// The same with its shadow rays on the GPU (`--gpu`).
+    /// The same with its rays and blur on the GPU (`--gpu`).
     pub speed_up_gpu: Option<SpeedUp>,
 }
 
@@ -234,7 +235,10 @@ pub fn run(a: &BenchPenumbraArgs) -> Result<Report> {
             let c = measure_case(name, &case, &settings, gpu, &a.out)?;
             eprintln!("  rt-penumbra vs MC: {}", c.speed_up.describe());
             if let Some(s) = &c.speed_up_gpu {
-                eprintln!("  rt-penumbra, rays on the GPU, vs MC: {}", s.describe());
+                eprintln!(
+                    "  rt-penumbra on the GPU (rays and blur) vs MC: {}",
+                    s.describe()
+                );
             }
             report.cases.push(c);
         }
@@ -423,13 +427,15 @@ fn measure_case(
     if let Some(g) = gpu {
         // The BVH's upload and the pipeline's compilation are setup, as the CPU's BVH build
         // is: outside the timed frames.
-        let rays = GpuShadowRays::new(g, &occ)?;
-        for (t, name) in [
-            (Technique::RtPenumbra, "rt-penumbra-gpu"),
-            (Technique::RtHard, "rt-hard-gpu"),
+        let rays = GpuShadowRays::new(g, &occ, false)?;
+        let all = GpuShadowRays::new(g, &occ, true)?;
+        for (t, name, caster) in [
+            (Technique::RtPenumbra, "rt-penumbra-gpu", &all),
+            (Technique::RtPenumbra, "rt-penumbra-gpu-rays", &rays),
+            (Technique::RtHard, "rt-hard-gpu", &rays),
         ] {
             let (ms, img) = timed(st.frames, || {
-                penumbra::render(&r, &guide, &light, t, Some(&rays), &params)
+                penumbra::render(&r, &guide, &light, t, Some(caster), &params)
             })?;
             rows.push(row(name, None, ms, &img)?);
         }
@@ -577,7 +583,7 @@ fn markdown(report: &Report) -> String {
         if let Some(g) = &c.speed_up_gpu {
             let _ = writeln!(
                 s,
-                "The same with its shadow rays on the GPU ({}): {}\n",
+                "The same with its rays and blur on the GPU ({}): {}\n",
                 report.adapter.as_deref().unwrap_or("?"),
                 g.describe()
             );

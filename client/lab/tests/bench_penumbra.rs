@@ -27,12 +27,15 @@ fn quick_bench_writes_finite_results() {
         for c in &report.cases {
             let rmse = |m: &str| c.rows.iter().find(|r| r.method == m).unwrap().rmse;
             // The same rays answered by another machine: the same error.
-            let (cpu, on_gpu) = (rmse("rt-penumbra"), rmse("rt-penumbra-gpu"));
-            assert!(
-                (cpu - on_gpu).abs() <= 0.02 * cpu,
-                "{}: rt-penumbra RMSE {cpu} on the CPU, {on_gpu} with the GPU's rays",
-                c.case
-            );
+            let cpu = rmse("rt-penumbra");
+            for m in ["rt-penumbra-gpu", "rt-penumbra-gpu-rays"] {
+                let on_gpu = rmse(m);
+                assert!(
+                    (cpu - on_gpu).abs() <= 0.02 * cpu,
+                    "{}: rt-penumbra RMSE {cpu} on the CPU, {on_gpu} as {m}",
+                    c.case
+                );
+            }
             assert!(c.speed_up_gpu.is_some());
         }
     }
@@ -83,7 +86,7 @@ fn quick_bench_writes_finite_results() {
         }
         n += 1;
     }
-    // Per case: 5 methods (+ 2 with GPU rays) + unshadowed + 5 MC spp counts (quick: 1..16)
+    // Per case: 5 methods (+ 3 on the GPU) + unshadowed + 5 MC spp counts (quick: 1..16)
     // + reference noise.
-    assert_eq!(n, 4 * (12 + 2 * usize::from(gpu)));
+    assert_eq!(n, 4 * (12 + 3 * usize::from(gpu)));
 }

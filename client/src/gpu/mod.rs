@@ -7,6 +7,7 @@
 pub mod backend;
 pub mod context;
 pub mod frame;
+pub(crate) mod penumbra_blur;
 pub mod present;
 pub mod shadow_rays;
 pub(crate) mod sky;

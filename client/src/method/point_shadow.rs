@@ -36,7 +36,7 @@ impl FrameMethod for PointShadow {
             ..Needs::default()
         }
     }
-    /// The ray-traced techniques cast their hard shadow rays on the GPU.
+    /// The ray-traced techniques cast their hard shadow rays, and blur them, on the GPU.
     fn gpu(&self) -> bool {
         self.technique.needs_rays()
     }
@@ -50,7 +50,7 @@ impl FrameMethod for PointShadow {
         if self.technique.needs_rays() {
             let occ = scene.occluder();
             if let (Some(device), _) = settings.backend.resolve()? {
-                gpu = Some(GpuShadowRays::new(device, occ)?);
+                gpu = Some(GpuShadowRays::new(device, occ, true)?);
             }
         }
         Ok(Box::new(State {
@@ -66,7 +66,7 @@ struct State {
     technique: Technique,
     params: Params,
     guide: GuideCache,
-    /// The hard shadow rays on the GPU (`None`: on the CPU).
+    /// The hard shadow rays and the blur on the GPU (`None`: on the CPU).
     gpu: Option<GpuShadowRays>,
 }
 

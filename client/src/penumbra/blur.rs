@@ -444,6 +444,7 @@ mod tests {
             height: h,
             pixels,
             footprint_per_depth: 0.01,
+            id: Guide::next_id(),
         }
     }
 

@@ -72,7 +72,7 @@ pub fn shadow_factor(
             return Ok(if technique == Technique::RtHard {
                 b.hard
             } else {
-                rt::soft_shadows(&b, guide, &r.view, light, params)
+                rt::soft_shadows(&b, guide, &r.view, light, params, occ)?
             });
         }
         Technique::Pcf => shadowmap::Filter::Pcf,
@@ -248,6 +248,9 @@ pub struct Guide {
     pub pixels: Vec<Option<GuidePixel>>,
     /// World size of one pixel at view depth 1: 2 tan(fov_y / 2) / height.
     pub footprint_per_depth: f64,
+    /// Which guide this is ([`Guide::next_id`]): the GPU's copy is kept while it stays the
+    /// same (a guide is not changed after it is made).
+    pub(crate) id: u64,
 }
 
 /// The [`Guide`] of the last camera a method drew for: a frame whose camera (and materials)
@@ -338,7 +341,14 @@ impl Guide {
             height: g.height as usize,
             pixels,
             footprint_per_depth,
+            id: Guide::next_id(),
         }
+    }
+
+    /// A number no other guide of this process has.
+    pub(crate) fn next_id() -> u64 {
+        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+        NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
     }
 
     /// True when pixel `q` lies on the same surface as `c`: near c's tangent plane (relative

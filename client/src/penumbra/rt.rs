@@ -31,6 +31,18 @@ pub struct RtBuffers {
 pub trait ShadowCaster: Sync {
     /// The closest hit of each segment (`None`: clear), as [`Occluder::first_hit`].
     fn first_hits(&self, segments: &[Segment]) -> Result<Vec<Option<f32>>>;
+
+    /// The box kernel's soft shadow of `buffers` ([`blur::edge_radius`],
+    /// [`blur::spread_radius`], [`blur::blur`]) where this caster's machine blurs it too;
+    /// `None`: the CPU does.
+    fn blur(
+        &self,
+        _buffers: &RtBuffers,
+        _guide: &Guide,
+        _params: &Params,
+    ) -> Option<Result<Vec<f32>>> {
+        None
+    }
 }
 
 impl ShadowCaster for Occluder {
@@ -123,17 +135,24 @@ pub fn hard_shadows(
 }
 
 /// The soft shadow factor: the hard shadow blurred by the per-pixel radius spread from the
-/// hard shadow's edge ([`blur::edge_radius`], [`blur::spread_radius`]).
+/// hard shadow's edge ([`blur::edge_radius`], [`blur::spread_radius`]); by `caster`'s machine
+/// where it blurs ([`ShadowCaster::blur`], the box kernel's tent).
 pub(crate) fn soft_shadows(
     buffers: &RtBuffers,
     guide: &Guide,
     view: &View,
     light: &Light,
     params: &Params,
-) -> Vec<f32> {
+    caster: &dyn ShadowCaster,
+) -> Result<Vec<f32>> {
+    if params.kernel == Kernel::Box
+        && let Some(soft) = caster.blur(buffers, guide, params)
+    {
+        return soft;
+    }
     let edge = blur::edge_radius(&buffers.hard, &buffers.radius, guide, params);
     let radius = blur::spread_radius(&edge, guide, params);
-    match params.kernel {
+    Ok(match params.kernel {
         Kernel::Box => blur::blur(&buffers.hard, &radius, guide, params),
         Kernel::Light(n) => blur::light_blur(
             &buffers.hard,
@@ -145,5 +164,5 @@ pub(crate) fn soft_shadows(
             light_width(light),
             params,
         ),
-    }
+    })
 }

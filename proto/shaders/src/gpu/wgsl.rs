@@ -33,6 +33,11 @@ pub fn resolve(samples: u32) -> String {
     .concat()
 }
 
+/// rt-penumbra's edge-aware blur (paper 003): edges, the widths' spread, the tent's boxes.
+pub fn penumbra() -> &'static str {
+    include_str!("penumbra.wgsl")
+}
+
 /// Tone mapping and the overlay, drawn to the window or canvas.
 pub fn present() -> &'static str {
     include_str!("present.wgsl")

@@ -12,11 +12,13 @@ use bspvt_client::frame::image::Image;
 use bspvt_client::gpu::shadow_rays::GpuShadowRays;
 use bspvt_client::gpu::{Backend, Gpu};
 use bspvt_client::light::Light;
-use bspvt_client::method::{FrameInput, SceneData, Settings, registry};
+use bspvt_client::method::Settings;
 use bspvt_client::penumbra::{self, Guide, Params, Technique, rt};
 use bspvt_client::render::renderer::{Mode, Renderer};
 use bspvt_proto::Scene;
 use bspvt_raytrace::Occluder;
+
+mod common;
 
 fn gpu() -> Option<&'static Gpu> {
     match Gpu::shared() {
@@ -38,37 +40,15 @@ fn room(name: &str) -> Scene {
     Scene::from_mesh_path(&rooms.join(name)).unwrap()
 }
 
-/// One frame of `method` with `backend` through the registry, as `bspvt render` draws it.
+/// One frame of `method` with `backend` per pixel through the registry, as `bspvt render`
+/// draws it.
 fn frame(scene: &Scene, r: &Renderer, method: &str, backend: Backend) -> Image {
-    let data = SceneData::new(scene);
     let settings = Settings {
         backend,
+        mode: Mode::Pixel,
         ..Settings::default()
     };
-    let mut state = registry::lookup(method)
-        .unwrap()
-        .prepare(&data, &settings)
-        .unwrap();
-    let lights: Vec<Light> = scene
-        .lights
-        .iter()
-        .map(|l| Light::load(l).unwrap())
-        .collect();
-    state
-        .frame(&FrameInput {
-            scene: &data,
-            renderer: r,
-            lights: &lights,
-            trees: None,
-            sky_trees: None,
-            env_rotation_deg: 0.0,
-            index: 0,
-            time: 0.0,
-            mode: Mode::Pixel,
-            on_gpu: false,
-        })
-        .unwrap()
-        .image
+    common::registry_frame(method, scene, r, &settings, None, None)
 }
 
 /// The share of pixels whose colour differs by more than 10⁻⁴ of the frame's peak, and the

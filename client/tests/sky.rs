@@ -7,10 +7,12 @@
 use std::path::{Path, PathBuf};
 
 use bspvt_client::frame::image::Image;
-use bspvt_client::method::{EnvOptions, FrameInput, SceneData, Settings, registry};
+use bspvt_client::method::{EnvOptions, Settings};
 use bspvt_client::render::renderer::{Mode, Renderer, Trees};
 use bspvt_proto::Scene;
 use bspvt_proto::encoding::{Bake, decode_bake};
+
+mod common;
 
 /// A shared mesh with the default ground, lit by the sky alone.
 fn sky_scene(mesh: &str) -> Option<Scene> {
@@ -46,37 +48,13 @@ fn frame(
     mode: Mode,
     spp: u32,
 ) -> Image {
-    let data = SceneData::new(scene);
     let settings = Settings {
         spp,
         mode,
         env: env.clone(),
         ..Settings::default()
     };
-    let mut state = registry::lookup(method)
-        .unwrap()
-        .prepare(&data, &settings)
-        .unwrap();
-    let lights: Vec<_> = scene
-        .lights
-        .iter()
-        .map(|l| bspvt_client::light::Light::load(l).unwrap())
-        .collect();
-    state
-        .frame(&FrameInput {
-            scene: &data,
-            renderer: r,
-            lights: &lights,
-            trees,
-            sky_trees: sky,
-            env_rotation_deg: 0.0,
-            index: 7,
-            time: 0.0,
-            mode,
-            on_gpu: false,
-        })
-        .unwrap()
-        .image
+    common::registry_frame(method, scene, r, &settings, trees, sky)
 }
 
 /// (mean |a − b|, mean b) over covered pixels, channel mean; panics on NaN or Inf.

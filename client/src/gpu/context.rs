@@ -71,11 +71,7 @@ impl Gpu {
         layout: &wgpu::BindGroupLayout,
         buffers: &[&wgpu::Buffer],
     ) -> wgpu::BindGroup {
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(label),
-            layout,
-            entries: &buffer_entries(buffers),
-        })
+        bspvt_raytrace::gpu::bind_buffers(&self.device, label, layout, buffers)
     }
 
     /// Holds the queue for one frame or batch (see `busy`).

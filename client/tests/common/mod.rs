@@ -62,3 +62,42 @@ pub fn random_trees(seed: u64, codec: &LineCodec) -> VertexTrees {
     }
     t
 }
+
+/// One frame of `method` with `settings` (its mode among them) through the registry, as
+/// `bspvt render` draws it: the scene's lights as loaded, baked `trees` and `sky` trees where
+/// given, frame number 7.
+pub fn registry_frame(
+    method: &str,
+    scene: &bspvt_proto::Scene,
+    r: &bspvt_client::render::renderer::Renderer,
+    settings: &bspvt_client::method::Settings,
+    trees: Option<&bspvt_client::render::renderer::Trees>,
+    sky: Option<&bspvt_client::render::renderer::Trees>,
+) -> bspvt_client::frame::image::Image {
+    use bspvt_client::method::{FrameInput, SceneData, registry};
+    let data = SceneData::new(scene);
+    let mut state = registry::lookup(method)
+        .unwrap()
+        .prepare(&data, settings)
+        .unwrap();
+    let lights: Vec<_> = scene
+        .lights
+        .iter()
+        .map(|l| bspvt_client::light::Light::load(l).unwrap())
+        .collect();
+    state
+        .frame(&FrameInput {
+            scene: &data,
+            renderer: r,
+            lights: &lights,
+            trees,
+            sky_trees: sky,
+            env_rotation_deg: 0.0,
+            index: 7,
+            time: 0.0,
+            mode: settings.mode,
+            on_gpu: false,
+        })
+        .unwrap()
+        .image
+}

@@ -6,8 +6,7 @@
 // no account of this device's rounding: a shadow ray grazing an edge may answer otherwise than
 // the CPU's (tests/tests/first_hit_gpu.rs counts how often).
 
-// CwBvhNode (80 bytes, repr(C)) as 20 words: p.xyz, e[3] | imask << 24, child_base_idx,
-// primitive_base_idx, child_meta (2 words), then child_{min,max}_{x,y,z} (2 words each).
+// The CWBVH's nodes (cwbvh.wgsl, prepended).
 @group(0) @binding(0) var<storage, read> nodes: array<u32>;
 // RtTriangle per primitive, 16 floats: v0, e1 (= v0 - v1), e2 (= v2 - v0), ng (= e1 × e2),
 // then four words this shader does not read.
@@ -21,13 +20,8 @@
 // Segments in this dispatch, invocations per row of the dispatch grid.
 @group(0) @binding(5) var<storage, read> shape: vec4<u32>;
 
-// obvhs's cwbvh::node::EPSILON: a child box is entered no nearer than this.
-const BOX_T_MIN: f32 = 0.0001;
-// f32::EPSILON, for obvhs's `safe_inverse`.
-const F32_EPSILON: f32 = 1.1920929e-7;
 // bspvt_raytrace::EDGE_SLACK (2^-20): barycentrics down to minus this count as inside.
 const EDGE_SLACK: f32 = 9.5367431640625e-7;
-const STACK_SIZE: u32 = 32u;
 
 // obvhs's ray::safe_inverse (signum(±0) = ±1).
 fn safe_inverse(x: f32) -> f32 {
@@ -38,47 +32,23 @@ fn safe_inverse(x: f32) -> f32 {
     return 1.0 / x;
 }
 
-fn byte_of(w: u32, i: u32) -> u32 {
-    return (w >> (8u * i)) & 0xffu;
-}
-
-// Byte `c` (0..8) of the 8-byte field starting at word `w` of node `n`.
-fn node_byte(n: u32, w: u32, c: u32) -> u32 {
-    return byte_of(nodes[n * 20u + w + c / 4u], c % 4u);
-}
-
 // CwBvhNode::intersect_ray: the hit mask of the node's children (slab test of each child's
 // quantized box against [BOX_T_MIN, t_max]).
 fn intersect_node(n: u32, o: vec3<f32>, inv_d: vec3<f32>, neg: vec3<bool>, t_max: f32, oct_inv4: u32) -> u32 {
-    let b = n * 20u;
-    let p = vec3<f32>(bitcast<f32>(nodes[b]), bitcast<f32>(nodes[b + 1u]), bitcast<f32>(nodes[b + 2u]));
-    let ew = nodes[b + 3u];
-    let extent = vec3<f32>(
-        bitcast<f32>(byte_of(ew, 0u) << 23u),
-        bitcast<f32>(byte_of(ew, 1u) << 23u),
-        bitcast<f32>(byte_of(ew, 2u) << 23u),
-    );
-    let adj_inv = extent * inv_d;
-    let adj_o = (p - o) * inv_d;
+    let frame = node_frame(n, o, inv_d);
     var hit_mask = 0u;
     for (var c = 0u; c < 8u; c++) {
         let child_meta = node_byte(n, 6u, c);
         if child_meta == 0u {
             continue; // empty slot
         }
-        let lo = vec3<f32>(f32(node_byte(n, 8u, c)), f32(node_byte(n, 12u, c)), f32(node_byte(n, 16u, c)));
-        let hi = vec3<f32>(f32(node_byte(n, 10u, c)), f32(node_byte(n, 14u, c)), f32(node_byte(n, 18u, c)));
-        let t0 = select(lo, hi, neg) * adj_inv + adj_o;
-        let t1 = select(hi, lo, neg) * adj_inv + adj_o;
+        let box = child_near_far(n, c, neg);
+        let t0 = box[0] * frame[0] + frame[1];
+        let t1 = box[1] * frame[0] + frame[1];
         let tmin = max(max(max(t0.x, t0.y), t0.z), BOX_T_MIN);
         let tmax = min(min(min(t1.x, t1.y), t1.z), t_max);
         if tmin <= tmax {
-            // CwBvhNode::get_child_and_index_bits, one byte at a time.
-            let inner = ((child_meta & (child_meta << 1u)) & 0x10u) != 0u;
-            let oct = select(0u, oct_inv4 & 0xffu, inner);
-            let bit_index = (child_meta ^ oct) & 0x1fu;
-            let child_bits = (child_meta >> 5u) & 7u;
-            hit_mask |= child_bits << bit_index;
+            hit_mask |= child_hit_bits(child_meta, oct_inv4);
         }
     }
     return hit_mask;
@@ -118,7 +88,7 @@ fn hit_distance(id: u32, o: vec3<f32>, d: vec3<f32>, t_max: f32) -> f32 {
 fn first_hit(o: vec3<f32>, d: vec3<f32>, t_end: f32) -> f32 {
     let inv_d = vec3<f32>(safe_inverse(d.x), safe_inverse(d.y), safe_inverse(d.z));
     let neg = d < vec3<f32>(0.0);
-    let oct_inv4 = select(0x04040404u, 0u, neg.x) | select(0x02020202u, 0u, neg.y) | select(0x01010101u, 0u, neg.z);
+    let oct_inv4 = octant_inv4(neg);
     var stack: array<vec2<u32>, STACK_SIZE>;
     var sp = 0u;
     var current = vec2<u32>(0u, 0x80000000u);
@@ -148,14 +118,10 @@ fn first_hit(o: vec3<f32>, d: vec3<f32>, t_end: f32) -> f32 {
                 stack[sp] = current;
                 sp++;
             }
-            let slot = (offset - 24u) ^ (oct_inv4 & 0xffu);
-            let relative = countOneBits(hits_imask & ~(0xffffffffu << slot));
-            let n = current.x + relative;
-            let hit_mask = intersect_node(n, o, inv_d, neg, t_max, oct_inv4);
-            current.x = nodes[n * 20u + 4u];
-            prims.x = nodes[n * 20u + 5u];
-            current.y = (hit_mask & 0xff000000u) | (nodes[n * 20u + 3u] >> 24u);
-            prims.y = hit_mask & 0x00ffffffu;
+            let n = child_node(vec2<u32>(current.x, hits_imask), offset, oct_inv4);
+            let next = enter_node(n, intersect_node(n, o, inv_d, neg, t_max, oct_inv4));
+            current = next[0];
+            prims = next[1];
         } else {
             current = vec2<u32>(0u, 0u);
         }

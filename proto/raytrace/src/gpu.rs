@@ -218,6 +218,53 @@ impl GpuContext {
     }
 }
 
+/// `buffers` bound whole at bindings 0, 1, 2, … of `layout`.
+pub fn bind_buffers(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::BindGroupLayout,
+    buffers: &[&wgpu::Buffer],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry> = buffers
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: b.as_entire_binding(),
+        })
+        .collect();
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout,
+        entries: &entries,
+    })
+}
+
+/// The most items of `bytes_per_item` one dispatch of `workgroup`-wide groups takes: what the
+/// adapter binds in one storage buffer and dispatches in a grid (capped at 2²⁴).
+pub fn max_items(device: &wgpu::Device, bytes_per_item: usize, workgroup: u32) -> usize {
+    let limits = device.limits();
+    let by_dispatch = limits.max_compute_workgroups_per_dimension as usize
+        * limits.max_compute_workgroups_per_dimension as usize
+        * workgroup as usize;
+    (limits.max_storage_buffer_binding_size as usize / bytes_per_item)
+        .min(limits.max_buffer_size as usize / bytes_per_item)
+        .min(by_dispatch)
+        .min(1 << 24)
+}
+
+/// The dispatch grid of `items` invocations in `workgroup`-wide groups: rows of the adapter's
+/// most workgroups per dimension. The shader's index is `gid.y × x × workgroup + gid.x`.
+pub fn dispatch_grid(device: &wgpu::Device, items: u32, workgroup: u32) -> (u32, u32) {
+    let groups = items.div_ceil(workgroup);
+    let max_x = device.limits().max_compute_workgroups_per_dimension;
+    if groups <= max_x {
+        (groups, 1)
+    } else {
+        (max_x, groups.div_ceil(max_x))
+    }
+}
+
 /// A compute pipeline of `wgsl`'s `main` over one bind group of storage buffers, binding i
 /// read-only where `read_only[i]`, and that group's layout, on `device` (errors surface in the
 /// caller's error scope, [`scope_result`]).

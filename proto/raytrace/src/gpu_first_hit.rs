@@ -10,7 +10,9 @@ use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
 use crate::Occluder;
-use crate::gpu::{GpuError, scope_result, storage_pipeline};
+use crate::gpu::{
+    GpuError, bind_buffers, dispatch_grid, max_items, scope_result, storage_pipeline,
+};
 use crate::gpu_occluder::MeshBuffers;
 
 /// A segment from `origin` along the unit `dir` up to `t_max` (as [`Occluder::first_hit`]
@@ -70,18 +72,16 @@ impl GpuFirstHit {
         let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mesh = MeshBuffers::new(device, occ);
-        let wgsl = [include_str!("first_hit.wgsl"), crate::CUTOUT_WGSL].concat();
+        let wgsl = [
+            include_str!("cwbvh.wgsl"),
+            include_str!("first_hit.wgsl"),
+            crate::CUTOUT_WGSL,
+        ]
+        .concat();
         // Nodes, triangles, cut-outs, segments read; the hits written; the shape read.
         let read_only = [true, true, true, true, false, true];
         let (pipeline, layout) = storage_pipeline(device, "first hit", &wgsl, &read_only);
-        let limits = device.limits();
-        let by_dispatch = limits.max_compute_workgroups_per_dimension as usize
-            * limits.max_compute_workgroups_per_dimension as usize
-            * WORKGROUP as usize;
-        let max_segments = (limits.max_storage_buffer_binding_size as usize / 32)
-            .min(limits.max_buffer_size as usize / 32)
-            .min(by_dispatch)
-            .min(1 << 24);
+        let max_segments = max_items(device, 32, WORKGROUP);
         scope_result(validation)?;
         scope_result(memory)?;
         Ok(GpuFirstHit {
@@ -198,13 +198,7 @@ impl GpuFirstHit {
         let segments = buffer("segments", (n * 32) as u64, U::STORAGE | U::COPY_DST);
         let hits = buffer("hits", (n * 4) as u64, U::STORAGE | U::COPY_SRC);
         let readback = buffer("hits readback", (n * 4) as u64, U::MAP_READ | U::COPY_DST);
-        let groups = (n as u32).div_ceil(WORKGROUP);
-        let max_x = device.limits().max_compute_workgroups_per_dimension;
-        let groups = if groups <= max_x {
-            (groups, 1)
-        } else {
-            (max_x, groups.div_ceil(max_x))
-        };
+        let groups = dispatch_grid(device, n as u32, WORKGROUP);
         let shape = wgpu::util::DeviceExt::create_buffer_init(
             device,
             &wgpu::util::BufferInitDescriptor {
@@ -213,27 +207,19 @@ impl GpuFirstHit {
                 usage: U::STORAGE,
             },
         );
-        let buffers = [
-            &self.mesh.nodes,
-            &self.mesh.tris,
-            &self.mesh.cut,
-            &segments,
-            &hits,
-            &shape,
-        ];
-        let entries: Vec<wgpu::BindGroupEntry> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("first hit"),
-            layout: &self.layout,
-            entries: &entries,
-        });
+        let group = bind_buffers(
+            device,
+            "first hit",
+            &self.layout,
+            &[
+                &self.mesh.nodes,
+                &self.mesh.tris,
+                &self.mesh.cut,
+                &segments,
+                &hits,
+                &shape,
+            ],
+        );
         Batch {
             len: n,
             segments,

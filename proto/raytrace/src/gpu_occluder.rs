@@ -11,7 +11,7 @@ use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
 use crate::Occluder;
-use crate::gpu::{GpuContext, GpuError, scope_result};
+use crate::gpu::{GpuContext, GpuError, bind_buffers, dispatch_grid, max_items, scope_result};
 
 /// One vertex of a cube-map batch: where its rays start, the nearest hit that counts, its
 /// normal (sub-rays below its horizon escape uncast) and its index (its own triangles are
@@ -192,18 +192,16 @@ impl GpuOccluder {
         let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mesh = MeshBuffers::new(device, occ);
-        let wgsl = [include_str!("occlusion.wgsl"), crate::CUTOUT_WGSL].concat();
+        let wgsl = [
+            include_str!("cwbvh.wgsl"),
+            include_str!("occlusion.wgsl"),
+            crate::CUTOUT_WGSL,
+        ]
+        .concat();
         // The BVH, triangles, … read; binding 7 (the counts) written.
         let read_only = [true, true, true, true, true, true, true, false, true, true];
         let (pipeline, layout) = ctx.storage_pipeline("occlusion", &wgsl, &read_only);
-        let limits = device.limits();
-        let by_dispatch = limits.max_compute_workgroups_per_dimension as usize
-            * limits.max_compute_workgroups_per_dimension as usize
-            * WORKGROUP as usize;
-        let max_items = (limits.max_storage_buffer_binding_size as usize / 4)
-            .min(limits.max_buffer_size as usize / 4)
-            .min(by_dispatch)
-            .min(1 << 24);
+        let max_items = max_items(device, 4, WORKGROUP);
         scope_result(validation)?;
         scope_result(memory)?;
         Ok(GpuOccluder {
@@ -407,13 +405,7 @@ impl GpuOccluder {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let groups = (n as u32).div_ceil(WORKGROUP);
-        let max_x = device.limits().max_compute_workgroups_per_dimension;
-        let (gx, gy) = if groups <= max_x {
-            (groups, 1)
-        } else {
-            (max_x, groups.div_ceil(max_x))
-        };
+        let (gx, gy) = dispatch_grid(device, n as u32, WORKGROUP);
         let params = [
             sources.len() as u32,
             table.pixels,
@@ -441,19 +433,7 @@ impl GpuOccluder {
             &params_buffer,
             &self.mesh.cut,
         ];
-        let entries: Vec<wgpu::BindGroupEntry> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("occlusion"),
-            layout: &self.layout,
-            entries: &entries,
-        });
+        let group = bind_buffers(device, "occlusion", &self.layout, &buffers);
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("occlusion"),
         });

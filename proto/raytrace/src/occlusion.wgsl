@@ -5,8 +5,7 @@
 // same Möller–Trumbore test (obvhs's `RtTriangle::intersect`). A ray is occluded when a triangle
 // not using its `skip` vertex is hit at a distance in [t_min, t_max).
 
-// CwBvhNode (80 bytes, repr(C)) as 20 words: p.xyz, e[3] | imask << 24, child_base_idx,
-// primitive_base_idx, child_meta (2 words), then child_{min,max}_{x,y,z} (2 words each).
+// The CWBVH's nodes (cwbvh.wgsl, prepended).
 @group(0) @binding(0) var<storage, read> nodes: array<u32>;
 // RtTriangle per primitive, 16 floats: v0, e1 (= v0 - v1), e2 (= v2 - v0), ng (= e1 × e2),
 // then |e1|, |e2|, |ng| (bounds for `judge`) and 0.
@@ -49,11 +48,6 @@ struct CubeParams {
 // the masks' alpha bytes four to a word.
 @group(0) @binding(9) var<storage, read> cut: array<u32>;
 
-// obvhs's cwbvh::node::EPSILON: a child box is entered no nearer than this.
-const BOX_T_MIN: f32 = 0.0001;
-// f32::EPSILON, for obvhs's `safe_inverse`.
-const F32_EPSILON: f32 = 1.1920929e-7;
-const STACK_SIZE: u32 = 32u;
 
 // What a test decided: surely not, within rounding of the other way, or surely. In this order,
 // `min` is "and" (MISS if any is, else UNSURE if any is) and 2 − x is "not".
@@ -85,41 +79,24 @@ fn safe_inverse(x: f32) -> f32 {
     return skewed(1.0 / x);
 }
 
-fn byte_of(w: u32, i: u32) -> u32 {
-    return (w >> (8u * i)) & 0xffu;
-}
-
-// Byte `c` (0..8) of the 8-byte field starting at word `w` of node `n`.
-fn node_byte(n: u32, w: u32, c: u32) -> u32 {
-    return byte_of(nodes[n * 20u + w + c / 4u], c % 4u);
-}
-
 // CwBvhNode::intersect_ray (intersect_ray_basic): the hit mask of the node's children, by the
 // CPU's box test (a relative slack here made the answers differ more, not less: 1,012 vs 89
 // sub-rays per million on the room's dyadic grid, tests/tests/cast_gpu.rs). A child whose
 // entry and exit are within rounding of each other is decided pair by pair (`box_pairs`), and
 // entered when unsure (`unsure_box`). `t_err`: how far `t_max` may be from the CPU's.
 fn intersect_node(n: u32, o: vec3<f32>, inv_d: vec3<f32>, neg: vec3<bool>, t_max: f32, t_err: f32, oct_inv4: u32) -> u32 {
-    let b = n * 20u;
-    let p = vec3<f32>(bitcast<f32>(nodes[b]), bitcast<f32>(nodes[b + 1u]), bitcast<f32>(nodes[b + 2u]));
-    let ew = nodes[b + 3u];
-    let extent = vec3<f32>(
-        bitcast<f32>(byte_of(ew, 0u) << 23u),
-        bitcast<f32>(byte_of(ew, 1u) << 23u),
-        bitcast<f32>(byte_of(ew, 2u) << 23u),
-    );
-    let adj_inv = extent * inv_d;
-    let adj_o = (p - o) * inv_d;
+    let frame = node_frame(n, o, inv_d);
+    let adj_inv = frame[0];
+    let adj_o = frame[1];
     var hit_mask = 0u;
     for (var c = 0u; c < 8u; c++) {
         let child_meta = node_byte(n, 6u, c);
         if child_meta == 0u {
             continue; // empty slot
         }
-        let lo = vec3<f32>(f32(node_byte(n, 8u, c)), f32(node_byte(n, 12u, c)), f32(node_byte(n, 16u, c)));
-        let hi = vec3<f32>(f32(node_byte(n, 10u, c)), f32(node_byte(n, 14u, c)), f32(node_byte(n, 18u, c)));
-        let near = select(lo, hi, neg);
-        let far = select(hi, lo, neg);
+        let box = child_near_far(n, c, neg);
+        let near = box[0];
+        let far = box[1];
         let t0 = near * adj_inv + adj_o;
         let t1 = far * adj_inv + adj_o;
         let tmin = max(max(max(t0.x, t0.y), t0.z), BOX_T_MIN);
@@ -142,12 +119,7 @@ fn intersect_node(n: u32, o: vec3<f32>, inv_d: vec3<f32>, neg: vec3<bool>, t_max
             }
         }
         if enter {
-            // CwBvhNode::get_child_and_index_bits, one byte at a time.
-            let inner = ((child_meta & (child_meta << 1u)) & 0x10u) != 0u;
-            let oct = select(0u, oct_inv4 & 0xffu, inner);
-            let bit_index = (child_meta ^ oct) & 0x1fu;
-            let child_bits = (child_meta >> 5u) & 7u;
-            hit_mask |= child_bits << bit_index;
+            hit_mask |= child_hit_bits(child_meta, oct_inv4);
         }
     }
     return hit_mask;
@@ -296,7 +268,7 @@ fn uses_vertex(id: u32, skip: u32) -> bool {
 fn is_occluded(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, t_err: f32, skip: u32) -> u32 {
     let inv_d = vec3<f32>(safe_inverse(d.x), safe_inverse(d.y), safe_inverse(d.z));
     let neg = d < vec3<f32>(0.0);
-    let oct_inv4 = select(0x04040404u, 0u, neg.x) | select(0x02020202u, 0u, neg.y) | select(0x01010101u, 0u, neg.z);
+    let oct_inv4 = octant_inv4(neg);
     var stack: array<vec2<u32>, STACK_SIZE>;
     var sp = 0u;
     var current = vec2<u32>(0u, 0x80000000u);
@@ -330,14 +302,10 @@ fn is_occluded(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, t_err: f32, s
                     answer = max(answer, UNSURE);
                 }
             }
-            let slot = (offset - 24u) ^ (oct_inv4 & 0xffu);
-            let relative = countOneBits(hits_imask & ~(0xffffffffu << slot));
-            let n = current.x + relative;
-            let hit_mask = intersect_node(n, o, inv_d, neg, t_max, t_err, oct_inv4);
-            current.x = nodes[n * 20u + 4u];
-            prims.x = nodes[n * 20u + 5u];
-            current.y = (hit_mask & 0xff000000u) | (nodes[n * 20u + 3u] >> 24u);
-            prims.y = hit_mask & 0x00ffffffu;
+            let n = child_node(vec2<u32>(current.x, hits_imask), offset, oct_inv4);
+            let next = enter_node(n, intersect_node(n, o, inv_d, neg, t_max, t_err, oct_inv4));
+            current = next[0];
+            prims = next[1];
         } else {
             current = vec2<u32>(0u, 0u);
         }

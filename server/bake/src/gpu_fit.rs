@@ -385,19 +385,7 @@ impl GpuFitter {
             mapped_at_creation: false,
         });
         let buffers = [&params_buf, &proj, &offs, &thresh, &grid, &work, &result];
-        let entries: Vec<wgpu::BindGroupEntry> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("fit"),
-            layout: &self.layout,
-            entries: &entries,
-        });
+        let group = bspvt_raytrace::gpu::bind_buffers(device, "fit", &self.layout, &buffers);
         let mut enc =
             device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("fit") });
         {

@@ -1,7 +1,7 @@
 //! What the client's shading tests share: a small deterministic generator and random BSPVTs
 //! (the CPU stability tests and the GPU-against-CPU tests draw the same trees).
 
-#![allow(dead_code)]
+#![allow(dead_code, clippy::unwrap_used)]
 
 use bspvt_proto::bspvt::{FaceTree, LineCodec, Node, QLine, VertexTrees};
 

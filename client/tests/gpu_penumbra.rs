@@ -2,7 +2,8 @@
 //! `first_hit.wgsl` over the scene's BVH, the edge-aware blur in `penumbra.wgsl`) against the
 //! CPU, on the built-in plate, the alpha-masked canopy and the room lit by glTF punctual
 //! lights: the same hard shadow up to the device's rounding on grazing rays, the same soft
-//! shadow up to f32's, the same frame through the method registry as the CLI draws it. Skips
+//! shadow up to f32's, and through the method registry as the CLI draws it (the unshadowed
+//! shading then from the GPU's frames too) the frame within the GPU methods' bound. Skips
 //! (with a message) where no adapter exists.
 #![allow(clippy::unwrap_used)]
 
@@ -51,8 +52,8 @@ fn frame(scene: &Scene, r: &Renderer, method: &str, backend: Backend) -> Image {
     common::registry_frame(method, scene, r, &settings, None, None)
 }
 
-/// The share of pixels whose colour differs by more than 10⁻⁴ of the frame's peak, and the
-/// largest difference over the peak; panics on NaN or Inf.
+/// The share of pixels whose colour differs by more than 10⁻² of the frame's peak, and the
+/// mean difference over the peak; panics on NaN or Inf.
 fn differences(cpu: &Image, gpu: &Image) -> (f64, f64) {
     let peak = cpu
         .pixels
@@ -61,16 +62,17 @@ fn differences(cpu: &Image, gpu: &Image) -> (f64, f64) {
         .fold(0.0f32, |m, &x| m.max(x))
         .max(1e-20);
     let mut off = 0usize;
-    let mut worst = 0.0f32;
+    let mut sum = 0.0f64;
     for (a, b) in cpu.pixels.iter().zip(&gpu.pixels) {
         assert!(b.iter().all(|x| x.is_finite()), "{b:?}");
         let d = (0..3).map(|c| (a[c] - b[c]).abs()).fold(0.0, f32::max) / peak;
-        worst = worst.max(d);
-        if d > 1e-4 {
+        sum += f64::from(d);
+        if d > 1e-2 {
             off += 1;
         }
     }
-    (off as f64 / cpu.pixels.len() as f64, f64::from(worst))
+    let n = cpu.pixels.len() as f64;
+    (off as f64 / n, sum / n)
 }
 
 #[test]
@@ -137,18 +139,25 @@ fn gpu_shadow_rays_give_the_cpus_penumbrae() {
             assert!(soft > n / 100, "{name}: the blur makes penumbrae");
             assert!(off * 1000 <= n, "{name}: {off} pixels blurred otherwise");
         }
-        // Through the registry, as `bspvt render --method rt-penumbra --backend gpu`.
+        // Through the registry, as `bspvt render --method rt-penumbra --backend gpu`: the
+        // unshadowed per-pixel LTC then comes from the GPU's frames (MSAA 4×, f32), so the
+        // frames compare within the GPU methods' bound (tests/gpu_frames.rs: under 10 % of
+        // the pixels off by more than 1 % of the peak, mostly the anti-aliased edges; mean
+        // under 1 %).
         let cpu = frame(&scene, &r, "rt-penumbra", Backend::Cpu);
         let on_gpu = frame(&scene, &r, "rt-penumbra", Backend::Gpu);
-        let (off, worst) = differences(&cpu, &on_gpu);
+        let (off, mean) = differences(&cpu, &on_gpu);
         eprintln!(
-            "{name}: rt-penumbra, {:.3} % of pixels differ by > 1e-4 of the peak, largest {worst:.2e}",
+            "{name}: rt-penumbra frames, {:.2} % of pixels differ by > 1 % of the peak, mean \
+             |Δ| {mean:.2e} of the peak",
             100.0 * off
         );
+        assert!(off < 0.1 && mean < 1e-2, "{name}: {off} {mean}");
+        // Polygon lights are shaded by the GPU's frames (their f32 differs); the punctual
+        // room's points are shaded on the CPU, their unblurred shadows the same.
         assert!(
-            off <= 0.002,
-            "{name}: {:.3} % of pixels differ",
-            100.0 * off
+            (mean > 0.0) == !scene.lights.is_empty(),
+            "{name}: mean |Δ| {mean}: who shaded the frame?"
         );
     }
 }

@@ -14,5 +14,10 @@ nvidia-smi -L | tee "$OUT/gpu.txt"
 BSPVT_GPU_TIMING=1 TAILN=24 step bench_penumbra_gpu 300 "$D/bspvt" bench-penumbra \
   --scenes plate-small,teapot,bunny --meshes-dir "$M" --base-only --size 1024 --ref-spp 64 \
   --frames 5 --gpu --out "$OUT/bench-penumbra-gpu"
+# The whole method as `--backend gpu` draws it (the unshadowed shading from the GPU's frames).
+for b in cpu gpu; do
+  TAILN=2 step "render_rt_penumbra_$b" 120 "$D/bspvt" render --mesh "$M/bunny.ply" \
+    --method rt-penumbra --backend "$b" --width 1920 --height 1080 --frames 8 --out "/tmp/rt-$b.png"
+done
 echo "== done" | tee -a "$OUT/summary.txt"
 cat "$OUT/summary.txt"

@@ -66,8 +66,10 @@ pub struct BenchPenumbraArgs {
     pub out: PathBuf,
     /// Also rt-penumbra and rt-hard on the GPU: rows `rt-penumbra-gpu` (the shadow rays and
     /// the blur there), `rt-penumbra-gpu-rays` (the rays there, the blur on the CPU) and
-    /// `rt-hard-gpu`; the unshadowed shading stays on the CPU. An error without an adapter; a
-    /// software one (lavapipe) is used when it is the only one.
+    /// `rt-hard-gpu`. The unshadowed shading stays on the CPU's G-buffer, as the reference's
+    /// (`--backend gpu` shades it in the GPU's MSAA frames, whose anti-aliased edges the
+    /// reference does not have). An error without an adapter; a software one (lavapipe) is
+    /// used when it is the only one.
     #[arg(long)]
     pub gpu: bool,
 }

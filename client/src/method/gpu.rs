@@ -11,7 +11,7 @@ use crate::frame::image::Image;
 use crate::gpu::frame::GpuFrames;
 use crate::gpu::{Backend, Gpu};
 use crate::light::{Light, Shape};
-use crate::render::renderer::{FrameCounts, Trees};
+use crate::render::renderer::{FrameCounts, Mode, Trees};
 use crate::sky_cells::SkyCells;
 use glam::DVec3;
 
@@ -119,6 +119,20 @@ impl GpuPath {
         }
         let (image, counts) = frames.frame(self.gpu, f.renderer, light, trees, f.mode)?;
         Ok(Some(Frame::new(image, counts)))
+    }
+
+    /// The unshadowed per-pixel LTC frame of one `light` (`None`: the CPU must draw it — a
+    /// light the shaders do not take, or the scene refused): what the point-light shadow
+    /// methods multiply by their shadow factor.
+    pub(crate) fn unshadowed(&mut self, f: &FrameInput, light: &Light) -> Result<Option<Image>> {
+        if crate::gpu::vertex::supports(light).is_err() || !self.made(f) {
+            return Ok(None);
+        }
+        let Some(frames) = self.frames.as_mut() else {
+            return Ok(None);
+        };
+        let (image, _) = frames.frame(self.gpu, f.renderer, light, None, Mode::Pixel)?;
+        Ok(Some(image))
     }
 
     /// The GPU's per-vertex frame of the sky in `cells` with this frame's cell radiances,

@@ -4,6 +4,7 @@
 
 use anyhow::Result;
 
+use super::gpu::GpuPath;
 use super::{Frame, FrameInput, FrameMethod, MethodState, Needs, SceneData, Settings};
 use crate::gpu::shadow_rays::GpuShadowRays;
 use crate::penumbra::rt::ShadowCaster;
@@ -36,7 +37,8 @@ impl FrameMethod for PointShadow {
             ..Needs::default()
         }
     }
-    /// The ray-traced techniques cast their hard shadow rays, and blur them, on the GPU.
+    /// The ray-traced techniques cast their hard shadow rays, blur them and shade the
+    /// polygon lights unshadowed per pixel on the GPU.
     fn gpu(&self) -> bool {
         self.technique.needs_rays()
     }
@@ -46,11 +48,12 @@ impl FrameMethod for PointShadow {
     /// The BVH is built now when the technique traces rays, and uploaded when the backend
     /// is a GPU.
     fn prepare(&self, scene: &SceneData, settings: &Settings) -> Result<Box<dyn MethodState>> {
-        let mut gpu = None;
+        let (mut gpu, mut frames) = (None, None);
         if self.technique.needs_rays() {
             let occ = scene.occluder();
             if let (Some(device), _) = settings.backend.resolve()? {
                 gpu = Some(GpuShadowRays::new(device, occ, true)?);
+                frames = GpuPath::new(settings)?;
             }
         }
         Ok(Box::new(State {
@@ -58,6 +61,7 @@ impl FrameMethod for PointShadow {
             params: settings.penumbra,
             guide: GuideCache::default(),
             gpu,
+            frames,
         }))
     }
 }
@@ -68,6 +72,8 @@ struct State {
     guide: GuideCache,
     /// The hard shadow rays and the blur on the GPU (`None`: on the CPU).
     gpu: Option<GpuShadowRays>,
+    /// The unshadowed per-pixel frames on the GPU (`None`: on the CPU).
+    frames: Option<GpuPath>,
 }
 
 impl MethodState for State {
@@ -90,7 +96,29 @@ impl MethodState for State {
                 .cloned()
                 .collect();
             super::sum_over_lights(&polygons, |light| {
-                penumbra::render(f.renderer, guide, light, self.technique, occ, &self.params)
+                let on_gpu = match self.frames.as_mut() {
+                    Some(g) => g.unshadowed(f, light)?,
+                    None => None,
+                };
+                match on_gpu {
+                    Some(unshadowed) => penumbra::render_over(
+                        f.renderer,
+                        guide,
+                        light,
+                        self.technique,
+                        occ,
+                        &self.params,
+                        &unshadowed,
+                    ),
+                    None => penumbra::render(
+                        f.renderer,
+                        guide,
+                        light,
+                        self.technique,
+                        occ,
+                        &self.params,
+                    ),
+                }
             })?
         } else {
             penumbra::render_punctual(f.renderer, guide, self.technique, occ, &self.params)?

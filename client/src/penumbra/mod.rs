@@ -111,6 +111,21 @@ pub fn render(
     ))
 }
 
+/// [`render`] of a polygon light over its unshadowed per-pixel frame drawn elsewhere (the
+/// GPU's frames): `unshadowed` × the technique's shadow factor.
+pub(crate) fn render_over(
+    r: &Renderer,
+    guide: &Guide,
+    light: &Light,
+    technique: Technique,
+    occluder: Option<&dyn rt::ShadowCaster>,
+    params: &Params,
+    unshadowed: &Image,
+) -> Result<Image> {
+    let s = shadow_factor(r, guide, light, technique, occluder, params)?;
+    Ok(compose(unshadowed, &s))
+}
+
 /// The scene's punctual lights: Σ over the lights of the unshadowed punctual shading
 /// ([`Renderer::shade_pixels_punctual`]) × the technique's shadow factor for that light. A
 /// punctual light has no size: its shadow is cast from a point ([`point_caster`]), so the

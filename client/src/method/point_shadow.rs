@@ -100,25 +100,19 @@ impl MethodState for State {
                     Some(g) => g.unshadowed(f, light)?,
                     None => None,
                 };
-                match on_gpu {
-                    Some(unshadowed) => penumbra::render_over(
-                        f.renderer,
-                        guide,
-                        light,
-                        self.technique,
-                        occ,
-                        &self.params,
-                        &unshadowed,
-                    ),
-                    None => penumbra::render(
-                        f.renderer,
-                        guide,
-                        light,
-                        self.technique,
-                        occ,
-                        &self.params,
-                    ),
-                }
+                let unshadowed = match on_gpu {
+                    Some(image) => image,
+                    None => f.renderer.shade_pixels(std::slice::from_ref(light), None),
+                };
+                penumbra::render_over(
+                    f.renderer,
+                    guide,
+                    light,
+                    self.technique,
+                    occ,
+                    &self.params,
+                    &unshadowed,
+                )
             })?
         } else {
             penumbra::render_punctual(f.renderer, guide, self.technique, occ, &self.params)?

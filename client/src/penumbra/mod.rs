@@ -104,11 +104,8 @@ pub fn render(
     if !r.scene.punctual.is_empty() {
         return render_punctual(r, guide, technique, occluder, params);
     }
-    let s = shadow_factor(r, guide, light, technique, occluder, params)?;
-    Ok(compose(
-        &r.shade_pixels(std::slice::from_ref(light), None),
-        &s,
-    ))
+    let unshadowed = r.shade_pixels(std::slice::from_ref(light), None);
+    render_over(r, guide, light, technique, occluder, params, &unshadowed)
 }
 
 /// [`render`] of a polygon light over its unshadowed per-pixel frame drawn elsewhere (the

@@ -3,8 +3,8 @@
 //! Occlusion rays against a mesh: one CWBVH (obvhs) per mesh, any-hit and closest-hit queries.
 //! The one ray caster of the project: the bake's visibility cube maps, the Monte Carlo
 //! references, the point-light penumbrae and the exact SSDF all ask it. With the `gpu`
-//! feature, the bake's cube maps ([`GpuOccluder`]) and the penumbrae's closest hits
-//! ([`GpuFirstHit`]) run in wgpu compute shaders over the same BVH.
+//! feature, the bake's cube maps (`GpuOccluder`) and the penumbrae's closest hits
+//! (`GpuFirstHit`) run in wgpu compute shaders over the same BVH.
 //!
 //! Must not depend on: anything but `bspvt-proto`'s mesh, glam and obvhs (no I/O).
 

@@ -52,7 +52,9 @@ impl FrameMethod for PointShadow {
         if self.technique.needs_rays() {
             let occ = scene.occluder();
             if let (Some(device), _) = settings.backend.resolve()? {
-                gpu = Some(GpuShadowRays::new(device, occ, true)?);
+                // rt-hard does not blur: no blur pipeline for it.
+                let blur = self.technique == Technique::RtPenumbra;
+                gpu = Some(GpuShadowRays::new(device, occ, blur)?);
                 frames = GpuPath::new(settings)?;
             }
         }

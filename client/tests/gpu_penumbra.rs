@@ -113,7 +113,8 @@ fn gpu_shadow_rays_give_the_cpus_penumbrae() {
                 "{name}: the light casts a shadow in view"
             );
             assert!(flipped * 1000 <= n, "{name}: {flipped} pixels flipped");
-            // The blur on the GPU (`penumbra.wgsl`, f32) against the CPU's (f64).
+            // The blur on the GPU (`penumbra.wgsl`, f32) against the CPU's (f64), of the
+            // split light's fractions (`Params::split`: the rays of both through the caster).
             let params = Params::default();
             let all = GpuShadowRays::new(gpu, &occ, true).unwrap();
             let factor = |c: &dyn rt::ShadowCaster| {

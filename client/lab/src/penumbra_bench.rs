@@ -182,6 +182,9 @@ pub struct CaseReport {
     pub rows: Vec<Row>,
     /// rt-penumbra's speed-up over Monte Carlo at equal RMSE.
     pub speed_up: SpeedUp,
+    /// The same for paper 003 as published: one ray toward the light's centroid everywhere
+    /// (row `rt-penumbra-point`, [`Params::split`] 1).
+    pub speed_up_point: SpeedUp,
     /// The same with its rays and blur on the GPU (`--gpu`).
     pub speed_up_gpu: Option<SpeedUp>,
 }
@@ -236,6 +239,10 @@ pub fn run(a: &BenchPenumbraArgs) -> Result<Report> {
             eprintln!("bench-penumbra: {name} / {} …", case.name);
             let c = measure_case(name, &case, &settings, gpu, &a.out)?;
             eprintln!("  rt-penumbra vs MC: {}", c.speed_up.describe());
+            eprintln!(
+                "  rt-penumbra-point (one ray per pixel) vs MC: {}",
+                c.speed_up_point.describe()
+            );
             if let Some(s) = &c.speed_up_gpu {
                 eprintln!(
                     "  rt-penumbra on the GPU (rays and blur) vs MC: {}",
@@ -426,6 +433,19 @@ fn measure_case(
         })?;
         rows.push(row(name, None, ms, &img)?);
     }
+    // Paper 003 as published: the light's centroid as the point light for every pixel.
+    let point = Params { split: 1, ..params };
+    let (ms, img) = timed(st.frames, || {
+        penumbra::render(
+            &r,
+            &guide,
+            &light,
+            Technique::RtPenumbra,
+            Some(&occ),
+            &point,
+        )
+    })?;
+    rows.push(row("rt-penumbra-point", None, ms, &img)?);
     if let Some(g) = gpu {
         // The BVH's upload and the pipeline's compilation are setup, as the CPU's BVH build
         // is: outside the timed frames.
@@ -455,6 +475,7 @@ fn measure_case(
         rows.push(row("ltc-exact", Some(spp), ms, &img)?);
     }
     let speed_up = equal_rmse_speed_up(&rows, "rt-penumbra")?;
+    let speed_up_point = equal_rmse_speed_up(&rows, "rt-penumbra-point")?;
     let speed_up_gpu = match gpu {
         Some(_) => Some(equal_rmse_speed_up(&rows, "rt-penumbra-gpu")?),
         None => None,
@@ -468,6 +489,7 @@ fn measure_case(
         ref_rmse: ref_between / 2.0,
         rows,
         speed_up,
+        speed_up_point,
         speed_up_gpu,
     })
 }
@@ -581,6 +603,12 @@ fn markdown(report: &Report) -> String {
             s,
             "\nEqual-RMSE speed-up of rt-penumbra over MC area-light shadows: {}\n",
             c.speed_up.describe()
+        );
+        let _ = writeln!(
+            s,
+            "The same for paper 003 as published (`rt-penumbra-point`: one ray per pixel toward \
+             the light's centroid): {}\n",
+            c.speed_up_point.describe()
         );
         if let Some(g) = &c.speed_up_gpu {
             let _ = writeln!(

@@ -86,7 +86,7 @@ fn quick_bench_writes_finite_results() {
         }
         n += 1;
     }
-    // Per case: 5 methods (+ 3 on the GPU) + unshadowed + 5 MC spp counts (quick: 1..16)
-    // + reference noise.
-    assert_eq!(n, 4 * (12 + 3 * usize::from(gpu)));
+    // Per case: 5 methods + rt-penumbra-point (+ 3 on the GPU) + unshadowed + 5 MC spp
+    // counts (quick: 1..16) + reference noise.
+    assert_eq!(n, 4 * (13 + 3 * usize::from(gpu)));
 }

@@ -32,8 +32,8 @@ use crate::light::Light;
 
 type Widths = [f64];
 
-/// The half-width of occluded pixels (`hard` < 1) with a same-surface 4-neighbour that is lit;
-/// 0 elsewhere.
+/// The half-width of occluded pixels (`hard` < 1) with a same-surface 4-neighbour that sees
+/// more of the light (lit, for a hard shadow of one point); 0 elsewhere.
 pub(crate) fn edge_radius(
     hard: &[f32],
     radius: &Widths,
@@ -57,7 +57,7 @@ pub(crate) fn edge_radius(
                     return false;
                 }
                 let j = (qy * w + qx) as usize;
-                hard[j] >= 1.0
+                hard[j] > hard[i]
                     && guide.pixels[j]
                         .as_ref()
                         .is_some_and(|q| guide.same_surface(c, q, params))

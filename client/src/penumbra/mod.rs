@@ -68,12 +68,12 @@ pub fn shadow_factor(
                 bail!("{technique:?} needs an occluder (ray tracing)");
             };
             let eps = Shadows::for_scene(r.scene, None).epsilon;
-            let b = rt::hard_shadows(guide, light, occ, eps)?;
-            return Ok(if technique == Technique::RtHard {
-                b.hard
-            } else {
-                rt::soft_shadows(&b, guide, &r.view, light, params, occ)?
-            });
+            let mut b = rt::hard_shadows(guide, light, occ, eps)?;
+            if technique == Technique::RtHard {
+                return Ok(b.hard);
+            }
+            rt::split_light(&mut b, guide, light, params, occ, eps)?;
+            return rt::soft_shadows(&b, guide, &r.view, light, params, occ);
         }
         Technique::Pcf => shadowmap::Filter::Pcf,
         Technique::Vsm => shadowmap::Filter::Vsm,
@@ -198,6 +198,10 @@ pub struct Params {
     pub vsm_bleed: f64,
     /// rt-penumbra's blur kernel.
     pub kernel: Kernel,
+    /// rt-penumbra's light split: where the point light's shadow is soft, `split` × `split`
+    /// shadow rays per pixel toward the light's parts ([`rt::split_light`]); 1: paper 003's
+    /// one ray toward the centroid everywhere.
+    pub split: usize,
 }
 
 /// The shape of rt-penumbra's blur.
@@ -220,6 +224,10 @@ impl Default for Params {
             pcf_radius: 2,
             vsm_bleed: 0.3,
             kernel: Kernel::Box,
+            split: std::env::var("BSPVT_SPLIT")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(2),
         }
     }
 }

@@ -2,27 +2,33 @@
 //! polygon's centroid), the occluder's distance from its closest hit, and a blur of the hard
 //! shadow only, of width W = (Z_receiver − Z_occluder) / Z_occluder · W_light projected to
 //! screen pixels (W / the pixel's footprint on the receiver's tangent plane), capped at
-//! [`Params::max_radius`] pixels ([`super::blur`]).
+//! [`Params::max_radius`] pixels ([`super::blur`]). Ours, not the paper's: where that blur
+//! reaches, the light split into [`Params::split`]² parts, one ray each ([`split_light`]).
 
 use anyhow::Result;
 use bspvt_raytrace::{Occluder, Segment};
 use rayon::prelude::*;
 
-use super::{Guide, Kernel, Params, blur, light_width, penumbra_width};
+use glam::DVec3;
+
+use super::{Guide, GuidePixel, Kernel, Params, blur, light_width, penumbra_width};
 use crate::frame::camera::View;
 use crate::light::Light;
 
 /// Per-pixel buffers of the hard shadow pass (row-major; background pixels: lit, no width).
 #[derive(Clone, Debug)]
 pub struct RtBuffers {
-    /// Hard shadow: 1 when the ray to the light's centroid is clear, else 0.
-    pub(crate) hard: Vec<f32>,
-    /// Distance from the light's centroid to the receiver, Z_receiver.
+    /// Hard shadow: 1 when the ray to the light's centroid is clear, else 0; where the light
+    /// is split ([`split_light`]), the weighted fraction of its parts that the pixel sees.
+    pub hard: Vec<f32>,
+    /// Distance from the light point to the receiver, Z_receiver (split: the blocked rays'
+    /// weighted mean).
     pub(crate) z_receiver: Vec<f64>,
-    /// Distance from the light's centroid to the occluder hit, Z_occluder (`NAN`: none).
+    /// Distance from the light point to the occluder hit, Z_occluder (`NAN`: none).
     pub(crate) z_occluder: Vec<f64>,
-    /// Half the penumbra width, W / 2, in world units (0 where unoccluded; `f64::MAX` for an
-    /// occluder at the light — the blur caps it in pixels).
+    /// Half the penumbra width, W / 2, in world units, of the whole light (split: of one part)
+    /// (0 where unoccluded; `f64::MAX` for an occluder at the light — the blur caps it in
+    /// pixels).
     pub radius: Vec<f64>,
 }
 
@@ -51,51 +57,121 @@ impl ShadowCaster for Occluder {
     }
 }
 
-/// A pixel's shadow ray: its receiver's distance to the light Z_receiver, and the segment
-/// cast with its length before the stop short of the light (`None`: nothing to cast).
-type PixelRay = (f64, Option<(Segment, f64)>);
+/// A pixel's shadow ray toward one light point: the receiver's distance to it Z_receiver, the
+/// point's weight in the pixel's unshadowed light, and the segment cast with its length before
+/// the stop short of the light (`None`: nothing to cast).
+type PixelRay = (f64, f64, Option<(Segment, f64)>);
 
-/// The hard shadow pass. `epsilon`: the shadow-ray offset (origins move by ε along the
-/// geometric normal toward the light's side, segments stop ε short of the light).
+/// The hard shadow pass (paper 003): one shadow ray per pixel toward the light's centroid, the
+/// point light. `epsilon`: the shadow-ray offset (origins move by ε along the geometric normal
+/// toward the light's side, segments stop ε short of the light).
 pub fn hard_shadows(
     guide: &Guide,
     light: &Light,
     caster: &dyn ShadowCaster,
     epsilon: f64,
 ) -> Result<RtBuffers> {
+    let all: Vec<usize> = (0..guide.pixels.len()).collect();
+    let mut out = RtBuffers {
+        hard: vec![1.0; all.len()],
+        z_receiver: vec![f64::NAN; all.len()],
+        z_occluder: vec![f64::NAN; all.len()],
+        radius: vec![0.0; all.len()],
+    };
+    cast(
+        &mut out,
+        &all,
+        guide,
+        light,
+        &[light.centroid()],
+        caster,
+        epsilon,
+    )?;
+    Ok(out)
+}
+
+/// The light split into `split` × `split` parts where the point light's shadow is soft: the
+/// pixels of `buffers` (the point light's hard shadow) that the blur would change — within
+/// reach of a hard shadow's edge ([`blur::spread_radius`]) by half a pixel or more — cast one
+/// ray toward each part's
+/// centre ([`blur::light_offsets`]) instead.
+///
+/// Such a pixel's `hard` becomes the fraction of its unshadowed light that reaches it — the
+/// parts weighted by cos θ_receiver · cos θ_light / d², so parts below its horizon, which the
+/// unshadowed LTC integral already leaves out, do not count as shadow — and its `radius` the
+/// same weighted mean of its blocked parts' half-widths for a part of width
+/// W_light / `split`. Why: a light's soft shadow is the sum of its parts' (for a planar
+/// occluder and receiver, the box of width W is the sum of `split` shifted boxes of width
+/// W / `split` along each axis), and each part's penumbra is `split` times narrower, so one
+/// width per pixel is less wrong where penumbrae of different widths overlap, and a large
+/// light whose umbra vanishes is not drawn with the point light's umbra.
+pub fn split_light(
+    buffers: &mut RtBuffers,
+    guide: &Guide,
+    light: &Light,
+    params: &Params,
+    caster: &dyn ShadowCaster,
+    epsilon: f64,
+) -> Result<()> {
+    if params.split <= 1 {
+        return Ok(());
+    }
     let centre = light.centroid();
-    let w_light = light_width(light);
-    let rays: Vec<Option<PixelRay>> = guide
-        .pixels
+    let points: Vec<DVec3> = blur::light_offsets(light, params.split)
+        .into_iter()
+        .map(|o| centre + o)
+        .collect();
+    if points.len() < 2 {
+        return Ok(());
+    }
+    let edge = blur::edge_radius(&buffers.hard, &buffers.radius, guide, params);
+    let reach = blur::spread_radius(&edge, guide, params);
+    // Pixels whose blur spans less than half a pixel either way (a punctual light's stand-in)
+    // keep their one ray: the blur leaves them as they are.
+    let soft: Vec<usize> = (0..reach.len())
+        .filter(|&i| {
+            guide.pixels[i].as_ref().is_some_and(|g| {
+                let cap = params.max_radius;
+                reach[i] > 0.0
+                    && g.pixels(reach[i], true, cap)
+                        .max(g.pixels(reach[i], false, cap))
+                        >= 0.5
+            })
+        })
+        .collect();
+    cast(buffers, &soft, guide, light, &points, caster, epsilon)
+}
+
+/// Casts the rays of `pixels` toward `points` (on `light`) and writes their buffers: the
+/// weighted fraction of the points seen, and of the blocked ones the weighted mean Z_receiver,
+/// Z_occluder and half-width for a part of width W_light / √(number of points).
+fn cast(
+    out: &mut RtBuffers,
+    pixels: &[usize],
+    guide: &Guide,
+    light: &Light,
+    points: &[DVec3],
+    caster: &dyn ShadowCaster,
+    epsilon: f64,
+) -> Result<()> {
+    let w_part = light_width(light) / (points.len().max(1) as f64).sqrt();
+    let rays: Vec<Option<Vec<PixelRay>>> = pixels
         .par_iter()
-        .map(|g| {
-            let g = g.as_ref()?;
-            let to_light = centre - g.position;
-            let z_r = to_light.length();
-            if !(z_r > epsilon) || !z_r.is_finite() {
-                // The receiver touches the point light: nothing can be in between.
-                return Some((z_r, None));
-            }
-            let dir = to_light / z_r;
-            let side = if g.geometric.dot(dir) >= 0.0 {
-                1.0
-            } else {
-                -1.0
-            };
-            let origin = g.position + g.geometric * (epsilon * side);
-            let seg = centre - origin;
-            let len = seg.length();
-            let t_max = len - epsilon;
-            let cast = (t_max > 0.0 && len.is_finite()).then(|| {
-                let s = Segment::new(origin.as_vec3(), (seg / len).as_vec3(), t_max as f32);
-                (s, len)
-            });
-            Some((z_r, cast))
+        .map(|&i| {
+            let g = guide.pixels[i].as_ref()?;
+            Some(
+                points
+                    .iter()
+                    .map(|&p| pixel_ray(g, light, p, epsilon))
+                    .collect(),
+            )
         })
         .collect();
     let segments: Vec<Segment> = rays
         .iter()
-        .filter_map(|r| r.and_then(|(_, c)| c).map(|(s, _)| s))
+        .flatten()
+        .flatten()
+        .filter_map(|(_, _, c)| c.map(|(s, _)| s))
         .collect();
     let hits = caster.first_hits(&segments)?;
     if hits.len() != segments.len() {
@@ -106,32 +182,88 @@ pub fn hard_shadows(
         );
     }
     let mut hits = hits.into_iter();
-    let mut out = RtBuffers {
-        hard: Vec::with_capacity(rays.len()),
-        z_receiver: Vec::with_capacity(rays.len()),
-        z_occluder: Vec::with_capacity(rays.len()),
-        radius: Vec::with_capacity(rays.len()),
-    };
-    for ray in rays {
-        let (h, zr, zo, r) = match ray {
-            None => (1.0, f64::NAN, f64::NAN, 0.0),
-            Some((z_r, None)) => (1.0, z_r, f64::NAN, 0.0),
-            Some((z_r, Some((_, len)))) => match hits.next().flatten() {
-                None => (1.0, z_r, f64::NAN, 0.0),
-                Some(t) => {
-                    // Z from the light: the hit lies len − t from the centroid.
-                    let z_o = (len - f64::from(t)).max(0.0);
-                    let w = penumbra_width(z_r, z_o, w_light);
-                    (0.0, z_r, z_o, 0.5 * w)
-                }
-            },
+    for (&i, ray) in pixels.iter().zip(rays) {
+        let Some(ray) = ray else {
+            continue;
         };
-        out.hard.push(h);
-        out.z_receiver.push(zr);
-        out.z_occluder.push(zo);
-        out.radius.push(r);
+        // Sums over the points (weighted, and plain for a pixel that faces none of them).
+        let (mut seen, mut total, mut seen_n) = (0.0, 0.0, 0usize);
+        let (mut blocked, mut blocked_n) = (0.0, 0usize);
+        let (mut zr, mut zo, mut r, mut plain) = (0.0, 0.0, 0.0, [0.0; 3]);
+        for &(z_r, weight, cast) in &ray {
+            total += weight;
+            let hit = match cast {
+                None => None,
+                Some((_, len)) => hits.next().flatten().map(|t| (len, t)),
+            };
+            match hit {
+                None => {
+                    seen += weight;
+                    seen_n += 1;
+                }
+                Some((len, t)) => {
+                    // Z from the light: the hit lies len − t from the point.
+                    let z_o = (len - f64::from(t)).max(0.0);
+                    // Half of W = (Z_r − Z_o) / Z_o · W_part (f64::MAX for an occluder at the
+                    // light, capped by the blur), halved before it is summed.
+                    let half = 0.5 * penumbra_width(z_r, z_o, w_part);
+                    blocked += weight;
+                    blocked_n += 1;
+                    zr += weight * z_r;
+                    zo += weight * z_o;
+                    r += weight * half;
+                    plain = [plain[0] + z_r, plain[1] + z_o, plain[2] + half];
+                }
+            }
+        }
+        let n = ray.len().max(1) as f64;
+        out.hard[i] = match total > 0.0 && ray.len() > 1 {
+            true => (seen / total) as f32,
+            false => (seen_n as f64 / n) as f32,
+        };
+        // One point (the point light): the plain values, as paper 003 has them.
+        let weighted = ray.len() > 1 && blocked > 0.0;
+        (out.z_receiver[i], out.z_occluder[i], out.radius[i]) = match (weighted, blocked_n) {
+            (_, 0) => (ray.iter().map(|r| r.0).sum::<f64>() / n, f64::NAN, 0.0),
+            (true, _) => (zr / blocked, zo / blocked, (r / blocked).min(f64::MAX)),
+            (_, k) => {
+                let k = k as f64;
+                (plain[0] / k, plain[1] / k, (plain[2] / k).min(f64::MAX))
+            }
+        };
     }
-    Ok(out)
+    Ok(())
+}
+
+/// The shadow ray from `g`'s surface to the point `p` on `light`, with `p`'s weight in `g`'s
+/// unshadowed light: cos θ_receiver · cos θ_light / d² (0 below either horizon).
+fn pixel_ray(g: &GuidePixel, light: &Light, p: DVec3, epsilon: f64) -> PixelRay {
+    let to_light = p - g.position;
+    let z_r = to_light.length();
+    if !(z_r > epsilon) || !z_r.is_finite() {
+        // The receiver touches the point light: nothing can be in between.
+        return (z_r, 0.0, None);
+    }
+    let dir = to_light / z_r;
+    let cos_l = match light.two_sided {
+        true => light.normal.dot(dir).abs(),
+        false => (-light.normal.dot(dir)).max(0.0),
+    };
+    let weight = g.normal.dot(dir).max(0.0) * cos_l / (z_r * z_r);
+    let side = if g.geometric.dot(dir) >= 0.0 {
+        1.0
+    } else {
+        -1.0
+    };
+    let origin = g.position + g.geometric * (epsilon * side);
+    let seg = p - origin;
+    let len = seg.length();
+    let t_max = len - epsilon;
+    let cast = (t_max > 0.0 && len.is_finite()).then(|| {
+        let s = Segment::new(origin.as_vec3(), (seg / len).as_vec3(), t_max as f32);
+        (s, len)
+    });
+    (z_r, if weight.is_finite() { weight } else { 0.0 }, cast)
 }
 
 /// The soft shadow factor: the hard shadow blurred by the per-pixel radius spread from the

@@ -80,7 +80,8 @@ fn along(i: u32, l: Line, t: i32) -> i32 {
     return i32(i) + t * l.stride;
 }
 
-// edge_radius: the half-width of an occluded pixel with a lit same-surface 4-neighbour.
+// edge_radius: the half-width of an occluded pixel with a same-surface 4-neighbour that sees
+// more of the light.
 fn edge(i: u32) -> f32 {
     if !valid(i) || values[i] >= 1.0 {
         return 0.0;
@@ -96,7 +97,7 @@ fn edge(i: u32) -> f32 {
             continue;
         }
         let j = u32(q.y * w + q.x);
-        if values[j] >= 1.0 && valid(j) && same_surface(i, j) {
+        if values[j] > values[i] && valid(j) && same_surface(i, j) {
             return widths[i];
         }
     }

@@ -629,6 +629,71 @@ fn markdown(report: &Report) -> String {
 mod tests {
     use super::*;
 
+    /// The light split where the shadow is soft ([`Params::split`], `rt::split_light`): closer
+    /// to LTC with ray-traced visibility than paper 003's one ray toward the centroid, on the
+    /// built-in scene and, by far, under the `big-light` case's light (its slab shadow has no
+    /// umbra, which the point light's hard shadow cannot lose); only pixels within the blur's
+    /// reach change.
+    #[test]
+    fn the_split_light_is_closer_to_the_area_lights_shadow() {
+        use bspvt_client::penumbra::rt;
+        let base = bspvt_proto::builtin::scene("plate-small").expect("built-in scene");
+        let point = Params {
+            split: 1,
+            ..Params::default()
+        };
+        let split = Params::default();
+        assert_eq!(split.split, 2, "the default splits the light in 2 × 2");
+        for (name, s, most) in [
+            ("base", base.clone(), 0.9),
+            ("big light", big_light(&base), 0.7),
+        ] {
+            let r = Renderer::new(&s, 128, 80);
+            let occ = Occluder::of_surfaces(&s.mesh, &s.materials);
+            let l = Light::load(&s.lights[0]).expect("light");
+            let g = Guide::new(&r);
+            let covered = covered_pixels(&r.gbuffer);
+            let reference = render_ltc_exact_visibility(
+                &s,
+                &r.view,
+                &r.gbuffer,
+                &l,
+                &occ,
+                &builtin_lookup,
+                256,
+                1,
+            );
+            let mae = |p: &Params| {
+                let img = penumbra::render(&r, &g, &l, Technique::RtPenumbra, Some(&occ), p)
+                    .expect("frame");
+                errors(&img, &reference, &covered).1
+            };
+            let (e_point, e_split) = (mae(&point), mae(&split));
+            eprintln!(
+                "{name}: mean abs. error vs ltc-exact (256 spp): one ray {e_point:.5}, 2 × 2 {e_split:.5}"
+            );
+            assert!(
+                e_split < most * e_point,
+                "{name}: split {e_split} not below {most} × one ray's {e_point}"
+            );
+            let mut b = rt::hard_shadows(&g, &l, &occ, 1e-4).expect("rays");
+            let hard = b.hard.clone();
+            rt::split_light(&mut b, &g, &l, &split, &occ, 1e-4).expect("rays");
+            let changed = hard.iter().zip(&b.hard).filter(|(a, c)| a != c).count();
+            let kept = hard.iter().zip(&b.hard).filter(|(a, c)| a == c).count();
+            eprintln!("{name}: the split changed {changed} pixels' visibility, kept {kept}");
+            assert!(
+                changed > 0 && kept > changed,
+                "{name}: {changed} changed, {kept} kept"
+            );
+            assert!(
+                b.hard
+                    .iter()
+                    .all(|v| v.is_finite() && (0.0..=1.0).contains(v))
+            );
+        }
+    }
+
     fn row(method: &str, spp: Option<u32>, ms: f64, rmse: f64) -> Row {
         Row {
             scene: "s".into(),

@@ -45,6 +45,12 @@ pub(crate) struct RenderArgs {
     /// Samples per pixel (mc, ltc-exact).
     #[arg(long, default_value_t = 64)]
     spp: u32,
+    /// `--method rt-penumbra`: where the blur of the one ray per pixel reaches, cast N × N rays
+    /// toward the light's parts (docs/penumbra.md, "The light split"); 1: paper 003 as
+    /// published, one ray toward the light's centroid everywhere.
+    #[arg(long, default_value_t = bspvt_client::penumbra::DEFAULT_SPLIT as u32,
+          value_parser = clap::value_parser!(u32).range(1..=8))]
+    penumbra_split: u32,
     #[arg(long, default_value_t = 512)]
     width: u32,
     /// Image height [default: the width over the scene camera's aspect ratio (a glTF camera's
@@ -140,6 +146,10 @@ pub(crate) fn run(a: RenderArgs) -> Result<()> {
                 spp: a.spp,
                 env: a.env.options(&scene)?,
                 backend,
+                penumbra: bspvt_client::penumbra::Params {
+                    split: a.penumbra_split as usize,
+                    ..Default::default()
+                },
                 ..Settings::default()
             },
         };

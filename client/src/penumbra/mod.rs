@@ -178,6 +178,9 @@ pub(crate) fn point_caster(
     }
 }
 
+/// rt-penumbra's default light split ([`Params::split`]): 2 × 2 parts where the blur reaches.
+pub const DEFAULT_SPLIT: usize = 2;
+
 /// Settings shared by the methods.
 #[derive(Clone, Copy, Debug)]
 pub struct Params {
@@ -224,10 +227,7 @@ impl Default for Params {
             pcf_radius: 2,
             vsm_bleed: 0.3,
             kernel: Kernel::Box,
-            split: std::env::var("BSPVT_SPLIT")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(2),
+            split: DEFAULT_SPLIT,
         }
     }
 }

@@ -123,7 +123,8 @@ pub struct Row {
     pub mae: f64,
 }
 
-/// rt-penumbra's time against Monte Carlo area-light shadows at equal RMSE.
+/// A method's time (rt-penumbra, its one-ray form or its GPU rows) against Monte Carlo
+/// area-light shadows at equal RMSE.
 #[derive(Clone, Debug, Serialize)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum SpeedUp {
@@ -152,14 +153,14 @@ impl SpeedUp {
     fn describe(&self) -> String {
         match self {
             SpeedUp::Interpolated { spp, factor } => {
-                format!("{factor:.1}× (MC reaches rt-penumbra's RMSE at ≈ {spp:.1} spp)")
+                format!("{factor:.1}× (MC reaches its RMSE at ≈ {spp:.1} spp)")
             }
             SpeedUp::AtLeast { max_spp, factor } => {
-                format!("> {factor:.1}× (MC never reaches rt-penumbra's RMSE within {max_spp} spp)")
+                format!("> {factor:.1}× (MC never reaches its RMSE within {max_spp} spp)")
             }
-            SpeedUp::WorseThanOneSpp { factor } => format!(
-                "none: rt-penumbra is worse than 1 spp (MC at 1 spp / rt-penumbra = {factor:.2}×)"
-            ),
+            SpeedUp::WorseThanOneSpp { factor } => {
+                format!("none: worse than 1 spp (MC at 1 spp / its time = {factor:.2}×)")
+            }
         }
     }
 }

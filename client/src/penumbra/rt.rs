@@ -186,50 +186,46 @@ fn cast(
         let Some(ray) = ray else {
             continue;
         };
-        // Sums over the points (weighted, and plain for a pixel that faces none of them).
-        let (mut seen, mut total, mut seen_n) = (0.0, 0.0, 0usize);
-        let (mut blocked, mut blocked_n) = (0.0, 0usize);
-        let (mut zr, mut zo, mut r, mut plain) = (0.0, 0.0, 0.0, [0.0; 3]);
-        for &(z_r, weight, cast) in &ray {
-            total += weight;
-            let hit = match cast {
-                None => None,
-                Some((_, len)) => hits.next().flatten().map(|t| (len, t)),
-            };
-            match hit {
-                None => {
-                    seen += weight;
-                    seen_n += 1;
-                }
-                Some((len, t)) => {
-                    // Z from the light: the hit lies len − t from the point.
-                    let z_o = (len - f64::from(t)).max(0.0);
-                    // Half of W = (Z_r − Z_o) / Z_o · W_part (f64::MAX for an occluder at the
-                    // light, capped by the blur), halved before it is summed.
-                    let half = 0.5 * penumbra_width(z_r, z_o, w_part);
-                    blocked += weight;
-                    blocked_n += 1;
-                    zr += weight * z_r;
-                    zo += weight * z_o;
-                    r += weight * half;
-                    plain = [plain[0] + z_r, plain[1] + z_o, plain[2] + half];
-                }
-            }
-        }
-        let n = ray.len().max(1) as f64;
-        out.hard[i] = match total > 0.0 && ray.len() > 1 {
-            true => (seen / total) as f32,
-            false => (seen_n as f64 / n) as f32,
+        // Per point: Z_receiver, weight, and Z_occluder from the light (`None`: seen).
+        let answers: Vec<(f64, f64, Option<f64>)> = ray
+            .iter()
+            .map(|&(z_r, weight, cast)| {
+                let z_o = cast.and_then(|(_, len)| {
+                    hits.next().flatten().map(|t| (len - f64::from(t)).max(0.0))
+                });
+                (z_r, weight, z_o)
+            })
+            .collect();
+        // Points count by their share of the unshadowed light; one point (paper 003's), or a
+        // pixel that faces none of them, counts them alike.
+        let weighted = answers.len() > 1 && answers.iter().any(|a| a.1 > 0.0);
+        let share = |a: &(f64, f64, Option<f64>)| if weighted { a.1 } else { 1.0 };
+        let total: f64 = answers.iter().map(share).sum();
+        let seen: f64 = answers.iter().filter(|a| a.2.is_none()).map(share).sum();
+        out.hard[i] = (seen / total) as f32;
+        // The blocked points' means (alike if none of them has a share): Z_r, Z_o and half of
+        // W = (Z_r − Z_o) / Z_o · W_part (f64::MAX for an occluder at the light: the blur caps it).
+        let blocked: Vec<(f64, f64, f64)> = answers
+            .iter()
+            .filter_map(|a| a.2.map(|z_o| (share(a), a.0, z_o)))
+            .collect();
+        let alike = !blocked.iter().any(|b| b.0 > 0.0);
+        let w = |b: &(f64, f64, f64)| if alike { 1.0 } else { b.0 };
+        let sum_w: f64 = blocked.iter().map(w).sum();
+        let mean = |f: &dyn Fn(&(f64, f64, f64)) -> f64| {
+            blocked.iter().map(|b| w(b) * f(b)).sum::<f64>() / sum_w
         };
-        // One point (the point light): the plain values, as paper 003 has them.
-        let weighted = ray.len() > 1 && blocked > 0.0;
-        (out.z_receiver[i], out.z_occluder[i], out.radius[i]) = match (weighted, blocked_n) {
-            (_, 0) => (ray.iter().map(|r| r.0).sum::<f64>() / n, f64::NAN, 0.0),
-            (true, _) => (zr / blocked, zo / blocked, (r / blocked).min(f64::MAX)),
-            (_, k) => {
-                let k = k as f64;
-                (plain[0] / k, plain[1] / k, (plain[2] / k).min(f64::MAX))
-            }
+        (out.z_receiver[i], out.z_occluder[i], out.radius[i]) = match blocked.is_empty() {
+            true => (
+                answers.iter().map(|a| a.0).sum::<f64>() / answers.len().max(1) as f64,
+                f64::NAN,
+                0.0,
+            ),
+            false => (
+                mean(&|b| b.1),
+                mean(&|b| b.2),
+                mean(&|b| 0.5 * penumbra_width(b.1, b.2, w_part)).min(f64::MAX),
+            ),
         };
     }
     Ok(())

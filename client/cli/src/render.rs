@@ -51,6 +51,12 @@ pub(crate) struct RenderArgs {
     #[arg(long, default_value_t = bspvt_client::penumbra::DEFAULT_SPLIT as u32,
           value_parser = clap::value_parser!(u32).range(1..=8))]
     penumbra_split: u32,
+    /// `--method rt-penumbra`: how many pixels the split region may grow past the one ray's
+    /// blur, where the split fractions at its edge still differ from the one ray's (docs/
+    /// penumbra.md, "The light split"); 0: the one ray's blur's reach only.
+    #[arg(long, default_value_t = bspvt_client::penumbra::Params::default().grow as u32,
+          value_parser = clap::value_parser!(u32).range(0..=4096))]
+    penumbra_grow: u32,
     #[arg(long, default_value_t = 512)]
     width: u32,
     /// Image height [default: the width over the scene camera's aspect ratio (a glTF camera's
@@ -148,6 +154,7 @@ pub(crate) fn run(a: RenderArgs) -> Result<()> {
                 backend,
                 penumbra: bspvt_client::penumbra::Params {
                     split: a.penumbra_split as usize,
+                    grow: f64::from(a.penumbra_grow),
                     ..Default::default()
                 },
                 ..Settings::default()

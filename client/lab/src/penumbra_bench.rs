@@ -633,8 +633,9 @@ mod tests {
     /// The light split where the shadow is soft ([`Params::split`], `rt::split_light`): closer
     /// to LTC with ray-traced visibility than paper 003's one ray toward the centroid, on the
     /// built-in scene and, by far, under the `big-light` case's light (its slab shadow has no
-    /// umbra, which the point light's hard shadow cannot lose); only pixels within the blur's
-    /// reach change.
+    /// umbra, which the point light's hard shadow cannot lose), the more so where the split
+    /// region grows past the one ray's blur ([`Params::grow`]); only pixels near the shadows
+    /// change.
     #[test]
     fn the_split_light_is_closer_to_the_area_lights_shadow() {
         use bspvt_client::penumbra::rt;
@@ -669,13 +670,20 @@ mod tests {
                     .expect("frame");
                 errors(&img, &reference, &covered).1
             };
-            let (e_point, e_split) = (mae(&point), mae(&split));
+            let fixed = Params { grow: 0.0, ..split };
+            let (e_point, e_fixed, e_split) = (mae(&point), mae(&fixed), mae(&split));
             eprintln!(
-                "{name}: mean abs. error vs ltc-exact (256 spp): one ray {e_point:.5}, 2 × 2 {e_split:.5}"
+                "{name}: mean abs. error vs ltc-exact (256 spp): one ray {e_point:.5}, 2 × 2 \
+                 {e_fixed:.5} where the one ray's blur reaches, {e_split:.5} grown"
             );
             assert!(
                 e_split < most * e_point,
                 "{name}: split {e_split} not below {most} × one ray's {e_point}"
+            );
+            assert!(
+                e_split < e_fixed,
+                "{name}: the grown split region's {e_split} not below the one ray's reach's \
+                 {e_fixed}"
             );
             let mut b = rt::hard_shadows(&g, &l, &occ, 1e-4).expect("rays");
             let hard = b.hard.clone();

@@ -205,6 +205,10 @@ pub struct Params {
     /// shadow rays per pixel toward the light's parts ([`rt::split_light`]); 1: paper 003's
     /// one ray toward the centroid everywhere.
     pub split: usize,
+    /// How far, in pixels, the split region may grow past the one ray's blur where the split
+    /// fractions still differ from the one ray's 0 or 1 at its edge ([`rt::split_light`]); 0:
+    /// the region is the one ray's blur's reach.
+    pub grow: f64,
 }
 
 /// The shape of rt-penumbra's blur.
@@ -228,6 +232,7 @@ impl Default for Params {
             vsm_bleed: 0.3,
             kernel: Kernel::Box,
             split: DEFAULT_SPLIT,
+            grow: 32.0,
         }
     }
 }

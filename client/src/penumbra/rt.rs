@@ -139,7 +139,91 @@ pub fn split_light(
             })
         })
         .collect();
-    cast(buffers, &soft, guide, light, &points, caster, epsilon)
+    let one_ray = buffers.hard.clone();
+    let mut split = vec![false; reach.len()];
+    let mut last = soft;
+    for round in 0..=grow_rounds(params) {
+        cast(buffers, &last, guide, light, &points, caster, epsilon)?;
+        for &i in &last {
+            split[i] = true;
+        }
+        if round == grow_rounds(params) {
+            break;
+        }
+        last = seam_band(&last, &split, &buffers.hard, &one_ray, guide, params);
+        if last.is_empty() {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// Pixels a round of [`split_light`]'s growth adds: [`GROW_BAND`].
+const GROW_BAND: isize = 4;
+
+/// How many rounds the split region may grow past the one-ray blur's reach: together at most
+/// [`Params::grow`] pixels.
+fn grow_rounds(params: &Params) -> usize {
+    let rounds = (params.grow / GROW_BAND as f64).ceil();
+    if rounds.is_finite() && rounds > 0.0 {
+        rounds.min(1e4) as usize
+    } else {
+        0
+    }
+}
+
+/// The split region's seam: the pixels not yet split within [`GROW_BAND`] pixels (a square)
+/// of a newly split pixel (`last`) that has a same-surface neighbour not split whose one ray's
+/// 0 or 1 (`one_ray`) differs from its fraction. Where the one ray's blur falls short of the
+/// area light's penumbra (its width capped at [`Params::max_radius`], or a narrower occluder's
+/// distance), the split fractions would stop at such a step; the bands take the region on
+/// until the fractions meet the one ray's values.
+fn seam_band(
+    last: &[usize],
+    split: &[bool],
+    hard: &[f32],
+    one_ray: &[f32],
+    guide: &Guide,
+    params: &Params,
+) -> Vec<usize> {
+    let (w, h) = (guide.width as isize, guide.height as isize);
+    let at = |x: isize, y: isize| {
+        (x >= 0 && y >= 0 && x < w && y < h)
+            .then_some((y * w + x) as usize)
+            .filter(|&j| !split[j] && guide.pixels[j].is_some())
+    };
+    let mut added = vec![false; split.len()];
+    let mut out = Vec::new();
+    for &i in last {
+        let Some(p) = &guide.pixels[i] else {
+            continue;
+        };
+        let (x, y) = ((i as isize) % w, (i as isize) / w);
+        let seam = [(-1, 0), (1, 0), (0, -1), (0, 1)]
+            .iter()
+            .filter_map(|&(dx, dy)| at(x + dx, y + dy))
+            .any(|j| {
+                one_ray[j] != hard[i]
+                    && guide.pixels[j]
+                        .as_ref()
+                        .is_some_and(|q| guide.same_surface(p, q, params))
+            });
+        if !seam {
+            continue;
+        }
+        for qy in y - GROW_BAND..=y + GROW_BAND {
+            for qx in x - GROW_BAND..=x + GROW_BAND {
+                if let Some(j) = at(qx, qy)
+                    && !added[j]
+                {
+                    added[j] = true;
+                    out.push(j);
+                }
+            }
+        }
+    }
+    out.sort_unstable();
+    out
 }
 
 /// Casts the rays of `pixels` toward `points` (on `light`) and writes their buffers: the

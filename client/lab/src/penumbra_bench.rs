@@ -8,7 +8,7 @@
 //!   each: Var(A − B) = 2σ², Var((A + B)/2) = σ²/2);
 //! - rt-penumbra, rt-hard, pcf, vsm, pcss: median ms/frame over `frames` renders at the same
 //!   light pose, RMSE and mean absolute error over covered pixels;
-//! - `ltc-exact` at 1, 2, 4, …, 128 spp: ms/frame and RMSE, and the equal-RMSE speed-up of
+//! - `ltc-exact` at 1, 2, 4, …, 256 spp: ms/frame and RMSE, and the equal-RMSE speed-up of
 //!   rt-penumbra, interpolated log-log between the two spp counts that bracket its RMSE.
 
 use std::fmt::Write as _;
@@ -94,7 +94,7 @@ impl Settings {
         if ref_spp == 0 || frames == 0 {
             bail!("--ref-spp and --frames must be at least 1");
         }
-        let top = if a.quick { 16 } else { 128 };
+        let top = if a.quick { 16 } else { 256 };
         let mc_spp = (0..).map(|k| 1u32 << k).take_while(|&n| n <= top).collect();
         Ok(Settings {
             size,

@@ -239,22 +239,18 @@ fn cast(
     epsilon: f64,
 ) -> Result<()> {
     let w_part = light_width(light) / (points.len().max(1) as f64).sqrt();
-    let rays: Vec<Option<Vec<PixelRay>>> = pixels
+    // Every pixel with a surface's rays, `points.len()` each, in `pixels`' order.
+    let rays: Vec<PixelRay> = pixels
         .par_iter()
-        .map(|&i| {
-            let g = guide.pixels[i].as_ref()?;
-            Some(
-                points
-                    .iter()
-                    .map(|&p| pixel_ray(g, light, p, epsilon))
-                    .collect(),
-            )
+        .flat_map_iter(|&i| {
+            guide.pixels[i]
+                .as_ref()
+                .into_iter()
+                .flat_map(|g| points.iter().map(|&p| pixel_ray(g, light, p, epsilon)))
         })
         .collect();
     let segments: Vec<Segment> = rays
         .iter()
-        .flatten()
-        .flatten()
         .filter_map(|(_, _, c)| c.map(|(s, _)| s))
         .collect();
     let hits = caster.first_hits(&segments)?;
@@ -266,20 +262,23 @@ fn cast(
         );
     }
     let mut hits = hits.into_iter();
-    for (&i, ray) in pixels.iter().zip(rays) {
-        let Some(ray) = ray else {
+    // Per point: Z_receiver, weight, and Z_occluder from the light (`None`: seen); reused.
+    let mut answers: Vec<(f64, f64, Option<f64>)> = Vec::with_capacity(points.len());
+    let mut blocked: Vec<(f64, f64, f64)> = Vec::with_capacity(points.len());
+    let mut rays = rays.chunks_exact(points.len().max(1));
+    for &i in pixels {
+        if guide.pixels[i].is_none() {
             continue;
+        }
+        let Some(ray) = rays.next() else {
+            break;
         };
-        // Per point: Z_receiver, weight, and Z_occluder from the light (`None`: seen).
-        let answers: Vec<(f64, f64, Option<f64>)> = ray
-            .iter()
-            .map(|&(z_r, weight, cast)| {
-                let z_o = cast.and_then(|(_, len)| {
-                    hits.next().flatten().map(|t| (len - f64::from(t)).max(0.0))
-                });
-                (z_r, weight, z_o)
-            })
-            .collect();
+        answers.clear();
+        answers.extend(ray.iter().map(|&(z_r, weight, cast)| {
+            let z_o = cast
+                .and_then(|(_, len)| hits.next().flatten().map(|t| (len - f64::from(t)).max(0.0)));
+            (z_r, weight, z_o)
+        }));
         // Points count by their share of the unshadowed light; one point (paper 003's), or a
         // pixel that faces none of them, counts them alike.
         let weighted = answers.len() > 1 && answers.iter().any(|a| a.1 > 0.0);
@@ -289,10 +288,12 @@ fn cast(
         out.hard[i] = (seen / total) as f32;
         // The blocked points' means (alike if none of them has a share): Z_r, Z_o and half of
         // W = (Z_r − Z_o) / Z_o · W_part (f64::MAX for an occluder at the light: the blur caps it).
-        let blocked: Vec<(f64, f64, f64)> = answers
-            .iter()
-            .filter_map(|a| a.2.map(|z_o| (share(a), a.0, z_o)))
-            .collect();
+        blocked.clear();
+        blocked.extend(
+            answers
+                .iter()
+                .filter_map(|a| a.2.map(|z_o| (share(a), a.0, z_o))),
+        );
         let alike = !blocked.iter().any(|b| b.0 > 0.0);
         let w = |b: &(f64, f64, f64)| if alike { 1.0 } else { b.0 };
         let sum_w: f64 = blocked.iter().map(w).sum();

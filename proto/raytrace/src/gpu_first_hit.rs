@@ -45,14 +45,16 @@ impl Segment {
 
 const WORKGROUP: u32 = 64;
 
-/// The buffers of one batch size.
+/// The buffers of batches of up to `capacity` segments, kept across calls (a frame's passes
+/// cast batches of different sizes: all pixels, then the light's parts on a few of them).
 struct Batch {
-    len: usize,
+    capacity: usize,
     segments: wgpu::Buffer,
     hits: wgpu::Buffer,
     readback: wgpu::Buffer,
+    /// The batch's count and dispatch width (`first_hit.wgsl`'s shape), written per dispatch.
+    shape: wgpu::Buffer,
     group: wgpu::BindGroup,
-    groups: (u32, u32),
 }
 
 /// An occluder on the GPU for closest-hit queries.
@@ -124,12 +126,20 @@ impl GpuFirstHit {
         let mut batch = self.batch.lock().unwrap_or_else(|p| p.into_inner());
         let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        if batch.as_ref().is_none_or(|b| b.len != n) {
-            *batch = Some(self.batch(device, n));
+        if batch.as_ref().is_none_or(|b| b.capacity < n) {
+            // Room for a quarter more: growing batches do not reallocate every call.
+            let capacity = (n + n / 4).min(self.max_segments.max(n));
+            *batch = Some(self.batch(device, capacity));
         }
         let Some(b) = batch.as_ref() else {
             return Err(GpuError::Failed("no batch buffers".into()));
         };
+        let groups = dispatch_grid(device, n as u32, WORKGROUP);
+        queue.write_buffer(
+            &b.shape,
+            0,
+            bytemuck::cast_slice(&[n as u32, groups.0 * WORKGROUP, 0, 0]),
+        );
         queue.write_buffer(&b.segments, 0, bytemuck::cast_slice(segments));
         let bytes = (n * 4) as u64;
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -142,7 +152,7 @@ impl GpuFirstHit {
             });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &b.group, &[]);
-            pass.dispatch_workgroups(b.groups.0, b.groups.1, 1);
+            pass.dispatch_workgroups(groups.0, groups.1, 1);
         }
         enc.copy_buffer_to_buffer(&b.hits, 0, &b.readback, 0, bytes);
         let t_upload = t0.elapsed();
@@ -150,9 +160,10 @@ impl GpuFirstHit {
         scope_result(validation)?;
         scope_result(memory)?;
         let (tx, rx) = std::sync::mpsc::channel();
-        b.readback.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
+        b.readback
+            .map_async(wgpu::MapMode::Read, ..bytes, move |r| {
+                let _ = tx.send(r);
+            });
         device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| GpuError::Failed(e.to_string()))?;
@@ -163,7 +174,7 @@ impl GpuFirstHit {
         {
             let view = b
                 .readback
-                .get_mapped_range(..)
+                .get_mapped_range(..bytes)
                 .map_err(|e| GpuError::Failed(e.to_string()))?;
             out.extend(view.chunks_exact(4).map(|w| {
                 let t = f32::from_le_bytes([w[0], w[1], w[2], w[3]]);
@@ -184,7 +195,7 @@ impl GpuFirstHit {
         Ok(())
     }
 
-    /// Buffers and bind group for batches of `n` segments.
+    /// Buffers and bind group for batches of up to `n` segments.
     fn batch(&self, device: &wgpu::Device, n: usize) -> Batch {
         let buffer = |label: &str, size: u64, usage: wgpu::BufferUsages| {
             device.create_buffer(&wgpu::BufferDescriptor {
@@ -198,15 +209,7 @@ impl GpuFirstHit {
         let segments = buffer("segments", (n * 32) as u64, U::STORAGE | U::COPY_DST);
         let hits = buffer("hits", (n * 4) as u64, U::STORAGE | U::COPY_SRC);
         let readback = buffer("hits readback", (n * 4) as u64, U::MAP_READ | U::COPY_DST);
-        let groups = dispatch_grid(device, n as u32, WORKGROUP);
-        let shape = wgpu::util::DeviceExt::create_buffer_init(
-            device,
-            &wgpu::util::BufferInitDescriptor {
-                label: Some("first hit shape"),
-                contents: bytemuck::cast_slice(&[n as u32, groups.0 * WORKGROUP, 0, 0]),
-                usage: U::STORAGE,
-            },
-        );
+        let shape = buffer("first hit shape", 16, U::STORAGE | U::COPY_DST);
         let group = bind_buffers(
             device,
             "first hit",
@@ -221,12 +224,12 @@ impl GpuFirstHit {
             ],
         );
         Batch {
-            len: n,
+            capacity: n,
             segments,
             hits,
             readback,
+            shape,
             group,
-            groups,
         }
     }
 }

@@ -81,6 +81,19 @@ fn compare(ctx: &GpuContext, occ: &Occluder, segs: &[Segment], label: &str) -> S
         .first_hits(&ctx.device, &ctx.queue, segs)
         .expect("GPU first hits, again");
     assert_eq!(got, again, "{label}: the GPU's answers are deterministic");
+    // Smaller batches reuse the buffers of the first (a frame casts all pixels, then the
+    // light's parts on a few): each answers its own segments, none of the last batch's.
+    let n = segs.len();
+    for range in [n / 3..n / 2, 0..7, 1..n] {
+        let answers = gpu
+            .first_hits(&ctx.device, &ctx.queue, &segs[range.clone()])
+            .expect("GPU first hits, another batch");
+        assert_eq!(
+            answers,
+            got[range.clone()],
+            "{label}: segments {range:?} through kept buffers"
+        );
+    }
     let mut seen = Seen {
         n: segs.len(),
         hits: 0,

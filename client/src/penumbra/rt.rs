@@ -141,24 +141,22 @@ pub fn split_light(
         .collect();
     let one_ray = buffers.hard.clone();
     let mut split = vec![false; reach.len()];
+    for &i in &soft {
+        split[i] = true;
+    }
     let mut last = soft;
-    for round in 0..=grow_rounds(params) {
-        cast(buffers, &last, guide, light, &points, caster, epsilon)?;
-        for &i in &last {
-            split[i] = true;
-        }
-        if round == grow_rounds(params) {
-            break;
-        }
-        last = seam_band(&last, &split, &buffers.hard, &one_ray, guide, params);
+    cast(buffers, &last, guide, light, &points, caster, epsilon)?;
+    for _ in 0..grow_rounds(params) {
+        last = seam_band(&last, &mut split, &buffers.hard, &one_ray, guide, params);
         if last.is_empty() {
             break;
         }
+        cast(buffers, &last, guide, light, &points, caster, epsilon)?;
     }
     Ok(())
 }
 
-/// Pixels a round of [`split_light`]'s growth adds: [`GROW_BAND`].
+/// How far, in pixels, a round of [`split_light`]'s growth reaches from a seam pixel.
 const GROW_BAND: isize = 4;
 
 /// How many rounds the split region may grow past the one-ray blur's reach: together at most
@@ -174,49 +172,49 @@ fn grow_rounds(params: &Params) -> usize {
 
 /// The split region's seam: the pixels not yet split within [`GROW_BAND`] pixels (a square)
 /// of a newly split pixel (`last`) that has a same-surface neighbour not split whose one ray's
-/// 0 or 1 (`one_ray`) differs from its fraction. Where the one ray's blur falls short of the
-/// area light's penumbra (its width capped at [`Params::max_radius`], or a narrower occluder's
-/// distance), the split fractions would stop at such a step; the bands take the region on
-/// until the fractions meet the one ray's values.
+/// 0 or 1 (`one_ray`) differs from its fraction; marked in `split` and returned in order.
+/// Where the one ray's blur falls short of the area light's penumbra (its width capped at
+/// [`Params::max_radius`], or a narrower occluder's distance), the split fractions would stop
+/// at such a step; the bands take the region on until the fractions meet the one ray's values.
 fn seam_band(
     last: &[usize],
-    split: &[bool],
+    split: &mut [bool],
     hard: &[f32],
     one_ray: &[f32],
     guide: &Guide,
     params: &Params,
 ) -> Vec<usize> {
     let (w, h) = (guide.width as isize, guide.height as isize);
-    let at = |x: isize, y: isize| {
+    let free = |split: &[bool], x: isize, y: isize| {
         (x >= 0 && y >= 0 && x < w && y < h)
             .then_some((y * w + x) as usize)
             .filter(|&j| !split[j] && guide.pixels[j].is_some())
     };
-    let mut added = vec![false; split.len()];
+    // The seam against the region as it was before this round …
+    let seams: Vec<(isize, isize)> = last
+        .iter()
+        .filter_map(|&i| {
+            let p = guide.pixels[i].as_ref()?;
+            let (x, y) = ((i as isize) % w, (i as isize) / w);
+            [(-1, 0), (1, 0), (0, -1), (0, 1)]
+                .iter()
+                .filter_map(|&(dx, dy)| free(split, x + dx, y + dy))
+                .any(|j| {
+                    one_ray[j] != hard[i]
+                        && guide.pixels[j]
+                            .as_ref()
+                            .is_some_and(|q| guide.same_surface(p, q, params))
+                })
+                .then_some((x, y))
+        })
+        .collect();
+    // … then its bands, each pixel once.
     let mut out = Vec::new();
-    for &i in last {
-        let Some(p) = &guide.pixels[i] else {
-            continue;
-        };
-        let (x, y) = ((i as isize) % w, (i as isize) / w);
-        let seam = [(-1, 0), (1, 0), (0, -1), (0, 1)]
-            .iter()
-            .filter_map(|&(dx, dy)| at(x + dx, y + dy))
-            .any(|j| {
-                one_ray[j] != hard[i]
-                    && guide.pixels[j]
-                        .as_ref()
-                        .is_some_and(|q| guide.same_surface(p, q, params))
-            });
-        if !seam {
-            continue;
-        }
+    for (x, y) in seams {
         for qy in y - GROW_BAND..=y + GROW_BAND {
             for qx in x - GROW_BAND..=x + GROW_BAND {
-                if let Some(j) = at(qx, qy)
-                    && !added[j]
-                {
-                    added[j] = true;
+                if let Some(j) = free(split, qx, qy) {
+                    split[j] = true;
                     out.push(j);
                 }
             }

@@ -248,11 +248,13 @@ impl Occluder {
         skip: u32,
     ) -> bool {
         let ray = Ray::new(origin.into(), dir.into(), t_min, t_max);
+        // The triangle first: most tests miss, and then its vertex indices (another cache
+        // line) are not read.
         !self.bvh.ray_traverse_miss(ray, |ray, id| {
-            if self.indices[id].contains(&skip) {
-                f32::INFINITY
-            } else {
-                self.primitive_hit(id, ray)
+            let t = self.primitive_hit(id, ray);
+            match t < f32::INFINITY && self.indices[id].contains(&skip) {
+                true => f32::INFINITY,
+                false => t,
             }
         })
     }
@@ -274,10 +276,10 @@ impl Occluder {
     pub fn blocker(&self, ray: Ray, skip: u32) -> Option<u32> {
         let mut found = None;
         self.bvh.ray_traverse_miss(ray, |ray, id| {
-            if self.indices[id].contains(&skip) {
+            let t = self.primitive_hit(id, ray);
+            if t < f32::INFINITY && self.indices[id].contains(&skip) {
                 return f32::INFINITY;
             }
-            let t = self.primitive_hit(id, ray);
             // The traversal's own acceptance test (`t < ray.tmax`), so the primitive named
             // is the one that ended it.
             if t < ray.tmax {

@@ -420,15 +420,20 @@ impl LightStop {
     pub(crate) fn distance(&self, origin: Vec3, d: Vec3) -> Option<f32> {
         match *self {
             LightStop::Region(b) => b.ray_entry(origin, d),
-            LightStop::Plane { point, normal } => {
-                let den = d.dot(normal);
-                let t = (point - origin).dot(normal) / den;
-                (den != 0.0 && t > 0.0 && t.is_finite()).then_some(t)
-            }
+            LightStop::Plane { point, normal } => plane_distance(point, normal, origin, d),
             LightStop::Lamp(ref l) => l.distance(origin, d),
             LightStop::Sphere(ref l) => l.distance(origin, d),
         }
     }
+}
+
+/// Where the ray from `origin` along `d` crosses the plane through `point` with normal
+/// `normal`, ahead of the origin.
+#[inline(always)]
+fn plane_distance(point: Vec3, normal: Vec3, origin: Vec3, d: Vec3) -> Option<f32> {
+    let den = d.dot(normal);
+    let t = (point - origin).dot(normal) / den;
+    (den != 0.0 && t > 0.0 && t.is_finite()).then_some(t)
 }
 
 /// One light stop's test of which pixels of a face can reach it ([`VertexRays::face_mask`]).
@@ -523,6 +528,10 @@ impl VertexRays<'_> {
     /// How far a ray from `origin` along unit `d` is traced: to the first light it reaches.
     #[inline]
     pub(crate) fn t_max(&self, origin: Vec3, d: Vec3) -> f32 {
+        // A bare mesh's lamp moves in its plane: that one stop, without the loop's call.
+        if let [LightStop::Plane { point, normal }] = *self.stops {
+            return plane_distance(point, normal, origin, d).unwrap_or(f32::INFINITY);
+        }
         self.stops
             .iter()
             .filter_map(|s| s.distance(origin, d))
@@ -550,6 +559,18 @@ impl VertexRays<'_> {
         let res = table.res as usize;
         let centre = &table.centre[f];
         let fr = FaceFrame::of(f);
+        // Pass by pass, without a branch per pixel where the test allows (the horizon, a
+        // plane): `out` first holds the pixels above the horizon, `reaches` those of them that
+        // reach some stop; each stop's count is of the pixels above the horizon it reaches.
+        let n = res * res;
+        let mut above = false;
+        for (m, &d) in out[..n].iter_mut().zip(centre) {
+            *m = d.dot(self.normal) > 0.0;
+            above |= *m;
+        }
+        if !above {
+            return None;
+        }
         // Per stop, its test: a region's box, or a plane's w·k and, per pixel column and row,
         // the larger corner term.
         let e = |i: usize| 2.0 * i as f32 / res as f32 - 1.0;
@@ -579,34 +600,50 @@ impl VertexRays<'_> {
                 }
             })
             .collect();
-        let mut any = false;
-        // Per stop, the pixels that reach it.
-        let mut reached = vec![0u32; reach.len()];
-        let pixels = (0..res).flat_map(|j| (0..res).map(move |i| (i, j)));
-        for (p, ((m, &d), (i, j))) in out.iter_mut().zip(centre).zip(pixels).enumerate() {
-            let above = d.dot(self.normal) > 0.0;
-            *m = above && reach.is_empty();
-            if above {
-                for (r, n) in reach.iter().zip(&mut reached) {
-                    let hit = match r {
-                        Reach::Region(b) => b.hit_by_ray(self.origin, d),
-                        Reach::Plane(w, u, v) => w + u[i] + v[j] > 0.0,
-                        Reach::Lamp(l, may) => may[p] && l.distance(self.origin, d).is_some(),
-                        Reach::Sphere(l) => l.reaches(self.origin, d),
-                    };
-                    *n += u32::from(hit);
-                    *m |= hit;
+        if reach.is_empty() {
+            return Some(u32::MAX);
+        }
+        let mut reaches = vec![false; n];
+        let mut fewest = u32::MAX;
+        for r in &reach {
+            let mut count = 0u32;
+            match r {
+                Reach::Plane(w, u, v) => {
+                    for (j, row) in out[..n].chunks_exact(res).enumerate() {
+                        let at = &mut reaches[j * res..(j + 1) * res];
+                        for ((hit, &above), &ui) in at.iter_mut().zip(row).zip(u) {
+                            let h = above & (w + ui + v[j] > 0.0);
+                            count += u32::from(h);
+                            *hit |= h;
+                        }
+                    }
+                }
+                _ => {
+                    for (p, (hit, &d)) in reaches.iter_mut().zip(centre).enumerate() {
+                        if !out[p] {
+                            continue;
+                        }
+                        let h = match r {
+                            Reach::Region(b) => b.hit_by_ray(self.origin, d),
+                            Reach::Lamp(l, may) => may[p] && l.distance(self.origin, d).is_some(),
+                            Reach::Sphere(l) => l.reaches(self.origin, d),
+                            Reach::Plane(w, u, v) => w + u[p % res] + v[p / res] > 0.0,
+                        };
+                        count += u32::from(h);
+                        *hit |= h;
+                    }
                 }
             }
+            if count > 0 {
+                fewest = fewest.min(count);
+            }
+        }
+        let mut any = false;
+        for (m, &hit) in out[..n].iter_mut().zip(&reaches) {
+            *m &= hit;
             any |= *m;
         }
-        any.then(|| {
-            reached
-                .into_iter()
-                .filter(|&n| n > 0)
-                .min()
-                .unwrap_or(u32::MAX)
-        })
+        any.then_some(fewest)
     }
 
     /// Casts the rays of every pixel that matters; returns per-face pixel sets (`None` for

@@ -151,15 +151,19 @@ impl FrustumCuller {
     ) -> bool {
         out.clear();
         stack.clear();
-        if self.bvh.nodes.is_empty() {
+        let nodes = &self.bvh.nodes;
+        let outside = |n: u32| {
+            let b = nodes[n as usize].aabb();
+            pyr.excludes_box(b.min.into(), b.max.into())
+        };
+        if nodes.is_empty() || outside(0) {
             return true;
         }
+        // Nodes are tested when their parent is opened (both children's boxes read together)
+        // and pushed only when inside: the same order of visits as testing them when popped.
         stack.push(0);
         while let Some(n) = stack.pop() {
-            let node = &self.bvh.nodes[n as usize];
-            if pyr.excludes_box(node.aabb.min.into(), node.aabb.max.into()) {
-                continue;
-            }
+            let node = &nodes[n as usize];
             if node.is_leaf() {
                 let first = node.first_index as usize;
                 for p in first..first + node.prim_count as usize {
@@ -172,8 +176,11 @@ impl FrustumCuller {
                     }
                 }
             } else {
-                stack.push(node.first_index);
-                stack.push(node.first_index + 1);
+                for c in [node.first_index, node.first_index + 1] {
+                    if !outside(c) {
+                        stack.push(c);
+                    }
+                }
             }
         }
         true

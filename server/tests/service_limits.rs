@@ -339,9 +339,11 @@ fn the_idlest_event_stream_is_shed_for_a_new_stream() {
             "1",
         ],
     );
-    // A slow bake (one big chunk): its event streams stay open and quiet.
+    // A slow bake (one big chunk at 256² faces, 16× the work of 64²): its event streams stay
+    // open and quiet. (At 64² the flat grid's one chunk came to take under 3 s once the cast's
+    // per-face work was cut, and the bake was done before the streams could idle.)
     let obj = grid_obj(200);
-    let settings = r#"{"face_res": 64, "chunk_vertices": 60000}"#;
+    let settings = r#"{"face_res": 256, "chunk_vertices": 60000}"#;
     let id = submit_ok(
         &agent(),
         &srv,

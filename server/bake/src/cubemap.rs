@@ -526,12 +526,18 @@ impl VertexRays<'_> {
     }
 
     /// How far a ray from `origin` along unit `d` is traced: to the first light it reaches.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn t_max(&self, origin: Vec3, d: Vec3) -> f32 {
-        // A bare mesh's lamp moves in its plane: that one stop, without the loop's call.
+        // A bare mesh's lamp moves in its plane: that one stop computed in place (the rays'
+        // loop keeps the division's latency in flight with its other work).
         if let [LightStop::Plane { point, normal }] = *self.stops {
             return plane_distance(point, normal, origin, d).unwrap_or(f32::INFINITY);
         }
+        self.t_max_of_stops(origin, d)
+    }
+
+    /// [`Self::t_max`] over any stops.
+    fn t_max_of_stops(&self, origin: Vec3, d: Vec3) -> f32 {
         self.stops
             .iter()
             .filter_map(|s| s.distance(origin, d))
@@ -882,7 +888,7 @@ struct BlockWalk<'a> {
     origin: Vec3,
     matters: &'a [bool],
     vis: &'a mut [u16],
-    stack: &'a mut Vec<u32>,
+    stack: &'a mut Vec<[u32; 2]>,
     /// Adaptive cast: per pixel of the face, the occluder primitive that blocked one of its
     /// rays ([`NO_BLOCKER`]: none yet); empty for the full cast.
     blocker: &'a mut [u32],

@@ -667,12 +667,14 @@ impl<'a> Fitter<'a> {
         stats.cell_visits += cells.len() as u64;
         // The non-empty bins, in order: a cell has at least one pixel, so a bin holds a
         // non-zero count exactly when a cell fell in it.
-        bins.clear();
+        // Without a branch per bin (whether one is empty is a coin toss): every index is
+        // written, the count moves past the non-empty ones.
+        let mut len = 0;
         for (b, &w) in hist[lo..=hi].iter().enumerate() {
-            if w != 0 {
-                bins.push((lo + b) as u32);
-            }
+            bins[len] = (lo + b) as u32;
+            len += usize::from(w != 0);
         }
+        let bins = &bins[..len];
         let moments =
             |b: u32| Moments::unpack(hist[b as usize], squares.then(|| hist_k2[b as usize]));
         let s = self.samples as u64;
@@ -815,7 +817,7 @@ struct Scratch {
     hist: Vec<u64>,
     /// Σk² per offset bin, where a pixel has more than one ray (zero between sweeps).
     hist_k2: Vec<u64>,
-    /// The non-empty bins of the current sweep, in order.
+    /// The non-empty bins of the current sweep, in order, at its start (one slot per bin).
     bins: Vec<u32>,
 }
 
@@ -825,7 +827,7 @@ impl Scratch {
         Scratch {
             hist: vec![0; bins],
             hist_k2: vec![0; bins],
-            bins: Vec::with_capacity(bins),
+            bins: vec![0; bins],
         }
     }
 }

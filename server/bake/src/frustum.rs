@@ -19,15 +19,72 @@
 use bspvt_proto::Mesh;
 use bspvt_raytrace::Occluder;
 use glam::{BVec4A, Vec3, Vec4};
-use obvhs::{BvhBuildParams, bvh2::Bvh2, ray::Ray, triangle::Triangle};
+use obvhs::{
+    BvhBuildParams,
+    bvh2::{Bvh2, node::Bvh2Node},
+    ray::Ray,
+    triangle::Triangle,
+};
 
-/// A BVH2 (obvhs) over the triangles, for pyramid queries.
+/// A BVH2 (obvhs) over the triangles, for pyramid queries, laid out as sibling pairs.
 pub(crate) struct FrustumCuller {
-    bvh: Bvh2,
+    /// The root's box and link; `None` for a mesh without triangles.
+    root: Option<(Vec3, Vec3, Link)>,
+    /// Every inner node's two children ([`Siblings`]).
+    pairs: Vec<Siblings>,
     /// Per primitive (BVH order): vertices and vertex indices.
     prims: Vec<([Vec3; 3], [u32; 3])>,
     /// Per primitive (BVH order), the same triangle's primitive in the [`Occluder`].
     occ_prim: Vec<u32>,
+}
+
+/// A node as its parent's pair names it: `[first, count]`, a leaf's first primitive and its
+/// primitive count, or an inner node's children (`first` indexes the pairs) and 0.
+type Link = [u32; 2];
+
+/// Two sibling nodes in one cache line: opening a node reads its children's boxes from one
+/// line (obvhs's `Bvh2Node` is 48 bytes, so siblings span two or three). The boxes are the
+/// BVH's own, so every culling decision is the one the BVH2 makes.
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(64))]
+struct Siblings {
+    min: [Vec3; 2],
+    max: [Vec3; 2],
+    link: [Link; 2],
+}
+
+/// [`FrustumCuller`]'s layout of obvhs's `bvh` (children of node n at `first_index` and
+/// `first_index + 1`): the root's box and link, and the sibling pairs, numbered depth first.
+fn sibling_pairs(bvh: &Bvh2) -> (Option<(Vec3, Vec3, Link)>, Vec<Siblings>) {
+    let Some(root) = bvh.nodes.first() else {
+        return (None, Vec::new());
+    };
+    let mut pairs = Vec::with_capacity(bvh.nodes.len() / 2);
+    // (an inner node's first child in `bvh.nodes`, the pair that will hold its children)
+    let mut todo = Vec::new();
+    fn link(n: &Bvh2Node, pairs: &mut Vec<Siblings>, todo: &mut Vec<(usize, usize)>) -> Link {
+        if n.is_leaf() {
+            return [n.first_index, n.prim_count];
+        }
+        todo.push((n.first_index as usize, pairs.len()));
+        pairs.push(Siblings::default());
+        [(pairs.len() - 1) as u32, 0]
+    }
+    let root = (
+        root.aabb().min.into(),
+        root.aabb().max.into(),
+        link(root, &mut pairs, &mut todo),
+    );
+    while let Some((c, slot)) = todo.pop() {
+        for s in 0..2 {
+            let n = &bvh.nodes[c + s];
+            let l = link(n, &mut pairs, &mut todo);
+            let pair = &mut pairs[slot];
+            (pair.min[s], pair.max[s]) = (n.aabb().min.into(), n.aabb().max.into());
+            pair.link[s] = l;
+        }
+    }
+    (Some(root), pairs)
 }
 
 /// A pyramid of directions from an apex: four inward plane normals through the apex, cut by
@@ -132,8 +189,10 @@ impl FrustumCuller {
             of_triangle[t as usize] = p as u32;
         }
         let occ_prim = order.iter().map(|&i| of_triangle[i]).collect();
+        let (root, pairs) = sibling_pairs(&bvh);
         FrustumCuller {
-            bvh,
+            root,
+            pairs,
             prims,
             occ_prim,
         }
@@ -147,26 +206,24 @@ impl FrustumCuller {
         skip: u32,
         limit: usize,
         out: &mut Vec<u32>,
-        stack: &mut Vec<u32>,
+        stack: &mut Vec<Link>,
     ) -> bool {
         out.clear();
         stack.clear();
-        let nodes = &self.bvh.nodes;
-        let outside = |n: u32| {
-            let b = nodes[n as usize].aabb();
-            pyr.excludes_box(b.min.into(), b.max.into())
+        let Some((min, max, root)) = self.root else {
+            return true;
         };
-        if nodes.is_empty() || outside(0) {
+        if pyr.excludes_box(min, max) {
             return true;
         }
-        // Nodes are tested when their parent is opened (both children's boxes read together)
-        // and pushed only when inside: the same order of visits as testing them when popped.
-        stack.push(0);
-        while let Some(n) = stack.pop() {
-            let node = &nodes[n as usize];
-            if node.is_leaf() {
-                let first = node.first_index as usize;
-                for p in first..first + node.prim_count as usize {
+        // A node's children are tested when it is opened (one line: [`Siblings`]) and pushed
+        // only when inside, sibling 0 first: nodes are visited as when testing each on its
+        // own, depth first, sibling 1 first.
+        stack.push(root);
+        while let Some([first, count]) = stack.pop() {
+            if count > 0 {
+                let first = first as usize;
+                for p in first..first + count as usize {
                     let (v, idx) = &self.prims[p];
                     if !idx.contains(&skip) && !pyr.excludes_triangle(v) {
                         if out.len() == limit {
@@ -176,9 +233,10 @@ impl FrustumCuller {
                     }
                 }
             } else {
-                for c in [node.first_index, node.first_index + 1] {
-                    if !outside(c) {
-                        stack.push(c);
+                let pair = &self.pairs[first as usize];
+                for s in 0..2 {
+                    if !pyr.excludes_box(pair.min[s], pair.max[s]) {
+                        stack.push(pair.link[s]);
                     }
                 }
             }
@@ -231,6 +289,52 @@ mod tests {
     proptest! {
         // Rays that graze the plane closely are often rounded below it and skipped: allow it.
         #![proptest_config(ProptestConfig { max_global_rejects: 1 << 20, ..ProptestConfig::default() })]
+
+        /// The walk over sibling pairs finds exactly the primitives (not using `skip`) that no
+        /// plane excludes — a box is excluded only where everything it holds is, the f32
+        /// tests being monotone — and says "more than `limit`" exactly when there are.
+        #[test]
+        fn collect_finds_every_primitive_the_planes_keep(
+            pts in prop::collection::vec(prop::array::uniform3(-1.0f32..1.0), 3..150),
+            apex in prop::array::uniform3(-1.5f32..1.5),
+            face in 0usize..6,
+            (i0, j0, size) in (0u32..8, 0u32..8, 1u32..5),
+            h in prop::array::uniform3(-1.0f32..1.0),
+            skip in 0u32..150,
+            limit in 0usize..40,
+        ) {
+            let n = pts.len() / 3 * 3;
+            let mesh = Mesh {
+                positions: pts[..n].iter().map(|&p| Vec3::from(p)).collect(),
+                normals: vec![Vec3::Y; n],
+                triangles: (0..n as u32 / 3).map(|k| [3 * k, 3 * k + 1, 3 * k + 2]).collect(),
+                material_ids: vec![0; n / 3],
+                ..Mesh::default()
+            };
+            let tris = bspvt_raytrace::mesh_triangles(&mesh);
+            let occ = Occluder::new(&mesh, &tris);
+            let culler = FrustumCuller::new(&mesh, &tris, &occ);
+            let h = Vec3::from(h);
+            prop_assume!(h.length() > 0.1);
+            // Block (i0, j0, size) of an 8² face, as the cast's quadtree walk builds it.
+            let fr = bspvt_proto::cubemap::FaceFrame::of(face);
+            let e = |i: u32| 2.0 * (i.min(8)) as f32 / 8.0 - 1.0;
+            let (u0, u1, v0, v1) = (e(i0), e(i0 + size), e(j0), e(j0 + size));
+            let normals = [fr.a - u0 * fr.w, u1 * fr.w - fr.a, fr.b - v0 * fr.w, v1 * fr.w - fr.b];
+            let pyr = Pyramid::new(Vec3::from(apex), normals, h.normalize(), 1e-4);
+            let inside: std::collections::BTreeSet<u32> = (0..culler.prims.len() as u32)
+                .filter(|&p| {
+                    let (v, idx) = &culler.prims[p as usize];
+                    !idx.contains(&skip) && !pyr.excludes_triangle(v)
+                })
+                .collect();
+            let (mut out, mut stack) = (Vec::new(), Vec::new());
+            prop_assert!(culler.collect(&pyr, skip, usize::MAX, &mut out, &mut stack));
+            prop_assert_eq!(out.len(), inside.len(), "a primitive collected twice");
+            prop_assert_eq!(out.iter().copied().collect::<std::collections::BTreeSet<u32>>(), inside.clone());
+            let fits = culler.collect(&pyr, skip, limit, &mut out, &mut stack);
+            prop_assert_eq!(fits, inside.len() <= limit);
+        }
 
         /// The four side planes in `Vec4` lanes decide as the scalar dot products do, bit
         /// for bit (the claim that makes culling the same as before the lanes).

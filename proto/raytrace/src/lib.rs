@@ -252,9 +252,10 @@ impl Occluder {
         // line) are not read.
         !self.bvh.ray_traverse_miss(ray, |ray, id| {
             let t = self.primitive_hit(id, ray);
-            match t < f32::INFINITY && self.indices[id].contains(&skip) {
-                true => f32::INFINITY,
-                false => t,
+            if t < f32::INFINITY && self.indices[id].contains(&skip) {
+                f32::INFINITY
+            } else {
+                t
             }
         })
     }

@@ -198,7 +198,9 @@ fn bake(a: BakeArgs) -> Result<()> {
         .build()
         .context("cannot start the worker threads")?;
     let threads = pool.current_num_threads();
+    let prepared = std::time::Instant::now();
     let mut baker = Baker::new(&scene);
+    let prepared = prepared.elapsed().as_secs_f64();
     baker.set_cast(match a.cast {
         CastArg::Adaptive => CastMode::Adaptive,
         CastArg::Full => CastMode::Full,
@@ -209,7 +211,7 @@ fn bake(a: BakeArgs) -> Result<()> {
     };
     let n = baker.header().vertex_count as u64;
     eprintln!(
-        "baking {n} vertices, {} triangles, {}² faces, ε = {}, {} thread(s), rays on {}",
+        "baking {n} vertices, {} triangles, {}² faces, ε = {}, {} thread(s), rays on {} (BVHs built in {prepared:.2} s)",
         scene.mesh.triangles.len(),
         scene.bake.face_res,
         scene.bake.epsilon,

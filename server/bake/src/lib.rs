@@ -75,6 +75,12 @@ pub(crate) const RAY_T_MIN_SCALE: f32 = 1e-6;
 /// flat or convex neighbourhood below the plane).
 pub(crate) const RAY_HORIZON_MARGIN_SCALE: f32 = 1e-5;
 
+/// A chunk's vertices are handed to the threads in runs of at most this many: a vertex costs
+/// from microseconds (all culled) to milliseconds (in a crevice), and rayon splits a range
+/// only until each thread has a run of its own, which a thread then works through alone while
+/// the others, done with theirs, wait for it.
+const VERTICES_PER_TASK: usize = 4;
+
 /// Everything a bake shares across vertices.
 pub struct Baker {
     mesh: Mesh,
@@ -381,6 +387,7 @@ impl Baker {
         let results: Vec<VertexResult> = range
             .clone()
             .into_par_iter()
+            .with_max_len(VERTICES_PER_TASK)
             .map(|v| self.bake_vertex(v))
             .collect();
         let mut totals = Totals::default();
@@ -415,6 +422,7 @@ impl Baker {
     ) -> (Vec<u8>, Totals) {
         let results: Vec<(VertexTrees, FitStats, f64)> = maps
             .par_iter()
+            .with_max_len(VERTICES_PER_TASK)
             .map(|faces| {
                 let t0 = Instant::now();
                 let (trees, fit) = self.fit_faces(faces, self.settings.split);

@@ -20,7 +20,7 @@ use obvhs::ray::Ray;
 const NONE: u32 = u32::MAX;
 
 /// Steps a walk may take before giving up.
-const MAX_STEPS: usize = 8;
+const MAX_STEPS: usize = 32;
 
 /// A shortcut hit must cross the triangle at least this far inside (smallest barycentric
 /// coordinate, as seen from the ray's origin). At a hit on or near an edge the traversal can

@@ -227,6 +227,60 @@ impl PartialEq for Ratio {
 }
 impl Eq for Ratio {}
 
+/// Which power-of-two blocks of a face's merge grid are uniform ([`Fitter::cells`]): per block
+/// of 2ˡ × 2ˡ pixels, l = 1 … log₂ `top`, the value all its pixels hold (≥ 0), or −1 when they
+/// differ or one does not matter. Built bottom up, each level from the four blocks below.
+struct Uniform {
+    /// Level l − 1: blocks per row, and their values row by row (whole blocks only).
+    levels: Vec<(usize, Vec<i32>)>,
+}
+
+impl Uniform {
+    /// The levels of `grid` (`res` × `res`) up to blocks of `top` pixels (none above 1 when
+    /// `top` is not a power of two).
+    fn new(grid: &[i32], res: usize, top: usize) -> Uniform {
+        let mut levels: Vec<(usize, Vec<i32>)> = Vec::new();
+        let mut size = 2;
+        while top.is_power_of_two() && size <= top {
+            let (below_w, below) = match levels.last() {
+                Some((w, v)) => (*w, v.as_slice()),
+                None => (res, grid),
+            };
+            let w = res / size;
+            let mut cur = vec![-1; w * w];
+            for (bj, row) in cur.chunks_exact_mut(w.max(1)).enumerate().take(w) {
+                let (up, down) = (2 * bj * below_w, (2 * bj + 1) * below_w);
+                for (bi, c) in row.iter_mut().enumerate() {
+                    let x = 2 * bi;
+                    let a = below[up + x];
+                    if a >= 0
+                        && below[up + x + 1] == a
+                        && below[down + x] == a
+                        && below[down + x + 1] == a
+                    {
+                        *c = a;
+                    }
+                }
+            }
+            levels.push((w, cur));
+            size *= 2;
+        }
+        Uniform { levels }
+    }
+
+    /// Block (i, j, size)'s value when `size` is a level's (aligned blocks only, as the
+    /// quadtree makes them); `None` for other sizes.
+    #[inline]
+    fn value(&self, i: u16, j: u16, size: u16) -> Option<i32> {
+        if !size.is_power_of_two() || size < 2 {
+            return None;
+        }
+        let (w, v) = self.levels.get(size.trailing_zeros() as usize - 1)?;
+        let (bi, bj) = (i as usize / size as usize, j as usize / size as usize);
+        v.get(bj * w + bi).copied()
+    }
+}
+
 impl<'a> Fitter<'a> {
     /// The tree builder of `res`² faces at `samples` rays per pixel, a leaf's tolerance ε of
     /// the face's pixels [paper000 §3.2].
@@ -301,15 +355,16 @@ impl<'a> Fitter<'a> {
         let mut out = Vec::new();
         let r = self.res as u16;
         let top = MAX_CELL.min(r).max(1);
+        let uniform = Uniform::new(&grid, res, top as usize);
         for j in (0..r).step_by(top as usize) {
             for i in (0..r).step_by(top as usize) {
                 if i + top <= r && j + top <= r {
-                    self.merge(&grid, i, j, top, &mut out);
+                    self.merge(&grid, &uniform, i, j, top, &mut out);
                 } else {
                     // A partial block at the face's edge (res not a multiple of MAX_CELL).
                     for jj in j..(j + top).min(r) {
                         for ii in i..(i + top).min(r) {
-                            self.merge(&grid, ii, jj, 1, &mut out);
+                            self.merge(&grid, &uniform, ii, jj, 1, &mut out);
                         }
                     }
                 }
@@ -320,56 +375,60 @@ impl<'a> Fitter<'a> {
 
     /// Emits block (i, j, size) as one cell when uniform, else its quadrants; returns the
     /// block's uniform value (−1 for none).
-    fn merge(&self, grid: &[i32], i: u16, j: u16, size: u16, out: &mut Vec<Cell>) -> i32 {
+    fn merge(
+        &self,
+        grid: &[i32],
+        uniform: &Uniform,
+        i: u16,
+        j: u16,
+        size: u16,
+        out: &mut Vec<Cell>,
+    ) -> i32 {
         let res = self.res as usize;
-        if size == 1 {
+        let pixel = |out: &mut Vec<Cell>, i: u16, j: u16| {
             let k = grid[j as usize * res + i as usize];
             if k >= 0 {
-                out.push(self.grid_cell(i, j, size, k));
+                out.push(self.grid_cell(i, j, 1, k));
             }
-            return k;
+            k
+        };
+        if size == 1 {
+            return pixel(out, i, j);
         }
-        // Most blocks of a face are uniform: one scan, stopping at the first pixel that
-        // differs, emits them without the recursion, which would find the same cell (only
-        // for power-of-two sizes: the recursion never merges a block it halves to an odd
-        // size above one).
-        let first = grid[j as usize * res + i as usize];
-        if first >= 0
-            && size.is_power_of_two()
-            && (j..j + size).all(|jj| {
-                let row = jj as usize * res;
-                grid[row + i as usize..row + (i + size) as usize]
-                    .iter()
-                    .all(|&v| v == first)
-            })
-        {
-            out.push(self.grid_cell(i, j, size, first));
-            return first;
-        }
-        let mark = out.len();
         let h = size / 2;
-        let mut vals = [0i32; 4];
         let quads = [(i, j), (i + h, j), (i, j + h), (i + h, j + h)];
+        // Power-of-two blocks (every block of a power-of-two face): whether the block is
+        // uniform is looked up. One that is not has a quadrant that is not, or two that
+        // differ, so its quadrants are never merged back.
+        if let Some(v) = uniform.value(i, j, size) {
+            if v >= 0 {
+                out.push(self.grid_cell(i, j, size, v));
+            } else if size == 2 {
+                for (qi, qj) in quads {
+                    pixel(out, qi, qj);
+                }
+            } else {
+                for (qi, qj) in quads {
+                    self.merge(grid, uniform, qi, qj, h, out);
+                }
+            }
+            return v;
+        }
+        // Other sizes (a face's resolution that is not a power of two): only even ones are
+        // halved, and no block of another size is merged.
         if !size.is_multiple_of(2) {
             // Odd sizes only happen at a face's edge for odd resolutions: emit pixels.
             for jj in j..j + size {
                 for ii in i..i + size {
-                    self.merge(grid, ii, jj, 1, out);
+                    pixel(out, ii, jj);
                 }
             }
             return -1;
         }
-        for (q, &(qi, qj)) in quads.iter().enumerate() {
-            vals[q] = self.merge(grid, qi, qj, h, out);
+        for (qi, qj) in quads {
+            self.merge(grid, uniform, qi, qj, h, out);
         }
-        let uniform = vals[0] >= 0 && vals.iter().all(|&v| v == vals[0]);
-        if uniform {
-            out.truncate(mark);
-            out.push(self.grid_cell(i, j, size, vals[0]));
-            vals[0]
-        } else {
-            -1
-        }
+        -1
     }
 
     /// The cell `[i, i+size) × [j, j+size)` of the merge grid's value `g` (a count, plus
@@ -1105,6 +1164,105 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    /// The cells by their definition: each pixel that matters lies in the largest aligned
+    /// power-of-two block of at most `top` pixels (inside a whole one of the face's top
+    /// blocks; `top` a power of two) whose pixels all matter and hold one merge value.
+    fn cells_by_definition(
+        grid: &[i32],
+        res: usize,
+        top: usize,
+    ) -> std::collections::BTreeSet<(u16, u16, u16, i32)> {
+        let whole = |i: usize, j: usize| (i / top + 1) * top <= res && (j / top + 1) * top <= res;
+        let uniform = |i: usize, j: usize, s: usize| {
+            let v = grid[j * res + i];
+            v >= 0 && (j..j + s).all(|y| (i..i + s).all(|x| grid[y * res + x] == v))
+        };
+        let mut out = std::collections::BTreeSet::new();
+        for j in 0..res {
+            for i in 0..res {
+                let v = grid[j * res + i];
+                if v < 0 {
+                    continue;
+                }
+                let mut cell = (i, j, 1);
+                let mut s = 2;
+                while top.is_power_of_two() && s <= top && whole(i, j) {
+                    let (bi, bj) = (i / s * s, j / s * s);
+                    if uniform(bi, bj, s) {
+                        cell = (bi, bj, s);
+                    }
+                    s *= 2;
+                }
+                out.insert((cell.0 as u16, cell.1 as u16, cell.2 as u16, v));
+            }
+        }
+        out
+    }
+
+    proptest::proptest! {
+        /// The merge's cells (found through the `Uniform` levels) are the definition's, on
+        /// faces of power-of-two and other sizes, with protected pixels.
+        #[test]
+        fn cells_are_the_largest_uniform_blocks(
+            res in proptest::sample::select(vec![1u32, 4, 8, 12, 16, 20, 24, 32, 48, 64]),
+            patches in proptest::collection::vec((0u32..64, 0u32..64, 0u32..5, 0u16..3, proptest::bool::ANY), 0..24),
+            holes in proptest::collection::vec((0u32..64, 0u32..64), 0..16),
+            protect in proptest::collection::vec((0u32..64, 0u32..64, 0u32..6), 0..4),
+        ) {
+            // Every pixel matters, count 0, then patches of other counts (aligned or not),
+            // pixels that do not matter, and protected squares.
+            let n = (res * res) as usize;
+            let mut k = vec![Some(0u16); n];
+            for &(i, j, l, v, aligned) in &patches {
+                let s = 1 << l;
+                let (i, j) = if aligned { (i / s * s, j / s * s) } else { (i, j) };
+                for y in j..(j + s).min(res) {
+                    for x in i..(i + s).min(res) {
+                        if x < res && y < res {
+                            k[(y * res + x) as usize] = Some(v);
+                        }
+                    }
+                }
+            }
+            for &(i, j) in &holes {
+                if i < res && j < res {
+                    k[(j * res + i) as usize] = None;
+                }
+            }
+            let mut protected = Vec::new();
+            for &(i, j, s) in &protect {
+                for y in j..(j + s).min(res) {
+                    for x in i..(i + s).min(res) {
+                        protected.push(y * res + x);
+                    }
+                }
+            }
+            protected.sort_unstable();
+            protected.dedup();
+            let (index, visible): (Vec<u32>, Vec<u16>) = (0..n as u32)
+                .filter_map(|p| k[p as usize].map(|v| (p, v)))
+                .unzip();
+            protected.retain(|p| index.binary_search(p).is_ok());
+            let codec = LineCodec::for_resolution(res);
+            let uv = pixel_centres(res);
+            let f = one_ray_fitter(&codec, &uv, res, SplitMethod::Default);
+            let cells = f.cells(&index, &visible, &protected);
+            let mut grid = vec![-1i32; n];
+            for (&p, &v) in index.iter().zip(&visible) {
+                grid[p as usize] = i32::from(v)
+                    + if protected.binary_search(&p).is_ok() { PROTECTED } else { 0 };
+            }
+            let top = MAX_CELL.min(res as u16).max(1) as usize;
+            let expected = cells_by_definition(&grid, res as usize, top);
+            let got: std::collections::BTreeSet<(u16, u16, u16, i32)> = cells
+                .iter()
+                .map(|c| (c.i, c.j, c.size, i32::from(c.k) + if c.protected { PROTECTED } else { 0 }))
+                .collect();
+            proptest::prop_assert_eq!(cells.len(), got.len(), "a cell emitted twice");
+            proptest::prop_assert_eq!(got, expected);
         }
     }
 }

@@ -16,7 +16,6 @@ use crate::cubemap::FaceFrame;
 pub struct OffsetBins {
     scale: f32,
     offsets: f32,
-    max: u32,
 }
 
 impl OffsetBins {
@@ -24,8 +23,9 @@ impl OffsetBins {
     #[inline]
     pub fn bin(&self, t: f32) -> u32 {
         let k = (t * self.scale + self.offsets - 1.0) * 0.5 + 1.0;
-        // Truncation is floor for k > 0; k ≤ 0 (and NaN) gives 0.
-        if k > 0.0 { (k as u32).min(self.max) } else { 0 }
+        // Clamped to [0, O] without a branch (`max` takes 0 over NaN), where truncation is
+        // floor: k ≤ 0 (and NaN) gives 0, k ≥ O gives O.
+        k.max(0.0).min(self.offsets) as u32
     }
 }
 
@@ -119,7 +119,6 @@ impl LineCodec {
         OffsetBins {
             scale: self.inv_half_step,
             offsets: self.offsets() as f32,
-            max: self.offsets(),
         }
     }
 
@@ -187,6 +186,35 @@ mod tests {
                 .count() as i64;
             let got = codec.offsets_below(t) as i64;
             assert!((exact - got).abs() <= 1, "t={t} exact={exact} got={got}");
+        }
+    }
+
+    /// The bin is the formula's k truncated and clamped to [0, O] (the bins the trees were
+    /// always fitted with), at every f32 around the face's range and at the extremes.
+    #[test]
+    fn bins_are_the_clamped_truncation() {
+        let codec = LineCodec::for_resolution(64);
+        let bins = codec.offset_bins();
+        let o = codec.offsets();
+        let reference = |t: f32| {
+            let k = (t * bins.scale + bins.offsets - 1.0) * 0.5 + 1.0;
+            if k > 0.0 { (k as u32).min(o) } else { 0 }
+        };
+        let specials = [
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MAX,
+            f32::MIN,
+            0.0,
+            -0.0,
+        ];
+        // Every f32 in [-2, 2] whose bits are a multiple of 64 (≈ 1.6 · 10⁷ values).
+        let sweep = (0..=2.0f32.to_bits())
+            .step_by(64)
+            .flat_map(|b| [f32::from_bits(b), -f32::from_bits(b)]);
+        for t in specials.into_iter().chain(sweep) {
+            assert_eq!(bins.bin(t), reference(t), "t = {t:e}");
         }
     }
 }

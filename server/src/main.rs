@@ -199,9 +199,9 @@ fn bake(a: BakeArgs) -> Result<()> {
         .build()
         .context("cannot start the worker threads")?;
     let threads = pool.current_num_threads();
-    let prepared = std::time::Instant::now();
+    let build_start = std::time::Instant::now();
     let mut baker = Baker::new(&scene);
-    let prepared = prepared.elapsed().as_secs_f64();
+    let prepared = build_start.elapsed().as_secs_f64();
     baker.set_cast(match a.cast {
         CastArg::Adaptive => CastMode::Adaptive,
         CastArg::Full => CastMode::Full,

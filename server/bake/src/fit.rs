@@ -248,7 +248,8 @@ impl Uniform {
             };
             let w = res / size;
             let mut cur = vec![-1; w * w];
-            for (bj, row) in cur.chunks_exact_mut(w.max(1)).enumerate().take(w) {
+            // w ≥ 1: size ≤ top ≤ res.
+            for (bj, row) in cur.chunks_exact_mut(w).enumerate() {
                 let (up, down) = (2 * bj * below_w, (2 * bj + 1) * below_w);
                 for (bi, c) in row.iter_mut().enumerate() {
                     let x = 2 * bi;

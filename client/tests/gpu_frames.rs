@@ -524,10 +524,14 @@ fn gpu_frames_equal_cpu_frames_on_a_refined_umbra() {
         );
         assert!(shadowed > 1000, "{shadowed} pixels in shadow");
         // Measured on lavapipe, mean |Δ| / peak: per vertex 3.21e-3 with the CPU's visible
-        // vertices only, 2.04e-3 now; per pixel 7.36e-3, 3.31e-3 (the rest: MSAA's edges
-        // against the CPU's one sample).
+        // vertices only, 2.04e-3 with every vertex the GPU may interpolate; per pixel 7.36e-3,
+        // 3.31e-3 (the rest: MSAA's edges against the CPU's one sample). The board's
+        // underside, which the camera sees, was then the brightest surface per vertex (its lit
+        // upper side's radiance); shaded on the side seen it is dark, the peak is the floor's,
+        // 1.62× lower, and the same differences read 3.30e-3 per vertex; the bound is scaled
+        // alike (2.7e-3 → 4.3e-3; the 3.21e-3 of before would scale to ≈ 5.2e-3).
         let bound = match mode {
-            Mode::Vertex => 2.7e-3,
+            Mode::Vertex => 4.3e-3,
             Mode::Pixel => 5e-3,
         };
         assert!(mean <= bound, "{mode:?}: mean |Δ| {mean} > {bound}");

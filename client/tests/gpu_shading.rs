@@ -97,6 +97,7 @@ fn compare(gpu: &Gpu, l: &Light, eye: DVec3, cases: &[(DVec3, f64, u64)], worst:
                 roughness: a as f32,
                 ..Material::default()
             },
+            behind: false,
         })
         .collect();
     let t = std::time::Instant::now();
@@ -471,3 +472,55 @@ fn gpu_tiny_lights_stay_finite_and_bounded() {
 /// The radiance bound for lights of 1e-8 sr, relative to their unshadowed radiance
 /// (docs/gpu.md).
 const TINY: f64 = 1e-2;
+
+/// A point seen from behind (`ShadePoint::behind`, the vertex record's w = −1) is shaded
+/// unshadowed: its trees are for its other side (`Renderer::vertex_trees`). The same points
+/// with the same random trees, not behind, are shadowed — the trees do cut the light.
+#[test]
+fn gpu_points_seen_from_behind_ignore_their_trees() {
+    let Some((gpu, _one)) = gpu() else { return };
+    let codec = LineCodec::for_resolution(64);
+    let eye = DVec3::new(0.3, 1.0, 0.5);
+    let l = light(quad(DVec3::new(0.2, 1.0, -0.1), 0.6, 0.3), false);
+    let seeds: Vec<u64> = (0..64).collect();
+    let trees: Vec<VertexTrees> = seeds.iter().map(|&s| random_trees(s, &codec)).collect();
+    let points = |behind: bool| -> Vec<ShadePoint> {
+        seeds
+            .iter()
+            .map(|&s| ShadePoint {
+                p: glam::Vec3::ZERO,
+                n: normal_at(eye.normalize(), 5.0 * (s % 8) as f64, s as f64).as_vec3(),
+                material: Material {
+                    roughness: 0.3,
+                    ..Material::default()
+                },
+                behind,
+            })
+            .collect()
+    };
+    let (mut shadowed, mut worst) = (0, 0.0f64);
+    for behind in [false, true] {
+        let pts = points(behind);
+        let got = shade_points(gpu, &l, eye, &pts, &trees, &codec).unwrap();
+        for ((pt, t), g) in pts.iter().zip(&trees).zip(&got) {
+            let n = pt.n.as_dvec3().normalize();
+            let lobes = Lobes::new(LtcTable::builtin(), &pt.material, n, eye.normalize());
+            let r = shade_vertex(&lobes, &l, DVec3::ZERO, n, t, &codec);
+            let want = if behind { &r.unshadowed } else { &r.shadowed };
+            let (c, u) = (
+                lobes.radiance(DVec3::ONE, want),
+                lobes.radiance(DVec3::ONE, &r.unshadowed).max_element(),
+            );
+            let e = (glam::Vec3::from(g.colour).as_dvec3() - c)
+                .abs()
+                .max_element();
+            worst = worst.max(e / u.max(1e-4));
+            if !behind && lobes.radiance(DVec3::ONE, &r.shadowed).max_element() < 0.9 * u {
+                shadowed += 1;
+            }
+        }
+    }
+    eprintln!("{shadowed} of 64 points shadowed by their trees; worst error {worst:.2e}");
+    assert!(shadowed > 8, "the trees cut the light: {shadowed}");
+    assert!(worst < RADIANCE, "{worst}");
+}

@@ -590,6 +590,71 @@ fn checker_canopy_lets_half_the_light_through() {
     assert!(pixel_err <= 0.05, "BSPVT per pixel vs MC: {pixel_err}");
 }
 
+/// The checker board's underside, which the scene's camera sees from below at the top of the
+/// frame: the lamp is above the board, so the underside is black per pixel (as in the Monte
+/// Carlo) — and per vertex, where each of the board's vertices is shaded on the side the
+/// camera sees, though its normal faces the lamp (before: a lit checker strip, the upper
+/// side's radiance interpolated over the underside). Seen from above, the board is lit.
+#[test]
+fn the_boards_underside_is_dark_per_vertex() {
+    let mut s = Scene::from_mesh_path(&room("checker-canopy.gltf")).expect("checker canopy");
+    bspvt_bake::refine::refine_scene(&mut s).expect("refine");
+    let lights: Vec<Light> = scene_lights(&s)
+        .expect("lights")
+        .into_iter()
+        .map(|l| l.0)
+        .collect();
+    let bytes = Baker::new(&s)
+        .bake_all(&|_, _| {}, &AtomicBool::new(false))
+        .expect("bake")
+        .bytes;
+    let b = decode_bake(&bytes).expect("decode");
+    let trees = Trees::full(&b.trees, b.header.codec());
+    let leaves = s
+        .materials
+        .iter()
+        .position(|m| m.name == "leaves")
+        .expect("the board's material") as u32;
+    let lum = |p: &[f32; 3]| f64::from(p[0] + p[1] + p[2]) / 3.0;
+    // The board's mean luminance per vertex and per pixel, BSPVT and unshadowed LTC, through
+    // `r`'s camera.
+    let board = |r: &Renderer| {
+        let px: Vec<usize> = (0..r.gbuffer.tri.len())
+            .filter(|&i| s.mesh.material_ids.get(r.gbuffer.tri[i] as usize) == Some(&leaves))
+            .collect();
+        assert!(px.len() > 30, "the board is seen: {} px", px.len());
+        let mean =
+            |img: &Image| px.iter().map(|&i| lum(&img.pixels[i])).sum::<f64>() / px.len() as f64;
+        let (v, _) = r.bspvt_lights(&lights, Some(&trees), None, Mode::Vertex);
+        let (p, _) = r.bspvt_lights(&lights, Some(&trees), None, Mode::Pixel);
+        let (lv, _) = r.ltc(&lights, Mode::Vertex);
+        let (lp, _) = r.ltc(&lights, Mode::Pixel);
+        [mean(&v), mean(&p), mean(&lv), mean(&lp)]
+    };
+    let below = board(&Renderer::new(&s, 256, 171));
+    let above = board(&Renderer::with_camera(
+        &s,
+        &bspvt_proto::scene::Camera {
+            position: [0.4, 2.0, 1.5],
+            target: [0.0, 0.0, 0.0],
+            up: [0.0, 1.0, 0.0],
+            fov_y_deg: 40.0,
+            aspect: None,
+        },
+        192,
+        128,
+    ));
+    println!(
+        "the board's mean luminance, BSPVT per vertex / per pixel, LTC per vertex / per pixel: \
+         from below {below:.5?}, from above {above:.5?}"
+    );
+    assert!(above.iter().all(|&x| x > 0.01), "lit from above: {above:?}");
+    assert!(
+        below.iter().all(|&x| x < 1e-3 * above[3]),
+        "dark from below: {below:?} (from above {above:?})"
+    );
+}
+
 /// The camera sees through the checker canopy's holes (the G-buffer's alpha test): looking
 /// straight down on the board, about half its pixels show the floor beneath; the opaque board
 /// covers them all.

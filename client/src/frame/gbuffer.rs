@@ -246,6 +246,46 @@ impl GBuffer {
         out
     }
 
+    /// Per vertex, whether the camera sees it from behind: the side [`shading_normal`] turns
+    /// its normal to, voted by the pixels of the visible triangles that use it (a triangle
+    /// shows the back of vertex v when v's normal points away from the triangle's face the
+    /// eye sees). The underside of a two-sided sheet lit from above is one; a closed mesh's
+    /// silhouette vertex, whose normal turns slightly away from the eye over a face that
+    /// looks at it, is not. A vertex seen from both sides takes the side most pixels see.
+    pub(crate) fn vertices_seen_from_behind(&self, mesh: &Mesh, eye: DVec3) -> Vec<bool> {
+        let mut pixels = vec![0u32; mesh.triangles.len()];
+        for &t in &self.tri {
+            if let Some(c) = pixels.get_mut(t as usize) {
+                *c += 1;
+            }
+        }
+        // Pixels that see vertex v's back minus those that see its front.
+        let mut vote = vec![0i64; mesh.vertex_count()];
+        for (idx, &c) in mesh.triangles.iter().zip(&pixels) {
+            if c == 0 {
+                continue;
+            }
+            let p = idx.map(|v| mesh.positions[v as usize].as_dvec3());
+            let mut g = (p[1] - p[0]).cross(p[2] - p[0]);
+            if g.dot(eye - p[0]) < 0.0 {
+                g = -g;
+            }
+            for &v in idx {
+                let n = mesh
+                    .normals
+                    .get(v as usize)
+                    .map_or(DVec3::ZERO, |n| n.as_dvec3());
+                let d = n.dot(g);
+                if d < 0.0 {
+                    vote[v as usize] += i64::from(c);
+                } else if d > 0.0 {
+                    vote[v as usize] -= i64::from(c);
+                }
+            }
+        }
+        vote.into_iter().map(|x| x > 0).collect()
+    }
+
     /// Pixels that see a surface.
     pub(crate) fn covered(&self) -> usize {
         self.tri.iter().filter(|&&t| t != NONE).count()
@@ -444,6 +484,57 @@ mod tests {
         assert!(g.covered() > 96 * 64 / 4, "covered {}", g.covered());
         eprintln!("{} covered, {differ} differ", g.covered());
         assert!(differ <= 96 * 64 / 500, "{differ} pixels differ");
+    }
+
+    /// The side each vertex is seen from: a sheet whose normals face up is seen from behind
+    /// from below and from the front from above; no vertex of a closed smooth sphere is seen
+    /// from behind, though the normals of its silhouette's vertices turn away from the eye.
+    #[test]
+    fn vertices_seen_from_behind_follow_the_faces_seen() {
+        let camera = |y: f32| bspvt_proto::scene::Camera {
+            position: [0.3, y, 2.5],
+            target: [0.0, 0.0, 0.0],
+            up: [0.0, 1.0, 0.0],
+            fov_y_deg: 60.0,
+            aspect: None,
+        };
+        let sheet = builtin::grid_plane(glam::Vec3::ZERO, glam::Vec3::Z, glam::Vec3::X, 5, 0);
+        assert!(
+            sheet.normals.iter().all(|n| n.y > 0.99),
+            "the sheet faces up"
+        );
+        for (y, behind) in [(-1.0, true), (1.0, false)] {
+            let view = View::new(&camera(y), 48, 48);
+            let g = GBuffer::rasterize(&sheet, &view);
+            let seen = g.visible_vertices(&sheet);
+            let side = g.vertices_seen_from_behind(&sheet, view.eye);
+            assert!(
+                seen.iter().filter(|&&s| s).count() > 20,
+                "the sheet is seen"
+            );
+            for (v, (&s, &b)) in seen.iter().zip(&side).enumerate() {
+                assert!(!s || b == behind, "eye at y = {y}: vertex {v} behind {b}");
+            }
+        }
+        let sphere = builtin::icosphere(3, 0);
+        let view = View::new(&camera(0.5), 64, 64);
+        let g = GBuffer::rasterize(&sphere, &view);
+        let side = g.vertices_seen_from_behind(&sphere, view.eye);
+        // Vertices seen whose normals turn away from the eye: the silhouette's.
+        let turned = g
+            .visible_vertices(&sphere)
+            .iter()
+            .enumerate()
+            .filter(|&(v, &s)| {
+                let p = sphere.positions[v].as_dvec3();
+                s && sphere.normals[v].as_dvec3().dot(view.eye - p) < 0.0
+            })
+            .count();
+        assert!(turned > 0, "the silhouette has vertices facing away");
+        assert!(
+            !side.iter().any(|&b| b),
+            "a closed mesh is seen from the front"
+        );
     }
 
     fn hit(o: DVec3, d: DVec3, p: [DVec3; 3]) -> Option<f64> {

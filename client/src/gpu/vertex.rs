@@ -50,11 +50,17 @@ pub struct ShadePoint {
     pub n: Vec3,
     /// The material at the point.
     pub material: Material,
+    /// Seen from behind (`Renderer::seen_from_behind`): shaded unshadowed, its trees being
+    /// for its other side.
+    pub behind: bool,
 }
 
 /// The vertex record of the shader (`bspvt_shaders::gpu::records`), without a UV.
 pub(crate) fn vertex_record(p: &ShadePoint) -> [[f32; 4]; 4] {
-    records::vertex_record(p.p, p.n, &p.material, None)
+    records::seen_from_behind(
+        records::vertex_record(p.p, p.n, &p.material, None),
+        p.behind,
+    )
 }
 
 /// The light as the shaders read it (`bspvt_shaders::gpu::lights`).
@@ -364,7 +370,8 @@ impl VertexShader {
                 .map(|v| {
                     let (p, n, m) = renderer.vertex_surface(v);
                     let uv = renderer.scene.mesh.uvs.get(v as usize).copied();
-                    records::vertex_record(p.as_vec3(), n.as_vec3(), &m, uv)
+                    let r = records::vertex_record(p.as_vec3(), n.as_vec3(), &m, uv);
+                    records::seen_from_behind(r, renderer.seen_from_behind(v))
                 })
                 .collect();
             self.set_vertices(gpu, &records);

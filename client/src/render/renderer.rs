@@ -102,6 +102,9 @@ pub struct Renderer<'a> {
     pub gbuffer: GBuffer,
     /// Vertices of the triangles the camera sees.
     pub(crate) visible_vertices: Vec<u32>,
+    /// Per vertex, whether the camera sees it from behind
+    /// ([`GBuffer::vertices_seen_from_behind`]): shaded per vertex on that side, unshadowed.
+    seen_from_behind: Vec<bool>,
     /// Material of each vertex (that of the first triangle using it).
     pub(crate) vertex_material: Vec<u32>,
     pub(crate) table: &'static LtcTable,
@@ -128,18 +131,14 @@ impl<'a> Renderer<'a> {
         let normal_maps = NormalMaps::of(&scene.mesh, &scene.materials);
         let gbuffer = GBuffer::rasterize_cut(&scene.mesh, &view, cut.as_deref())
             .with_normal_maps(normal_maps.clone());
-        let visible_vertices = gbuffer
-            .visible_vertices(&scene.mesh)
-            .iter()
-            .enumerate()
-            .filter_map(|(v, &s)| s.then_some(v as u32))
-            .collect();
+        let (visible_vertices, seen_from_behind) = seen(&gbuffer, &scene.mesh, view.eye);
         let vertex_material = bspvt_shaders::gpu::records::vertex_materials(&scene.mesh);
         Renderer {
             scene,
             view,
             gbuffer,
             visible_vertices,
+            seen_from_behind,
             vertex_material,
             table: LtcTable::builtin(),
             materials: scene.materials.clone(),
@@ -181,13 +180,8 @@ impl<'a> Renderer<'a> {
         self.view = View::new(camera, w, h);
         self.gbuffer = GBuffer::rasterize_cut(&self.scene.mesh, &self.view, self.cut.as_deref())
             .with_normal_maps(self.normal_maps.clone());
-        self.visible_vertices = self
-            .gbuffer
-            .visible_vertices(&self.scene.mesh)
-            .iter()
-            .enumerate()
-            .filter_map(|(v, &s)| s.then_some(v as u32))
-            .collect();
+        (self.visible_vertices, self.seen_from_behind) =
+            seen(&self.gbuffer, &self.scene.mesh, self.view.eye);
     }
 
     /// Overrides every material's GGX roughness α (`None`: the scene's own).
@@ -266,21 +260,41 @@ impl<'a> Renderer<'a> {
     /// Vertex `v`'s position, unit normal and material (per vertex, a textured material is
     /// the texture at the vertex's own UV (docs/scene-format.md "Textures"), interpolated over
     /// the triangle like the lighting).
+    /// A vertex the camera sees from behind ([`Self::seen_from_behind`]) has its normal, and
+    /// its whole tangent frame, turned over (as `gbuffer::shading_normal` per pixel).
     pub(crate) fn vertex_surface(&self, v: u32) -> (DVec3, DVec3, std::borrow::Cow<'_, Material>) {
         let p = self.scene.mesh.positions[v as usize].as_dvec3();
         let n = self.scene.mesh.normals[v as usize]
             .as_dvec3()
             .normalize_or(DVec3::Y);
         let id = self.vertex_material[v as usize];
-        let n = self.normal_maps.as_ref().map_or(n, |m| {
-            let wo = (self.view.eye - p).normalize_or(n);
-            // Seen from behind, the whole frame turns over (as `gbuffer::shading_normal`).
-            let side = if n.dot(wo) < 0.0 { -1.0 } else { 1.0 };
-            let bent = side * m.bend_vertex(&self.scene.mesh, v, id, n);
-            NormalMaps::facing(bent, side * n, wo)
-        });
+        let side = if self.seen_from_behind(v) { -1.0 } else { 1.0 };
+        let n = match self.normal_maps.as_ref() {
+            None => side * n,
+            Some(m) => {
+                let wo = (self.view.eye - p).normalize_or(side * n);
+                let bent = side * m.bend_vertex(&self.scene.mesh, v, id, n);
+                NormalMaps::facing(bent, side * n, wo)
+            }
+        };
         let uv = self.scene.mesh.uvs.get(v as usize).copied();
         (p, n, self.material_at(id, uv))
+    }
+
+    /// Whether the camera sees vertex `v` from behind: it is then shaded on that side, where
+    /// it has no trees — the bake covers the hemisphere its normal faces (docs/bake.md) — so
+    /// unshadowed ([`Self::vertex_trees`]).
+    pub(crate) fn seen_from_behind(&self, v: u32) -> bool {
+        self.seen_from_behind
+            .get(v as usize)
+            .copied()
+            .unwrap_or(false)
+    }
+
+    /// Vertex `v`'s trees for the side the camera sees: `None` while they have not arrived
+    /// and for a vertex seen from behind.
+    pub(crate) fn vertex_trees<'t>(&self, trees: &'t Trees, v: u32) -> Option<&'t VertexTrees> {
+        (trees.has(v) && !self.seen_from_behind(v)).then(|| &trees.trees[v as usize])
     }
 
     pub(crate) fn vertex_lobes(&self, v: u32) -> (Lobes, DVec3, DVec3) {
@@ -343,12 +357,13 @@ impl<'a> Renderer<'a> {
             let mut sum = Shaded::default();
             let mut r = Vec::with_capacity(k);
             let (mut pieces, mut dropped) = (0, 0);
+            let vt = self.vertex_trees(trees, v);
             for light in lights {
-                if !trees.has(v) {
+                let Some(vt) = vt else {
                     sum += unshadowed(lobes, light, p, nrm).tinted(light.radiance_toward(p));
                     continue;
-                }
-                let s = shade_vertex(lobes, light, p, nrm, &trees.trees[v as usize], &trees.codec);
+                };
+                let s = shade_vertex(lobes, light, p, nrm, vt, &trees.codec);
                 sum += s.shadowed.tinted(light.radiance_toward(p));
                 if ratios {
                     r.push(s.shadowed.ratio(&s.unshadowed));
@@ -376,19 +391,12 @@ impl<'a> Renderer<'a> {
         ratios: bool,
     ) -> (Vec<[f32; 3]>, Vec<ShadowRatio>, FrameCounts) {
         let (colour, shaded, counts) = self.per_vertex(|v, lobes, _, nrm| {
-            let Some(trees) = trees.filter(|t| t.has(v)) else {
+            let Some((vt, t)) = trees.and_then(|t| Some((self.vertex_trees(t, v)?, t))) else {
                 let s = unshadowed_sky(lobes, pieces, nrm);
                 let c = lobes.radiance(DVec3::ONE, &s);
                 return (c.as_vec3().to_array(), UNSHADOWED, 0, 0);
             };
-            let r = shade_vertex_sky(
-                lobes,
-                pieces,
-                nrm,
-                &trees.trees[v as usize],
-                &trees.codec,
-                ratios,
-            );
+            let r = shade_vertex_sky(lobes, pieces, nrm, vt, &t.codec, ratios);
             let c = lobes.radiance(DVec3::ONE, &r.shadowed);
             let ratio = if ratios { r.ratio() } else { UNSHADOWED };
             (c.as_vec3().to_array(), ratio, r.pieces, r.dropped)
@@ -681,4 +689,16 @@ impl<'a> Renderer<'a> {
             ),
         }
     }
+}
+
+/// The vertices of the triangles `g` sees, and per vertex whether it is seen from behind
+/// ([`GBuffer::vertices_seen_from_behind`]).
+fn seen(g: &GBuffer, mesh: &bspvt_proto::Mesh, eye: DVec3) -> (Vec<u32>, Vec<bool>) {
+    let visible = g
+        .visible_vertices(mesh)
+        .iter()
+        .enumerate()
+        .filter_map(|(v, &s)| s.then_some(v as u32))
+        .collect();
+    (visible, g.vertices_seen_from_behind(mesh, eye))
 }

@@ -23,6 +23,9 @@ pub struct CellTransfer {
 struct VertexCells {
     /// Cut by the vertex's trees (else unshadowed: redone when they arrive).
     with_trees: bool,
+    /// Made for the vertex's back ([`Renderer::seen_from_behind`]: redone when the camera
+    /// crosses to its other side).
+    behind: bool,
     /// [`Renderer::shading_key`] of `weights`.
     view: u64,
     terms: Vec<CellTerm>,
@@ -85,16 +88,21 @@ impl Renderer<'_> {
             .filter(|(v, _)| visible[*v])
             .map(|(v, slot)| {
                 let (lobes, _, nrm) = self.vertex_lobes(v as u32);
-                let has = trees.is_some_and(|t| t.has(v as u32));
+                let t = trees.and_then(|t| Some((self.vertex_trees(t, v as u32)?, &t.codec)));
+                let has = t.is_some();
+                let behind = self.seen_from_behind(v as u32);
                 let (mut pieces, mut dropped) = (0, 0);
-                if slot.as_ref().is_none_or(|e| e.with_trees != has) {
+                if slot
+                    .as_ref()
+                    .is_none_or(|e| e.with_trees != has || e.behind != behind)
+                {
                     let mut terms = Vec::new();
-                    let t = trees.filter(|_| has).map(|t| (&t.trees[v], &t.codec));
                     (pieces, dropped) =
                         cell_terms(&cells.grid().polys, nrm, &lobes.to_local, t, &mut terms);
                     terms.shrink_to_fit();
                     *slot = Some(VertexCells {
                         with_trees: has,
+                        behind,
                         view: !view,
                         terms,
                         weights: Vec::new(),

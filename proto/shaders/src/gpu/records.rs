@@ -54,6 +54,21 @@ pub fn vertex_record(p: Vec3, n: Vec3, m: &Material, uv: Option<Vec2>) -> [[f32;
     ]
 }
 
+/// `record`, whose normal is the one to shade with, for a vertex seen from behind or not
+/// (the client's `Renderer::seen_from_behind`): behind, its normal is stored turned back to the
+/// mesh's side (which resolve.wgsl interpolates per pixel) and its position's w is −1 (else
+/// 1), and shade.wgsl turns the normal over again and shades the vertex unshadowed — its trees
+/// are for its other side.
+pub fn seen_from_behind(mut record: [[f32; 4]; 4], behind: bool) -> [[f32; 4]; 4] {
+    record[0][3] = if behind { -1.0 } else { 1.0 };
+    if behind {
+        for x in &mut record[1][..3] {
+            *x = -*x;
+        }
+    }
+    record
+}
+
 /// The records of every vertex of a mesh at rest: the vertex's material (its first
 /// triangle's, clamped to the list; textured ones evaluated at the vertex's UV) and its
 /// normal — bent by its material's normal map at its UV where it has one, as seen from the

@@ -133,6 +133,8 @@ fn ratio3(s: vec3f, u: vec3f) -> vec3f {
 // the view's frame and the specular LTC.
 struct Surface {
     p: vec3f,
+    // Seen from behind (records::seen_from_behind): its trees are for its other side.
+    behind: bool,
     n: vec3f,
     albedo: vec3f,
     spec: vec3f,
@@ -143,11 +145,15 @@ struct Surface {
 fn surface(v: u32) -> Surface {
     var s: Surface;
     s.p = verts[4u * v].xyz;
+    s.behind = verts[4u * v].w < 0.0;
     // The renderer's normals are unit in f64 (render::renderer::vertex_surface); in f32
     // they are normalised again.
     let n0 = verts[4u * v + 1u].xyz;
     let nl = length(n0);
     s.n = select(vec3f(0.0, 1.0, 0.0), n0 / nl, nl > 0.0 && finite(nl));
+    // The record holds the normal on the mesh's side (resolve.wgsl interpolates it per
+    // pixel); a vertex seen from behind is shaded with it turned over.
+    s.n = select(s.n, -s.n, s.behind);
     let albedo = verts[4u * v + 2u];
     let f0 = verts[4u * v + 3u].xyz;
     s.albedo = albedo.xyz;
@@ -330,8 +336,9 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
     let ud = un.d.w;
     let us = un.s.w;
     let root0 = roots[6u * v];
-    if root0 == NO_TREES {
-        // Trees not streamed in yet: unshadowed (render::renderer::Trees::has).
+    if root0 == NO_TREES || s.behind {
+        // Trees not streamed in yet, or seen from behind: unshadowed
+        // (render::renderer::Renderer::vertex_trees).
         res.colour = vec4f(radiance * (s.albedo * un.d.xyz + s.spec * un.s.xyz), 0.0);
         results[v] = res;
         return;

@@ -38,8 +38,9 @@ fn sky_terms(@builtin(global_invocation_id) gid: vec3u,
     let s = surface(v);
     flags = 0u;
     let em = emitter(s.p, s.frame, s.lt);
-    // Trees not streamed in yet: unshadowed (render::renderer::Trees::has).
-    let shadowed = roots[6u * v] != NO_TREES;
+    // Trees not streamed in yet, or seen from behind: unshadowed
+    // (render::renderer::Renderer::vertex_trees).
+    let shadowed = roots[6u * v] != NO_TREES && !s.behind;
     let base = gid.x * cell_count();
     for (var c = first; c < last; c++) {
         let k = min(u32(cells[4u * c].w), 4u);

@@ -67,12 +67,19 @@ struct BakeArgs {
     /// Output bake file.
     #[arg(long)]
     out: PathBuf,
+    /// Cube-map face resolution, pixels a side (default: the scene's `bake.face_res`, 64).
     #[arg(long)]
     face_res: Option<u32>,
+    /// Leaf tolerance ε: a node is a leaf when its squared deviation is at most ε × the face's
+    /// pixel count (default: the scene's, 1e-3); smaller is closer and bigger (docs/bake.md).
     #[arg(long)]
     epsilon: Option<f32>,
+    /// s × s rays per pixel, stored as fractional visibility (default: the scene's, 1). The
+    /// fit's ε then lets more through: lower it with it (docs/benchmarks.md, "Two-sided
+    /// surfaces per vertex").
     #[arg(long)]
     supersampling: Option<u32>,
+    /// How the fit chooses split lines (default: the scene's, `default`).
     #[arg(long, value_enum)]
     split: Option<SplitArg>,
     /// How rays are cast (the same cube maps and bytes either way; docs/bake.md).

@@ -135,6 +135,7 @@ fn the_page_and_its_files_are_served_with_a_strict_policy() {
         ("visibility.wgsl", wgsl::visibility()),
         ("resolve.wgsl", wgsl::resolve(1)),
         ("present.wgsl", wgsl::present().to_string()),
+        ("sides.wgsl", wgsl::sides()),
     ] {
         let r = get(&a, &srv.url(&format!("/ui/wgsl/{name}")));
         assert_eq!(r.status, 200, "{name}");

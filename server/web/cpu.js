@@ -249,15 +249,17 @@ function cut(poly, n) {
 /**
  * Eq. 2 of paper 000 at vertex v for one light: Σ over the tree leaves v̄ · the LTC integrals of
  * the light's pieces in them (the light cut by each face's pyramid, then by the tree's lines),
- * times the light's radiance (and a sphere's falloff); unshadowed where `shadowed` is false or
- * the vertex's trees have not arrived. Returns linear RGB.
+ * times the light's radiance (and a sphere's falloff); unshadowed where `shadowed` is false,
+ * the vertex's trees have not arrived or it is seen from `behind` (its trees are for its other
+ * side; its normal is turned over). Returns linear RGB.
  */
-export function shadeVertex(scene, trees, v, record, count, eye, shadowed) {
+export function shadeVertex(scene, trees, v, record, count, eye, shadowed, behind = false) {
   const V = scene.verts;
   const p = [V[16 * v], V[16 * v + 1], V[16 * v + 2]];
   const n0 = [V[16 * v + 4], V[16 * v + 5], V[16 * v + 6]];
   const nl = len(n0);
-  const n = nl > 0 && Number.isFinite(nl) ? scale(n0, 1 / nl) : [0, 1, 0];
+  // Seen from behind (seenFromBehind): shaded on that side, where it has no trees.
+  const n = scale(nl > 0 && Number.isFinite(nl) ? scale(n0, 1 / nl) : [0, 1, 0], behind ? -1 : 1);
   const albedo = [V[16 * v + 8], V[16 * v + 9], V[16 * v + 10]];
   const alpha = V[16 * v + 11];
   const f0 = [V[16 * v + 12], V[16 * v + 13], V[16 * v + 14]];
@@ -273,7 +275,7 @@ export function shadeVertex(scene, trees, v, record, count, eye, shadowed) {
   const radiance = scale([record[4], record[5], record[6]], lightFalloff(record, p));
   const shade = (rd, rs) => [0, 1, 2].map((c) => radiance[c] * (albedo[c] * rd + spec[c] * rs));
   const root0 = trees.roots[6 * v];
-  if (!shadowed || root0 === NO_TREES || root0 === undefined) {
+  if (!shadowed || behind || root0 === NO_TREES || root0 === undefined) {
     return shade(integrate(frame, dirs), integrate(toLtc, dirs));
   }
   let sd = 0;
@@ -351,16 +353,17 @@ export function verticesSeen(scene, view) {
 }
 
 /**
- * The frame per vertex: every pixel's nearest triangle along its primary ray (against the
- * triangle's plane, barycentrics inside it: gbuffer::ray_plane_barycentrics), its vertices'
- * colours interpolated there. `colour`: linear RGB per vertex (Float64Array, 3 per vertex).
+ * The frame's visibility: every pixel's nearest triangle along its primary ray (against the
+ * triangle's plane, barycentrics inside it: gbuffer::ray_plane_barycentrics) — `tri` (−1:
+ * none) and the barycentrics of its corners 1 and 2.
  */
-export function rasterize(scene, view, colour, out) {
+export function visibilityBuffer(scene, view) {
   const { width: w, height: h } = view;
   const V = scene.verts;
   const T = scene.tris;
   const depth = new Float64Array(w * h).fill(Infinity);
-  out.fill(0);
+  const tri = new Int32Array(w * h).fill(-1);
+  const bary = new Float64Array(2 * w * h);
   const aspect = w / h;
   const rel = (v) => sub([V[16 * v], V[16 * v + 1], V[16 * v + 2]], view.eye);
   // Screen position of a point (pixels) and its depth along the view.
@@ -401,12 +404,55 @@ export function rasterize(scene, view, colour, out) {
         const i = y * w + x;
         if (!(dist > 0) || dist >= depth[i]) continue;
         depth[i] = dist;
-        const b = [1 - u - v, u, v];
-        for (let c = 0; c < 3; c++) out[3 * i + c] = b[0] * colour[3 * ids[0] + c] + b[1] * colour[3 * ids[1] + c] + b[2] * colour[3 * ids[2] + c];
+        tri[i] = t;
+        bary[2 * i] = u;
+        bary[2 * i + 1] = v;
       }
     }
   }
-  return depth;
+  return { tri, bary };
+}
+
+/**
+ * Per vertex, whether the camera sees it from behind (GBuffer::vertices_seen_from_behind,
+ * sides.wgsl): every pixel of `vis` votes for its triangle's corners, for the back where a
+ * corner's normal points away from the face the eye sees; a vertex is behind where the back
+ * has more votes.
+ */
+export function seenFromBehind(scene, eye, vis) {
+  const V = scene.verts;
+  const T = scene.tris;
+  const pixels = new Int32Array(scene.triangles);
+  for (const t of vis.tri) if (t >= 0) pixels[t] += 1;
+  const votes = new Int32Array(V.length / 16);
+  for (let t = 0; t < scene.triangles; t++) {
+    if (!pixels[t]) continue;
+    const ids = [T[4 * t], T[4 * t + 1], T[4 * t + 2]];
+    const p = ids.map((v) => [V[16 * v], V[16 * v + 1], V[16 * v + 2]]);
+    let g = cross(sub(p[1], p[0]), sub(p[2], p[0]));
+    if (dot(g, sub(eye, p[0])) < 0) g = scale(g, -1);
+    for (const v of ids) {
+      const d = dot([V[16 * v + 4], V[16 * v + 5], V[16 * v + 6]], g);
+      if (d < 0) votes[v] += pixels[t];
+      else if (d > 0) votes[v] -= pixels[t];
+    }
+  }
+  return Uint8Array.from(votes, (x) => (x > 0 ? 1 : 0));
+}
+
+/** The frame per vertex: the vertices' colours (linear RGB, 3 per vertex) interpolated at `vis`. */
+export function interpolate(scene, vis, colour, out) {
+  const T = scene.tris;
+  out.fill(0);
+  for (let i = 0; i < vis.tri.length; i++) {
+    const t = vis.tri[i];
+    if (t < 0) continue;
+    const u = vis.bary[2 * i];
+    const v = vis.bary[2 * i + 1];
+    const b = [1 - u - v, u, v];
+    const ids = [T[4 * t], T[4 * t + 1], T[4 * t + 2]];
+    for (let c = 0; c < 3; c++) out[3 * i + c] = b[0] * colour[3 * ids[0] + c] + b[1] * colour[3 * ids[1] + c] + b[2] * colour[3 * ids[2] + c];
+  }
 }
 
 /** ACES filmic (Narkowicz 2015) then the sRGB OETF, 8-bit: present.wgsl's and Image::to_srgb8's. */

@@ -6,7 +6,7 @@
 // same frame per vertex. Every URL is relative to this module, so it works behind a path
 // prefix.
 
-import { rasterize, shadeVertex, toneMap, verticesSeen } from './cpu.js';
+import { interpolate, seenFromBehind, shadeVertex, toneMap, verticesSeen, visibilityBuffer } from './cpu.js';
 
 const root = new URL('../', import.meta.url);
 const api = (path) => new URL(path, root).href;
@@ -191,7 +191,9 @@ class Frames {
       let bent = scale(front, side);
       const d = dot(bent, wo);
       if (d < EPS && side * dot(n, wo) > EPS) bent = normalizeOr(add(bent, scale(wo, EPS - d)), scale(n, side));
-      R.set(bent, 16 * v + 4);
+      // Stored on the mesh's side: shade.wgsl turns it over for a vertex seen from behind
+      // (sides.wgsl; records::seen_from_behind).
+      R.set(scale(bent, side), 16 * v + 4);
     }
     return { records: R, changed: true };
   }
@@ -339,6 +341,9 @@ class GpuViewer extends Frames {
     this.rasterParams = zeros(64);
     this.resolveParams = zeros(272);
     this.presentParams = zeros(16);
+    // sides.wgsl: its parameters and the per-vertex votes (zero between frames).
+    this.sidesParams = zeros(32);
+    this.votes = zeros(this.n * 4);
     this.image = zeros(this.width * this.height * 16);
     this.overlay = zeros(this.width * this.height * 4);
     this.visibility = device.createTexture({
@@ -357,6 +362,7 @@ class GpuViewer extends Frames {
       visibility: module(sources.visibility, 'visibility.wgsl'),
       resolve: module(sources.resolve, 'resolve.wgsl'),
       present: module(sources.present, 'present.wgsl'),
+      sides: module(sources.sides, 'sides.wgsl'),
     };
     this.format = format;
   }
@@ -372,7 +378,7 @@ class GpuViewer extends Frames {
     }
     const d = this.device;
     const m = this.modules;
-    [this.shadePipe, this.rasterPipe, this.resolvePipe, this.presentPipe] = await Promise.all([
+    [this.shadePipe, this.rasterPipe, this.resolvePipe, this.presentPipe, this.votePipe, this.markPipe] = await Promise.all([
       d.createComputePipelineAsync({ layout: 'auto', compute: { module: m.shade, entryPoint: 'main' } }),
       d.createRenderPipelineAsync({
         layout: 'auto',
@@ -389,6 +395,8 @@ class GpuViewer extends Frames {
         fragment: { module: m.present, entryPoint: 'fs', targets: [{ format: this.format }] },
         primitive: { topology: 'triangle-list' },
       }),
+      d.createComputePipelineAsync({ layout: 'auto', compute: { module: m.sides, entryPoint: 'vote' } }),
+      d.createComputePipelineAsync({ layout: 'auto', compute: { module: m.sides, entryPoint: 'mark' } }),
     ]);
   }
 
@@ -432,6 +440,11 @@ class GpuViewer extends Frames {
   writeFrameParams() {
     const q = this.device.queue;
     q.writeBuffer(this.rasterParams, 0, viewProj(this.view, this.diagonal));
+    // sides.wgsl `SidesParams`: the eye; width, height, vertices.
+    const sp = new ArrayBuffer(32);
+    new Float32Array(sp, 0, 4).set([...this.view.eye, 1]);
+    new Uint32Array(sp, 16, 4).set([this.width, this.height, this.n, 0]);
+    q.writeBuffer(this.sidesParams, 0, sp);
     const pp = new ArrayBuffer(16);
     new Uint32Array(pp).set([this.width, this.height, 0, 0]);
     new Float32Array(pp, 8, 1)[0] = this.exposure;
@@ -449,9 +462,10 @@ class GpuViewer extends Frames {
   }
 
   /**
-   * One frame: the visibility raster once, then per lamp its per-vertex shading and a resolve
-   * that adds its frame to the image, then present. The lamps are submitted one after the
-   * other (their parameters share one buffer each).
+   * One frame: the visibility raster once and the side each vertex is seen from (sides.wgsl),
+   * then per lamp its per-vertex shading and a resolve that adds its frame to the image, then
+   * present. The lamps are submitted one after the other (their parameters share one buffer
+   * each).
    */
   draw() {
     const d = this.device;
@@ -491,13 +505,6 @@ class GpuViewer extends Frames {
     for (let k = 0; k < lamps; k++) {
       this.writeLampParams(k, k === 0 ? 0 : 1);
       const enc = d.createCommandEncoder();
-      {
-        const pass = enc.beginComputePass();
-        pass.setPipeline(this.shadePipe);
-        pass.setBindGroup(0, shadeGroup(k));
-        pass.dispatchWorkgroups(Math.ceil(this.n / 64));
-        pass.end();
-      }
       if (k === 0) {
         const pass = enc.beginRenderPass({
           colorAttachments: [{ view: visView, clearValue: [0, 0, 0, 0], loadOp: 'clear', storeOp: 'store' }],
@@ -511,6 +518,40 @@ class GpuViewer extends Frames {
         pass.setPipeline(this.rasterPipe);
         pass.setBindGroup(0, this.group(this.rasterPipe, [this.rasterParams, this.verts, this.tris, this.cut]));
         pass.draw(this.doc.triangles * 3);
+        pass.end();
+        const sides = enc.beginComputePass();
+        sides.setPipeline(this.votePipe);
+        sides.setBindGroup(
+          0,
+          d.createBindGroup({
+            layout: this.votePipe.getBindGroupLayout(0),
+            entries: [this.sidesParams, this.verts, this.tris, this.votes, visView].map((r, i) => ({
+              binding: i,
+              resource: r instanceof GPUBuffer ? { buffer: r } : r,
+            })),
+          }),
+        );
+        sides.dispatchWorkgroups(Math.ceil(this.width / 8), Math.ceil(this.height / 8));
+        sides.setPipeline(this.markPipe);
+        sides.setBindGroup(
+          0,
+          d.createBindGroup({
+            layout: this.markPipe.getBindGroupLayout(0),
+            entries: [
+              { binding: 0, resource: { buffer: this.sidesParams } },
+              { binding: 1, resource: { buffer: this.verts } },
+              { binding: 3, resource: { buffer: this.votes } },
+            ],
+          }),
+        );
+        sides.dispatchWorkgroups(Math.ceil(this.n / 64));
+        sides.end();
+      }
+      {
+        const pass = enc.beginComputePass();
+        pass.setPipeline(this.shadePipe);
+        pass.setBindGroup(0, shadeGroup(k));
+        pass.dispatchWorkgroups(Math.ceil(this.n / 64));
         pass.end();
       }
       {
@@ -633,6 +674,8 @@ class CpuViewer extends Frames {
     this.scene.verts = this.vertexRecords().records;
     const colour = new Float64Array(this.n * 3);
     const seen = verticesSeen(this.scene, this.view);
+    const vis = visibilityBuffer(this.scene, this.view);
+    const behind = seenFromBehind(this.scene, this.view.eye, vis);
     const lamps = this.doc.lights.length;
     for (let k = 0; k < lamps; k++) {
       const { words, count } = this.lightRecord(k);
@@ -640,13 +683,13 @@ class CpuViewer extends Frames {
       const shadowed = this.method === 'bspvt' && this.doc.lights[k].shadowed !== false;
       for (let i = 0; i < seen.length; i++) {
         const v = seen[i];
-        const c = shadeVertex(this.scene, this.trees, v, words, count, this.view.eye, shadowed);
+        const c = shadeVertex(this.scene, this.trees, v, words, count, this.view.eye, shadowed, behind[v] === 1);
         for (let a = 0; a < 3; a++) colour[3 * v + a] += c[a];
         // Let the page breathe (input, progress) between slices of vertices.
         if (i % 4096 === 4095) await new Promise((ok) => setTimeout(ok, 0));
       }
     }
-    rasterize(this.scene, this.view, colour, this.linear);
+    interpolate(this.scene, vis, colour, this.linear);
     toneMap(this.linear, this.exposure, this.pixels.data);
     this.context.putImageData(this.pixels, 0, 0);
   }
@@ -756,7 +799,7 @@ async function main() {
   const t0 = performance.now();
   const [doc, ...wgsl] = await Promise.all([
     fetchScene(),
-    ...(device ? ['shade.wgsl', 'visibility.wgsl', 'resolve.wgsl', 'present.wgsl'].map(fetchShader) : []),
+    ...(device ? ['shade.wgsl', 'visibility.wgsl', 'resolve.wgsl', 'present.wgsl', 'sides.wgsl'].map(fetchShader) : []),
   ]);
   const canvas = $('frame');
   const width = Number(query.get('width')) || 960;
@@ -769,8 +812,8 @@ async function main() {
     const context = canvas.getContext('webgpu');
     const format = navigator.gpu.getPreferredCanvasFormat();
     context.configure({ device, format, alphaMode: 'opaque' });
-    const [shade, visibility, resolve, present] = wgsl;
-    viewer = new GpuViewer(device, context, format, doc, { shade, visibility, resolve, present }, { width, height });
+    const [shade, visibility, resolve, present, sides] = wgsl;
+    viewer = new GpuViewer(device, context, format, doc, { shade, visibility, resolve, present, sides }, { width, height });
   } else {
     viewer = new CpuViewer(canvas.getContext('2d'), doc, { width, height });
     // The CPU path shades per vertex only.

@@ -286,6 +286,53 @@ fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
     );
 }
 
+/// The canopy (`assets/rooms/canopy.gltf`) from its own camera, which sees the board's
+/// underside at the top of the frame: per vertex, on WebGPU (`sides.wgsl`) and on the CPU path
+/// (cpu.js `seenFromBehind`), the viewer shades each vertex on the side the camera sees, as
+/// `bspvt render --mode vertex` does — the underside is dark, not its lit upper side's
+/// radiance. Compared over the frame and over its top quarter, where the board is.
+#[test]
+fn the_browser_viewer_shades_the_side_it_sees() {
+    let Some(chromium) = bspvt_tests::browser::chromium_or_skip("the viewer in Chromium") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/canopy.gltf");
+    let bytes = std::fs::read(&gltf).unwrap();
+    let (srv, id) = served(tmp.path(), "mesh", "canopy.gltf", &bytes);
+    let size = (192, 128);
+    let source = [std::ffi::OsStr::new("--mesh"), gltf.as_os_str()];
+    let reference = tmp.path().join("ref.png");
+    render(
+        &source,
+        size,
+        &tmp.path().join("cache"),
+        &reference,
+        &["--mode", "vertex"],
+    );
+    let (w, h, want) = rgb(&reference);
+    let top = (h / 4) as usize * w as usize;
+    for (path, extra) in [
+        ("gpu", &["--mode", "vertex", "--drag", "no"][..]),
+        ("cpu", &["--webgpu", "no", "--drag", "no"][..]),
+    ] {
+        let dir = tmp.path().join(path);
+        std::fs::create_dir_all(&dir).unwrap();
+        let seen = view(&chromium, &srv, &id, size, &dir, extra);
+        let (_, _, got) = rgb(&seen.dir.join("web.png"));
+        let (whole, kept) = mean_difference_off_edges(w, h, &want, &got);
+        let (upper, _) = mean_difference_off_edges(w, h / 4, &want[..top], &got[..top]);
+        eprintln!(
+            "canopy per vertex, {} vs bspvt render: {whole:.4} over {:.1} % of the pixels, \
+             {upper:.4} over the top quarter",
+            seen.json["graphics"],
+            kept * 100.0
+        );
+        assert!(kept > 0.8, "edges cover too much of the frame: {kept}");
+        assert!(whole <= 0.02 && upper <= 0.01, "{path}: {whole}, {upper}");
+    }
+}
+
 /// A glTF room lit by two emissive lamps (`assets/rooms/two-lamps.gltf`): the viewer draws
 /// both at once, as `bspvt render` does, and not the first alone.
 #[test]

@@ -380,3 +380,167 @@ impl VertexShader {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bspvt_shaders::gpu::wgsl;
+    use wgpu::util::DeviceExt;
+
+    use crate::frame::gbuffer::NONE;
+    use crate::render::renderer::Renderer;
+
+    /// `sides.wgsl`'s vote (the browser viewer's, on a visibility buffer) over the CPU
+    /// G-buffer's triangle ids: which vertices of `r`'s frame are seen from behind.
+    fn gpu_sides(gpu: &Gpu, r: &Renderer) -> Result<Vec<bool>> {
+        let d = &gpu.device;
+        let mesh = &r.scene.mesh;
+        let n = mesh.vertex_count();
+        let (w, h) = (r.gbuffer.width, r.gbuffer.height);
+        let ids: Vec<u16> = r
+            .gbuffer
+            .tri
+            .iter()
+            .flat_map(|&t| {
+                let id = if t == NONE { 0 } else { t + 1 };
+                [(id & 0xffff) as u16, (id >> 16) as u16]
+            })
+            .collect();
+        let vis = d.create_texture_with_data(
+            &gpu.queue,
+            &wgpu::TextureDescriptor {
+                label: Some("visibility"),
+                size: wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rg16Uint,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            bytemuck::cast_slice(&ids),
+        );
+        let storage = |label: &str, bytes: &[u8]| {
+            d.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytes,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            })
+        };
+        let eye = r.view.eye.as_vec3();
+        let mut params = [0u32; 8];
+        params[..3].copy_from_slice(&eye.to_array().map(f32::to_bits));
+        params[4..7].copy_from_slice(&[w, h, n as u32]);
+        let params = storage("sides params", bytemuck::cast_slice(&params));
+        let records: Vec<[[f32; 4]; 4]> = (0..n)
+            .map(|v| {
+                let p = mesh.positions[v];
+                records::vertex_record(p, mesh.normals[v], &Material::default(), None)
+            })
+            .collect();
+        let verts = storage("verts", bytemuck::cast_slice(&records));
+        let tris = storage(
+            "tris",
+            bytemuck::cast_slice(&bspvt_shaders::gpu::records::triangles(mesh)),
+        );
+        let votes = storage("votes", &vec![0u8; 4 * n.max(4)]);
+        let module = d.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("sides.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(wgsl::sides().into()),
+        });
+        let view = vis.create_view(&Default::default());
+        let mut enc = d.create_command_encoder(&Default::default());
+        for (entry, groups) in [
+            ("vote", (w.div_ceil(8), h.div_ceil(8))),
+            ("mark", ((n as u32).div_ceil(64), 1)),
+        ] {
+            let pipe = gpu.checked(entry, || {
+                d.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(entry),
+                    layout: None,
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    cache: None,
+                })
+            })?;
+            // vote: the parameters, records, triangles, votes and the visibility buffer at 4;
+            // mark: no triangles nor visibility buffer.
+            let bufs: &[(u32, &wgpu::Buffer)] = if entry == "vote" {
+                &[(0, &params), (1, &verts), (2, &tris), (3, &votes)]
+            } else {
+                &[(0, &params), (1, &verts), (3, &votes)]
+            };
+            let mut entries: Vec<_> = bufs
+                .iter()
+                .map(|&(binding, b)| wgpu::BindGroupEntry {
+                    binding,
+                    resource: b.as_entire_binding(),
+                })
+                .collect();
+            if entry == "vote" {
+                entries.push(wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::TextureView(&view),
+                });
+            }
+            let group = d.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(entry),
+                layout: &pipe.get_bind_group_layout(0),
+                entries: &entries,
+            });
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&pipe);
+            pass.set_bind_group(0, &group, &[]);
+            pass.dispatch_workgroups(groups.0, groups.1, 1);
+        }
+        gpu.queue.submit([enc.finish()]);
+        let out: Vec<[[f32; 4]; 4]> =
+            bytemuck::pod_collect_to_vec(&gpu.read_buffer(&verts, (n * 64) as u64)?);
+        Ok(out.iter().map(|r| r[0][3] < 0.0).collect())
+    }
+
+    /// The browser's vote (`sides.wgsl`) marks the vertices the CPU's rule
+    /// (`GBuffer::vertices_seen_from_behind`) does, on the canopy's own camera (its board seen
+    /// from below: some vertices behind) and from above (none).
+    #[test]
+    fn the_gpu_vote_marks_the_cpus_vertices() {
+        let gpu = match Gpu::shared() {
+            Ok(g) => g,
+            Err(e) => {
+                eprintln!("SKIPPED: no GPU adapter ({e:#})");
+                return;
+            }
+        };
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/rooms/canopy.gltf");
+        let scene = bspvt_proto::Scene::from_mesh_path(&path).expect("canopy");
+        let above = bspvt_proto::scene::Camera {
+            position: [0.4, 2.5, 1.5],
+            target: [0.0, 0.0, 0.0],
+            up: [0.0, 1.0, 0.0],
+            fov_y_deg: 45.0,
+            aspect: None,
+        };
+        let mut behind = Vec::new();
+        for camera in [scene.camera.clone(), above] {
+            let r = Renderer::with_camera(&scene, &camera, 96, 64);
+            let cpu: Vec<bool> = (0..scene.mesh.vertex_count() as u32)
+                .map(|v| r.seen_from_behind(v))
+                .collect();
+            let got = gpu_sides(gpu, &r).expect("sides.wgsl");
+            assert_eq!(got, cpu, "the GPU's vote against the CPU's");
+            behind.push(cpu.iter().filter(|&&b| b).count());
+        }
+        eprintln!(
+            "vertices seen from behind: from below {}, from above {}",
+            behind[0], behind[1]
+        );
+        assert!(behind[0] > 0 && behind[1] == 0, "{behind:?}");
+    }
+}

@@ -109,6 +109,7 @@ async fn shader(Path(name): Path<String>, headers: HeaderMap) -> Response {
         "visibility.wgsl" => wgsl::visibility(),
         "resolve.wgsl" => wgsl::resolve(1),
         "present.wgsl" => wgsl::present().to_string(),
+        "sides.wgsl" => wgsl::sides(),
         _ => {
             return ApiError::new(StatusCode::NOT_FOUND, "not_found", "no such shader")
                 .into_response();

@@ -33,6 +33,16 @@ pub fn resolve(samples: u32) -> String {
     .concat()
 }
 
+/// Which side of each vertex the camera sees, voted by the pixels of a one-sample visibility
+/// buffer (entry points `vote`, `mark`): the browser viewer's per-vertex frames.
+pub fn sides() -> String {
+    [
+        include_str!("sides.wgsl"),
+        &visibility_binding(1).replace("@binding(7)", "@binding(4)"),
+    ]
+    .concat()
+}
+
 /// rt-penumbra's edge-aware blur (paper 003): edges, the widths' spread, the tent's boxes.
 pub fn penumbra() -> &'static str {
     include_str!("penumbra.wgsl")

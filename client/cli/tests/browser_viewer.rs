@@ -183,6 +183,17 @@ fn served(dir: &Path, field: &str, name: &str, bytes: &[u8]) -> (Server, String)
     (srv, id)
 }
 
+/// `assets/rooms/NAME` submitted as a user's mesh to a server with its data in `dir`, and
+/// baked: the asset's path, the server and the scene's id.
+fn served_room(dir: &Path, name: &str) -> (PathBuf, Server, String) {
+    let gltf = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../assets/rooms")
+        .join(name);
+    let bytes = std::fs::read(&gltf).unwrap();
+    let (srv, id) = served(dir, "mesh", name, &bytes);
+    (gltf, srv, id)
+}
+
 #[test]
 fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
     let Some(chromium) = bspvt_tests::browser::chromium_or_skip("the viewer in Chromium") else {
@@ -297,9 +308,7 @@ fn the_browser_viewer_shades_the_side_it_sees() {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
-    let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/canopy.gltf");
-    let bytes = std::fs::read(&gltf).unwrap();
-    let (srv, id) = served(tmp.path(), "mesh", "canopy.gltf", &bytes);
+    let (gltf, srv, id) = served_room(tmp.path(), "canopy.gltf");
     let size = (192, 128);
     let source = [std::ffi::OsStr::new("--mesh"), gltf.as_os_str()];
     let reference = tmp.path().join("ref.png");
@@ -341,9 +350,7 @@ fn the_browser_viewer_draws_every_lamp() {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
-    let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/two-lamps.gltf");
-    let bytes = std::fs::read(&gltf).unwrap();
-    let (srv, id) = served(tmp.path(), "mesh", "two-lamps.gltf", &bytes);
+    let (gltf, srv, id) = served_room(tmp.path(), "two-lamps.gltf");
     let size = (128, 128);
     let cache = tmp.path().join("cache");
     let source = [std::ffi::OsStr::new("--mesh"), gltf.as_os_str()];
@@ -460,9 +467,7 @@ fn the_browser_viewer_draws_a_textured_lamp() {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
-    let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/textured-floor.gltf");
-    let bytes = std::fs::read(&gltf).unwrap();
-    let (srv, id) = served(tmp.path(), "mesh", "textured-floor.gltf", &bytes);
+    let (gltf, srv, id) = served_room(tmp.path(), "textured-floor.gltf");
     let size = (160, 120);
     let cache = tmp.path().join("cache");
     let source = [std::ffi::OsStr::new("--mesh"), gltf.as_os_str()];
@@ -481,7 +486,8 @@ fn the_browser_viewer_draws_a_textured_lamp() {
         "the browser's textured lamp differs from bspvt render's by {diff}"
     );
     // The same room with the lamp's emissive texture taken off: its plain radiance.
-    let mut doc: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+    let mut doc: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&gltf).unwrap()).unwrap();
     for m in doc["materials"].as_array_mut().unwrap() {
         m.as_object_mut().unwrap().remove("emissiveTexture");
     }
@@ -514,9 +520,8 @@ fn the_browser_viewer_bends_normals_by_their_maps() {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
-    let gltf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../assets/rooms/normal-floor.gltf");
+    let (gltf, srv, id) = served_room(tmp.path(), "normal-floor.gltf");
     let bytes = std::fs::read(&gltf).unwrap();
-    let (srv, id) = served(tmp.path(), "mesh", "normal-floor.gltf", &bytes);
     let mut doc: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
     for m in doc["materials"].as_array_mut().unwrap() {
         m.as_object_mut().unwrap().remove("normalTexture");

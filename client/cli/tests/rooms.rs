@@ -54,6 +54,24 @@ fn room(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// Every light of `scene` (lamps, point, spot and sun lights), at rest.
+fn lights_of(scene: &Scene) -> Vec<Light> {
+    scene_lights(scene)
+        .expect("lights")
+        .into_iter()
+        .map(|l| l.0)
+        .collect()
+}
+
+/// `scene` baked and decoded.
+fn baked(scene: &Scene) -> bspvt_proto::encoding::Bake {
+    let bytes = Baker::new(scene)
+        .bake_all(&|_, _| {}, &AtomicBool::new(false))
+        .expect("bake")
+        .bytes;
+    decode_bake(&bytes).expect("decode")
+}
+
 /// Mean over pixels of the channel-mean |a − b|.
 fn mean_abs_diff(a: &Image, b: &Image) -> f64 {
     a.pixels
@@ -67,11 +85,7 @@ fn mean_abs_diff(a: &Image, b: &Image) -> f64 {
 /// BSPVT (per pixel and per vertex) and unshadowed LTC against Monte Carlo; returns the
 /// errors relative to the Monte Carlo mean: (per pixel, per vertex, shadows' effect).
 fn errors(scene: &Scene, size: (u32, u32), spp: u32) -> (f64, f64, f64) {
-    let lights: Vec<Light> = scene_lights(scene)
-        .expect("lights")
-        .into_iter()
-        .map(|l| l.0)
-        .collect();
+    let lights = lights_of(scene);
     errors_with(scene, &lights, size, spp).0
 }
 
@@ -82,11 +96,7 @@ fn errors_with(
     size: (u32, u32),
     spp: u32,
 ) -> ((f64, f64, f64), Image, Image) {
-    let bytes = Baker::new(scene)
-        .bake_all(&|_, _| {}, &AtomicBool::new(false))
-        .expect("bake")
-        .bytes;
-    let b = decode_bake(&bytes).expect("decode");
+    let b = baked(scene);
     // A refined scene's bake carries the refined mesh, whose hash the header names.
     // (Its geometry: the mesh frame does not carry UVs.)
     assert_eq!(
@@ -96,13 +106,7 @@ fn errors_with(
     );
     let trees = Trees::full(&b.trees, b.header.codec());
     // The suns' own bake where the scene has other lights too (Scene::suns_in_sky_bake).
-    let sky = scene.suns_in_sky_bake().then(|| {
-        let bytes = Baker::new(&scene.sky())
-            .bake_all(&|_, _| {}, &AtomicBool::new(false))
-            .expect("sky bake")
-            .bytes;
-        decode_bake(&bytes).expect("decode")
-    });
+    let sky = scene.suns_in_sky_bake().then(|| baked(&scene.sky()));
     let sky = sky
         .as_ref()
         .map(|b| Trees::full(&b.trees, b.header.codec()));
@@ -240,11 +244,7 @@ fn punctual_room_bspvt_per_pixel_matches_monte_carlo() {
     }
     let before = s.mesh.vertex_count();
     bspvt_bake::refine::refine_scene(&mut s).expect("refine");
-    let all: Vec<Light> = scene_lights(&s)
-        .expect("lights")
-        .into_iter()
-        .map(|l| l.0)
-        .collect();
+    let all = lights_of(&s);
     for (k, l) in all.iter().enumerate() {
         let ((p, v, u), _, _) = errors_with(&s, std::slice::from_ref(l), (72, 48), 64);
         println!("  light {k} alone: per pixel {p:.4}, per vertex {v:.4}, unshadowed {u:.4}");
@@ -304,11 +304,7 @@ fn a_bulbs_shadow_is_its_own_at_every_vertex() {
     s.suns.clear(); // the sun is shaded through the sky's bake, not this one
     assert_eq!(s.punctual.len(), 2, "the point light and the spot");
     bspvt_bake::refine::refine_scene(&mut s).expect("refine");
-    let bytes = Baker::new(&s)
-        .bake_all(&|_, _| {}, &AtomicBool::new(false))
-        .expect("bake")
-        .bytes;
-    let b = decode_bake(&bytes).expect("decode");
+    let b = baked(&s);
     let codec = b.header.codec();
     let mut stats = Vec::new();
     for light in &s.punctual {
@@ -465,11 +461,7 @@ fn canopy_umbra_does_not_leak() {
         .bytes;
     let b = decode_bake(&bytes).expect("decode");
     let trees = Trees::full(&b.trees, b.header.codec());
-    let lights: Vec<Light> = scene_lights(&s)
-        .expect("lights")
-        .into_iter()
-        .map(|l| l.0)
-        .collect();
+    let lights = lights_of(&s);
     let r = Renderer::new(&s, 96, 64);
     let (unshadowed, _) = r.ltc(&lights, Mode::Pixel);
     let occ = Occluder::new(&s.mesh, &mesh_triangles(&s.mesh));
@@ -536,13 +528,7 @@ fn checker_canopy_lets_half_the_light_through() {
         cut.warnings
     );
     assert!(cut.materials.iter().any(|m| m.cutout.is_some()));
-    let lights = |s: &Scene| -> Vec<Light> {
-        scene_lights(s)
-            .expect("lights")
-            .into_iter()
-            .map(|l| l.0)
-            .collect()
-    };
+    let lights = lights_of;
     let size = (96, 64);
     // Beneath the canopy: where the opaque board's Monte Carlo is below 2 % of the lit level.
     let lum = |p: &[f32; 3]| f64::from(p[0] + p[1] + p[2]) / 3.0;
@@ -599,16 +585,8 @@ fn checker_canopy_lets_half_the_light_through() {
 fn the_boards_underside_is_dark_per_vertex() {
     let mut s = Scene::from_mesh_path(&room("checker-canopy.gltf")).expect("checker canopy");
     bspvt_bake::refine::refine_scene(&mut s).expect("refine");
-    let lights: Vec<Light> = scene_lights(&s)
-        .expect("lights")
-        .into_iter()
-        .map(|l| l.0)
-        .collect();
-    let bytes = Baker::new(&s)
-        .bake_all(&|_, _| {}, &AtomicBool::new(false))
-        .expect("bake")
-        .bytes;
-    let b = decode_bake(&bytes).expect("decode");
+    let lights = lights_of(&s);
+    let b = baked(&s);
     let trees = Trees::full(&b.trees, b.header.codec());
     let leaves = s
         .materials
@@ -706,11 +684,7 @@ fn normal_mapped_floor_matches_monte_carlo() {
     let st = bspvt_bake::refine::refine_scene(&mut scene)
         .expect("refine")
         .expect("an asset given alone is refined");
-    let lights: Vec<Light> = scene_lights(&scene)
-        .expect("lights")
-        .into_iter()
-        .map(|l| l.0)
-        .collect();
+    let lights = lights_of(&scene);
     let size = (96, 64);
     let ((pixel_err, vertex_err, shadows), pixel, mc) = errors_with(&scene, &lights, size, 64);
 

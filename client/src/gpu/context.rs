@@ -44,6 +44,14 @@ impl Gpu {
             .map_err(|e| anyhow!("{e}"))
     }
 
+    /// The shared GPU, or `None` after printing why the test that asked is skipped.
+    #[cfg(test)]
+    pub(crate) fn shared_or_skip() -> Option<&'static Gpu> {
+        Gpu::shared()
+            .map_err(|e| eprintln!("SKIPPED: no GPU adapter ({e:#})"))
+            .ok()
+    }
+
     /// The adapter and device of [`bspvt_raytrace::gpu::GpuContext`] (the one the bake's GPU
     /// ray casting uses: high performance first, the adapter's own limits, since the trees of
     /// a large mesh exceed wgpu's defaults).

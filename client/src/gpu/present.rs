@@ -279,12 +279,8 @@ mod tests {
     /// negative, 1e30), for a frame uploaded from the CPU and one already on the GPU.
     #[test]
     fn the_gpu_shows_what_the_cpu_would() {
-        let gpu = match Gpu::shared() {
-            Ok(g) => g,
-            Err(e) => {
-                eprintln!("SKIPPED: no GPU adapter ({e:#})");
-                return;
-            }
+        let Some(gpu) = Gpu::shared_or_skip() else {
+            return;
         };
         let (w, h) = (37u32, 23u32);
         let stiff = [

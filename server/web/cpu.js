@@ -258,7 +258,7 @@ export function shadeVertex(scene, trees, v, record, count, eye, shadowed, behin
   const p = [V[16 * v], V[16 * v + 1], V[16 * v + 2]];
   const n0 = [V[16 * v + 4], V[16 * v + 5], V[16 * v + 6]];
   const nl = len(n0);
-  // Seen from behind (seenFromBehind): shaded on that side, where it has no trees.
+  // Seen from behind (vertexSides): shaded on that side, where it has no trees.
   const n = scale(nl > 0 && Number.isFinite(nl) ? scale(n0, 1 / nl) : [0, 1, 0], behind ? -1 : 1);
   const albedo = [V[16 * v + 8], V[16 * v + 9], V[16 * v + 10]];
   const alpha = V[16 * v + 11];
@@ -317,39 +317,6 @@ export function shadeVertex(scene, trees, v, record, count, eye, shadowed, behin
     }
   }
   return shade(sd, ss);
-}
-
-/**
- * The vertices of the triangles that lie in front of the camera and overlap the frame (a
- * superset of those the frame interpolates).
- */
-export function verticesSeen(scene, view) {
-  const { width: w, height: h } = view;
-  const V = scene.verts;
-  const T = scene.tris;
-  const aspect = w / h;
-  const inFront = new Int8Array(scene.verts.length / 16);
-  const sx = new Float64Array(inFront.length);
-  const sy = new Float64Array(inFront.length);
-  for (let v = 0; v < inFront.length; v++) {
-    const d = sub([V[16 * v], V[16 * v + 1], V[16 * v + 2]], view.eye);
-    const z = dot(d, view.forward);
-    inFront[v] = z > 1e-6 ? 1 : 0;
-    sx[v] = dot(d, view.right) / (z * view.tanHalf * aspect);
-    sy[v] = dot(d, view.up) / (z * view.tanHalf);
-  }
-  const seen = new Uint8Array(inFront.length);
-  for (let t = 0; t < scene.triangles; t++) {
-    const ids = [T[4 * t], T[4 * t + 1], T[4 * t + 2]];
-    if (!ids.every((v) => inFront[v])) continue;
-    const xs = ids.map((v) => sx[v]);
-    const ys = ids.map((v) => sy[v]);
-    if (Math.max(...xs) < -1 || Math.min(...xs) > 1 || Math.max(...ys) < -1 || Math.min(...ys) > 1) continue;
-    for (const v of ids) seen[v] = 1;
-  }
-  const out = [];
-  for (let v = 0; v < seen.length; v++) if (seen[v]) out.push(v);
-  return out;
 }
 
 /**
@@ -414,16 +381,17 @@ export function visibilityBuffer(scene, view) {
 }
 
 /**
- * Per vertex, whether the camera sees it from behind (GBuffer::vertices_seen_from_behind,
- * sides.wgsl): every pixel of `vis` votes for its triangle's corners, for the back where a
- * corner's normal points away from the face the eye sees; a vertex is behind where the back
- * has more votes.
+ * The vertices the frame interpolates (corners of the triangles in `vis`) and, per vertex,
+ * whether the camera sees it from behind (GBuffer::vertex_sides, sides.wgsl): every pixel of
+ * `vis` votes for its triangle's corners, for the back where a corner's normal points away
+ * from the face the eye sees; a vertex is behind where the back has more votes.
  */
-export function seenFromBehind(scene, eye, vis) {
+export function vertexSides(scene, eye, vis) {
   const V = scene.verts;
   const T = scene.tris;
   const pixels = new Int32Array(scene.triangles);
   for (const t of vis.tri) if (t >= 0) pixels[t] += 1;
+  const seen = new Uint8Array(V.length / 16);
   const votes = new Int32Array(V.length / 16);
   for (let t = 0; t < scene.triangles; t++) {
     if (!pixels[t]) continue;
@@ -432,12 +400,15 @@ export function seenFromBehind(scene, eye, vis) {
     let g = cross(sub(p[1], p[0]), sub(p[2], p[0]));
     if (dot(g, sub(eye, p[0])) < 0) g = scale(g, -1);
     for (const v of ids) {
+      seen[v] = 1;
       const d = dot([V[16 * v + 4], V[16 * v + 5], V[16 * v + 6]], g);
       if (d < 0) votes[v] += pixels[t];
       else if (d > 0) votes[v] -= pixels[t];
     }
   }
-  return Uint8Array.from(votes, (x) => (x > 0 ? 1 : 0));
+  const visible = [];
+  for (let v = 0; v < seen.length; v++) if (seen[v]) visible.push(v);
+  return { visible, behind: Uint8Array.from(votes, (x) => (x > 0 ? 1 : 0)) };
 }
 
 /** The frame per vertex: the vertices' colours (linear RGB, 3 per vertex) interpolated at `vis`. */

@@ -6,7 +6,7 @@
 // same frame per vertex. Every URL is relative to this module, so it works behind a path
 // prefix.
 
-import { interpolate, seenFromBehind, shadeVertex, toneMap, verticesSeen, visibilityBuffer } from './cpu.js';
+import { interpolate, shadeVertex, toneMap, vertexSides, visibilityBuffer } from './cpu.js';
 
 const root = new URL('../', import.meta.url);
 const api = (path) => new URL(path, root).href;
@@ -673,9 +673,8 @@ class CpuViewer extends Frames {
   async draw() {
     this.scene.verts = this.vertexRecords().records;
     const colour = new Float64Array(this.n * 3);
-    const seen = verticesSeen(this.scene, this.view);
     const vis = visibilityBuffer(this.scene, this.view);
-    const behind = seenFromBehind(this.scene, this.view.eye, vis);
+    const { visible: seen, behind } = vertexSides(this.scene, this.view.eye, vis);
     const lamps = this.doc.lights.length;
     for (let k = 0; k < lamps; k++) {
       const { words, count } = this.lightRecord(k);

@@ -299,7 +299,7 @@ fn the_browser_viewer_matches_bspvt_render_and_moves_its_light() {
 
 /// The canopy (`assets/rooms/canopy.gltf`) from its own camera, which sees the board's
 /// underside at the top of the frame: per vertex, on WebGPU (`sides.wgsl`) and on the CPU path
-/// (cpu.js `seenFromBehind`), the viewer shades each vertex on the side the camera sees, as
+/// (cpu.js `vertexSides`), the viewer shades each vertex on the side the camera sees, as
 /// `bspvt render --mode vertex` does — the underside is dark, not its lit upper side's
 /// radiance. Compared over the frame and over its top quarter, where the board is.
 #[test]

@@ -227,38 +227,21 @@ impl GBuffer {
         })
     }
 
-    /// Marks the vertices of every triangle seen by some pixel.
-    pub(crate) fn visible_vertices(&self, mesh: &Mesh) -> Vec<bool> {
-        let mut seen_tri = vec![false; mesh.triangles.len()];
-        for &t in &self.tri {
-            if t != NONE {
-                seen_tri[t as usize] = true;
-            }
-        }
-        let mut out = vec![false; mesh.vertex_count()];
-        for (t, s) in mesh.triangles.iter().zip(seen_tri) {
-            if s {
-                for &v in t {
-                    out[v as usize] = true;
-                }
-            }
-        }
-        out
-    }
-
-    /// Per vertex, whether the camera sees it from behind: the side [`shading_normal`] turns
-    /// its normal to, voted by the pixels of the visible triangles that use it (a triangle
-    /// shows the back of vertex v when v's normal points away from the triangle's face the
-    /// eye sees). The underside of a two-sided sheet lit from above is one; a closed mesh's
-    /// silhouette vertex, whose normal turns slightly away from the eye over a face that
-    /// looks at it, is not. A vertex seen from both sides takes the side most pixels see.
-    pub(crate) fn vertices_seen_from_behind(&self, mesh: &Mesh, eye: DVec3) -> Vec<bool> {
+    /// Per vertex, whether some pixel sees it (a corner of a triangle in the G-buffer) and
+    /// whether the camera sees it from behind: the side [`shading_normal`] turns its normal
+    /// to, voted by the pixels of the visible triangles that use it (a triangle shows the back
+    /// of vertex v when v's normal points away from the triangle's face the eye sees). The
+    /// underside of a two-sided sheet lit from above is seen from behind; a closed mesh's
+    /// silhouette vertex, whose normal turns slightly away from the eye over a face that looks
+    /// at it, is not. A vertex seen from both sides takes the side most pixels see.
+    pub(crate) fn vertex_sides(&self, mesh: &Mesh, eye: DVec3) -> (Vec<bool>, Vec<bool>) {
         let mut pixels = vec![0u32; mesh.triangles.len()];
         for &t in &self.tri {
             if let Some(c) = pixels.get_mut(t as usize) {
                 *c += 1;
             }
         }
+        let mut seen = vec![false; mesh.vertex_count()];
         // Pixels that see vertex v's back minus those that see its front.
         let mut vote = vec![0i64; mesh.vertex_count()];
         for (idx, &c) in mesh.triangles.iter().zip(&pixels) {
@@ -271,6 +254,7 @@ impl GBuffer {
                 g = -g;
             }
             for &v in idx {
+                seen[v as usize] = true;
                 let n = mesh
                     .normals
                     .get(v as usize)
@@ -283,7 +267,7 @@ impl GBuffer {
                 }
             }
         }
-        vote.into_iter().map(|x| x > 0).collect()
+        (seen, vote.into_iter().map(|x| x > 0).collect())
     }
 
     /// Pixels that see a surface.
@@ -506,8 +490,7 @@ mod tests {
         for (y, behind) in [(-1.0, true), (1.0, false)] {
             let view = View::new(&camera(y), 48, 48);
             let g = GBuffer::rasterize(&sheet, &view);
-            let seen = g.visible_vertices(&sheet);
-            let side = g.vertices_seen_from_behind(&sheet, view.eye);
+            let (seen, side) = g.vertex_sides(&sheet, view.eye);
             assert!(
                 seen.iter().filter(|&&s| s).count() > 20,
                 "the sheet is seen"
@@ -519,10 +502,9 @@ mod tests {
         let sphere = builtin::icosphere(3, 0);
         let view = View::new(&camera(0.5), 64, 64);
         let g = GBuffer::rasterize(&sphere, &view);
-        let side = g.vertices_seen_from_behind(&sphere, view.eye);
+        let (seen, side) = g.vertex_sides(&sphere, view.eye);
         // Vertices seen whose normals turn away from the eye: the silhouette's.
-        let turned = g
-            .visible_vertices(&sphere)
+        let turned = seen
             .iter()
             .enumerate()
             .filter(|&(v, &s)| {

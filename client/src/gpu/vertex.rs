@@ -506,7 +506,7 @@ mod tests {
     }
 
     /// The browser's vote (`sides.wgsl`) marks the vertices the CPU's rule
-    /// (`GBuffer::vertices_seen_from_behind`) does, on the canopy's own camera (its board seen
+    /// (`GBuffer::vertex_sides`) does, on the canopy's own camera (its board seen
     /// from below: some vertices behind) and from above (none).
     #[test]
     fn the_gpu_vote_marks_the_cpus_vertices() {

@@ -103,7 +103,7 @@ pub struct Renderer<'a> {
     /// Vertices of the triangles the camera sees.
     pub(crate) visible_vertices: Vec<u32>,
     /// Per vertex, whether the camera sees it from behind
-    /// ([`GBuffer::vertices_seen_from_behind`]): shaded per vertex on that side, unshadowed.
+    /// ([`GBuffer::vertex_sides`]): shaded per vertex on that side, unshadowed.
     seen_from_behind: Vec<bool>,
     /// Material of each vertex (that of the first triangle using it).
     pub(crate) vertex_material: Vec<u32>,
@@ -692,13 +692,13 @@ impl<'a> Renderer<'a> {
 }
 
 /// The vertices of the triangles `g` sees, and per vertex whether it is seen from behind
-/// ([`GBuffer::vertices_seen_from_behind`]).
+/// ([`GBuffer::vertex_sides`]).
 fn seen(g: &GBuffer, mesh: &bspvt_proto::Mesh, eye: DVec3) -> (Vec<u32>, Vec<bool>) {
-    let visible = g
-        .visible_vertices(mesh)
+    let (seen, behind) = g.vertex_sides(mesh, eye);
+    let visible = seen
         .iter()
         .enumerate()
         .filter_map(|(v, &s)| s.then_some(v as u32))
         .collect();
-    (visible, g.vertices_seen_from_behind(mesh, eye))
+    (visible, behind)
 }

@@ -374,8 +374,7 @@ impl<'a> Fitter<'a> {
         out
     }
 
-    /// Emits block (i, j, size) as one cell when uniform, else its quadrants; returns the
-    /// block's uniform value (−1 for none).
+    /// Emits block (i, j, size) as one cell when uniform, else its quadrants.
     fn merge(
         &self,
         grid: &[i32],
@@ -384,17 +383,17 @@ impl<'a> Fitter<'a> {
         j: u16,
         size: u16,
         out: &mut Vec<Cell>,
-    ) -> i32 {
+    ) {
         let res = self.res as usize;
         let pixel = |out: &mut Vec<Cell>, i: u16, j: u16| {
             let k = grid[j as usize * res + i as usize];
             if k >= 0 {
                 out.push(self.grid_cell(i, j, 1, k));
             }
-            k
         };
         if size == 1 {
-            return pixel(out, i, j);
+            pixel(out, i, j);
+            return;
         }
         let h = size / 2;
         let quads = [(i, j), (i + h, j), (i, j + h), (i + h, j + h)];
@@ -404,16 +403,12 @@ impl<'a> Fitter<'a> {
         if let Some(v) = uniform.value(i, j, size) {
             if v >= 0 {
                 out.push(self.grid_cell(i, j, size, v));
-            } else if size == 2 {
-                for (qi, qj) in quads {
-                    pixel(out, qi, qj);
-                }
             } else {
                 for (qi, qj) in quads {
                     self.merge(grid, uniform, qi, qj, h, out);
                 }
             }
-            return v;
+            return;
         }
         // Other sizes (a face's resolution that is not a power of two): only even ones are
         // halved, and no block of another size is merged.
@@ -424,12 +419,11 @@ impl<'a> Fitter<'a> {
                     pixel(out, ii, jj);
                 }
             }
-            return -1;
+            return;
         }
         for (qi, qj) in quads {
             self.merge(grid, uniform, qi, qj, h, out);
         }
-        -1
     }
 
     /// The cell `[i, i+size) × [j, j+size)` of the merge grid's value `g` (a count, plus

@@ -1,5 +1,5 @@
 // Which side of each vertex the camera sees, for frames shaded per vertex where the G-buffer
-// is on the GPU (the browser viewer; the CPU's is GBuffer::vertices_seen_from_behind, the same
+// is on the GPU (the browser viewer; the CPU's is GBuffer::vertex_sides, the same
 // rule): every pixel of the visibility buffer votes for the three corners of its triangle, +1
 // where a corner's normal points away from the triangle's face the eye sees and −1 where it
 // points toward it; `mark` then sets each vertex record's position w to −1 where the votes say

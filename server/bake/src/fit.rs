@@ -403,6 +403,12 @@ impl<'a> Fitter<'a> {
         if let Some(v) = uniform.value(i, j, size) {
             if v >= 0 {
                 out.push(self.grid_cell(i, j, size, v));
+            } else if size == 2 {
+                // The quadrants are pixels: emitted here, without four more calls (the hot
+                // path of a noisy face).
+                for (qi, qj) in quads {
+                    pixel(out, qi, qj);
+                }
             } else {
                 for (qi, qj) in quads {
                     self.merge(grid, uniform, qi, qj, h, out);

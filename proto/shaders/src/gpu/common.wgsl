@@ -291,6 +291,60 @@ const LIGHT_SUN: f32 = 3.0;
 // light::ROUND_SIDES: a sphere or a disk is shaded as this regular spherical polygon.
 const ROUND_SIDES: u32 = 12u;
 
+// sin, cos, tan and atan with a small relative error at small arguments. Vulkan lets a
+// device's sin and cos be off by 2⁻¹¹ absolute and its atan by 4096 ULP; an NVIDIA H200's sin
+// is off by ~2⁻²¹ absolute, which is percents of sin x at x ~ 1e-5 (a sun's half-angle is
+// 4.6e-3, the 12th of its solid angle 5.6e-6), and the round polygons' solid angle goes as the
+// square of such angles. Below 1/4 (atan: 1/10) their Taylor series, to the first term below
+// f32's rounding (x⁹/9! < 1e-11, y¹¹/11 < 1e-12, relative).
+fn sin_rel(x: f32) -> f32 {
+    if abs(x) < 0.25 {
+        let x2 = x * x;
+        return x * (1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0 * (1.0 - x2 / 72.0))));
+    }
+    return sin(x);
+}
+
+// cos x = 1 − 2 sin²(x/2): exact to f32's rounding of 1 near 0.
+fn cos_rel(x: f32) -> f32 {
+    if abs(x) < 0.5 {
+        let s = sin_rel(0.5 * x);
+        return 1.0 - 2.0 * s * s;
+    }
+    return cos(x);
+}
+
+fn tan_rel(x: f32) -> f32 {
+    if abs(x) < 0.25 {
+        return sin_rel(x) / cos_rel(x);
+    }
+    return tan(x);
+}
+
+// atan y = 2 atan(y / (1 + √(1 + y²))), at most three times from [0, 1] (below 0.1 then),
+// and π/2 − atan(1/y) above 1; lavapipe's atan is off by 1.5e-5 relative near 0.1.
+fn atan_rel(y: f32) -> f32 {
+    let inv = abs(y) > 1.0;
+    var a = select(abs(y), 1.0 / abs(y), inv);
+    var k = 1.0;
+    if a >= 0.1 {
+        a = a / (1.0 + sqrt(1.0 + a * a));
+        k = 2.0;
+    }
+    if a >= 0.1 {
+        a = a / (1.0 + sqrt(1.0 + a * a));
+        k = 4.0;
+    }
+    if a >= 0.1 {
+        a = a / (1.0 + sqrt(1.0 + a * a));
+        k = 8.0;
+    }
+    let a2 = a * a;
+    var r = k * a * (1.0 - a2 * (1.0 / 3.0 - a2 * (1.0 / 5.0 - a2 * (1.0 / 7.0 - a2 / 9.0))));
+    r = select(r, 0.5 * PI - r, inv);
+    return select(r, -r, y < 0.0);
+}
+
 fn light_vertex(i: u32) -> vec3f {
     return light_word(i).xyz;
 }
@@ -303,15 +357,15 @@ fn light_vertex(i: u32) -> vec3f {
 fn round_directions(axis: vec3f, sin_half: f32) -> bool {
     let c = 2.0 * PI / f32(ROUND_SIDES);
     let omega = 4.0 * PI * sin_half * sin_half;
-    let big_t = tan(0.5 * omega / f32(ROUND_SIDES));
+    let big_t = tan_rel(0.5 * omega / f32(ROUND_SIDES));
     let t2 = big_t / (sin(c) - big_t * cos(c));
     let al = length(axis);
     if !(t2 > 0.0) || !finite(t2) || !(al > 0.0) || !finite(al) {
         return false;
     }
-    let beta = 2.0 * atan(sqrt(t2));
-    let sb = sin(beta);
-    let cb = cos(beta);
+    let beta = 2.0 * atan_rel(sqrt(t2));
+    let sb = sin_rel(beta);
+    let cb = cos_rel(beta);
     let a = axis / al;
     // glam's any_orthonormal_pair (its signum: the sign bit), so that the polygon's corners
     // are where the CPU puts them.
@@ -333,7 +387,7 @@ fn round_directions(axis: vec3f, sin_half: f32) -> bool {
 fn round_light(p: vec3f) -> bool {
     let w0 = light_word(0u);
     if light_normal().w == LIGHT_SUN {
-        return round_directions(w0.xyz, sin(0.5 * w0.w));
+        return round_directions(w0.xyz, sin_rel(0.5 * w0.w));
     }
     let to = w0.xyz - p;
     let d = length(to);

@@ -68,6 +68,20 @@ pub struct Row {
     /// GPU: a frame as the window presents it (shading, raster, tone mapping and the
     /// overlay into an 8-bit target; no read-back), waited for, ms.
     pub gpu_present_ms: f64,
+    /// The presented frame's parts, ms (medians): the CPU recording and submitting the
+    /// frame's passes, the CPU uploading the overlay and recording the composite, and the
+    /// wait for the GPU after both.
+    pub present_cpu_frame_ms: f64,
+    /// See `present_cpu_frame_ms`.
+    pub present_cpu_composite_ms: f64,
+    /// See `present_cpu_frame_ms`.
+    pub present_wait_ms: f64,
+    /// GPU time of each pass of the presented frame (timestamps; `shade`, `raster`,
+    /// `resolve`, `composite`), ms (medians); empty where the device has no timestamps.
+    pub gpu_pass_ms: Vec<(String, f64)>,
+    /// The first frame of the configuration (read back): the scene's and trees' uploads,
+    /// the records, pipelines not yet made, ms.
+    pub first_frame_ms: f64,
     /// CPU: per-vertex shading of every visible vertex, µs.
     pub cpu_shade_us: f64,
     /// CPU: a whole frame, ms.
@@ -184,19 +198,30 @@ pub fn run(a: &BenchGpuArgs) -> Result<Report> {
                 };
                 let mut frames = GpuFrames::new(gpu, &scene, a.samples)?;
                 let mut compositor = Compositor::new(gpu, Offscreen::FORMAT)?;
+                let timed = frames.time_passes(gpu) & compositor.time_passes(gpu);
                 let target = Offscreen::new(gpu, w, h)?;
                 let overlay = vec![0u32; (w * h) as usize];
                 for mode in [Mode::Vertex, Mode::Pixel] {
                     // Warm-up: uploads, pipelines.
+                    let t = Instant::now();
                     frames.frame(gpu, &r, &pose(0), Some(&all), mode)?;
+                    let first_frame_ms = t.elapsed().as_secs_f64() * 1e3;
+                    // The presented frame, its CPU parts (ms): recording the frame, the
+                    // composite, the wait.
                     let present = |frames: &mut GpuFrames, c: &mut Compositor, k: usize| {
+                        let t = Instant::now();
                         let (img, _) = frames.frame_on_gpu(gpu, &r, &pose(k), Some(&all), mode)?;
+                        let t1 = Instant::now();
                         c.draw(gpu, Pixels::Gpu(&img), 1.0, &overlay, &target.view())?;
-                        target.finish(gpu)
+                        let t2 = Instant::now();
+                        target.finish(gpu)?;
+                        let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
+                        anyhow::Ok([ms(t, t1), ms(t1, t2), ms(t2, Instant::now())])
                     };
                     present(&mut frames, &mut compositor, 0)?;
                     let (mut gs, mut gf, mut cs, mut cf) = (vec![], vec![], vec![], vec![]);
-                    let mut gp = vec![];
+                    let (mut gp, mut parts) = (vec![], [vec![], vec![], vec![]]);
+                    let mut passes: Vec<(&'static str, Vec<f64>)> = Vec::new();
                     for k in 0..a.frames {
                         let t = Instant::now();
                         frames.shade_only(gpu, &r, &pose(k + 1), Some(&all))?;
@@ -205,9 +230,23 @@ pub fn run(a: &BenchGpuArgs) -> Result<Report> {
                         frames.frame(gpu, &r, &pose(k + 1), Some(&all), mode)?;
                         gf.push(t.elapsed().as_secs_f64() * 1e3);
                         let t = Instant::now();
-                        present(&mut frames, &mut compositor, k + 1)?;
+                        let p = present(&mut frames, &mut compositor, k + 1)?;
                         gp.push(t.elapsed().as_secs_f64() * 1e3);
+                        for (v, x) in parts.iter_mut().zip(p) {
+                            v.push(x);
+                        }
+                        if timed {
+                            let mut times = frames.pass_times(gpu)?;
+                            times.extend(compositor.pass_times(gpu)?);
+                            for (label, ms) in times {
+                                match passes.iter_mut().find(|(l, _)| *l == label) {
+                                    Some((_, v)) => v.push(ms),
+                                    None => passes.push((label, vec![ms])),
+                                }
+                            }
+                        }
                     }
+                    let [pf, pc, pw] = parts.map(median);
                     for k in 0..a.cpu_frames {
                         let t = Instant::now();
                         let _ = r.shade_vertices(std::slice::from_ref(&pose(k + 1)), &all, false);
@@ -225,11 +264,24 @@ pub fn run(a: &BenchGpuArgs) -> Result<Report> {
                         gpu_shade_us: median(gs),
                         gpu_frame_ms: median(gf),
                         gpu_present_ms: median(gp),
+                        present_cpu_frame_ms: pf,
+                        present_cpu_composite_ms: pc,
+                        present_wait_ms: pw,
+                        gpu_pass_ms: passes
+                            .into_iter()
+                            .map(|(l, v)| (l.to_string(), median(v)))
+                            .collect(),
+                        first_frame_ms,
                         cpu_shade_us: median(cs),
                         cpu_frame_ms: median(cf),
                     };
+                    let passes: Vec<String> = row
+                        .gpu_pass_ms
+                        .iter()
+                        .map(|(l, ms)| format!("{l} {ms:.3}"))
+                        .collect();
                     eprintln!(
-                        "{} ({} vertices, {} visible) {} {}: GPU shade {:.0} µs, frame {:.1} ms read back, {:.1} ms presented | CPU shade {:.0} µs, frame {:.1} ms",
+                        "{} ({} vertices, {} visible) {} {}: GPU shade {:.0} µs, frame {:.1} ms read back, {:.1} ms presented (CPU: frame {:.2}, composite {:.2}, wait {:.2} ms; GPU passes ms: {}); first frame {:.1} ms | CPU shade {:.0} µs, frame {:.1} ms",
                         row.mesh,
                         row.vertices,
                         row.visible,
@@ -238,6 +290,15 @@ pub fn run(a: &BenchGpuArgs) -> Result<Report> {
                         row.gpu_shade_us,
                         row.gpu_frame_ms,
                         row.gpu_present_ms,
+                        row.present_cpu_frame_ms,
+                        row.present_cpu_composite_ms,
+                        row.present_wait_ms,
+                        if passes.is_empty() {
+                            "no timestamps".to_string()
+                        } else {
+                            passes.join(", ")
+                        },
+                        row.first_frame_ms,
                         row.cpu_shade_us,
                         row.cpu_frame_ms
                     );

@@ -34,6 +34,8 @@ pub struct GBuffer {
     pub(crate) bary: Vec<[f32; 2]>,
     /// The scene's normal maps, which bend every surface's shading normal.
     pub(crate) normal_maps: Option<Arc<NormalMaps>>,
+    /// Pixels with a triangle (counted once: frames report it).
+    covered: usize,
 }
 
 /// A near-clipped triangle in screen space: its index, vertices (pixels, 1/z) and the pixel
@@ -171,6 +173,7 @@ impl GBuffer {
         GBuffer {
             width: w as u32,
             height: h as u32,
+            covered: tri.iter().filter(|&&t| t != NONE).count(),
             tri,
             bary,
             normal_maps: None,
@@ -272,7 +275,7 @@ impl GBuffer {
 
     /// Pixels that see a surface.
     pub(crate) fn covered(&self) -> usize {
-        self.tri.iter().filter(|&&t| t != NONE).count()
+        self.covered
     }
 }
 

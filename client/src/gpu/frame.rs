@@ -16,6 +16,7 @@ use bspvt_shaders::gpu::{materials, wgsl};
 
 use super::context::{Gpu, buffer_entries};
 use super::sky::GpuSky;
+use super::timing::PassClock;
 use super::vertex::{LightRecord, VertexShader, light_record, ltc_buffer, supports};
 use crate::frame::image::Image;
 use crate::light::Light;
@@ -83,6 +84,8 @@ pub struct GpuFrames {
     target: Option<Target>,
     /// The sky's cells and terms (made on the first sky frame).
     sky: Option<GpuSky>,
+    /// Timestamps between the passes, when asked for ([`GpuFrames::time_passes`]).
+    clock: Option<PassClock>,
 }
 
 /// The raster and resolve pipelines for `samples` per pixel, compiled once per process.
@@ -225,7 +228,26 @@ impl GpuFrames {
             samples,
             target: None,
             sky: None,
+            clock: None,
         })
+    }
+
+    /// Times each pass of the frames that follow on the GPU (`bench-gpu`): false where the
+    /// device cannot write timestamps between passes.
+    pub fn time_passes(&mut self, gpu: &Gpu) -> bool {
+        if self.clock.is_none() {
+            self.clock = PassClock::new(gpu);
+        }
+        self.clock.is_some()
+    }
+
+    /// The last frame's GPU time per pass (`shade`, `raster`, `resolve`; `sky` for the sky's),
+    /// ms, after [`GpuFrames::time_passes`]; waits for the frame.
+    pub fn pass_times(&self, gpu: &Gpu) -> Result<Vec<(&'static str, f64)>> {
+        match &self.clock {
+            Some(c) => c.read(gpu),
+            None => Ok(Vec::new()),
+        }
     }
 
     /// Vertices whose trees are on the GPU.
@@ -315,6 +337,9 @@ impl GpuFrames {
         let (mut enc, counts) = self.encode(gpu, renderer, light, trees, mode)?;
         let t = self.made_target()?;
         enc.copy_buffer_to_buffer(&t.image, 0, &t.readback, 0, t.image.size());
+        if let Some(c) = &self.clock {
+            c.resolve(&mut enc);
+        }
         gpu.queue.submit([enc.finish()]);
         let bytes = gpu.map_read(&t.readback)?;
         Ok((image_from_bytes(t.size, &bytes), counts))
@@ -331,7 +356,10 @@ impl GpuFrames {
         mode: Mode,
     ) -> Result<(GpuImage, FrameCounts)> {
         let _queue = gpu.exclusive();
-        let (enc, counts) = self.encode(gpu, renderer, light, trees, mode)?;
+        let (mut enc, counts) = self.encode(gpu, renderer, light, trees, mode)?;
+        if let Some(c) = &self.clock {
+            c.resolve(&mut enc);
+        }
         gpu.queue.submit([enc.finish()]);
         let t = self.made_target()?;
         Ok((
@@ -364,8 +392,14 @@ impl GpuFrames {
     ) -> Result<(wgpu::CommandEncoder, FrameCounts)> {
         supports(light)?;
         let mut enc = gpu.device.create_command_encoder(&Default::default());
+        if let Some(c) = &mut self.clock {
+            c.start(&mut enc);
+        }
         self.shader
             .shade_renderer(gpu, &mut enc, renderer, &mut self.key, light, trees)?;
+        if let Some(c) = &mut self.clock {
+            c.mark(&mut enc, "shade");
+        }
         let counts = self.draw(gpu, &mut enc, renderer, light_record(light), mode);
         Ok((enc, counts))
     }
@@ -384,6 +418,9 @@ impl GpuFrames {
     ) -> Result<(Image, FrameCounts)> {
         let _queue = gpu.exclusive();
         let mut enc = gpu.device.create_command_encoder(&Default::default());
+        if let Some(c) = &mut self.clock {
+            c.start(&mut enc);
+        }
         self.shader.sync_renderer(gpu, renderer, &mut self.key);
         let sky = match &mut self.sky {
             Some(s) => s,
@@ -399,10 +436,16 @@ impl GpuFrames {
             (cells, radiance),
             trees,
         )?;
+        if let Some(c) = &mut self.clock {
+            c.mark(&mut enc, "sky");
+        }
         let none = (bytemuck::Zeroable::zeroed(), 0);
         let counts = self.draw(gpu, &mut enc, renderer, none, Mode::Vertex);
         let t = self.made_target()?;
         enc.copy_buffer_to_buffer(&t.image, 0, &t.readback, 0, t.image.size());
+        if let Some(c) = &self.clock {
+            c.resolve(&mut enc);
+        }
         gpu.queue.submit([enc.finish()]);
         let bytes = gpu.map_read(&t.readback)?;
         Ok((image_from_bytes(t.size, &bytes), counts))
@@ -469,6 +512,8 @@ impl GpuFrames {
             ],
         );
         let triangles = self.triangles;
+        // Out while the target is borrowed; back after the last pass.
+        let mut clock = self.clock.take();
         let (raster, resolve) = (self.raster.clone(), self.resolve.clone());
         let buffers = [
             &self.resolve_params,
@@ -511,6 +556,9 @@ impl GpuFrames {
             pass.set_bind_group(0, &raster_group, &[]);
             pass.draw(0..triangles * 3, 0..1);
         }
+        if let Some(c) = &mut clock {
+            c.mark(enc, "raster");
+        }
         let layout = resolve.get_bind_group_layout(0);
         let buffers: Vec<&wgpu::Buffer> = buffers.iter().chain([&t.image]).collect();
         let mut entries = buffer_entries(&buffers);
@@ -541,6 +589,10 @@ impl GpuFrames {
             pass.set_bind_group(0, &group, &[]);
             pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
         }
+        if let Some(c) = &mut clock {
+            c.mark(enc, "resolve");
+        }
+        self.clock = clock;
         FrameCounts {
             vertices_shaded: renderer.visible_vertices.len(),
             pixels_shaded: if mode == Mode::Pixel {

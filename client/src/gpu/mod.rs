@@ -11,6 +11,7 @@ pub(crate) mod penumbra_blur;
 pub mod present;
 pub mod shadow_rays;
 pub(crate) mod sky;
+pub(crate) mod timing;
 pub(crate) mod trees;
 pub mod vertex;
 

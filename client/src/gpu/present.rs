@@ -8,6 +8,7 @@ use anyhow::{Result, bail};
 
 use super::context::Gpu;
 use super::frame::GpuImage;
+use super::timing::PassClock;
 use crate::frame::image::Image;
 
 /// The frame to present.
@@ -44,6 +45,8 @@ pub struct Compositor {
     overlay: wgpu::Buffer,
     /// A CPU frame's radiance, uploaded (grown as needed).
     upload: wgpu::Buffer,
+    /// Timestamps around the pass, when asked for ([`Compositor::time_passes`]).
+    clock: Option<PassClock>,
 }
 
 impl Compositor {
@@ -99,6 +102,7 @@ impl Compositor {
             ),
             overlay: buffer("overlay", 16, U::STORAGE),
             upload: buffer("uploaded frame", 16, U::STORAGE),
+            clock: None,
         })
     }
 
@@ -151,6 +155,9 @@ impl Compositor {
             &[&self.params, &radiance, &self.overlay],
         );
         let mut enc = gpu.device.create_command_encoder(&Default::default());
+        if let Some(c) = &mut self.clock {
+            c.start(&mut enc);
+        }
         {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("bspvt present"),
@@ -169,8 +176,30 @@ impl Compositor {
             pass.set_bind_group(0, &group, &[]);
             pass.draw(0..3, 0..1);
         }
+        if let Some(c) = &mut self.clock {
+            c.mark(&mut enc, "composite");
+            c.resolve(&mut enc);
+        }
         gpu.queue.submit([enc.finish()]);
         Ok(())
+    }
+
+    /// Times the pass of the draws that follow on the GPU (`bench-gpu`): false where the
+    /// device cannot write timestamps between passes.
+    pub fn time_passes(&mut self, gpu: &Gpu) -> bool {
+        if self.clock.is_none() {
+            self.clock = PassClock::new(gpu);
+        }
+        self.clock.is_some()
+    }
+
+    /// The last draw's GPU time (`composite`), ms, after [`Compositor::time_passes`]; waits
+    /// for it.
+    pub fn pass_times(&self, gpu: &Gpu) -> Result<Vec<(&'static str, f64)>> {
+        match &self.clock {
+            Some(c) => c.read(gpu),
+            None => Ok(Vec::new()),
+        }
     }
 }
 

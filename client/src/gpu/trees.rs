@@ -14,6 +14,8 @@ pub(crate) struct GpuTrees {
     /// (trees slice address, length) of what was uploaded: another slice starts over.
     source: (usize, usize),
     uploaded: Vec<bool>,
+    /// How many of `uploaded` are set.
+    uploaded_count: usize,
     roots_cpu: Vec<u32>,
     pub(crate) roots: wgpu::Buffer,
     pub(crate) nodes: wgpu::Buffer,
@@ -45,6 +47,7 @@ impl GpuTrees {
         GpuTrees {
             source: (0, 0),
             uploaded: vec![false; vertices],
+            uploaded_count: 0,
             roots_cpu,
             roots,
             nodes: storage(gpu, "tree nodes", 1 << 16),
@@ -57,7 +60,7 @@ impl GpuTrees {
 
     /// Vertices whose trees are on the GPU.
     pub(crate) fn uploaded(&self) -> usize {
-        self.uploaded.iter().filter(|&&b| b).count()
+        self.uploaded_count
     }
 
     /// Uploads the trees of the vertices that have them and were not uploaded yet (all of
@@ -75,6 +78,10 @@ impl GpuTrees {
             self.set_codec(gpu, &t.codec);
         }
         let n = self.uploaded.len().min(t.trees.len());
+        // Every tree there: nothing to look for (a frame does no work per vertex).
+        if self.uploaded_count == n {
+            return;
+        }
         let new: Vec<u32> = (0..n as u32)
             .filter(|&v| !self.uploaded[v as usize] && t.has(v))
             .collect();
@@ -90,6 +97,7 @@ impl GpuTrees {
         for &v in new {
             let roots = encode_vertex(&trees[v as usize], self.node_len, &mut words);
             self.roots_cpu[v as usize * FACES..][..FACES].copy_from_slice(&roots);
+            self.uploaded_count += usize::from(!self.uploaded[v as usize]);
             self.uploaded[v as usize] = true;
         }
         self.reserve(gpu, self.node_len + words.len() as u64);
@@ -116,6 +124,7 @@ impl GpuTrees {
     fn reset(&mut self, gpu: &Gpu, source: (usize, usize)) {
         self.source = source;
         self.uploaded.iter_mut().for_each(|b| *b = false);
+        self.uploaded_count = 0;
         self.roots_cpu.iter_mut().for_each(|r| *r = NO_TREES);
         gpu.queue
             .write_buffer(&self.roots, 0, bytemuck::cast_slice(&self.roots_cpu));

@@ -144,8 +144,13 @@ impl GpuContext {
         }))
         .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
         let info = adapter.get_info();
+        // Timestamps between passes where the adapter has them (benchmarks' per-pass times;
+        // nothing writes one unless asked).
+        let timestamps =
+            wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
         let (device, queue) = block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("bspvt"),
+            required_features: adapter.features() & timestamps,
             required_limits: adapter.limits(),
             ..Default::default()
         }))

@@ -14,7 +14,7 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use bspvt_bake::cubemap::FacePixels;
-use bspvt_bake::gpu_cast::GpuContext;
+use bspvt_bake::gpu_cast::{FitOn, GpuContext};
 use bspvt_bake::{Baker, CastMode};
 use bspvt_proto::{BakeSettings, Scene};
 
@@ -191,6 +191,8 @@ fn gpu_equals_full_cpu_cast() {
     );
 }
 
+/// Whole GPU bakes write the CPU bake's bytes, with the trees fitted on the GPU and shared
+/// between the GPU and the pool by their measured rates (`FitOn`).
 #[test]
 fn gpu_bake_writes_the_cpu_bytes() {
     let Some(ctx) = GpuContext::for_test() else {
@@ -210,12 +212,19 @@ fn gpu_bake_writes_the_cpu_bytes() {
     for (label, b) in bakers {
         let none = AtomicBool::new(false);
         let cpu = b.bake_all(&|_, _| {}, &none).expect("CPU bake");
-        let caster = b.gpu_caster(ctx.clone()).expect("BVH on the GPU");
-        let gpu = b
-            .bake_all_gpu(&caster, &|_, _| {}, &none)
-            .expect("GPU bake");
-        assert_eq!(gpu.totals.vertices, cpu.totals.vertices, "{label}");
-        assert!(gpu.bytes == cpu.bytes, "{label}: GPU bake bytes differ");
+        let mut caster = b.gpu_caster(ctx.clone()).expect("BVH on the GPU");
+        // The trees fitted on the GPU, then shared between the GPU and the pool.
+        for fit_on in [FitOn::Gpu, FitOn::Shared] {
+            caster.set_fit_on(fit_on);
+            let gpu = b
+                .bake_all_gpu(&caster, &|_, _| {}, &none)
+                .expect("GPU bake");
+            assert_eq!(gpu.totals.vertices, cpu.totals.vertices, "{label}");
+            assert!(
+                gpu.bytes == cpu.bytes,
+                "{label}, {fit_on:?}: GPU bake bytes differ"
+            );
+        }
     }
 }
 

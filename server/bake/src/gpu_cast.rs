@@ -41,12 +41,86 @@ pub struct GpuCaster {
     /// The tree fit's pipeline ([`GpuFitter`]), built on the first GPU bake that uses it;
     /// `None` where the device refused it (the trees are then fitted on the CPU).
     fit: std::sync::OnceLock<Option<GpuFitter>>,
+    /// Where the trees are fitted.
+    fit_on: FitOn,
+    /// The GPU's and the pool's measured fit rates, for [`FitOn::Shared`].
+    rates: std::sync::Mutex<FitRates>,
+}
+
+/// Where a GPU bake fits its trees; every choice writes the same bytes (the GPU fit gives the
+/// CPU's trees to the bit).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FitOn {
+    /// The CPU pool alone (`BSPVT_GPU_FIT=0`; the default on a software adapter such as
+    /// lavapipe, whose "GPU" is the pool's own cores).
+    Cpu,
+    /// The GPU, the faces it leaves on the pool (`BSPVT_GPU_FIT=1`).
+    Gpu,
+    /// Both at once, each a share of a chunk's faces in proportion to its measured rate
+    /// (`BSPVT_GPU_FIT=shared`, the default on a hardware adapter): on an NVIDIA H200 the GPU
+    /// fit is about half as fast as 16 cores (docs/bake.md), so neither alone keeps both busy.
+    Shared,
+}
+
+impl FitOn {
+    /// `BSPVT_GPU_FIT`: `0` the CPU, `1` the GPU, `shared` both; unset (or anything else) the
+    /// default for the adapter (`software`: a CPU implementation of the API).
+    pub fn from_env(software: bool) -> FitOn {
+        match std::env::var("BSPVT_GPU_FIT").as_deref() {
+            Ok("0") => FitOn::Cpu,
+            Ok("1") => FitOn::Gpu,
+            Ok("shared") => FitOn::Shared,
+            _ if software => FitOn::Cpu,
+            _ => FitOn::Shared,
+        }
+    }
+}
+
+/// Faces fitted per second by the GPU and by the pool, smoothed over chunks (0: not yet).
+#[derive(Clone, Copy, Debug, Default)]
+struct FitRates {
+    gpu: f64,
+    cpu: f64,
+}
+
+impl FitRates {
+    /// The GPU's least share: its rate stays measured.
+    const FLOOR: f64 = 1.0 / 16.0;
+
+    /// How many of `n` faces the GPU takes: in proportion to the rates, the floor until
+    /// both are measured.
+    fn gpu_faces(&self, n: usize) -> usize {
+        let share = if self.gpu > 0.0 && self.cpu > 0.0 {
+            (self.gpu / (self.gpu + self.cpu)).max(Self::FLOOR)
+        } else {
+            Self::FLOOR
+        };
+        ((n as f64 * share).round() as usize).min(n)
+    }
+
+    /// Adds a chunk's measurement: `faces` fitted in `seconds` on each side.
+    fn update(&mut self, gpu: (usize, f64), cpu: (usize, f64)) {
+        let mix = |old: f64, (faces, s): (usize, f64)| {
+            if faces == 0 || s <= 0.0 {
+                return old;
+            }
+            let rate = faces as f64 / s;
+            if old > 0.0 { 0.5 * (old + rate) } else { rate }
+        };
+        self.gpu = mix(self.gpu, gpu);
+        self.cpu = mix(self.cpu, cpu);
+    }
 }
 
 impl GpuCaster {
-    /// The GPU tree fit, unless `BSPVT_GPU_FIT=0` or the device refused its pipeline.
+    /// Fits the trees on `fit_on` instead of what `BSPVT_GPU_FIT` says.
+    pub fn set_fit_on(&mut self, fit_on: FitOn) {
+        self.fit_on = fit_on;
+    }
+
+    /// The GPU tree fit, unless the fit is on the CPU or the device refused its pipeline.
     fn fitter(&self) -> Option<&GpuFitter> {
-        if std::env::var_os("BSPVT_GPU_FIT").is_some_and(|v| v == "0") {
+        if self.fit_on == FitOn::Cpu {
             return None;
         }
         self.fit
@@ -123,11 +197,14 @@ impl Baker {
             .collect();
         let pixels = (FACES as u32) * t.res * t.res;
         let table = occ.cube_table(&ctx, &dirs, pixels, t.samples, &stops)?;
+        let software = ctx.adapter.get_info().device_type == wgpu::DeviceType::Cpu;
         Ok(GpuCaster {
             ctx,
             occ,
             table,
             fit: std::sync::OnceLock::new(),
+            fit_on: FitOn::from_env(software),
+            rates: std::sync::Mutex::new(FitRates::default()),
         })
     }
 
@@ -270,12 +347,13 @@ impl Baker {
         Ok((frame, t))
     }
 
-    /// [`Baker::fit_chunk`] with the trees fitted on the GPU ([`GpuFitter`]: the CPU's trees
-    /// to the bit; the faces it leaves, and every face where the GPU fit does not apply
-    /// (`gpu_fit::supported`: faces above `MAX_GPU_RES`², another split search…, or
-    /// `BSPVT_GPU_FIT=0`) fitted on the
-    /// CPU, on the current rayon pool). `Totals::fit_seconds` is then the wall-clock seconds of
-    /// the GPU fit and the refits, not thread-seconds; the GPU's busy clock counts the fit's
+    /// [`Baker::fit_chunk`] with the trees fitted where [`GpuCaster::fit_on`] says: on the GPU
+    /// ([`GpuFitter`]: the CPU's trees to the bit), on the current rayon pool, or shared
+    /// between the two at once in proportion to their measured rates ([`FitRates`]). The faces
+    /// the GPU leaves, and every face where the GPU fit does not apply (`gpu_fit::supported`:
+    /// faces above `MAX_GPU_RES`², another split search…; a tightened tolerance or a sun's
+    /// protected pixels), are fitted on the pool. `Totals::fit_seconds` is then the wall-clock
+    /// seconds of the whole fit, not thread-seconds; the GPU's busy clock counts the fit's
     /// dispatches.
     fn fit_chunk_gpu(
         &self,
@@ -304,8 +382,46 @@ impl Baker {
                 visible: &p.visible,
             })
             .collect();
-        let (fits, refit) = gpu_fit.fit_or_refit(&fitter, &faces)?;
-        let mut fits = fits.into_iter();
+        // The GPU's share on a thread of its own (it waits on the device), the pool's at once.
+        let k = match gpu.fit_on {
+            FitOn::Shared => gpu
+                .rates
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .gpu_faces(faces.len()),
+            _ => faces.len(),
+        };
+        let (on_gpu_faces, on_cpu_faces) = faces.split_at(k);
+        let (gpu_fits, gpu_s, cpu_fits, cpu_s) = std::thread::scope(|s| {
+            let fitting = s.spawn(|| {
+                let t = Instant::now();
+                let fits = gpu_fit.fit(&fitter, on_gpu_faces);
+                (fits, t.elapsed().as_secs_f64())
+            });
+            let t = Instant::now();
+            let cpu: Vec<_> = on_cpu_faces
+                .par_iter()
+                .map(|f| fitter.fit(f.index, f.visible))
+                .collect();
+            let cpu_s = t.elapsed().as_secs_f64();
+            match fitting.join() {
+                Ok((fits, gpu_s)) => Ok((fits, gpu_s, cpu, cpu_s)),
+                Err(_) => Err(GpuError::Failed("the GPU fit's thread panicked".into())),
+            }
+        })?;
+        gpu.rates
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .update((k, gpu_s), (faces.len() - k, cpu_s));
+        // What the GPU left, fitted on the pool.
+        let gpu_fits = gpu_fits?;
+        let refit = gpu_fits.iter().filter(|f| f.is_err()).count();
+        let gpu_fits: Vec<_> = gpu_fits
+            .into_par_iter()
+            .zip(on_gpu_faces)
+            .map(|(fit, face)| fit.unwrap_or_else(|_| fitter.fit(face.index, face.visible)))
+            .collect();
+        let mut fits = gpu_fits.into_iter().chain(cpu_fits);
         let mut totals = Totals::default();
         let mut trees = Vec::with_capacity(maps.len());
         for m in maps {
@@ -339,8 +455,10 @@ impl Baker {
         totals.fit_seconds = t0.elapsed().as_secs_f64();
         if std::env::var_os("BSPVT_GPU_TIMING").is_some() {
             eprintln!(
-                "gpu chunk {c}: {} faces fitted on the GPU, {refit} of them again on the CPU, in {:.2} ms",
-                faces.len(),
+                "gpu chunk {c}: {k} faces fitted on the GPU in {:.2} ms, {refit} of them again on the CPU, {} on the CPU in {:.2} ms, in {:.2} ms",
+                gpu_s * 1e3,
+                faces.len() - k,
+                cpu_s * 1e3,
                 totals.fit_seconds * 1e3
             );
         }

@@ -71,8 +71,13 @@ const HEADER: usize = 8;
 /// Bit of a leaf node's first word.
 const LEAF: u32 = 0x8000_0000;
 
-/// Faces' work and output buffers per dispatch, at most (bytes).
-const DISPATCH_BYTES: u64 = 256 << 20;
+/// Faces' work and output buffers per dispatch, at most (bytes): a chunk's faces (~4,400 of
+/// 88 KiB at 64²) in one.
+const DISPATCH_BYTES: u64 = 1 << 30;
+
+/// Words of each face's output read back at first ([`fit_gather.wgsl`]): its header and 128
+/// nodes. A face with more is read again whole.
+const GATHER_WORDS: u32 = HEADER as u32 + 2 * 128;
 
 /// Why the GPU left a face to the CPU.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -226,7 +231,60 @@ pub struct GpuFitter {
     ctx: Arc<GpuContext>,
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
+    gather: wgpu::ComputePipeline,
+    gather_layout: wgpu::BindGroupLayout,
+    /// The dispatches' buffers, kept from one to the next (one dispatch at a time).
+    buffers: std::sync::Mutex<Option<FitBuffers>>,
     wrong_ties: bool,
+}
+
+/// A dispatch's device buffers for up to `faces` faces of one [`Layout`], reused while they
+/// fit: new allocations of hundreds of MiB a chunk, zeroed by the driver, cost more than the
+/// fit.
+struct FitBuffers {
+    faces: usize,
+    words: (u32, u32, u32),
+    grid: wgpu::Buffer,
+    work: wgpu::Buffer,
+    result: wgpu::Buffer,
+    dense: wgpu::Buffer,
+    readback: wgpu::Buffer,
+}
+
+impl FitBuffers {
+    fn new(device: &wgpu::Device, layout: &Layout, faces: usize) -> FitBuffers {
+        use wgpu::BufferUsages as U;
+        let buffer = |label: &str, words: u32, usage: U| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: faces as u64 * u64::from(words) * 4,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        FitBuffers {
+            faces,
+            words: (layout.grid_words, layout.work_words, layout.out_words),
+            grid: buffer("fit grids", layout.grid_words, U::STORAGE | U::COPY_DST),
+            work: buffer("fit work", layout.work_words, U::STORAGE | U::COPY_DST),
+            result: buffer(
+                "fit trees",
+                layout.out_words,
+                U::STORAGE | U::COPY_SRC | U::COPY_DST,
+            ),
+            dense: buffer("fit trees, packed", GATHER_WORDS, U::STORAGE | U::COPY_SRC),
+            readback: buffer(
+                "fit trees readback",
+                GATHER_WORDS,
+                U::MAP_READ | U::COPY_DST,
+            ),
+        }
+    }
+
+    fn fits(&self, layout: &Layout, faces: usize) -> bool {
+        self.faces >= faces
+            && self.words == (layout.grid_words, layout.work_words, layout.out_words)
+    }
 }
 
 impl GpuFitter {
@@ -237,11 +295,19 @@ impl GpuFitter {
         // The parameters, tables and grids read; the work area and the trees written.
         let read_only = [true, true, true, true, true, false, false];
         let (pipeline, layout) = ctx.storage_pipeline("fit", include_str!("fit.wgsl"), &read_only);
+        let (gather, gather_layout) = ctx.storage_pipeline(
+            "fit gather",
+            include_str!("fit_gather.wgsl"),
+            &[true, true, false],
+        );
         scope_result(validation)?;
         Ok(GpuFitter {
             ctx,
             pipeline,
             layout,
+            gather,
+            gather_layout,
+            buffers: std::sync::Mutex::new(None),
             wrong_ties: false,
         })
     }
@@ -364,30 +430,44 @@ impl GpuFitter {
         let proj = input("fit projections", bytemuck::cast_slice(&tables.proj));
         let offs = input("fit offsets", bytemuck::cast_slice(&tables.offsets));
         let thresh = input("fit thresholds", bytemuck::cast_slice(&tables.thresholds));
-        let grid = input("fit grids", &grid);
-        let work = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("fit work"),
-            size: faces.len() as u64 * layout.work_words as u64 * 4,
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        });
-        let bytes = faces.len() as u64 * layout.out_words as u64 * 4;
-        let result = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("fit trees"),
-            size: bytes,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let readback = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("fit trees readback"),
-            size: bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let buffers = [&params_buf, &proj, &offs, &thresh, &grid, &work, &result];
+        let gather_params = input(
+            "fit gather params",
+            bytemuck::cast_slice(&[faces.len() as u32, layout.out_words, GATHER_WORDS, 0]),
+        );
+        let mut kept = self
+            .buffers
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if !kept.as_ref().is_some_and(|b| b.fits(layout, faces.len())) {
+            *kept = None;
+            *kept = Some(FitBuffers::new(device, layout, faces.len()));
+        }
+        let Some(b) = kept.as_ref() else {
+            return Err(GpuError::Failed("the fit's buffers".into()));
+        };
+        ctx.queue.write_buffer(&b.grid, 0, &grid);
+        let words = |w: u32| faces.len() as u64 * u64::from(w) * 4;
+        let buffers = [
+            &params_buf,
+            &proj,
+            &offs,
+            &thresh,
+            &b.grid,
+            &b.work,
+            &b.result,
+        ];
         let group = bspvt_raytrace::gpu::bind_buffers(device, "fit", &self.layout, &buffers);
+        let gather_group = bspvt_raytrace::gpu::bind_buffers(
+            device,
+            "fit gather",
+            &self.gather_layout,
+            &[&gather_params, &b.result, &b.dense],
+        );
         let mut enc =
             device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("fit") });
+        // As new buffers were: the shader's work area and output start at zero.
+        enc.clear_buffer(&b.work, 0, Some(words(layout.work_words)));
+        enc.clear_buffer(&b.result, 0, Some(words(layout.out_words)));
         {
             let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("fit"),
@@ -396,30 +476,92 @@ impl GpuFitter {
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &group, &[]);
             pass.dispatch_workgroups(faces.len() as u32, 1, 1);
+            pass.set_pipeline(&self.gather);
+            pass.set_bind_group(0, &gather_group, &[]);
+            pass.dispatch_workgroups(faces.len() as u32, 1, 1);
         }
-        enc.copy_buffer_to_buffer(&result, 0, &readback, 0, bytes);
-        ctx.queue.submit([enc.finish()]);
+        enc.copy_buffer_to_buffer(&b.dense, 0, &b.readback, 0, words(GATHER_WORDS));
+        let submitted = ctx.queue.submit([enc.finish()]);
         scope_result(validation)?;
         scope_result(memory)?;
-        let (tx, rx) = std::sync::mpsc::channel();
-        readback.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        ctx.wait()?;
-        rx.recv()
-            .map_err(|e| GpuError::Failed(e.to_string()))?
-            .map_err(|e| GpuError::Failed(e.to_string()))?;
-        let view = readback
-            .get_mapped_range(..)
-            .map_err(|e| GpuError::Failed(e.to_string()))?;
-        let words: Vec<u32> = bytemuck::cast_slice(&view).to_vec();
-        drop(view);
-        readback.unmap();
-        Ok(words
-            .chunks_exact(layout.out_words as usize)
-            .map(|w| decode(fitter, layout, w))
-            .collect())
+        let dense = map_words(ctx, &b.readback, words(GATHER_WORDS), submitted)?;
+        // Faces with more nodes than were gathered are read again whole (below).
+        let cut_short = |w: &[u32]| w[0] == 0 && HEADER + 2 * w[1] as usize > w.len();
+        let mut fits: Vec<GpuFaceFit> = dense
+            .chunks_exact(GATHER_WORDS as usize)
+            .map(|w| {
+                if cut_short(w) {
+                    Err(Refit::Malformed)
+                } else {
+                    decode(fitter, layout, w)
+                }
+            })
+            .collect();
+        let more: Vec<usize> = dense
+            .chunks_exact(GATHER_WORDS as usize)
+            .enumerate()
+            .filter(|(_, w)| cut_short(w))
+            .map(|(f, _)| f)
+            .collect();
+        if !more.is_empty() {
+            let face_bytes = u64::from(layout.out_words) * 4;
+            let whole = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("fit trees readback, whole"),
+                size: more.len() as u64 * face_bytes,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let mut enc = device.create_command_encoder(&Default::default());
+            for (k, &f) in more.iter().enumerate() {
+                enc.copy_buffer_to_buffer(
+                    &b.result,
+                    f as u64 * face_bytes,
+                    &whole,
+                    k as u64 * face_bytes,
+                    face_bytes,
+                );
+            }
+            let submitted = ctx.queue.submit([enc.finish()]);
+            let words = map_words(ctx, &whole, more.len() as u64 * face_bytes, submitted)?;
+            for (&f, w) in more
+                .iter()
+                .zip(words.chunks_exact(layout.out_words as usize))
+            {
+                fits[f] = decode(fitter, layout, w);
+            }
+        }
+        Ok(fits)
     }
+}
+
+/// The first `bytes` of a MAP_READ buffer once `submitted` is done, as words (waits for that
+/// submission alone: the cast's own submissions go on).
+fn map_words(
+    ctx: &GpuContext,
+    buffer: &wgpu::Buffer,
+    bytes: u64,
+    submitted: wgpu::SubmissionIndex,
+) -> Result<Vec<u32>, GpuError> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    buffer.map_async(wgpu::MapMode::Read, ..bytes, move |r| {
+        let _ = tx.send(r);
+    });
+    ctx.device
+        .poll(wgpu::PollType::Wait {
+            submission_index: Some(submitted),
+            timeout: None,
+        })
+        .map_err(|e| GpuError::Failed(e.to_string()))?;
+    rx.recv()
+        .map_err(|e| GpuError::Failed(e.to_string()))?
+        .map_err(|e| GpuError::Failed(e.to_string()))?;
+    let view = buffer
+        .get_mapped_range(..bytes)
+        .map_err(|e| GpuError::Failed(e.to_string()))?;
+    let words: Vec<u32> = bytemuck::pod_collect_to_vec(&view);
+    drop(view);
+    buffer.unmap();
+    Ok(words)
 }
 
 /// Per-face sizes in the shader's buffers.

@@ -39,6 +39,8 @@ S=${BSPVT_ASSETS:-../shared/assets}
 for m in bunny.ply bunny_res2.ply bunny_res4.ply dragon_res4.ply teapot.obj; do
   cp "$S/meshes/$m" .dev/assets/meshes/
 done
+mkdir -p .dev/assets/env
+cp "$S/env/royal_esplanade_1k.hdr" .dev/assets/env/
 o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64'
 mkdir -p /tmp/amd64/partial
 if ! ls .gl/libvulkan1_*.deb >/dev/null 2>&1; then

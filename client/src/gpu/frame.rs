@@ -235,19 +235,13 @@ impl GpuFrames {
     /// Times each pass of the frames that follow on the GPU (`bench-gpu`): false where the
     /// device cannot write timestamps between passes.
     pub fn time_passes(&mut self, gpu: &Gpu) -> bool {
-        if self.clock.is_none() {
-            self.clock = PassClock::new(gpu);
-        }
-        self.clock.is_some()
+        PassClock::ensure(&mut self.clock, gpu)
     }
 
     /// The last frame's GPU time per pass (`shade`, `raster`, `resolve`; `sky` for the sky's),
     /// ms, after [`GpuFrames::time_passes`]; waits for the frame.
     pub fn pass_times(&self, gpu: &Gpu) -> Result<Vec<(&'static str, f64)>> {
-        match &self.clock {
-            Some(c) => c.read(gpu),
-            None => Ok(Vec::new()),
-        }
+        PassClock::read_slot(self.clock.as_ref(), gpu)
     }
 
     /// Vertices whose trees are on the GPU.

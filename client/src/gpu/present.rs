@@ -187,19 +187,13 @@ impl Compositor {
     /// Times the pass of the draws that follow on the GPU (`bench-gpu`): false where the
     /// device cannot write timestamps between passes.
     pub fn time_passes(&mut self, gpu: &Gpu) -> bool {
-        if self.clock.is_none() {
-            self.clock = PassClock::new(gpu);
-        }
-        self.clock.is_some()
+        PassClock::ensure(&mut self.clock, gpu)
     }
 
     /// The last draw's GPU time (`composite`), ms, after [`Compositor::time_passes`]; waits
     /// for it.
     pub fn pass_times(&self, gpu: &Gpu) -> Result<Vec<(&'static str, f64)>> {
-        match &self.clock {
-            Some(c) => c.read(gpu),
-            None => Ok(Vec::new()),
-        }
+        PassClock::read_slot(self.clock.as_ref(), gpu)
     }
 }
 

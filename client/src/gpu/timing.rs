@@ -96,4 +96,61 @@ impl PassClock {
             .map(|(&l, t)| (l, t[1].saturating_sub(t[0]) as f64 * self.period * 1e-6))
             .collect())
     }
+
+    /// Makes `slot`'s clock if it has none (`time_passes` of the frames and the compositor):
+    /// false where the device cannot write timestamps between passes.
+    pub(crate) fn ensure(slot: &mut Option<PassClock>, gpu: &Gpu) -> bool {
+        if slot.is_none() {
+            *slot = PassClock::new(gpu);
+        }
+        slot.is_some()
+    }
+
+    /// [`PassClock::read`] of `slot`'s clock; nothing without one.
+    pub(crate) fn read_slot(
+        slot: Option<&PassClock>,
+        gpu: &Gpu,
+    ) -> Result<Vec<(&'static str, f64)>> {
+        slot.map_or(Ok(Vec::new()), |c| c.read(gpu))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Marks come back labelled, in order, one time per pass, finite and not negative; a new
+    /// frame forgets the last one's marks, and marks past the query set's capacity are dropped.
+    #[test]
+    fn marks_come_back_as_pass_times() {
+        let Some(gpu) = Gpu::shared_or_skip() else {
+            return;
+        };
+        let Some(mut clock) = PassClock::new(gpu) else {
+            eprintln!("skipped: the adapter has no timestamps inside encoders");
+            return;
+        };
+        let frame = |clock: &mut PassClock, labels: &[&'static str]| {
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            clock.start(&mut enc);
+            for &l in labels {
+                clock.mark(&mut enc, l);
+            }
+            clock.resolve(&mut enc);
+            gpu.queue.submit([enc.finish()]);
+            clock.read(gpu).expect("timestamps read back")
+        };
+        let times = frame(&mut clock, &["shade", "raster"]);
+        let labels: Vec<_> = times.iter().map(|t| t.0).collect();
+        assert_eq!(labels, ["shade", "raster"]);
+        assert!(
+            times.iter().all(|t| t.1.is_finite() && t.1 >= 0.0),
+            "{times:?}"
+        );
+        let many = ["pass"; 2 * CAPACITY as usize];
+        let times = frame(&mut clock, &many);
+        assert_eq!(times.len(), CAPACITY as usize - 1);
+        let times = frame(&mut clock, &["composite"]);
+        assert_eq!(times.iter().map(|t| t.0).collect::<Vec<_>>(), ["composite"]);
+    }
 }

@@ -585,6 +585,27 @@ impl GpuBatch {
 
 #[cfg(test)]
 mod tests {
+    /// The shared fit's split: the floor until both sides are measured, then in proportion
+    /// to the rates (never under the floor); a side that fitted nothing keeps its rate.
+    #[test]
+    fn the_gpu_takes_faces_in_proportion_to_its_rate() {
+        let mut r = super::FitRates::default();
+        assert_eq!(r.gpu_faces(1600), 100);
+        r.update((100, 1.0), (0, 0.0));
+        assert_eq!(r.gpu_faces(1600), 100, "the pool not measured yet");
+        r.update((100, 1.0), (300, 1.0));
+        assert_eq!(r.gpu_faces(1600), 400);
+        // A GPU 3× faster on the next chunk: the running mean of 100 and 300 faces/s.
+        r.update((300, 1.0), (300, 1.0));
+        assert_eq!(r.gpu_faces(1000), 400);
+        // A GPU far slower than the pool (its mean halves per chunk): the floor.
+        for _ in 0..6 {
+            r.update((1, 10.0), (300, 1.0));
+        }
+        assert_eq!(r.gpu_faces(1600), 100);
+        assert_eq!(r.gpu_faces(0), 0);
+    }
+
     use super::*;
 
     /// Another device's rounding cannot change a cube map. With every reciprocal and quotient

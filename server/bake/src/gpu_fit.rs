@@ -487,21 +487,18 @@ impl GpuFitter {
         let dense = map_words(ctx, &b.readback, words(GATHER_WORDS), submitted)?;
         // Faces with more nodes than were gathered are read again whole (below).
         let cut_short = |w: &[u32]| w[0] == 0 && HEADER + 2 * w[1] as usize > w.len();
+        let mut more = Vec::new();
         let mut fits: Vec<GpuFaceFit> = dense
             .chunks_exact(GATHER_WORDS as usize)
-            .map(|w| {
+            .enumerate()
+            .map(|(f, w)| {
                 if cut_short(w) {
+                    more.push(f);
                     Err(Refit::Malformed)
                 } else {
                     decode(fitter, layout, w)
                 }
             })
-            .collect();
-        let more: Vec<usize> = dense
-            .chunks_exact(GATHER_WORDS as usize)
-            .enumerate()
-            .filter(|(_, w)| cut_short(w))
-            .map(|(f, _)| f)
             .collect();
         if !more.is_empty() {
             let face_bytes = u64::from(layout.out_words) * 4;

@@ -114,6 +114,12 @@ impl GpuBlur {
             t.guide_id = guide.id;
         }
         for (buffer, &(stage, axis, scale)) in t.params.iter().zip(&STAGES) {
+            // The light split: the spread within the pixels' own widths (blur::spread_radius).
+            let stage = if stage == 1 && params.split > 1 {
+                3
+            } else {
+                stage
+            };
             let p = StageParams {
                 shape: [w as u32, h as u32, stage, axis],
                 limits: [
@@ -217,12 +223,12 @@ impl GpuBlur {
                 })
                 .collect();
             // (values, widths, out) per stage: the edges of the hard shadow into a; a spread
-            // along rows into c, along columns into a; the boxes hard → b → c along rows, then
-            // c → b → c along columns.
+            // along rows into c, along columns into a (their values: the pixels' own widths);
+            // the boxes hard → b → c along rows, then c → b → c along columns.
             let io: [(&wgpu::Buffer, &wgpu::Buffer, &wgpu::Buffer); 7] = [
                 (&hard, &widths, &a),
-                (&hard, &a, &c),
-                (&hard, &c, &a),
+                (&widths, &a, &c),
+                (&widths, &c, &a),
                 (&hard, &a, &b),
                 (&b, &a, &c),
                 (&c, &a, &b),

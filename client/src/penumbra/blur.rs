@@ -70,16 +70,34 @@ pub(crate) fn edge_radius(
 /// Largest half-width among same-surface pixels q whose box reaches p (|p − q| ≤ q's radius in
 /// pixels along each axis; p's own included), in two separable passes. The boxes reach at most
 /// `params.max_radius` pixels.
-pub(crate) fn spread_radius(radius: &Widths, guide: &Guide, params: &Params) -> Vec<f64> {
-    let h = spread_pass(radius, guide, params, true);
-    spread_pass(&h, guide, params, false)
+///
+/// `within`: per pixel, a half-width of its own (0: none); a pixel that has one takes a q's
+/// only when |p − q| is also within it. Where the light is split ([`super::rt::split_light`])
+/// every blocked pixel knows its own parts' width, and a penumbra reaches into the umbra only
+/// as far as the width there: at a contact (an occluder touching the receiver, its penumbra
+/// narrowing to 0) a wider edge further along no longer lifts the umbra (docs/penumbra.md,
+/// "The spread within a pixel's own width").
+pub(crate) fn spread_radius(
+    radius: &Widths,
+    within: Option<&Widths>,
+    guide: &Guide,
+    params: &Params,
+) -> Vec<f64> {
+    let h = spread_pass(radius, within, guide, params, true);
+    spread_pass(&h, within, guide, params, false)
 }
 
 /// One pass of [`spread_radius`] along rows (`horizontal`) or columns. A scatter from the
 /// pixels with a width: only the few near a hard shadow's edge have one, so the pass costs
 /// their boxes, not a search around every pixel. Lines are independent (run in parallel);
 /// the max is order-free, so the result does not depend on the schedule.
-fn spread_pass(radius: &Widths, guide: &Guide, params: &Params, horizontal: bool) -> Vec<f64> {
+fn spread_pass(
+    radius: &Widths,
+    within: Option<&Widths>,
+    guide: &Guide,
+    params: &Params,
+    horizontal: bool,
+) -> Vec<f64> {
     let lines = Lines::of(guide, horizontal);
     let (len, at) = (lines.len, |line, t| lines.index(line, t));
     let cap = params.max_radius;
@@ -103,6 +121,10 @@ fn spread_pass(radius: &Widths, guide: &Guide, params: &Params, horizontal: bool
                 if r > best[u]
                     && let Some(c) = &guide.pixels[at(line, u)]
                     && guide.same_surface(c, q, params)
+                    && within.is_none_or(|own| {
+                        let own = own[at(line, u)];
+                        !(own > 0.0) || c.pixels(own, horizontal, cap) >= u.abs_diff(t) as f64
+                    })
                 {
                     best[u] = r;
                     grown.push(u);
@@ -640,6 +662,36 @@ mod tests {
     }
 
     #[test]
+    fn the_spread_stays_within_a_pixels_own_width() {
+        // A contact: the umbra's own blocked rays hit an occluder just above the receiver
+        // (half-width 0.01 = 1 pixel), the edge's graze it higher up (0.05 = 5 pixels).
+        let g = flat();
+        let p = Params::default();
+        let hard: Vec<f32> = (0..g.pixels.len())
+            .map(|i| if i % 32 < 16 { 0.0 } else { 1.0 })
+            .collect();
+        let own: Vec<f64> = (0..g.pixels.len())
+            .map(|i| match i % 32 {
+                15 => 0.05,
+                x if x < 15 => 0.01,
+                _ => 0.0,
+            })
+            .collect();
+        let edge = edge_radius(&hard, &own, &g, &p);
+        let free = spread_radius(&edge, None, &g, &p);
+        let within = spread_radius(&edge, Some(&own), &g, &p);
+        for x in 0..32 {
+            let (want_free, want_within) = match x {
+                10..=13 => (0.05, 0.0),
+                14..=20 => (0.05, 0.05),
+                _ => (0.0, 0.0),
+            };
+            assert_eq!(free[3 * 32 + x], want_free, "x = {x}, free");
+            assert_eq!(within[3 * 32 + x], want_within, "x = {x}, within");
+        }
+    }
+
+    #[test]
     fn radius_spreads_from_the_edge_onto_the_lit_side() {
         let g = flat();
         let p = Params::default();
@@ -657,7 +709,7 @@ mod tests {
             8,
             "one edge column"
         );
-        let spread = spread_radius(&edge, &g, &p);
+        let spread = spread_radius(&edge, None, &g, &p);
         for x in 0..32 {
             let want = if (10..=20).contains(&x) { 0.05 } else { 0.0 };
             assert_eq!(spread[3 * 32 + x], want, "x = {x}");

@@ -125,7 +125,7 @@ pub fn split_light(
         return Ok(());
     }
     let edge = blur::edge_radius(&buffers.hard, &buffers.radius, guide, params);
-    let reach = blur::spread_radius(&edge, guide, params);
+    let reach = blur::spread_radius(&edge, None, guide, params);
     // Pixels whose blur spans less than half a pixel either way (a punctual light's stand-in)
     // keep their one ray: the blur leaves them as they are.
     let soft: Vec<usize> = (0..reach.len())
@@ -346,8 +346,9 @@ fn pixel_ray(g: &GuidePixel, light: &Light, p: DVec3, epsilon: f64) -> PixelRay 
 }
 
 /// The soft shadow factor: the hard shadow blurred by the per-pixel radius spread from the
-/// hard shadow's edge ([`blur::edge_radius`], [`blur::spread_radius`]); by `caster`'s machine
-/// where it blurs ([`ShadowCaster::blur`], the box kernel's tent).
+/// hard shadow's edge ([`blur::edge_radius`], [`blur::spread_radius`]; where the light is
+/// split, within each blocked pixel's own width); by `caster`'s machine where it blurs
+/// ([`ShadowCaster::blur`], the box kernel's tent).
 pub(crate) fn soft_shadows(
     buffers: &RtBuffers,
     guide: &Guide,
@@ -362,7 +363,8 @@ pub(crate) fn soft_shadows(
         return soft;
     }
     let edge = blur::edge_radius(&buffers.hard, &buffers.radius, guide, params);
-    let radius = blur::spread_radius(&edge, guide, params);
+    let within = (params.split > 1).then_some(&buffers.radius[..]);
+    let radius = blur::spread_radius(&edge, within, guide, params);
     Ok(match params.kernel {
         Kernel::Box => blur::blur(&buffers.hard, &radius, guide, params),
         Kernel::Light(n) => blur::light_blur(

@@ -12,13 +12,15 @@
 // Per pixel three vec4: the world position and 1 (0: background); the unit shading normal and
 // the view depth; the world length one pixel covers along x and along y (GuidePixel::step).
 @group(0) @binding(0) var<storage, read> guide: array<vec4<f32>>;
-// The values the stage reads: the hard shadow (edge), or the values being blurred (box).
+// The values the stage reads: the hard shadow (edge), the pixels' own half-widths (spread), or
+// the values being blurred (box).
 @group(0) @binding(1) var<storage, read> values: array<f32>;
 // World half-widths: each pixel's (edge), the widths being spread (spread), the blur's (box).
 @group(0) @binding(2) var<storage, read> widths: array<f32>;
 @group(0) @binding(3) var<storage, read_write> out: array<f32>;
 struct BlurParams {
-    // width, height, stage (0 edge, 1 spread, 2 box), axis (0 rows, 1 columns).
+    // width, height, stage (0 edge, 1 spread, 2 box, 3 spread within the pixels' own widths),
+    // axis (0 rows, 1 columns).
     shape: vec4<u32>,
     // cap (pixels), plane tolerance, normal cosine, the scale of the widths (1/√2 for a box of
     // the tent).
@@ -105,13 +107,19 @@ fn edge(i: u32) -> f32 {
 }
 
 // spread_pass: the largest width among same-surface pixels q on the line whose box (⌊pixels⌋
-// of their own width) reaches this one, its own included.
-fn spread(i: u32) -> f32 {
+// of their own width) reaches this one, its own included; `within` (the light split): a pixel
+// with a width of its own (`values`, the pixels' own half-widths, in the spread stages) takes
+// only the q within it.
+fn spread(i: u32, within: bool) -> f32 {
     var best = widths[i];
     if !valid(i) {
         return best;
     }
-    let reach = i32(floor(max(bp.limits.x, 0.0)));
+    var reach = i32(floor(max(bp.limits.x, 0.0)));
+    let own = values[i];
+    if within && own > 0.0 {
+        reach = min(reach, i32(floor(pixels(i, own))));
+    }
     let l = line_of(i);
     for (var d = 1; d <= reach; d++) {
         for (var s = -1; s <= 1; s += 2) {
@@ -176,7 +184,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             out[i] = edge(i);
         }
         case 1u: {
-            out[i] = spread(i);
+            out[i] = spread(i, false);
+        }
+        case 3u: {
+            out[i] = spread(i, true);
         }
         default: {
             out[i] = box_blur(i);

@@ -103,8 +103,8 @@ pub(crate) fn denoised_ratio(sums: &RatioSums, guide: &Guide, radius_px: f64) ->
         .map(|p| p.map_or(0.0, |p| radius_px * guide.footprint_per_depth * p.depth))
         .collect();
     let blurred = RatioSums {
-        shadowed: penumbra::blur::blur(&sums.shadowed, &world, guide, &params),
-        unshadowed: penumbra::blur::blur(&sums.unshadowed, &world, guide, &params),
+        shadowed: penumbra::blur::blur(&sums.shadowed, &world, None, guide, &params),
+        unshadowed: penumbra::blur::blur(&sums.unshadowed, &world, None, guide, &params),
     };
     ratio(&blurred)
 }

@@ -1,5 +1,6 @@
 //! rt-penumbra's edge-aware blur on the GPU (`penumbra.wgsl`; the CPU twin is
-//! [`crate::penumbra::blur`]): the hard shadow and its half-widths go up (8 bytes a pixel),
+//! [`crate::penumbra::blur`]): the hard shadow, its half-widths and the sharp pixels go up (12
+//! bytes a pixel),
 //! seven dispatches — edges, the widths spread along rows and columns, the tent's two boxes
 //! along rows and two along columns — and the soft shadow comes back (4 bytes a pixel). The
 //! guide (the pixels' surfaces) goes up once per camera, the buffers once per size.
@@ -18,6 +19,8 @@ struct Target {
     guide: wgpu::Buffer,
     hard: wgpu::Buffer,
     widths: wgpu::Buffer,
+    /// 1 per sharp pixel ([`crate::penumbra::blur::sharp_pixels`]; all 0 with one ray).
+    sharp: wgpu::Buffer,
     /// Buffers between the stages (the bind groups read and write them).
     _between: [wgpu::Buffer; 2],
     /// Where the soft shadow ends.
@@ -68,7 +71,7 @@ impl GpuBlur {
                 &gpu.device,
                 "penumbra blur",
                 bspvt_shaders::gpu::wgsl::penumbra(),
-                &[true, true, true, false, true],
+                &[true, true, true, false, true, true],
             )
         })?;
         Ok(GpuBlur {
@@ -133,6 +136,13 @@ impl GpuBlur {
         }
         gpu.queue
             .write_buffer(&t.hard, 0, bytemuck::cast_slice(hard));
+        let sharp: Vec<u32> = match crate::penumbra::blur::sharp_pixels(hard, radius, guide, params)
+        {
+            Some(m) => m.into_iter().map(u32::from).collect(),
+            None => vec![0; n],
+        };
+        gpu.queue
+            .write_buffer(&t.sharp, 0, bytemuck::cast_slice(&sharp));
         // f64::MAX (an occluder at the light) to f32::MAX, not ∞: ∞ / ∞ would be NaN where the
         // CPU's f64::MAX / f64::MAX is 1.
         let widths: Vec<f32> = radius.iter().map(|&r| (r as f32).min(f32::MAX)).collect();
@@ -205,6 +215,7 @@ impl GpuBlur {
             let guide = buffer("blur guide", n * 48, U::STORAGE | U::COPY_DST);
             let hard = buffer("hard shadow", n * 4, U::STORAGE | U::COPY_DST);
             let widths = buffer("half-widths", n * 4, U::STORAGE | U::COPY_DST);
+            let sharp = buffer("sharp pixels", n * 4, U::STORAGE | U::COPY_DST);
             let a = buffer("blur a", n * 4, U::STORAGE);
             let b = buffer("blur b", n * 4, U::STORAGE);
             let c = buffer("blur c", n * 4, U::STORAGE | U::COPY_SRC);
@@ -238,7 +249,7 @@ impl GpuBlur {
                 .iter()
                 .zip(&params)
                 .map(|(&(v, wd, o), p)| {
-                    gpu.bind_buffers("blur stage", &self.layout, &[&guide, v, wd, o, p])
+                    gpu.bind_buffers("blur stage", &self.layout, &[&guide, v, wd, o, p, &sharp])
                 })
                 .collect();
             let groups = (n as u32).div_ceil(WORKGROUP);
@@ -253,6 +264,7 @@ impl GpuBlur {
                 guide,
                 hard,
                 widths,
+                sharp,
                 _between: [a, b],
                 c,
                 readback,
@@ -280,4 +292,31 @@ fn guide_words(guide: &Guide) -> Vec<[f32; 4]> {
             None => [[0.0; 4]; 3],
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::penumbra::blur::{self, tests};
+
+    #[test]
+    fn a_contact_stays_sharp_on_the_gpu_as_on_the_cpu() {
+        let Some(gpu) = Gpu::shared_or_skip() else {
+            return;
+        };
+        let (g, p) = (tests::flat(), Params::default());
+        let (hard, own) = tests::contact();
+        let edge = blur::edge_radius(&hard, &own, &g, &p);
+        let radius = blur::spread_radius(&edge, Some(&own), &g, &p);
+        let sharp = blur::sharp_pixels(&hard, &own, &g, &p);
+        let cpu = blur::blur(&hard, &radius, sharp.as_deref(), &g, &p);
+        let mut blur = GpuBlur::new(gpu).expect("the blur's pipeline");
+        let got = blur.soft(gpu, &hard, &own, &g, &p).expect("the GPU's blur");
+        assert_eq!(got.len(), cpu.len());
+        for (i, (a, b)) in got.iter().zip(&cpu).enumerate() {
+            assert!((a - b).abs() < 1e-5, "pixel {i}: GPU {a}, CPU {b}");
+        }
+        // The cut is what keeps the lit side's first column at the rays' half or above.
+        assert!(got[16] >= 0.5, "{}", got[16]);
+    }
 }

@@ -149,13 +149,51 @@ fn spread_pass(
 /// 0.00402, contact 0.00463 → 0.00348, teapot 0.00459 → 0.00418, bunny 0.00403 → 0.00394)
 /// and raises it 3 % where two penumbrae of different widths overlap (0.00352 → 0.00362);
 /// three boxes (closer to a Gaussian) are no better and cost more.
-pub(crate) fn blur(values: &[f32], radius: &Widths, guide: &Guide, params: &Params) -> Vec<f32> {
+///
+/// `sharp` ([`sharp_pixels`]): a run of one surface also stops between a sharp pixel and one
+/// that is not.
+pub(crate) fn blur(
+    values: &[f32],
+    radius: &Widths,
+    sharp: Option<&[bool]>,
+    guide: &Guide,
+    params: &Params,
+) -> Vec<f32> {
     let half: Vec<f64> = radius
         .iter()
         .map(|r| r * std::f64::consts::FRAC_1_SQRT_2)
         .collect();
-    let rows = blur_pass(values, &half, guide, params, true, 2);
-    blur_pass(&rows, &half, guide, params, false, 2)
+    let rows = blur_pass(values, &half, sharp, guide, params, true, 2);
+    blur_pass(&rows, &half, sharp, guide, params, false, 2)
+}
+
+/// Where the light is split (`params.split` > 1), the blocked pixels (`hard` < 1) whose own
+/// width (`own`, their blocked parts' mean) spans less than half a pixel along both axes:
+/// their rays found the occluder touching the receiver — a contact, whose shadow has an edge as
+/// sharp as the rays resolve it (the parts' penumbrae all narrow to 0 there). The blur reads
+/// across no such edge ([`blur`]): a tent on the lit side of a contact would read the umbra's 0
+/// and round the step the rays found (docs/penumbra.md, "Contacts stay sharp"). `None` with
+/// one ray (paper 003 as published).
+pub(crate) fn sharp_pixels(
+    hard: &[f32],
+    own: &Widths,
+    guide: &Guide,
+    params: &Params,
+) -> Option<Vec<bool>> {
+    (params.split > 1).then(|| {
+        let cap = params.max_radius;
+        (0..hard.len())
+            .into_par_iter()
+            .map(|i| {
+                let r = own.get(i).copied().unwrap_or(0.0);
+                hard[i] < 1.0
+                    && r > 0.0
+                    && guide.pixels[i]
+                        .as_ref()
+                        .is_some_and(|g| g.pixels(r, true, cap).max(g.pixels(r, false, cap)) < 0.5)
+            })
+            .collect()
+    })
 }
 
 /// `boxes` box blurs, one after the other, along rows (`horizontal`) or columns. Each box is
@@ -166,6 +204,7 @@ pub(crate) fn blur(values: &[f32], radius: &Widths, guide: &Guide, params: &Para
 fn blur_pass(
     values: &[f32],
     radius: &Widths,
+    sharp: Option<&[bool]>,
     guide: &Guide,
     params: &Params,
     horizontal: bool,
@@ -188,7 +227,9 @@ fn blur_pass(
         for t in 1..len {
             let joined = match (px(t - 1), px(t)) {
                 (Some(a), Some(b)) => {
-                    guide.same_surface(a, b, params) && guide.same_surface(b, a, params)
+                    guide.same_surface(a, b, params)
+                        && guide.same_surface(b, a, params)
+                        && sharp.is_none_or(|m| m[at(line, t - 1)] == m[at(line, t)])
                 }
                 _ => false,
             };
@@ -434,7 +475,7 @@ pub(crate) fn light_offsets(light: &Light, n: usize) -> Vec<DVec3> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::penumbra::GuidePixel;
 
@@ -471,7 +512,7 @@ mod tests {
     }
 
     /// The same 32 × 8 image as one wall at depth 1 (one continuous surface).
-    fn flat() -> Guide {
+    pub(crate) fn flat() -> Guide {
         let mut g = guide(false);
         for px in g.pixels.iter_mut().flatten() {
             px.depth = 1.0;
@@ -491,7 +532,7 @@ mod tests {
                 .map(|i| if i % 32 < 16 { 0.0 } else { 1.0 })
                 .collect();
             let radius = vec![1.0; values.len()];
-            let out = blur(&values, &radius, &g, &p);
+            let out = blur(&values, &radius, None, &g, &p);
             assert_eq!(out, values, "tilt {tilt}: bled across the discontinuity");
         }
         // The same edge on one continuous surface is blurred (the test can fail).
@@ -499,7 +540,7 @@ mod tests {
         let values: Vec<f32> = (0..g.pixels.len())
             .map(|i| if i % 32 < 16 { 0.0 } else { 1.0 })
             .collect();
-        let out = blur(&values, &vec![0.04; values.len()], &g, &p);
+        let out = blur(&values, &vec![0.04; values.len()], None, &g, &p);
         assert!(out[16] < 0.9 && out[15] > 0.1, "{} {}", out[15], out[16]);
     }
 
@@ -520,7 +561,7 @@ mod tests {
         let radius: Vec<f64> = (0..n).map(|i| 0.12 * hash(i, 2)).collect();
         let (w, h) = (g.width as isize, g.height as isize);
         for horizontal in [true, false] {
-            let got = blur_pass(&values, &radius, &g, &p, horizontal, 1);
+            let got = blur_pass(&values, &radius, None, &g, &p, horizontal, 1);
             for i in 0..n {
                 let c = g.pixels[i].as_ref().expect("all surface");
                 let r = c.pixels(radius[i], horizontal, p.max_radius);
@@ -562,7 +603,7 @@ mod tests {
         let values: Vec<f32> = (0..g.pixels.len()).map(|i| hash(i % 32)).collect();
         // 6 pixels at depth 1; each box 6/√2 ≈ 4.24 pixels.
         let (radius, r) = (vec![0.06; values.len()], 6.0f64);
-        let got = blur(&values, &radius, &g, &p);
+        let got = blur(&values, &radius, None, &g, &p);
         let b = r * std::f64::consts::FRAC_1_SQRT_2;
         let m = (b + 0.5).floor() as i64;
         let bx: Vec<f64> = (-m..=m)
@@ -612,8 +653,8 @@ mod tests {
         // 6 pixels at depth 1 (0.01 per pixel): the box of x = 12 is 7 … 17, and 6 and 18 at
         // weight ½.
         let radius = vec![0.06; values.len()];
-        let cut = blur_pass(&values, &radius, &guide(false), &p, true, 1);
-        let whole = blur_pass(&values, &radius, &flat(), &p, true, 1);
+        let cut = blur_pass(&values, &radius, None, &guide(false), &p, true, 1);
+        let whole = blur_pass(&values, &radius, None, &flat(), &p, true, 1);
         for y in 0..8 {
             for x in 0..16 {
                 let i = y * 32 + x;
@@ -659,6 +700,51 @@ mod tests {
         assert!((40..=60).contains(&n), "{n}");
         tri.vertices.pop();
         assert!(light_offsets(&tri, 10).is_empty());
+    }
+
+    /// A contact on [`flat`] with the light split: columns 0–15 the umbra, their rays' occluder
+    /// touching the receiver (own half-width 0.001 = 0.1 pixel: sharp), then half the light
+    /// seen (16–19), three quarters (20–23) and all of it, the blocked parts' penumbra 3 pixels
+    /// wide either way. (hard, own widths.)
+    pub(crate) fn contact() -> (Vec<f32>, Vec<f64>) {
+        (0..32 * 8)
+            .map(|i| match i % 32 {
+                0..16 => (0.0, 0.001),
+                16..20 => (0.5, 0.03),
+                20..24 => (0.75, 0.03),
+                _ => (1.0, 0.0),
+            })
+            .unzip()
+    }
+
+    #[test]
+    fn a_contact_stays_sharp() {
+        let (g, p) = (flat(), Params::default());
+        let (hard, own) = contact();
+        let edge = edge_radius(&hard, &own, &g, &p);
+        let radius = spread_radius(&edge, Some(&own), &g, &p);
+        let sharp = sharp_pixels(&hard, &own, &g, &p).expect("the light is split by default");
+        assert_eq!(
+            sharp.iter().filter(|&&s| s).count(),
+            16 * 8,
+            "the umbra is sharp"
+        );
+        let kept = blur(&hard, &radius, Some(&sharp), &g, &p);
+        let rounded = blur(&hard, &radius, None, &g, &p);
+        for y in 0..8 {
+            let row = y * 32;
+            assert!(
+                kept[row..row + 16].iter().all(|&v| v == 0.0),
+                "the umbra stays 0"
+            );
+            // The lit side's first column keeps at least the rays' half (its tent reads the
+            // quarter ahead, not the umbra behind the cut) …
+            assert!((0.5..0.6).contains(&kept[row + 16]), "{}", kept[row + 16]);
+            // … which without the cut it does not (the test can fail).
+            assert!(rounded[row + 16] < 0.45, "{}", rounded[row + 16]);
+        }
+        let one_ray = Params { split: 1, ..p };
+        assert!(sharp_pixels(&hard, &own, &g, &one_ray).is_none());
     }
 
     #[test]

@@ -366,7 +366,10 @@ pub(crate) fn soft_shadows(
     let within = (params.split > 1).then_some(&buffers.radius[..]);
     let radius = blur::spread_radius(&edge, within, guide, params);
     Ok(match params.kernel {
-        Kernel::Box => blur::blur(&buffers.hard, &radius, guide, params),
+        Kernel::Box => {
+            let sharp = blur::sharp_pixels(&buffers.hard, &buffers.radius, guide, params);
+            blur::blur(&buffers.hard, &radius, sharp.as_deref(), guide, params)
+        }
         Kernel::Light(n) => blur::light_blur(
             &buffers.hard,
             &radius,

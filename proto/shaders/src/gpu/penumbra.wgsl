@@ -28,6 +28,9 @@ struct BlurParams {
 }
 // Storage, not uniform (lavapipe specializes a shader on uniform values: docs/gpu.md).
 @group(0) @binding(4) var<storage, read> bp: BlurParams;
+// 1 per sharp pixel (blur::sharp_pixels: a contact's umbra, with the light split): a box's run
+// never joins a sharp pixel and one that is not.
+@group(0) @binding(5) var<storage, read> sharp: array<u32>;
 
 const F32_MAX: f32 = 3.40282347e38;
 
@@ -44,9 +47,10 @@ fn same_surface(c: u32, q: u32) -> bool {
     return plane <= bp.limits.y * cn.w && dot(cn.xyz, qn.xyz) >= bp.limits.z;
 }
 
-// Two neighbours along a line are one surface both ways (blur_pass's runs).
+// Two neighbours along a line are one surface both ways, and both sharp or neither (blur_pass's
+// runs).
 fn joined(a: u32, b: u32) -> bool {
-    return valid(a) && valid(b) && same_surface(a, b) && same_surface(b, a);
+    return valid(a) && valid(b) && same_surface(a, b) && same_surface(b, a) && sharp[a] == sharp[b];
 }
 
 // GuidePixel::pixels: a world half-width in pixels along the stage's axis, capped.

@@ -1,7 +1,6 @@
 //! rt-penumbra's edge-aware blur on the GPU (`penumbra.wgsl`; the CPU twin is
-//! [`crate::penumbra::blur`]): the hard shadow, its half-widths and the sharp pixels go up (12
-//! bytes a pixel),
-//! seven dispatches — edges, the widths spread along rows and columns, the tent's two boxes
+//! [`crate::penumbra::blur`]): the hard shadow, its half-widths and, where the light is split,
+//! the sharp pixels go up (12 bytes a pixel; 8 with one ray), seven dispatches — edges, the widths spread along rows and columns, the tent's two boxes
 //! along rows and two along columns — and the soft shadow comes back (4 bytes a pixel). The
 //! guide (the pixels' surfaces) goes up once per camera, the buffers once per size.
 
@@ -21,6 +20,9 @@ struct Target {
     widths: wgpu::Buffer,
     /// 1 per sharp pixel ([`crate::penumbra::blur::sharp_pixels`]; all 0 with one ray).
     sharp: wgpu::Buffer,
+    /// Whether `sharp` holds a mask (else all 0, as wgpu creates it): with one ray a frame
+    /// uploads nothing there.
+    sharp_set: bool,
     /// Buffers between the stages (the bind groups read and write them).
     _between: [wgpu::Buffer; 2],
     /// Where the soft shadow ends.
@@ -116,9 +118,11 @@ impl GpuBlur {
                 .write_buffer(&t.guide, 0, bytemuck::cast_slice(&guide_words(guide)));
             t.guide_id = guide.id;
         }
+        let own = crate::penumbra::blur::own_widths(radius, params);
         for (buffer, &(stage, axis, scale)) in t.params.iter().zip(&STAGES) {
-            // The light split: the spread within the pixels' own widths (blur::spread_radius).
-            let stage = if stage == 1 && params.split > 1 {
+            // The spread within the pixels' own widths, where they have them
+            // (blur::spread_radius).
+            let stage = if stage == 1 && own.is_some() {
                 3
             } else {
                 stage
@@ -136,13 +140,20 @@ impl GpuBlur {
         }
         gpu.queue
             .write_buffer(&t.hard, 0, bytemuck::cast_slice(hard));
-        let sharp: Vec<u32> = match crate::penumbra::blur::sharp_pixels(hard, radius, guide, params)
-        {
-            Some(m) => m.into_iter().map(u32::from).collect(),
-            None => vec![0; n],
-        };
-        gpu.queue
-            .write_buffer(&t.sharp, 0, bytemuck::cast_slice(&sharp));
+        match crate::penumbra::blur::sharp_pixels(hard, own, guide, params) {
+            Some(m) => {
+                let words: Vec<u32> = m.into_iter().map(u32::from).collect();
+                gpu.queue
+                    .write_buffer(&t.sharp, 0, bytemuck::cast_slice(&words));
+                t.sharp_set = true;
+            }
+            None if t.sharp_set => {
+                gpu.queue
+                    .write_buffer(&t.sharp, 0, bytemuck::cast_slice(&vec![0u32; n]));
+                t.sharp_set = false;
+            }
+            None => {}
+        }
         // f64::MAX (an occluder at the light) to f32::MAX, not ∞: ∞ / ∞ would be NaN where the
         // CPU's f64::MAX / f64::MAX is 1.
         let widths: Vec<f32> = radius.iter().map(|&r| (r as f32).min(f32::MAX)).collect();
@@ -265,6 +276,7 @@ impl GpuBlur {
                 hard,
                 widths,
                 sharp,
+                sharp_set: false,
                 _between: [a, b],
                 c,
                 readback,
@@ -308,7 +320,7 @@ mod tests {
         let (hard, own) = tests::contact();
         let edge = blur::edge_radius(&hard, &own, &g, &p);
         let radius = blur::spread_radius(&edge, Some(&own), &g, &p);
-        let sharp = blur::sharp_pixels(&hard, &own, &g, &p);
+        let sharp = blur::sharp_pixels(&hard, blur::own_widths(&own, &p), &g, &p);
         let cpu = blur::blur(&hard, &radius, sharp.as_deref(), &g, &p);
         let mut blur = GpuBlur::new(gpu).expect("the blur's pipeline");
         let got = blur.soft(gpu, &hard, &own, &g, &p).expect("the GPU's blur");
@@ -318,5 +330,17 @@ mod tests {
         }
         // The cut is what keeps the lit side's first column at the rays' half or above.
         assert!(got[16] >= 0.5, "{}", got[16]);
+        // A one-ray frame after it, on the same buffers: the mask the split frame left is
+        // cleared (it uploads none of its own), so the contact is rounded as on the CPU.
+        let one_ray = Params { split: 1, ..p };
+        let radius = blur::spread_radius(&edge, None, &g, &one_ray);
+        let cpu = blur::blur(&hard, &radius, None, &g, &one_ray);
+        let got = blur
+            .soft(gpu, &hard, &own, &g, &one_ray)
+            .expect("the GPU's blur");
+        for (i, (a, b)) in got.iter().zip(&cpu).enumerate() {
+            assert!((a - b).abs() < 1e-5, "pixel {i}: GPU {a}, CPU {b}");
+        }
+        assert!(got[16] < 0.45, "{}", got[16]);
     }
 }

@@ -167,21 +167,30 @@ pub(crate) fn blur(
     blur_pass(&rows, &half, sharp, guide, params, false, 2)
 }
 
-/// Where the light is split (`params.split` > 1), the blocked pixels (`hard` < 1) whose own
-/// width (`own`, their blocked parts' mean) spans less than half a pixel along both axes:
-/// their rays found the occluder touching the receiver — a contact, whose shadow has an edge as
-/// sharp as the rays resolve it (the parts' penumbrae all narrow to 0 there). The blur reads
-/// across no such edge ([`blur`]): a tent on the lit side of a contact would read the umbra's 0
-/// and round the step the rays found (docs/penumbra.md, "Contacts stay sharp"). `None` with
-/// one ray (paper 003 as published).
+/// Each blocked pixel's own half-width, where it has one: with the light split
+/// ([`super::rt::split_light`], `params.split` > 1) `radius` is the mean of the pixel's blocked
+/// parts' widths; with one ray (paper 003 as published) it is the centre ray's, which knows
+/// nothing of the pixel's own penumbra, and `None`. What [`spread_radius`]'s `within` and
+/// [`sharp_pixels`] read; the one place that decides it for the CPU and the GPU.
+pub(crate) fn own_widths<'a>(radius: &'a Widths, params: &Params) -> Option<&'a Widths> {
+    (params.split > 1).then_some(radius)
+}
+
+/// The blocked pixels (`hard` < 1) whose own width (`own`, [`own_widths`]) spans less than
+/// half a pixel along both axes: their rays found the occluder touching the receiver — a
+/// contact, whose shadow has an edge as sharp as the rays resolve it (the parts' penumbrae all
+/// narrow to 0 there). The blur reads across no such edge ([`blur`]): a tent on the lit side of
+/// a contact would read the umbra's 0 and round the step the rays found (docs/penumbra.md,
+/// "Contacts stay sharp"). `None` without own widths.
 pub(crate) fn sharp_pixels(
     hard: &[f32],
-    own: &Widths,
+    own: Option<&Widths>,
     guide: &Guide,
     params: &Params,
 ) -> Option<Vec<bool>> {
-    (params.split > 1).then(|| {
-        let cap = params.max_radius;
+    let own = own?;
+    let cap = params.max_radius;
+    Some(
         (0..hard.len())
             .into_par_iter()
             .map(|i| {
@@ -192,8 +201,8 @@ pub(crate) fn sharp_pixels(
                         .as_ref()
                         .is_some_and(|g| g.pixels(r, true, cap).max(g.pixels(r, false, cap)) < 0.5)
             })
-            .collect()
-    })
+            .collect(),
+    )
 }
 
 /// `boxes` box blurs, one after the other, along rows (`horizontal`) or columns. Each box is
@@ -723,7 +732,9 @@ pub(crate) mod tests {
         let (hard, own) = contact();
         let edge = edge_radius(&hard, &own, &g, &p);
         let radius = spread_radius(&edge, Some(&own), &g, &p);
-        let sharp = sharp_pixels(&hard, &own, &g, &p).expect("the light is split by default");
+        let own_w = own_widths(&own, &p);
+        assert!(own_w.is_some(), "the light is split by default");
+        let sharp = sharp_pixels(&hard, own_w, &g, &p).expect("own widths give a mask");
         assert_eq!(
             sharp.iter().filter(|&&s| s).count(),
             16 * 8,
@@ -744,7 +755,8 @@ pub(crate) mod tests {
             assert!(rounded[row + 16] < 0.45, "{}", rounded[row + 16]);
         }
         let one_ray = Params { split: 1, ..p };
-        assert!(sharp_pixels(&hard, &own, &g, &one_ray).is_none());
+        assert!(own_widths(&own, &one_ray).is_none());
+        assert!(sharp_pixels(&hard, own_widths(&own, &one_ray), &g, &one_ray).is_none());
     }
 
     #[test]

@@ -363,11 +363,11 @@ pub(crate) fn soft_shadows(
         return soft;
     }
     let edge = blur::edge_radius(&buffers.hard, &buffers.radius, guide, params);
-    let within = (params.split > 1).then_some(&buffers.radius[..]);
-    let radius = blur::spread_radius(&edge, within, guide, params);
+    let own = blur::own_widths(&buffers.radius, params);
+    let radius = blur::spread_radius(&edge, own, guide, params);
     Ok(match params.kernel {
         Kernel::Box => {
-            let sharp = blur::sharp_pixels(&buffers.hard, &buffers.radius, guide, params);
+            let sharp = blur::sharp_pixels(&buffers.hard, own, guide, params);
             blur::blur(&buffers.hard, &radius, sharp.as_deref(), guide, params)
         }
         Kernel::Light(n) => blur::light_blur(

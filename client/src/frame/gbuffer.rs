@@ -4,7 +4,8 @@
 //!
 //! Triangles are clipped against the near plane in camera space, projected, and rasterised
 //! with edge functions and a 1/z depth test (1/z is affine in screen space), in parallel over
-//! bands of rows. Computed once per camera; every frame while the light moves reuses it.
+//! bands of rows, each band reading only the triangles that reach it. Computed once per
+//! camera; every frame while the light moves reuses it.
 
 use bspvt_proto::Mesh;
 use bspvt_raytrace::Cutouts;
@@ -38,9 +39,17 @@ pub struct GBuffer {
     covered: usize,
 }
 
-/// A near-clipped triangle in screen space: its index, vertices (pixels, 1/z) and the pixel
-/// box it covers [x0, y0, x1, y1].
-type ScreenPoly = (u32, Vec<(DVec2, f64)>, [usize; 4]);
+/// A screen-space point: pixels, and 1/z (affine in screen space).
+type ScreenPoint = (DVec2, f64);
+
+/// A triangle in screen space: its index, the pixel box it covers [x0, y0, x1, y1], and,
+/// where the near plane cut it, the polygon left (one plane leaves at most 4 corners); an
+/// uncut triangle's corners are its vertices' [`ScreenPoint`]s, kept once per vertex.
+struct ScreenPoly {
+    t: u32,
+    bounds: [u32; 4],
+    clipped: Option<Box<([ScreenPoint; 4], usize)>>,
+}
 
 /// A shading point on the mesh.
 #[derive(Clone, Copy, Debug)]
@@ -70,11 +79,26 @@ impl GBuffer {
     pub fn rasterize_cut(mesh: &Mesh, view: &View, cut: Option<&Cutouts>) -> GBuffer {
         let (w, h) = (view.width as usize, view.height as usize);
         let near = 1e-4 * f64::from(mesh.bounds().diagonal()).max(1e-12);
-        // Camera-space vertices once.
+        // Camera-space vertices once, and the image of those in front of the near plane (1/z
+        // > 0; 0 marks a vertex behind it, whose triangles are clipped).
         let cam: Vec<DVec3> = mesh
             .positions
             .par_iter()
             .map(|p| view.to_camera(p.as_dvec3()))
+            .collect();
+        let image = |q: DVec3| {
+            let (x, y) = view.to_image(q);
+            (DVec2::new(x, y), 1.0 / q.z)
+        };
+        let screen: Vec<ScreenPoint> = cam
+            .par_iter()
+            .map(|&q| {
+                if q.z >= near {
+                    image(q)
+                } else {
+                    (DVec2::NAN, 0.0)
+                }
+            })
             .collect();
         // Screen-space polygons (near-clipped), with their triangle index and pixel bounds.
         let polys: Vec<ScreenPoly> = mesh
@@ -82,21 +106,20 @@ impl GBuffer {
             .par_iter()
             .enumerate()
             .filter_map(|(t, tri)| {
-                let c = tri.map(|i| cam[i as usize]);
-                let clipped = clip_near(&c, near);
-                if clipped.len() < 3 {
-                    return None;
-                }
-                let pts: Vec<(DVec2, f64)> = clipped
-                    .iter()
-                    .map(|&q| {
-                        let (x, y) = view.to_image(q);
-                        (DVec2::new(x, y), 1.0 / q.z)
-                    })
-                    .collect();
+                let corners = tri.map(|i| screen[i as usize]);
+                let (pts, n, clipped) = if corners.iter().all(|p| p.1 > 0.0) {
+                    let [a, b, c] = corners;
+                    ([a, b, c, c], 3, false)
+                } else {
+                    let (q, n) = clip_near(&tri.map(|i| cam[i as usize]), near);
+                    if n < 3 {
+                        return None;
+                    }
+                    (q.map(image), n, true)
+                };
                 let (mut lo, mut hi) =
                     (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
-                for (p, _) in &pts {
+                for (p, _) in &pts[..n] {
                     lo = lo.min(*p);
                     hi = hi.max(*p);
                 }
@@ -111,13 +134,14 @@ impl GBuffer {
                 if x0 > x1 || y0 > y1 {
                     return None;
                 }
-                Some((
-                    t as u32,
-                    pts,
-                    [x0 as usize, y0 as usize, x1 as usize, y1 as usize],
-                ))
+                Some(ScreenPoly {
+                    t: t as u32,
+                    bounds: [x0 as u32, y0 as u32, x1 as u32, y1 as u32],
+                    clipped: clipped.then(|| Box::new((pts, n))),
+                })
             })
             .collect();
+        let bands = Bands::of(&polys, h);
 
         let mut tri = vec![NONE; w * h];
         tri.par_chunks_mut(BAND * w)
@@ -136,22 +160,29 @@ impl GBuffer {
                         c.covers_triangle(t, [(1.0 - b1 - b2) as f32, b1 as f32, b2 as f32])
                     })
                 };
-                for (t, pts, [x0, y0, x1, y1]) in &polys {
-                    let (ya, yb) = ((*y0).max(row0), (*y1).min(row0 + rows - 1));
-                    if ya > yb {
-                        continue;
-                    }
-                    // Fan triangulation of the (convex) clipped polygon.
-                    for k in 1..pts.len() - 1 {
+                for &k in bands.of_band(band) {
+                    let p = &polys[k as usize];
+                    let [x0, y0, x1, y1] = p.bounds.map(|b| b as usize);
+                    let (ya, yb) = (y0.max(row0), y1.min(row0 + rows - 1));
+                    let mut raster = |corners| {
                         raster_triangle(
-                            [pts[0], pts[k], pts[k + 1]],
-                            (*x0, *x1, ya, yb),
+                            corners,
+                            (x0, x1, ya, yb),
                             (row0, w),
-                            *t,
+                            p.t,
                             ids,
                             &mut depth,
                             &covers,
-                        );
+                        )
+                    };
+                    match p.clipped.as_deref() {
+                        None => raster(mesh.triangles[p.t as usize].map(|v| screen[v as usize])),
+                        // Fan triangulation of the (convex) clipped polygon.
+                        Some((pts, n)) => {
+                            for k in 1..n - 1 {
+                                raster([pts[0], pts[k], pts[k + 1]]);
+                            }
+                        }
                     }
                 }
             });
@@ -280,20 +311,60 @@ impl GBuffer {
 }
 
 /// Sutherland–Hodgman against the plane z = near (camera space).
-fn clip_near(c: &[DVec3; 3], near: f64) -> Vec<DVec3> {
-    let mut out = Vec::with_capacity(4);
+fn clip_near(c: &[DVec3; 3], near: f64) -> ([DVec3; 4], usize) {
+    let (mut out, mut n) = ([DVec3::ZERO; 4], 0);
     for i in 0..3 {
         let (a, b) = (c[i], c[(i + 1) % 3]);
         let (ia, ib) = (a.z >= near, b.z >= near);
         if ia {
-            out.push(a);
+            out[n] = a;
+            n += 1;
         }
         if ia != ib {
             let t = (near - a.z) / (b.z - a.z);
-            out.push(a + (b - a) * t);
+            out[n] = a + (b - a) * t;
+            n += 1;
         }
     }
-    out
+    (out, n)
+}
+
+/// The polygons each band of [`BAND`] rows meets, each band's in triangle order (the order the
+/// depth test meets them in, so ties resolve as in one pass over all), as one list of indices
+/// into the polygons with each band's start: a band reads its own polygons only, not every
+/// polygon of the mesh.
+struct Bands {
+    start: Vec<usize>,
+    members: Vec<u32>,
+}
+
+impl Bands {
+    fn of(polys: &[ScreenPoly], height: usize) -> Bands {
+        let count = height.div_ceil(BAND);
+        let rows = |p: &ScreenPoly| p.bounds[1] as usize / BAND..=p.bounds[3] as usize / BAND;
+        let mut start = vec![0usize; count + 1];
+        for p in polys {
+            for b in rows(p) {
+                start[b + 1] += 1;
+            }
+        }
+        for b in 0..count {
+            start[b + 1] += start[b];
+        }
+        let mut next = start.clone();
+        let mut members = vec![0u32; start[count]];
+        for (k, p) in polys.iter().enumerate() {
+            for b in rows(p) {
+                members[next[b]] = k as u32;
+                next[b] += 1;
+            }
+        }
+        Bands { start, members }
+    }
+
+    fn of_band(&self, band: usize) -> &[u32] {
+        &self.members[self.start[band]..self.start[band + 1]]
+    }
 }
 
 /// Edge-function rasterisation of one screen triangle into a band, with a 1/z depth test
@@ -471,6 +542,65 @@ mod tests {
         assert!(g.covered() > 96 * 64 / 4, "covered {}", g.covered());
         eprintln!("{} covered, {differ} differ", g.covered());
         assert!(differ <= 96 * 64 / 500, "{differ} pixels differ");
+    }
+
+    /// The banded rasteriser (each band reading only the triangles that reach it, uncut
+    /// triangles' corners projected once per vertex) sees through every pixel what one pass
+    /// over all triangles in mesh order sees, where the near plane cuts the ground under and
+    /// behind the eye and the image's last band is partial.
+    #[test]
+    fn the_bands_see_what_one_pass_over_every_triangle_sees() {
+        let scene = builtin::scene("plate-small").expect("built-in scene");
+        let b = scene.mesh.bounds();
+        let (lo, hi) = (b.min, b.max);
+        let camera = bspvt_proto::scene::Camera {
+            position: [
+                0.5 * (lo.x + hi.x),
+                lo.y + 0.05 * (hi.y - lo.y),
+                0.5 * (lo.z + hi.z),
+            ],
+            target: [hi.x, lo.y, hi.z],
+            up: [0.0, 1.0, 0.0],
+            fov_y_deg: 70.0,
+            aspect: None,
+        };
+        let (w, h) = (80usize, 50usize);
+        let view = View::new(&camera, w as u32, h as u32);
+        let g = GBuffer::rasterize(&scene.mesh, &view);
+        let m = &scene.mesh;
+        let near = 1e-4 * f64::from(m.bounds().diagonal()).max(1e-12);
+        let mut reference = vec![NONE; w * h];
+        let mut depth = vec![0.0f64; w * h];
+        let mut cut = 0;
+        for (t, tri) in m.triangles.iter().enumerate() {
+            let c = tri.map(|v| view.to_camera(m.positions[v as usize].as_dvec3()));
+            let (q, n) = clip_near(&c, near);
+            if n < 3 {
+                continue;
+            }
+            cut += usize::from(c.iter().any(|q| q.z < near));
+            let pts: Vec<ScreenPoint> = q[..n]
+                .iter()
+                .map(|&q| {
+                    let (x, y) = view.to_image(q);
+                    (DVec2::new(x, y), 1.0 / q.z)
+                })
+                .collect();
+            for k in 1..n - 1 {
+                raster_triangle(
+                    [pts[0], pts[k], pts[k + 1]],
+                    (0, w - 1, 0, h - 1),
+                    (0, w),
+                    t as u32,
+                    &mut reference,
+                    &mut depth,
+                    &|_, _, _| true,
+                );
+            }
+        }
+        assert!(cut > 0, "the near plane cuts some triangles");
+        assert!(g.covered() > w * h / 4, "covered {}", g.covered());
+        assert_eq!(g.tri, reference);
     }
 
     /// The side each vertex is seen from: a sheet whose normals face up is seen from behind

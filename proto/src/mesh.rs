@@ -274,27 +274,54 @@ impl Mesh {
     /// one's vertices, which the vertices' own triangles never do —, a point is never hit (its
     /// edges are zero: the intersection's t is 0 · ∞ = NaN, which no ray accepts), and a
     /// million copies of one face, or of one point, kept a BVH build busy for hours.
+    ///
+    /// Two sorts of packed 128-bit keys: the positions by their bits (each distinct position
+    /// an id), then the triangles by their sorted corner ids with the triangle's index in the
+    /// low bits, so the first of each run is the first in mesh order — not the 36-byte keys of
+    /// the corners' bits themselves (docs/benchmarks.md, "The first frame of an uploaded
+    /// mesh").
     pub fn unique_triangles(&self) -> Vec<u32> {
-        let bits = |i: u32| {
-            self.positions
-                .get(i as usize)
-                .map_or([u32::MAX; 3], |p| p.to_array().map(f32::to_bits))
+        let pack = |k: [u32; 3], low: u32| {
+            (u128::from(k[0]) << 96)
+                | (u128::from(k[1]) << 64)
+                | (u128::from(k[2]) << 32)
+                | u128::from(low)
         };
-        let mut keyed: Vec<([[u32; 3]; 3], u32)> = self
+        let mut by_bits: Vec<u128> = self
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(i, p)| pack(p.to_array().map(f32::to_bits), i as u32))
+            .collect();
+        by_bits.sort_unstable();
+        // Position ids: equal bits, equal id (an index out of range: u32::MAX, never an id).
+        let mut id = vec![0u32; self.positions.len()];
+        let mut next = 0u32;
+        for (k, w) in by_bits.iter().enumerate() {
+            if k > 0 && by_bits[k - 1] >> 32 != w >> 32 {
+                next += 1;
+            }
+            id[*w as u32 as usize] = next;
+        }
+        let mut keyed: Vec<u128> = self
             .triangles
             .iter()
             .enumerate()
             .filter_map(|(i, t)| {
-                let mut k = t.map(bits);
+                let mut k = t.map(|v| id.get(v as usize).copied().unwrap_or(u32::MAX));
                 k.sort_unstable();
-                (k[0] != k[2]).then_some((k, i as u32))
+                (k[0] != k[2]).then(|| pack(k, i as u32))
             })
             .collect();
         keyed.sort_unstable();
-        keyed.dedup_by_key(|(k, _)| *k);
-        let mut ids: Vec<u32> = keyed.into_iter().map(|(_, i)| i).collect();
-        ids.sort_unstable();
-        ids
+        keyed.dedup_by_key(|k| *k >> 32);
+        let mut kept = vec![false; self.triangles.len()];
+        for k in keyed {
+            kept[k as u32 as usize] = true;
+        }
+        (0..self.triangles.len() as u32)
+            .filter(|&t| kept[t as usize])
+            .collect()
     }
 
     /// A stable 64-bit content hash (FNV-1a over the little-endian bytes), used to tie a bake
@@ -313,5 +340,59 @@ impl Mesh {
             }
         }
         h.finish()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// [`Mesh::unique_triangles`] by its definition: the corners' bits sorted per triangle, the
+    /// triangles sorted by them, the first (lowest index) of each equal run kept.
+    fn unique_by_definition(mesh: &Mesh) -> Vec<u32> {
+        let bits = |i: u32| {
+            mesh.positions
+                .get(i as usize)
+                .map_or([u32::MAX; 3], |p| p.to_array().map(f32::to_bits))
+        };
+        let mut keyed: Vec<([[u32; 3]; 3], u32)> = mesh
+            .triangles
+            .iter()
+            .enumerate()
+            .filter_map(|(i, t)| {
+                let mut k = t.map(bits);
+                k.sort_unstable();
+                (k[0] != k[2]).then_some((k, i as u32))
+            })
+            .collect();
+        keyed.sort_unstable();
+        keyed.dedup_by_key(|(k, _)| *k);
+        let mut ids: Vec<u32> = keyed.into_iter().map(|(_, i)| i).collect();
+        ids.sort_unstable();
+        ids
+    }
+
+    proptest! {
+        /// Meshes with repeated positions (a few distinct values, ±0 among them), doubled
+        /// sheets, point triangles and any winding: the same triangles as the definition.
+        #[test]
+        fn unique_triangles_are_the_definitions(
+            coords in prop::collection::vec(
+                prop::sample::select(vec![0.0f32, -0.0, 1.0, 2.5, -3.0]), 6..60),
+            corners in prop::collection::vec(0u32..20, 3..240),
+        ) {
+            let positions: Vec<Vec3> = coords
+                .chunks_exact(3)
+                .map(|c| Vec3::new(c[0], c[1], c[2]))
+                .collect();
+            let n = positions.len() as u32;
+            let triangles: Vec<[u32; 3]> = corners
+                .chunks_exact(3)
+                .map(|c| [c[0] % n, c[1] % n, c[2] % n])
+                .collect();
+            let mesh = Mesh { positions, triangles, ..Mesh::default() };
+            prop_assert_eq!(mesh.unique_triangles(), unique_by_definition(&mesh));
+        }
     }
 }

@@ -27,6 +27,7 @@ use bspvt_bake::Baker;
 use super::db::Db;
 use super::metrics::Metrics;
 use super::pg::{Lease, PgDb, Recorded};
+use super::pool::PoolSettings;
 use super::store::Store;
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -65,21 +66,17 @@ enum Failure {
 }
 
 impl Workers {
-    /// Registers worker `id` and starts `loops` threads on a bake pool of `threads`.
+    /// Registers worker `id` and starts `loops` threads on a bake pool of `pool`'s settings.
     pub(crate) fn start(
         db: Arc<Db>,
         store: Arc<Store>,
         metrics: Arc<Metrics>,
         id: String,
         loops: usize,
-        threads: usize,
+        pool: PoolSettings,
         max_failures: u32,
     ) -> Result<(Arc<Workers>, Vec<std::thread::JoinHandle<()>>)> {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .thread_name(|i| format!("bake-pool-{i}"))
-            .build()
-            .context("cannot start the bake thread pool")?;
+        let pool = pool.build()?;
         let w = Arc::new(Workers {
             db,
             store,
@@ -349,6 +346,10 @@ pub struct WorkerArgs {
     /// Threads of the bake pool (0 = one per core).
     #[arg(long, env = "BSPVT_THREADS", default_value_t = 0)]
     pub threads: usize,
+    /// Added to the bake threads' nice value (Linux; 0 = the process's priority): other work
+    /// on the machine goes first.
+    #[arg(long, env = "BSPVT_BAKE_NICE", default_value_t = super::pool::DEFAULT_NICE)]
+    pub bake_nice: i32,
     /// Chunks baked at the same time (each on the whole pool).
     #[arg(long, env = "BSPVT_WORKER_CHUNKS", default_value_t = 2)]
     pub chunks: usize,

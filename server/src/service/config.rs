@@ -51,6 +51,10 @@ pub struct ServeArgs {
     /// Threads of the shared bake pool (0 = one per core).
     #[arg(long, env = "BSPVT_THREADS")]
     pub threads: Option<usize>,
+    /// Added to the bake threads' nice value (Linux; 0 = the process's priority): a viewer or
+    /// the API on the same machine goes first, an idle machine bakes as fast [default: 10].
+    #[arg(long, env = "BSPVT_BAKE_NICE")]
+    pub bake_nice: Option<i32>,
     /// Where the workers cast rays: `cpu` (default) or `gpu` (the fit stays on the pool; the
     /// service does not start without a GPU adapter). Same bakes, docs/bake.md.
     #[arg(long, env = "BSPVT_BAKE_BACKEND")]
@@ -145,6 +149,7 @@ struct FileConfig {
     api_key_file: Option<PathBuf>,
     workers: Option<usize>,
     threads: Option<usize>,
+    bake_nice: Option<i32>,
     bake_backend: Option<String>,
     max_body_bytes: Option<u64>,
     max_mesh_bytes: Option<u64>,
@@ -201,6 +206,8 @@ pub struct Config {
     pub workers: usize,
     /// Threads of the shared bake pool (0 = one per core).
     pub threads: usize,
+    /// Added to the bake pool threads' nice value (service/pool.rs).
+    pub bake_nice: i32,
     /// Where the workers cast rays.
     pub bake_backend: bspvt_bake::Backend,
     /// Largest request body in bytes.
@@ -266,6 +273,7 @@ impl Config {
             api_key: None,
             workers: 2,
             threads: 0,
+            bake_nice: super::pool::DEFAULT_NICE,
             bake_backend: bspvt_bake::Backend::Cpu,
             max_body_bytes: 256 << 20,
             max_mesh_bytes: 256 << 20,
@@ -337,6 +345,7 @@ impl Config {
         take!(
             workers,
             threads,
+            bake_nice,
             max_body_bytes,
             max_mesh_bytes,
             max_mesh_vertices,

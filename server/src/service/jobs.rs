@@ -42,6 +42,7 @@ use super::db::{ChunkMeta, Db, JobState, SceneRow, now_ms};
 use super::memory::{MemoryBudget, Refusal, Reservation};
 use super::metrics::{Gauges, Metrics};
 use super::pg::{ClusterGauges, PgDb};
+use super::pool::PoolSettings;
 use super::rays::Rays;
 use super::store::Store;
 use bspvt_bake::Baker;
@@ -373,11 +374,11 @@ impl Jobs {
     ) -> Result<Arc<Jobs>> {
         let (workers, threads) = (cfg.workers, cfg.threads);
         let (max_active, max_queued) = (cfg.max_active_scenes, cfg.max_queued_scenes);
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .thread_name(|i| format!("bake-pool-{i}"))
-            .build()
-            .context("cannot start the bake thread pool")?;
+        let pool = PoolSettings {
+            threads,
+            nice: cfg.bake_nice,
+        }
+        .build()?;
         let pool_threads = pool.current_num_threads();
         let jobs = Arc::new(Jobs {
             db,
@@ -446,7 +447,10 @@ impl Jobs {
                 metrics.clone(),
                 id,
                 workers,
-                threads,
+                PoolSettings {
+                    threads,
+                    nice: cfg.bake_nice,
+                },
                 max_failures,
             )?;
             Some((w, handles))

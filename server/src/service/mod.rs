@@ -6,11 +6,12 @@
 //! browser viewer), `sse` (status events), `openapi` (the API document and its handler),
 //! `state` (what every handler reaches: state, scene lookup, stream accounting), `http`
 //! (query strings, conditional requests), `jobs` (scheduler and workers), `store` (files),
-//! `db` (SQLite), `input` (uploads → scenes), `metrics`, `error`. Only [`config`] and
+//! `db` (SQLite), `input` (uploads → scenes), `metrics`, `error`, `pool` (the bake's threads,
+//! at background priority). Only [`config`] and
 //! the service handles below are public. The modules depend on each other without cycles, top
 //! to bottom: this module (router, server) → `openapi` → the handlers `api`, `stream`, `sse`,
 //! `gpu_scene` →
-//! `state`, `http` → `jobs` → `store`, `input`, `metrics` → `db`, `error`, `config` →
+//! `state`, `http` → `jobs` → `store`, `input`, `metrics`, `pool` → `db`, `error`, `config` →
 //! `memory` (the memory budget); `web` (the browser dashboard at `/`) beside the handlers.
 //! docs/service.md describes the API, the storage layout and the invariants.
 //!
@@ -43,6 +44,7 @@ mod metrics;
 mod objstore;
 mod openapi;
 mod pg;
+mod pool;
 mod rays;
 mod rows;
 mod sse;
@@ -605,7 +607,10 @@ pub fn worker_command(args: &WorkerArgs) -> Result<()> {
         Arc::new(Metrics::default()),
         id.clone(),
         args.chunks,
-        args.threads,
+        pool::PoolSettings {
+            threads: args.threads,
+            nice: args.bake_nice,
+        },
         args.max_chunk_failures,
     )?;
     {

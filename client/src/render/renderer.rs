@@ -432,18 +432,50 @@ impl<'a> Renderer<'a> {
     /// texture's finest level there) — what the Monte Carlo's camera ray would find — or
     /// `None`.
     pub fn emitters(&self, lights: &[Light]) -> Vec<Option<[f32; 3]>> {
+        let mut all = vec![None; self.gbuffer.tri.len()];
+        let (start, seen) = self.emitters_in_rows(lights);
+        all[start..start + seen.len()].copy_from_slice(&seen);
+        all
+    }
+
+    /// [`Self::emitters`] over the rows a lamp may be seen in ([`lamp_box`]): the first
+    /// pixel's index and the rows' pixels (none when no lamp is in view). A frame's lamps cost
+    /// their own rows, not a ray per pixel of the image toward each.
+    fn emitters_in_rows(&self, lights: &[Light]) -> (usize, Vec<Option<[f32; 3]>>) {
         let (mesh, g, view) = (&self.scene.mesh, &self.gbuffer, &self.view);
-        let w = g.width as usize;
-        if lights.is_empty() {
-            return vec![None; g.tri.len()];
+        let (w, h) = (g.width as usize, g.height as usize);
+        let boxes: Vec<Option<[f64; 4]>> = lights.iter().map(|l| lamp_box(l, view)).collect();
+        // Rows whose centres (y + ½) a box reaches.
+        let mut rows = (h, 0);
+        for b in &boxes {
+            let (y0, y1) = b.map_or((0, h), |[_, y0, _, y1]| {
+                let first = (y0 - 0.5).ceil().clamp(0.0, h as f64) as usize;
+                let end = ((y1 - 0.5).floor() + 1.0).clamp(0.0, h as f64) as usize;
+                (first, end)
+            });
+            if y0 < y1 {
+                rows = (rows.0.min(y0), rows.1.max(y1));
+            }
         }
-        (0..g.tri.len())
+        if rows.0 >= rows.1 {
+            return (0, Vec::new());
+        }
+        let seen = (rows.0 * w..rows.1 * w)
             .into_par_iter()
             .map(|i| {
-                let d = view.ray_dir((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+                let (x, y) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+                let may = |k: usize| {
+                    boxes[k].is_none_or(|[x0, y0, x1, y1]| x >= x0 && x <= x1 && y >= y0 && y <= y1)
+                };
+                if !(0..lights.len()).any(may) {
+                    return None;
+                }
+                let d = view.ray_dir(x, y);
                 let (t, l, q) = lights
                     .iter()
-                    .filter_map(|l| l.hit(view.eye, d).map(|(t, q)| (t, l, q)))
+                    .enumerate()
+                    .filter(|&(k, _)| may(k))
+                    .filter_map(|(_, l)| l.hit(view.eye, d).map(|(t, q)| (t, l, q)))
                     .min_by(|a, b| a.0.total_cmp(&b.0))?;
                 // Only a pixel that sees a lamp asks for its surface (most see none). A lamp
                 // flush with the surface behind it (an asset's emitting triangles on a
@@ -461,7 +493,8 @@ impl<'a> Renderer<'a> {
                 };
                 c.is_finite().then(|| c.as_vec3().to_array())
             })
-            .collect()
+            .collect();
+        (rows.0 * w, seen)
     }
 
     /// Draws the lamps over a frame ([`Self::emitters`]). Every method's frame goes through
@@ -471,7 +504,8 @@ impl<'a> Renderer<'a> {
         if lights.is_empty() || img.pixels.len() != self.gbuffer.tri.len() {
             return;
         }
-        for (px, e) in img.pixels.iter_mut().zip(self.emitters(lights)) {
+        let (start, seen) = self.emitters_in_rows(lights);
+        for (px, e) in img.pixels[start..].iter_mut().zip(seen) {
             if let Some(c) = e {
                 *px = c;
             }
@@ -701,4 +735,125 @@ fn seen(g: &GBuffer, mesh: &bspvt_proto::Mesh, eye: DVec3) -> (Vec<u32>, Vec<boo
         .filter_map(|(v, &s)| s.then_some(v as u32))
         .collect();
     (visible, behind)
+}
+
+/// Where a polygon lamp wholly in front of the eye can be seen: the box [x0, y0, x1, y1] of its
+/// corners' images, a pixel wider for rounding (a planar polygon in front of the eye projects
+/// into the convex hull of its corners' images); `None` (every pixel) for bulbs, suns and a
+/// polygon reaching behind the eye. [`Renderer::emitters`] traces no pixel outside it.
+fn lamp_box(l: &Light, view: &View) -> Option<[f64; 4]> {
+    if !matches!(l.shape, crate::light::Shape::Polygon) {
+        return None;
+    }
+    let mut b = [
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    ];
+    for &v in &l.vertices {
+        let c = view.to_camera(v);
+        if !(c.z > 0.0) {
+            return None;
+        }
+        let (x, y) = view.to_image(c);
+        b = [b[0].min(x), b[1].min(y), b[2].max(x), b[3].max(y)];
+    }
+    b.iter()
+        .all(|x| x.is_finite())
+        .then(|| [b[0] - 1.0, b[1] - 1.0, b[2] + 1.0, b[3] + 1.0])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bspvt_proto::scene::PolygonLight;
+
+    /// The lamps as the camera sees them are the same with the boxes as tracing every pixel
+    /// toward every lamp: two quads in view (one one-sided), one reaching behind the eye, one
+    /// off screen, a small one, and the scene's own; then the boxed ones alone, whose rows are
+    /// fewer than the image's.
+    #[test]
+    fn lamps_seen_are_those_every_pixel_would_find() {
+        let scene = bspvt_proto::builtin::scene("plate-small").expect("built-in scene");
+        let r = Renderer::new(&scene, 96, 64);
+        let (eye, at) = (r.view.eye, scene.camera.target);
+        let at = glam::Vec3::from(at).as_dvec3();
+        let fwd = (at - eye).normalize();
+        let side = fwd.cross(glam::DVec3::Y).normalize();
+        let up = side.cross(fwd);
+        let tilted = |c: glam::DVec3, s: f64, two_sided: bool, v: glam::DVec3| {
+            let corner = |a: f64, b: f64| (c + s * (a * side + b * v)).as_vec3().to_array();
+            Light::load(&PolygonLight {
+                vertices: vec![
+                    corner(-1.0, -1.0),
+                    corner(-1.0, 1.0),
+                    corner(1.0, 1.0),
+                    corner(1.0, -1.0),
+                ],
+                radiance: [1.0, 2.0, 3.0],
+                two_sided,
+                texture: None,
+                region: None,
+                moves_in_plane: false,
+                image: None,
+            })
+            .expect("a lamp")
+        };
+        let quad = |c, s, two_sided| tilted(c, s, two_sided, up);
+        let mid = eye + 0.5 * (at - eye);
+        let mut lights = vec![
+            quad(mid, 0.1 * (at - eye).length(), true),
+            quad(mid + 0.05 * side, 0.08 * (at - eye).length(), false),
+            // A floor under the eye running from behind it to ahead of it.
+            tilted(eye - 0.2 * up, 0.5, true, fwd),
+            quad(eye + fwd - 3.0 * side, 0.1, true),
+            quad(mid - 0.1 * up, 0.02 * (at - eye).length(), true),
+        ];
+        lights.extend(
+            crate::light::scene_lights(&scene)
+                .expect("lights")
+                .into_iter()
+                .map(|(l, _)| l),
+        );
+        assert!(lamp_box(&lights[0], &r.view).is_some());
+        assert!(
+            lamp_box(&lights[2], &r.view).is_none(),
+            "reaches behind the eye"
+        );
+        let w = r.gbuffer.width as usize;
+        // Every lamp (one box is the whole image), then the boxed ones alone (their rows).
+        let boxed: Vec<Light> = [3, 4].map(|k| lights[k].clone()).into();
+        let (start, rows) = r.emitters_in_rows(&boxed);
+        assert!(
+            start > 0 && start + rows.len() < w * 64,
+            "the small lamp's rows: {start} + {}",
+            rows.len()
+        );
+        for lights in [&lights[..], &boxed[..]] {
+            let got = r.emitters(lights);
+            let mut drawn = crate::frame::image::Image::new(96, 64);
+            r.draw_emitters(&mut drawn, lights);
+            let mut seen = 0;
+            for (i, e) in got.iter().enumerate() {
+                let d = r.view.ray_dir((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+                let every = lights
+                    .iter()
+                    .filter_map(|l| l.hit(r.view.eye, d).map(|(t, q)| (t, l, q)))
+                    .min_by(|a, b| a.0.total_cmp(&b.0))
+                    .filter(|&(t, _, _)| {
+                        let s = r
+                            .gbuffer
+                            .surface(&scene.mesh, &r.view, i)
+                            .map_or(f64::INFINITY, |s| (s.position - r.view.eye).length());
+                        t <= s * (1.0 + 1e-6)
+                    })
+                    .map(|(_, l, q)| l.radiance_at(q).as_vec3().to_array());
+                assert_eq!(*e, every, "pixel {i}");
+                assert_eq!(drawn.pixels[i], e.unwrap_or_default(), "pixel {i} drawn");
+                seen += usize::from(e.is_some());
+            }
+            assert!(seen > 10, "{seen} pixels see a lamp");
+        }
+    }
 }

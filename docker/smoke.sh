@@ -42,7 +42,7 @@ echo "submitted: $id"
 t0=$(date +%s)
 while :; do
   state=$(curl -fsS $B/v1/scenes/"$id" | field state)
-  [ "$state" = done ] && break
+  [ "$state" = "done" ] && break
   [ "$state" = failed ] && { curl -fsS $B/v1/scenes/"$id"; exit 1; }
   [ $(($(date +%s) - t0)) -lt 600 ] || { echo "not done after 600 s: $state"; exit 1; }
   sleep 1

@@ -7,6 +7,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use std::borrow::Cow;
 use std::sync::Arc;
 
 use crate::material::{Cutout, MaterialMaps, NormalMap};
@@ -201,9 +202,10 @@ pub struct SceneStatus {
 const STORED_VERSION: u16 = 9;
 
 #[derive(Serialize, Deserialize)]
-struct StoredScene {
+struct StoredScene<'a> {
     version: u16,
-    mesh: Mesh,
+    /// Borrowed when encoding (a big mesh is not copied to be written), owned when read.
+    mesh: Cow<'a, Mesh>,
     materials: Vec<Material>,
     lights: Vec<StoredLight>,
     camera: StoredCamera,
@@ -258,11 +260,11 @@ struct StoredSceneV8 {
     map_transforms: Vec<[Option<UvTransform>; 2]>,
 }
 
-impl From<StoredSceneV8> for StoredScene {
-    fn from(v: StoredSceneV8) -> StoredScene {
+impl From<StoredSceneV8> for StoredScene<'static> {
+    fn from(v: StoredSceneV8) -> StoredScene<'static> {
         StoredScene {
             version: v.version,
-            mesh: v.mesh,
+            mesh: Cow::Owned(v.mesh),
             materials: v.materials,
             lights: v.lights,
             camera: v.camera,
@@ -311,11 +313,11 @@ struct StoredSceneV7 {
     suns: Vec<SunLight>,
 }
 
-impl From<StoredSceneV7> for StoredScene {
-    fn from(v: StoredSceneV7) -> StoredScene {
+impl From<StoredSceneV7> for StoredScene<'static> {
+    fn from(v: StoredSceneV7) -> StoredScene<'static> {
         StoredScene {
             version: v.version,
-            mesh: v.mesh,
+            mesh: Cow::Owned(v.mesh),
             materials: v.materials,
             lights: v.lights,
             camera: v.camera,
@@ -376,8 +378,8 @@ impl From<PunctualV6> for PunctualLight {
     }
 }
 
-impl From<StoredSceneV6> for StoredScene {
-    fn from(v: StoredSceneV6) -> StoredScene {
+impl From<StoredSceneV6> for StoredScene<'static> {
+    fn from(v: StoredSceneV6) -> StoredScene<'static> {
         StoredSceneV7 {
             version: v.version,
             mesh: v.mesh,
@@ -416,8 +418,8 @@ struct StoredSceneV5 {
     punctual: Vec<PunctualV6>,
 }
 
-impl From<StoredSceneV5> for StoredScene {
-    fn from(v: StoredSceneV5) -> StoredScene {
+impl From<StoredSceneV5> for StoredScene<'static> {
+    fn from(v: StoredSceneV5) -> StoredScene<'static> {
         let moves_in_plane = v.lights.iter().map(|l| l.region.is_none()).collect();
         StoredSceneV6 {
             version: v.version,
@@ -846,7 +848,7 @@ pub fn encode_scene(s: &Scene) -> Vec<u8> {
     };
     let stored = StoredScene {
         version: STORED_VERSION,
-        mesh: s.mesh.clone(),
+        mesh: Cow::Borrowed(&s.mesh),
         materials: s.materials.clone(),
         lights: s.lights.iter().map(StoredLight::from).collect(),
         camera: StoredCamera::from(&s.camera),
@@ -870,7 +872,7 @@ pub fn encode_scene(s: &Scene) -> Vec<u8> {
 }
 
 /// Version 4 and before: nothing textured, no punctual lights.
-fn from_v4(v: StoredSceneV4) -> StoredScene {
+fn from_v4(v: StoredSceneV4) -> StoredScene<'static> {
     StoredSceneV5 {
         version: v.version,
         mesh: v.mesh,
@@ -1032,7 +1034,7 @@ pub fn decode_scene(bytes: &[u8]) -> Result<Scene, String> {
     }
     let mut images = s.light_images.into_iter();
     let mut in_plane = s.moves_in_plane.into_iter();
-    let mut mesh = s.mesh;
+    let mut mesh = s.mesh.into_owned();
     mesh.uvs = s.uvs.into_iter().map(glam::Vec2::from).collect();
     let scene = Scene {
         mesh,

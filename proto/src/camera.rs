@@ -62,35 +62,39 @@ impl Camera {
         let b = mesh.bounds();
         let c = b.center();
         let ext = (b.max - b.min).max(Vec3::splat(1e-6));
-        let faces: Vec<(Vec3, Vec3, f32)> = mesh
-            .triangles
-            .iter()
-            .filter_map(|t| {
-                let p = t.map(|i| mesh.positions[i as usize]);
-                let n = (p[1] - p[0]).cross(p[2] - p[0]);
-                let area = 0.5 * n.length();
-                (area > 0.0 && area.is_finite())
-                    .then(|| (n / (2.0 * area), (p[0] + p[1] + p[2]) / 3.0, area))
-            })
-            .collect();
-        let inward: f32 = faces
-            .iter()
-            .map(|(n, at, a)| if n.dot(c - *at) > 0.0 { *a } else { -*a })
-            .sum();
+        // (axis, side sign): the four sides a camera may look in through.
+        const SIDES: [(usize, f32); 4] = [(2, -1.0), (2, 1.0), (0, -1.0), (0, 1.0)];
+        let walls_at = SIDES.map(|(axis, sign)| {
+            let plane = if sign < 0.0 { b.min[axis] } else { b.max[axis] };
+            (axis, plane, 0.02 * ext[axis])
+        });
+        // One pass, no list of faces (a scan's million triangles made one of 31 MB): the area
+        // facing the box's centre net of the area facing away, and each side's wall area.
+        let mut inward = 0.0f32;
+        let mut walls = [0.0f32; 4];
+        for t in &mesh.triangles {
+            let p = t.map(|i| mesh.positions[i as usize]);
+            let n = (p[1] - p[0]).cross(p[2] - p[0]);
+            let area = 0.5 * n.length();
+            if !(area > 0.0 && area.is_finite()) {
+                continue;
+            }
+            let (n, at) = (n / (2.0 * area), (p[0] + p[1] + p[2]) / 3.0);
+            inward += if n.dot(c - at) > 0.0 { area } else { -area };
+            for (wall, &(axis, plane, tol)) in walls.iter_mut().zip(&walls_at) {
+                if (at[axis] - plane).abs() <= tol && n[axis].abs() > 0.9 {
+                    *wall += area;
+                }
+            }
+        }
         if inward <= 0.0 {
             return Camera::framing(&b);
         }
         // (axis, side sign, coverage of that side's wall as a fraction of its area).
-        let sides = [(2usize, -1.0f32), (2, 1.0), (0, -1.0), (0, 1.0)].map(|(axis, sign)| {
-            let plane = if sign < 0.0 { b.min[axis] } else { b.max[axis] };
-            let tol = 0.02 * ext[axis];
-            let wall: f32 = faces
-                .iter()
-                .filter(|(n, at, _)| (at[axis] - plane).abs() <= tol && n[axis].abs() > 0.9)
-                .map(|(_, _, a)| a)
-                .sum();
+        let sides: [(usize, f32, f32); 4] = std::array::from_fn(|k| {
+            let (axis, sign) = SIDES[k];
             let other = if axis == 0 { ext.z } else { ext.x };
-            (axis, sign, wall / (other * ext.y))
+            (axis, sign, walls[k] / (other * ext.y))
         });
         let (axis, sign, coverage) =
             sides.into_iter().fold(
@@ -189,5 +193,100 @@ mod tests {
         assert!(c.validate().is_err());
         c.aspect = Some(f32::NAN);
         assert!(c.validate().is_err());
+    }
+
+    /// The one-pass framing against its definition with a list of faces (the code before the
+    /// pass): the same camera, bit for bit, for an object and for rooms open on a side and
+    /// closed, whose framing takes the enclosure's branch.
+    #[test]
+    fn framing_mesh_is_the_face_lists() {
+        use crate::scene::builtin::{grid_plane, icosphere};
+        fn by_lists(mesh: &Mesh) -> Camera {
+            let b = mesh.bounds();
+            let c = b.center();
+            let ext = (b.max - b.min).max(Vec3::splat(1e-6));
+            let faces: Vec<(Vec3, Vec3, f32)> = mesh
+                .triangles
+                .iter()
+                .filter_map(|t| {
+                    let p = t.map(|i| mesh.positions[i as usize]);
+                    let n = (p[1] - p[0]).cross(p[2] - p[0]);
+                    let area = 0.5 * n.length();
+                    (area > 0.0 && area.is_finite())
+                        .then(|| (n / (2.0 * area), (p[0] + p[1] + p[2]) / 3.0, area))
+                })
+                .collect();
+            let inward: f32 = faces
+                .iter()
+                .map(|(n, at, a)| if n.dot(c - *at) > 0.0 { *a } else { -*a })
+                .sum();
+            if inward <= 0.0 {
+                return Camera::framing(&b);
+            }
+            let sides = [(2usize, -1.0f32), (2, 1.0), (0, -1.0), (0, 1.0)].map(|(axis, sign)| {
+                let plane = if sign < 0.0 { b.min[axis] } else { b.max[axis] };
+                let tol = 0.02 * ext[axis];
+                let wall: f32 = faces
+                    .iter()
+                    .filter(|(n, at, _)| (at[axis] - plane).abs() <= tol && n[axis].abs() > 0.9)
+                    .map(|(_, _, a)| a)
+                    .sum();
+                let other = if axis == 0 { ext.z } else { ext.x };
+                (axis, sign, wall / (other * ext.y))
+            });
+            let (axis, sign, coverage) =
+                sides.into_iter().fold(
+                    sides[0],
+                    |best, s| if s.2 < best.2 - 1e-3 { s } else { best },
+                );
+            let mut out = Vec3::ZERO;
+            out[axis] = sign;
+            let mut face = c;
+            face[axis] = if sign < 0.0 { b.min[axis] } else { b.max[axis] };
+            let (position, fov_y_deg) = if coverage < 0.5 {
+                let other = if axis == 0 { ext.z } else { ext.x };
+                let half = 0.5 * other.max(ext.y);
+                (face + out * (half / 20f32.to_radians().tan() * 1.05), 40.0)
+            } else {
+                let mut eye = face - out * (0.02 * ext[axis]);
+                eye.y = b.min.y + 0.55 * ext.y;
+                (eye, 60.0)
+            };
+            Camera {
+                position: position.to_array(),
+                target: c.to_array(),
+                up: default_up(),
+                fov_y_deg,
+                aspect: None,
+            }
+        }
+        // Walls of a 4 × 2.5 × 3 room centred on the origin, facing inward.
+        let wall = |center: Vec3, du: Vec3, dv: Vec3| {
+            let inward = du.cross(dv).dot(-center) > 0.0;
+            grid_plane(
+                center,
+                if inward { du } else { dv },
+                if inward { dv } else { du },
+                3,
+                0,
+            )
+        };
+        let (x, y, z) = (Vec3::X * 2.0, Vec3::Y * 1.25, Vec3::Z * 1.5);
+        let mut open = wall(-y, x, z);
+        for (c, du, dv) in [(y, z, x), (-x, y, z), (x, z, y), (-z, x, y)] {
+            open.append(&wall(c, du, dv), 0);
+        }
+        let mut closed = open.clone();
+        closed.append(&wall(z, y, x), 0);
+        let object = icosphere(3, 0);
+        for (name, mesh, room) in [
+            ("object", object, false),
+            ("open room", open, true),
+            ("closed room", closed, true),
+        ] {
+            let camera = Camera::framing_mesh(&mesh);
+            assert_eq!(camera, by_lists(&mesh), "{name}");
+            assert_eq!(camera != Camera::framing(&mesh.bounds()), room, "{name}");
+        }
     }
 }

@@ -263,7 +263,43 @@ pub fn load_asset_uploaded(
     load(bytes, format, limits, Sidecars::uploaded(files))
 }
 
+/// [`load_asset_uploaded`] without the check for repeated triangles: for a caller that runs
+/// [`repeats_warning`] on the mesh it bakes beside other work (the service, while it stores
+/// the scene; on a scanned mesh of a million triangles the check is a tenth of a second).
+pub fn parse_asset_uploaded(
+    bytes: &[u8],
+    format: Format,
+    limits: &Limits,
+    files: &BTreeMap<String, Vec<u8>>,
+) -> Result<Asset, MeshError> {
+    parse(bytes, format, limits, Sidecars::uploaded(files))
+}
+
+/// The warning for the triangles the ray casters leave out ([`Mesh::unique_triangles`]:
+/// copies of another triangle and single points), if there are any.
+pub fn repeats_warning(mesh: &Mesh) -> Option<String> {
+    let left_out = mesh.triangles.len() - mesh.unique_triangles().len();
+    (left_out > 0).then(|| {
+        format!(
+            "{left_out} triangles repeat another triangle's corners or are a single point: kept \
+             for shading, left out of the rays' BVH (they change no ray's answer)"
+        )
+    })
+}
+
+/// [`parse`] and the warning for repeated triangles.
 fn load(
+    bytes: &[u8],
+    format: Format,
+    limits: &Limits,
+    sidecars: Sidecars<'_>,
+) -> Result<Asset, MeshError> {
+    let mut asset = parse(bytes, format, limits, sidecars)?;
+    asset.warnings.extend(repeats_warning(&asset.mesh));
+    Ok(asset)
+}
+
+fn parse(
     bytes: &[u8],
     format: Format,
     limits: &Limits,
@@ -285,13 +321,6 @@ fn load(
         },
     };
     asset.files = sidecars.into_read();
-    let left_out = asset.mesh.triangles.len() - asset.mesh.unique_triangles().len();
-    if left_out > 0 {
-        asset.warnings.push(format!(
-            "{left_out} triangles repeat another triangle's corners or are a single point: kept \
-             for shading, left out of the rays' BVH (they change no ray's answer)"
-        ));
-    }
     Ok(asset)
 }
 

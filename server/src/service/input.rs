@@ -19,7 +19,7 @@
 use std::collections::BTreeMap;
 use std::io::Read;
 
-use bspvt_proto::import::{Asset, Format, Limits, load_asset_uploaded};
+use bspvt_proto::import::{Asset, Format, Limits, parse_asset_uploaded};
 use bspvt_proto::scene::SceneFile;
 use bspvt_proto::texture::{LightImage, image_dimensions};
 use bspvt_proto::{BakeSettings, Scene, SceneError};
@@ -226,7 +226,8 @@ fn load_upload(
         .min(bspvt_proto::texture::MAX_ASSET_TEXELS);
     mem.grow_to(mem.bytes() + parse_bytes(bytes.len() as u64) + 8 * texels)
         .map_err(|r| ApiError::memory("parsing this mesh", r))?;
-    let asset = load_asset_uploaded(&bytes, format, lim, files)?;
+    // The check for repeated triangles runs on the scene's mesh, beside its storing (`accept`).
+    let asset = parse_asset_uploaded(&bytes, format, lim, files)?;
     Ok((inner, asset))
 }
 

@@ -26,13 +26,14 @@ pub(crate) fn parse_bytes(decompressed: u64) -> u64 {
 }
 
 /// Peak memory of baking a scene of `vertices` and `triangles` on `threads` bake threads
-/// with `face_res`² cube-map faces: the mesh, its BVH, adjacency and ray origins, plus each
+/// with `face_res`² cube-map faces: the mesh, its BVHs (built on the bake's threads, whose
+/// reinsertion pass holds a candidate per node), adjacency and ray origins, plus each
 /// thread's cube map and fitting buffers (measured by the probe; docs/service.md).
 pub(crate) fn bake_bytes(vertices: u64, triangles: u64, face_res: u32, threads: usize) -> u64 {
     let per_thread = 6 * u64::from(face_res).pow(2) * 64 + 4 * MIB;
     vertices
-        .saturating_mul(160)
-        .saturating_add(triangles.saturating_mul(320))
+        .saturating_mul(200)
+        .saturating_add(triangles.saturating_mul(400))
         .saturating_add((threads as u64).saturating_mul(per_thread))
         .saturating_add(16 * MIB)
 }

@@ -15,6 +15,7 @@
 #![warn(unreachable_pub, missing_docs)]
 
 pub mod cubemap;
+mod edges;
 pub mod fit;
 mod frustum;
 #[cfg(feature = "gpu")]

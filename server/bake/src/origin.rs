@@ -17,8 +17,6 @@
 //!
 //! A math kernel: no I/O.
 
-use std::collections::HashMap;
-
 use bspvt_proto::Mesh;
 use glam::Vec3;
 
@@ -38,23 +36,7 @@ pub(crate) fn ray_origins(mesh: &Mesh, offset: f32) -> Vec<Vec3> {
 /// the vertex toward the centroids of the triangles around it (the side its surface lies on).
 pub(crate) fn boundary_inward(mesh: &Mesh) -> Vec<Vec3> {
     let n = mesh.positions.len();
-    let mut uses: HashMap<(u32, u32), u32> = HashMap::with_capacity(mesh.triangles.len() * 3 / 2);
-    for t in &mesh.triangles {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            *uses.entry((a.min(b), a.max(b))).or_default() += 1;
-        }
-    }
-    let mut on_boundary = vec![false; n];
-    for (&(a, b), &count) in &uses {
-        if count == 1 {
-            for v in [a, b] {
-                if let Some(flag) = on_boundary.get_mut(v as usize) {
-                    *flag = true;
-                }
-            }
-        }
-    }
+    let on_boundary = crate::edges::on_boundary(&mesh.triangles, n);
     // Σ over the triangles around a boundary vertex of (centroid − vertex), in f64 so that the
     // sum's order (triangle order) cannot change a bit of the result's direction materially.
     let mut toward = vec![glam::DVec3::ZERO; n];

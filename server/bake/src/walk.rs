@@ -9,8 +9,6 @@
 //! ([`Occluder::primitive_blocks`]), so a walk that strays (a seam, a silhouette, rounding)
 //! costs a few steps and the ray falls back to a traversal, never a wrong answer.
 
-use std::collections::HashMap;
-
 use bspvt_proto::Mesh;
 use bspvt_raytrace::Occluder;
 use glam::Vec3;
@@ -58,26 +56,9 @@ impl SurfaceWalk {
                 (idx.map(|v| mesh.positions[v as usize]), idx)
             })
             .collect();
-        // An edge shared by more than two triangles (non-manifold) links the first two.
-        let mut first: HashMap<(u32, u32), (u32, u8)> = HashMap::with_capacity(tris.len() * 3 / 2);
-        let mut across = vec![[NONE; 3]; tris.len()];
-        for (p, (_, idx)) in tris.iter().enumerate() {
-            for k in 0..3 {
-                let (a, b) = (idx[(k + 1) % 3], idx[(k + 2) % 3]);
-                let key = (a.min(b), a.max(b));
-                match first.get(&key) {
-                    Some(&(q, kq)) => {
-                        if across[p][k] == NONE && across[q as usize][kq as usize] == NONE {
-                            across[p][k] = q;
-                            across[q as usize][kq as usize] = p as u32;
-                        }
-                    }
-                    None => {
-                        first.insert(key, (p as u32, k as u8));
-                    }
-                }
-            }
-        }
+        // Non-manifold edges link their first two triangles (`edges::across`).
+        let idx: Vec<[u32; 3]> = tris.iter().map(|&(_, idx)| idx).collect();
+        let across = crate::edges::across(&idx, NONE);
         let tris = tris
             .into_iter()
             .zip(across)

@@ -17,6 +17,7 @@ pub mod gpu;
 mod gpu_first_hit;
 #[cfg(feature = "gpu")]
 mod gpu_occluder;
+mod prefetch;
 #[cfg(feature = "gpu")]
 pub use gpu_first_hit::{GpuFirstHit, Segment};
 #[cfg(feature = "gpu")]
@@ -26,6 +27,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 pub use cutout::Cutouts;
+pub use prefetch::prefetch;
 
 /// `covers`, the cut-out test of [`Cutouts::gpu_words`] in WGSL, for shaders that declare the
 /// `cut` buffer (`occlusion.wgsl`; the raster pass of `bspvt_shaders::gpu::wgsl`). Text only:
@@ -299,6 +301,13 @@ impl Occluder {
     #[inline]
     pub fn primitive_blocks(&self, prim: u32, ray: &Ray) -> bool {
         self.primitive_hit(prim as usize, ray) < ray.tmax
+    }
+
+    /// Asks for primitive `prim`'s triangle ahead of a [`Occluder::primitive_blocks`] on it
+    /// ([`prefetch`]).
+    #[inline(always)]
+    pub fn prefetch_primitive(&self, prim: u32) {
+        prefetch(&self.tris, prim as usize);
     }
 
     /// The mesh triangle index of each primitive, in this occluder's order.

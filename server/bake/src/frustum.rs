@@ -236,6 +236,13 @@ impl FrustumCuller {
                 let pair = &self.pairs[first as usize];
                 for s in 0..2 {
                     if !pyr.excludes_box(pair.min[s], pair.max[s]) {
+                        let [first, count] = pair.link[s];
+                        // Its line is on its way while the other sibling's subtree is walked.
+                        if count > 0 {
+                            bspvt_raytrace::prefetch(&self.prims, first as usize);
+                        } else {
+                            bspvt_raytrace::prefetch(&self.pairs, first as usize);
+                        }
                         stack.push(pair.link[s]);
                     }
                 }

@@ -87,10 +87,12 @@ impl SurfaceWalk {
         let mut facing = 0.0;
         for _ in 0..MAX_STEPS {
             let t = &self.tris[cur as usize];
-            // The next step reads one of the three triangles across: ask for their lines now,
-            // while this one's edge functions are computed (a step is otherwise a cache miss).
+            // The next step reads one of the three triangles across, and the last step the
+            // occluder's copy of it: ask for their lines now, while this one's edge functions
+            // are computed (a step is otherwise a cache miss or two).
             for &q in &t.across {
-                prefetch(&self.tris, q);
+                bspvt_raytrace::prefetch(&self.tris, q as usize);
+                occ.prefetch_primitive(q);
             }
             let [a, b, c] = t.v.map(|p| p - o);
             // Edge functions: d · (B × C) etc., signed so that all are ≥ 0 when the ray (on
@@ -124,15 +126,5 @@ impl SurfaceWalk {
             }
         }
         None
-    }
-}
-
-/// Touches `tris[q]` so that its line is on its way when the walk steps there (a load
-/// nothing waits for; out of range: nothing). The workspace denies `unsafe`, so no prefetch
-/// intrinsic.
-#[inline(always)]
-fn prefetch(tris: &[WalkTriangle], q: u32) {
-    if let Some(t) = tris.get(q as usize) {
-        std::hint::black_box(t.across[0]);
     }
 }

@@ -138,10 +138,11 @@ impl Camera {
     }
 }
 
-/// The side an enclosure is looked into through, or `None` for an object ([`Camera::framing_mesh`]):
-/// (axis, side sign, that side's wall area as a fraction of the side) for the side of ±x or ±z
-/// with the least wall, when more of the mesh's area faces the centre of its box `b` than away.
-/// One pass over the triangles, no list of them (a scan's million triangles made one of 31 MB).
+/// The side an enclosure is looked into through, or `None` for an object
+/// ([`Camera::framing_mesh`]): (axis, side sign, that side's wall area as a fraction of the
+/// side) for the side of ±x or ±z with the least wall, when more of the mesh's area faces the
+/// centre of its box `b` than away. One pass over the triangles, no list of them (a scan's
+/// million triangles made one of 31 MB).
 fn open_side(mesh: &Mesh, b: &Aabb) -> Option<(usize, f32, f32)> {
     let c = b.center();
     let ext = (b.max - b.min).max(Vec3::splat(1e-6));

@@ -177,8 +177,20 @@ pub(crate) fn run(a: RenderArgs) -> Result<()> {
                 },
             )
         })?;
+        // Per-vertex figures only where vertices were shaded (a per-pixel method shades none).
+        let per_vertex = if stats.vertices_shaded > 0 {
+            format!(
+                "{:.3} µs/vertex ({:.3} per core, {} threads), {} vertices shaded",
+                stats.us_per_vertex,
+                stats.us_per_vertex_per_core,
+                stats.threads,
+                stats.vertices_shaded
+            )
+        } else {
+            format!("{} threads", stats.threads)
+        };
         println!(
-            "{} {:?}: {} frame(s) at {}×{}, {:.2} ms/frame ({:.1} fps), {:.3} µs/vertex ({:.3} per core, {} threads), {} vertices shaded",
+            "{} {:?}: {} frame(s) at {}×{}, {:.2} ms/frame ({:.1} fps), {per_vertex}",
             stats.method.name(),
             stats.mode,
             stats.frames,
@@ -186,10 +198,6 @@ pub(crate) fn run(a: RenderArgs) -> Result<()> {
             stats.height,
             stats.ms_per_frame,
             stats.fps,
-            stats.us_per_vertex,
-            stats.us_per_vertex_per_core,
-            stats.threads,
-            stats.vertices_shaded
         );
         all_stats.push(stats);
         images.push(frames);

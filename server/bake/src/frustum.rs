@@ -236,12 +236,12 @@ impl FrustumCuller {
                 let pair = &self.pairs[first as usize];
                 for s in 0..2 {
                     if !pyr.excludes_box(pair.min[s], pair.max[s]) {
-                        let [first, count] = pair.link[s];
                         // Its line is on its way while the other sibling's subtree is walked.
+                        let [at, count] = pair.link[s];
                         if count > 0 {
-                            bspvt_raytrace::prefetch(&self.prims, first as usize);
+                            bspvt_raytrace::prefetch(&self.prims, at as usize);
                         } else {
-                            bspvt_raytrace::prefetch(&self.pairs, first as usize);
+                            bspvt_raytrace::prefetch(&self.pairs, at as usize);
                         }
                         stack.push(pair.link[s]);
                     }

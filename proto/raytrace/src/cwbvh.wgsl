@@ -5,8 +5,8 @@
 // e[3] | imask << 24, child_base_idx, primitive_base_idx, child_meta (2 words), then
 // child_{min,max}_{x,y,z} (2 words each).
 
-// obvhs's cwbvh::node::EPSILON: a child box is entered no nearer than this.
-const BOX_T_MIN: f32 = 0.0001;
+// A child box is entered no nearer than `box_t_min()` (each including shader declares it):
+// obvhs's cwbvh::node::EPSILON as the CPU's traversals scale it, `Occluder::box_t_min`.
 // f32::EPSILON, for obvhs's `safe_inverse`.
 const F32_EPSILON: f32 = 1.1920929e-7;
 const STACK_SIZE: u32 = 32u;

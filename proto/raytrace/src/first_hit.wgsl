@@ -17,8 +17,13 @@
 @group(0) @binding(3) var<storage, read> segments: array<vec4<f32>>;
 // Per segment: the closest hit's distance, or -1 when the segment is clear.
 @group(0) @binding(4) var<storage, read_write> hits: array<f32>;
-// Segments in this dispatch, invocations per row of the dispatch grid.
+// Segments in this dispatch, invocations per row of the dispatch grid, and the nearest distance
+// a child box is entered at (f32 bits; `Occluder::box_t_min`).
 @group(0) @binding(5) var<storage, read> shape: vec4<u32>;
+
+fn box_t_min() -> f32 {
+    return bitcast<f32>(shape.z);
+}
 
 // bspvt_raytrace::EDGE_SLACK (2^-20): barycentrics down to minus this count as inside.
 const EDGE_SLACK: f32 = 9.5367431640625e-7;
@@ -33,7 +38,7 @@ fn safe_inverse(x: f32) -> f32 {
 }
 
 // CwBvhNode::intersect_ray: the hit mask of the node's children (slab test of each child's
-// quantized box against [BOX_T_MIN, t_max]).
+// quantized box against [box_t_min(), t_max]).
 fn intersect_node(n: u32, o: vec3<f32>, inv_d: vec3<f32>, neg: vec3<bool>, t_max: f32, oct_inv4: u32) -> u32 {
     let frame = node_frame(n, o, inv_d);
     var hit_mask = 0u;
@@ -45,7 +50,7 @@ fn intersect_node(n: u32, o: vec3<f32>, inv_d: vec3<f32>, neg: vec3<bool>, t_max
         let box = child_near_far(n, c, neg);
         let t0 = box[0] * frame[0] + frame[1];
         let t1 = box[1] * frame[0] + frame[1];
-        let tmin = max(max(max(t0.x, t0.y), t0.z), BOX_T_MIN);
+        let tmin = max(max(max(t0.x, t0.y), t0.z), box_t_min());
         let tmax = min(min(min(t1.x, t1.y), t1.z), t_max);
         if tmin <= tmax {
             hit_mask |= child_hit_bits(child_meta, oct_inv4);

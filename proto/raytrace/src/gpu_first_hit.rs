@@ -138,7 +138,12 @@ impl GpuFirstHit {
         queue.write_buffer(
             &b.shape,
             0,
-            bytemuck::cast_slice(&[n as u32, groups.0 * WORKGROUP, 0, 0]),
+            bytemuck::cast_slice(&[
+                n as u32,
+                groups.0 * WORKGROUP,
+                self.mesh.box_t_min.to_bits(),
+                0,
+            ]),
         );
         queue.write_buffer(&b.segments, 0, bytemuck::cast_slice(segments));
         let bytes = (n * 4) as u64;

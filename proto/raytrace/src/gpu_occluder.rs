@@ -124,6 +124,8 @@ pub(crate) struct MeshBuffers {
     pub(crate) prim_verts: wgpu::Buffer,
     /// The cut-outs ([`crate::Cutouts::gpu_words`]; one zero word: none).
     pub(crate) cut: wgpu::Buffer,
+    /// [`Occluder::box_t_min`], which the shaders' traversals read.
+    pub(crate) box_t_min: f32,
 }
 
 impl MeshBuffers {
@@ -169,6 +171,7 @@ impl MeshBuffers {
             tris,
             prim_verts,
             cut,
+            box_t_min: occ.box_t_min(),
         }
     }
 }
@@ -415,6 +418,10 @@ impl GpuOccluder {
             table.pixels.div_ceil(32),
             table.skew,
             u32::from(table.plain),
+            self.mesh.box_t_min.to_bits(),
+            0,
+            0,
+            0,
         ];
         let params_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("cube params"),

@@ -94,6 +94,29 @@ pub struct Occluder {
     /// The scene's cut-outs and, per primitive, its entry there (0: opaque); `None` when
     /// every surface is opaque.
     cut: Option<(Arc<Cutouts>, Vec<u32>)>,
+    /// The power of two the traversals scale their rays' distances by ([`traversal_scale`]).
+    t_scale: f32,
+}
+
+/// obvhs's CWBVH traversal enters no child box nearer than this distance along the ray
+/// (`cwbvh::node::EPSILON`, whatever the ray's `tmin`): a fixed 10⁻⁴ in the scene's units.
+pub const OBVHS_BOX_T_MIN: f32 = 0.0001;
+
+/// The power of two by which every traversal scales its ray's distances ([`Occluder`]'s
+/// `traversal_ray`), so that obvhs's fixed [`OBVHS_BOX_T_MIN`] is at most 2⁻³⁰ of the scene's
+/// diagonal: far below any ray's `tmin` (the bake's is 10⁻⁶ of it). Unscaled, a scan in
+/// metres (a dragon 0.2 across) lost every blocker nearer than 0.1 mm to a ray's origin, deep
+/// in its crevices: 24 of dragon ×2's 93,607 vertices saw light through their own folds.
+/// Dividing the direction by 2^k and multiplying the reciprocal direction and the distances by
+/// it changes no other bit of a traversal or a triangle test (powers of two scale exactly), so
+/// every other answer is what it was. 1 for an empty or non-finite mesh.
+fn traversal_scale(diagonal: f32) -> f32 {
+    if !(diagonal.is_finite() && diagonal > 0.0) {
+        return 1.0;
+    }
+    let want = OBVHS_BOX_T_MIN * (1u64 << 30) as f32 / diagonal;
+    let k = want.log2().ceil().clamp(0.0, 40.0);
+    2f32.powi(k as i32)
 }
 
 /// The mesh's triangles as obvhs primitives, in mesh order.
@@ -147,6 +170,19 @@ fn grown(t: &Triangle, margin: f32) -> Triangle {
     }
 }
 
+/// What the occluder's BVH over `tris` (triangles of `mesh`) is built from: each grown by
+/// [`BOX_MARGIN`] of the mesh's diagonal ([`grown`]), so that no box face that a triangle's
+/// edge lies on shuts out a point of it by rounding.
+fn box_triangles(mesh: &Mesh, tris: &[Triangle]) -> Vec<Triangle> {
+    let diagonal = mesh.bounds().diagonal();
+    let margin = if diagonal.is_finite() {
+        BOX_MARGIN * diagonal
+    } else {
+        0.0
+    };
+    tris.iter().map(|t| grown(t, margin)).collect()
+}
+
 impl Occluder {
     /// `tris`: [`mesh_triangles`] of `mesh`. The highest-quality BVH (for bakes and
     /// references, where rays outnumber builds by far).
@@ -162,17 +198,13 @@ impl Occluder {
 
     fn with_params(mesh: &Mesh, tris: &[Triangle], params: BvhBuildParams) -> Occluder {
         let (unique, built) = distinct_triangles(mesh, tris);
-        // The boxes are built around the triangles grown by a margin ([`grown`]); the hits are
-        // tested on the triangles themselves.
-        let diagonal = mesh.bounds().diagonal();
-        let margin = if diagonal.is_finite() {
-            BOX_MARGIN * diagonal
-        } else {
-            0.0
-        };
-        let grown: Vec<Triangle> = built.iter().map(|t| grown(t, margin)).collect();
-        let bvh =
-            obvhs::cwbvh::builder::build_cwbvh_from_tris(&grown, params, &mut Duration::default());
+        // The boxes are built around the triangles grown by a margin; the hits are tested on
+        // the triangles themselves.
+        let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
+            &box_triangles(mesh, &built),
+            params,
+            &mut Duration::default(),
+        );
         let order: Vec<usize> = bvh
             .primitive_indices
             .iter()
@@ -186,6 +218,7 @@ impl Occluder {
             indices,
             order: order.iter().map(|&i| i as u32).collect(),
             cut: None,
+            t_scale: traversal_scale(mesh.bounds().diagonal()),
         }
     }
 
@@ -202,6 +235,28 @@ impl Occluder {
     /// The occluder of a scene's surfaces: [`Occluder::new`] with its cut-outs.
     pub fn of_surfaces(mesh: &Mesh, materials: &[bspvt_proto::scene::Material]) -> Occluder {
         Occluder::new(mesh, &mesh_triangles(mesh)).cut_out(Cutouts::of(mesh, materials))
+    }
+
+    /// `ray` as the traversals cast it: distances (and the reciprocal direction) times the
+    /// occluder's power of two, the direction divided by it ([`traversal_scale`]). A hit's
+    /// distance in it is the unscaled one times the same power.
+    #[inline]
+    fn traversal_ray(&self, ray: Ray) -> Ray {
+        let s = self.t_scale;
+        Ray {
+            origin: ray.origin,
+            direction: ray.direction / s,
+            inv_direction: ray.inv_direction * s,
+            tmin: ray.tmin * s,
+            tmax: ray.tmax * s,
+        }
+    }
+
+    /// The distance along a ray below which a traversal enters no box, in the scene's units:
+    /// obvhs's [`OBVHS_BOX_T_MIN`] over the traversals' scale. What the GPU's traversals
+    /// (`occlusion.wgsl`, `first_hit.wgsl`) use, so that they enter the CPU's boxes.
+    pub fn box_t_min(&self) -> f32 {
+        OBVHS_BOX_T_MIN / self.t_scale
     }
 
     /// Whether any surface is cut out.
@@ -249,7 +304,7 @@ impl Occluder {
         t_max: f32,
         skip: u32,
     ) -> bool {
-        let ray = Ray::new(origin.into(), dir.into(), t_min, t_max);
+        let ray = self.traversal_ray(Ray::new(origin.into(), dir.into(), t_min, t_max));
         // The triangle first: most tests miss, and then its vertex indices (another cache
         // line) are not read.
         !self.bvh.ray_traverse_miss(ray, |ray, id| {
@@ -278,18 +333,19 @@ impl Occluder {
     /// [`Occluder::blocker_between`] for a ray already made (`Ray::new` divides thrice).
     pub fn blocker(&self, ray: Ray, skip: u32) -> Option<u32> {
         let mut found = None;
-        self.bvh.ray_traverse_miss(ray, |ray, id| {
-            let t = self.primitive_hit(id, ray);
-            if t < f32::INFINITY && self.indices[id].contains(&skip) {
-                return f32::INFINITY;
-            }
-            // The traversal's own acceptance test (`t < ray.tmax`), so the primitive named
-            // is the one that ended it.
-            if t < ray.tmax {
-                found = Some(id as u32);
-            }
-            t
-        });
+        self.bvh
+            .ray_traverse_miss(self.traversal_ray(ray), |ray, id| {
+                let t = self.primitive_hit(id, ray);
+                if t < f32::INFINITY && self.indices[id].contains(&skip) {
+                    return f32::INFINITY;
+                }
+                // The traversal's own acceptance test (`t < ray.tmax`), so the primitive named
+                // is the one that ended it.
+                if t < ray.tmax {
+                    found = Some(id as u32);
+                }
+                t
+            });
         found
     }
 
@@ -301,6 +357,34 @@ impl Occluder {
     #[inline]
     pub fn primitive_blocks(&self, prim: u32, ray: &Ray) -> bool {
         self.primitive_hit(prim as usize, ray) < ray.tmax
+    }
+
+    /// [`Occluder::primitive_blocks`], and how near the ray's line passes to the triangle: the
+    /// smallest of its barycentric coordinates there (Möller–Trumbore's u, v, 1 − u − v;
+    /// negative outside, −∞ parallel), for choosing the closest of several triangles.
+    #[inline]
+    pub fn primitive_blocks_near(&self, prim: u32, ray: &Ray) -> (bool, f32) {
+        let tri = &self.tris[prim as usize];
+        let c = tri.v0 - ray.origin;
+        let r = ray.direction.cross(c);
+        let det = tri.ng.dot(ray.direction);
+        let inv_det = 1.0 / det;
+        let u = r.dot(tri.e2) * inv_det;
+        let v = r.dot(tri.e1) * inv_det;
+        let near = if det != 0.0 {
+            u.min(v).min(1.0 - u - v)
+        } else {
+            f32::NEG_INFINITY
+        };
+        let near = if near.is_nan() {
+            f32::NEG_INFINITY
+        } else {
+            near
+        };
+        (
+            near >= -EDGE_SLACK && self.primitive_blocks(prim, ray),
+            near,
+        )
     }
 
     /// Asks for primitive `prim`'s triangle ahead of a [`Occluder::primitive_blocks`] on it
@@ -319,7 +403,7 @@ impl Occluder {
     /// triangle (shadow rays from surface points; the caller offsets `origin`).
     #[inline]
     pub fn occluded_segment(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
-        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
+        let ray = self.traversal_ray(Ray::new(origin.into(), dir.into(), 0.0, t_max));
         !self
             .bvh
             .ray_traverse_miss(ray, |ray, id| self.primitive_hit(id, ray))
@@ -333,11 +417,11 @@ impl Occluder {
         if !(t_max > 0.0) || !origin.is_finite() || !dir.is_finite() {
             return None;
         }
-        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
+        let ray = self.traversal_ray(Ray::new(origin.into(), dir.into(), 0.0, t_max));
         let mut hit = RayHit::none();
         self.bvh
             .ray_traverse(ray, &mut hit, |ray, id| self.primitive_hit(id, ray))
-            .then_some(hit.t)
+            .then_some(hit.t / self.t_scale)
             .filter(|t| t.is_finite())
     }
 }

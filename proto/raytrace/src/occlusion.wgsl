@@ -37,6 +37,8 @@ struct CubeParams {
     // (GpuCubeTable::skew_rounding): a skew of every reciprocal and quotient in ULP (another
     // device's rounding), 1 for plain answers (every decision as computed, none unsure).
     grid: vec4<u32>,
+    // x: the nearest distance a child box is entered at (f32 bits; `Occluder::box_t_min`).
+    box: vec4<u32>,
 }
 // Storage, not uniform: lavapipe specializes a shader on the uniform values its branches
 // read and compiles it again (a minute on 2 cores) whenever they change (docs/gpu.md).
@@ -48,6 +50,10 @@ struct CubeParams {
 // the masks' alpha bytes four to a word.
 @group(0) @binding(9) var<storage, read> cut: array<u32>;
 
+
+fn box_t_min() -> f32 {
+    return bitcast<f32>(cp.box.x);
+}
 
 // What a test decided: surely not, within rounding of the other way, or surely. In this order,
 // `min` is "and" (MISS if any is, else UNSURE if any is) and 2 − x is "not".
@@ -99,7 +105,7 @@ fn intersect_node(n: u32, o: vec3<f32>, inv_d: vec3<f32>, neg: vec3<bool>, t_max
         let far = box[1];
         let t0 = near * adj_inv + adj_o;
         let t1 = far * adj_inv + adj_o;
-        let tmin = max(max(max(t0.x, t0.y), t0.z), BOX_T_MIN);
+        let tmin = max(max(max(t0.x, t0.y), t0.z), box_t_min());
         let tmax = min(min(min(t1.x, t1.y), t1.z), t_max);
         var enter = tmin <= tmax;
         if cp.grid.w == 0u {
@@ -110,10 +116,10 @@ fn intersect_node(n: u32, o: vec3<f32>, inv_d: vec3<f32>, neg: vec3<bool>, t_max
             let e0 = ROUNDING * (near * abs(adj_inv) + abs(adj_o));
             let e1 = ROUNDING * (far * abs(adj_inv) + abs(adj_o));
             let k = select(-1.0, 1.0, enter);
-            let lo = max(max(max(t0.x + k * e0.x, t0.y + k * e0.y), t0.z + k * e0.z), BOX_T_MIN);
+            let lo = max(max(max(t0.x + k * e0.x, t0.y + k * e0.y), t0.z + k * e0.z), box_t_min());
             let hi = min(min(min(t1.x - k * e1.x, t1.y - k * e1.y), t1.z - k * e1.z), t_max - k * t_err);
             if select(lo > hi, lo < hi, enter) == false {
-                let d = box_pairs(t0, e0, t1, e1, BOX_T_MIN, t_max, t_err);
+                let d = box_pairs(t0, e0, t1, e1, box_t_min(), t_max, t_err);
                 enter = d != MISS;
                 unsure_box = unsure_box || d == UNSURE;
             }

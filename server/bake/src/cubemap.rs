@@ -1043,12 +1043,21 @@ impl BlockWalk<'_> {
             }
             let t_max = self.rays.t_max(origin, d);
             let ray = Ray::new(origin.into(), d.into(), t_min, t_max);
-            let mut hit = hints[..n]
-                .iter()
-                .copied()
-                .find(|&h| self.occ.primitive_blocks(h, &ray) && self.walk.interior(h, origin, d));
+            // The walk starts from the near hint the ray passes closest to.
+            let (mut start, mut nearest) = (hints[0], f32::NEG_INFINITY);
+            let mut hit = None;
+            for (k, &h) in hints[..n].iter().enumerate() {
+                let (blocks, near) = self.occ.primitive_blocks_near(h, &ray);
+                if blocks && self.walk.interior(h, origin, d) {
+                    hit = Some(h);
+                    break;
+                }
+                if k < near_hints && near > nearest {
+                    (start, nearest) = (h, near);
+                }
+            }
             if hit.is_none() && near_hints > 0 && list.is_none() {
-                hit = self.walk.find(self.occ, hints[0], &ray, self.rays.vertex);
+                hit = self.walk.find(self.occ, start, &ray, self.rays.vertex);
             }
             if hit.is_none() {
                 hit = match list {

@@ -58,8 +58,11 @@ use fit::{FitStats, Fitter};
 /// cast toward the sphere itself (`VertexRays::aim`; bakes with such lights change,
 /// the pinned ones did not). 9: the sky's bake of a scene with suns casts the pixels each sun's
 /// disk at rest covers toward it, and the fit keeps those pixels in pure leaves
-/// (`VertexRays::aim`, `FacePixels::protected`; bakes without suns did not change).
-pub const ALGORITHM_VERSION: u32 = 9;
+/// (`VertexRays::aim`, `FacePixels::protected`; bakes without suns did not change). 10: BVH
+/// traversals find blockers nearer to a ray's origin than obvhs's fixed box distance of 10⁻⁴
+/// scene units (`bspvt_raytrace::OBVHS_BOX_T_MIN`: the occluder scales its rays' distances);
+/// before, a scan in metres lost them deep in its crevices.
+pub const ALGORITHM_VERSION: u32 = 10;
 
 /// Ray origins are offset along the normal by this fraction of the scene's diagonal.
 pub(crate) const RAY_OFFSET_SCALE: f32 = 1e-4;

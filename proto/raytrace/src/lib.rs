@@ -64,6 +64,20 @@ pub fn hit(tri: &RtTriangle, ray: &Ray) -> f32 {
 /// `None` for no hit.
 #[inline]
 pub fn intersect(tri: &RtTriangle, ray: &Ray) -> Option<(f32, [f32; 3])> {
+    let (det, [w, u, v], t) = line_crossing(tri, ray);
+    if det != 0.0 && u >= -EDGE_SLACK && v >= -EDGE_SLACK && w >= -EDGE_SLACK {
+        let t = t();
+        if t >= ray.tmin && t <= ray.tmax {
+            return Some((t, [w, u, v]));
+        }
+    }
+    None
+}
+
+/// Where the ray's line crosses the triangle's plane (Möller–Trumbore): the determinant (0:
+/// parallel), the barycentric weights of the corners (v0, v1, v2) and, on demand, the distance.
+#[inline(always)]
+fn line_crossing(tri: &RtTriangle, ray: &Ray) -> (f32, [f32; 3], impl Fn() -> f32) {
     let c = tri.v0 - ray.origin;
     let r = ray.direction.cross(c);
     let det = tri.ng.dot(ray.direction);
@@ -72,14 +86,8 @@ pub fn intersect(tri: &RtTriangle, ray: &Ray) -> Option<(f32, [f32; 3])> {
     // and v the corner v2.
     let u = r.dot(tri.e2) * inv_det;
     let v = r.dot(tri.e1) * inv_det;
-    let w = 1.0 - u - v;
-    if det != 0.0 && u >= -EDGE_SLACK && v >= -EDGE_SLACK && w >= -EDGE_SLACK {
-        let t = tri.ng.dot(c) * inv_det;
-        if t >= ray.tmin && t <= ray.tmax {
-            return Some((t, [w, u, v]));
-        }
-    }
-    None
+    let ng = tri.ng;
+    (det, [1.0 - u - v, u, v], move || ng.dot(c) * inv_det)
 }
 
 /// A mesh prepared for occlusion queries: a CWBVH over its triangles [obvhs].
@@ -364,22 +372,12 @@ impl Occluder {
     /// negative outside, −∞ parallel), for choosing the closest of several triangles.
     #[inline]
     pub fn primitive_blocks_near(&self, prim: u32, ray: &Ray) -> (bool, f32) {
-        let tri = &self.tris[prim as usize];
-        let c = tri.v0 - ray.origin;
-        let r = ray.direction.cross(c);
-        let det = tri.ng.dot(ray.direction);
-        let inv_det = 1.0 / det;
-        let u = r.dot(tri.e2) * inv_det;
-        let v = r.dot(tri.e1) * inv_det;
-        let near = if det != 0.0 {
-            u.min(v).min(1.0 - u - v)
-        } else {
-            f32::NEG_INFINITY
-        };
-        let near = if near.is_nan() {
-            f32::NEG_INFINITY
-        } else {
+        let (det, [w, u, v], _) = line_crossing(&self.tris[prim as usize], ray);
+        let near = w.min(u).min(v);
+        let near = if det != 0.0 && !near.is_nan() {
             near
+        } else {
+            f32::NEG_INFINITY
         };
         (
             near >= -EDGE_SLACK && self.primitive_blocks(prim, ray),

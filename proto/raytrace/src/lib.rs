@@ -157,8 +157,8 @@ pub fn distinct_triangles(mesh: &Mesh, tris: &[Triangle]) -> (Vec<u32>, Vec<Tria
 const BOX_MARGIN: f32 = 1.0 / 262_144.0;
 
 /// `t` grown along each axis away from its centroid by `margin`, or 4 ULP of a coordinate
-/// where that is more (far from the origin), but not along an axis it is flat in (where the
-/// centroid rounds to it: a floor's box stays flat, and a flat slab's entry and exit are one
+/// where that is more (far from the origin), but not along an axis it is flat in (its three
+/// vertices equal there: a floor's box stays flat, and a flat slab's entry and exit are one
 /// value). Only the BVH's boxes are built from it. Without the margin a ray that hits a
 /// triangle on its edge where that edge is its leaf box's face (a dyadic floor's triangles,
 /// crossed by a pixel's ray exactly on an edge) could be refused by the box test — its entry
@@ -166,9 +166,14 @@ const BOX_MARGIN: f32 = 1.0 / 262_144.0;
 /// triangle test (and the bake's candidate lists) count.
 fn grown(t: &Triangle, margin: f32) -> Triangle {
     let c = (t.v0 + t.v1 + t.v2) / 3.0;
+    // Flat where the three vertices are equal, not where the centroid rounds to them: in f32
+    // (3h)/3 ≠ h for 13 % of coordinates, and every vertex then stepped the same way, moving a
+    // flat box a margin off its plane (a grazing ray met it beside its triangle).
+    let flat = t.v0.cmpeq(t.v1) & t.v1.cmpeq(t.v2);
     let out = |v: Vec3A| {
         let away = v - c;
-        let step = Vec3A::select(away.cmpeq(Vec3A::ZERO), Vec3A::ZERO, away.signum());
+        let still = away.cmpeq(Vec3A::ZERO) | flat;
+        let step = Vec3A::select(still, Vec3A::ZERO, away.signum());
         v + step * Vec3A::splat(margin).max(v.abs() * (4.0 * f32::EPSILON))
     };
     Triangle {

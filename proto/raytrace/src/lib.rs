@@ -108,7 +108,7 @@ pub struct Occluder {
 
 /// obvhs's CWBVH traversal enters no child box nearer than this distance along the ray
 /// (`cwbvh::node::EPSILON`, whatever the ray's `tmin`): a fixed 10⁻⁴ in the scene's units.
-pub const OBVHS_BOX_T_MIN: f32 = 0.0001;
+const OBVHS_BOX_T_MIN: f32 = 0.0001;
 
 /// The power of two by which every traversal scales its ray's distances ([`Occluder`]'s
 /// `traversal_ray`), so that obvhs's fixed [`OBVHS_BOX_T_MIN`] is at most 2⁻³⁰ of the scene's

@@ -60,7 +60,7 @@ use fit::{FitStats, Fitter};
 /// disk at rest covers toward it, and the fit keeps those pixels in pure leaves
 /// (`VertexRays::aim`, `FacePixels::protected`; bakes without suns did not change). 10: BVH
 /// traversals find blockers nearer to a ray's origin than obvhs's fixed box distance of 10⁻⁴
-/// scene units (`bspvt_raytrace::OBVHS_BOX_T_MIN`: the occluder scales its rays' distances);
+/// scene units (`bspvt_raytrace::Occluder::box_t_min`: the occluder scales its rays' distances);
 /// before, a scan in metres lost them deep in its crevices.
 pub const ALGORITHM_VERSION: u32 = 10;
 

@@ -57,6 +57,17 @@ pub(crate) struct RenderArgs {
     #[arg(long, default_value_t = bspvt_client::penumbra::Params::default().grow as u32,
           value_parser = clap::value_parser!(u32).range(0..=4096))]
     penumbra_grow: u32,
+    /// `--method rt-penumbra`: where the penumbra is wide (the one ray's blur reaches 4 pixels
+    /// or more, and where the split region grows), cast N × N rays toward the light's parts on
+    /// every `--penumbra-sparse-step`-th pixel and interpolate between (docs/penumbra.md, "The
+    /// wide split"); N ≤ `--penumbra-split`: the split everywhere, every pixel cast.
+    #[arg(long, default_value_t = bspvt_client::penumbra::DEFAULT_WIDE_SPLIT as u32,
+          value_parser = clap::value_parser!(u32).range(1..=8))]
+    penumbra_wide_split: u32,
+    /// `--method rt-penumbra`: the wide split's grid spacing in pixels (1: every pixel casts).
+    #[arg(long, default_value_t = bspvt_client::penumbra::DEFAULT_SPARSE_STEP as u32,
+          value_parser = clap::value_parser!(u32).range(1..=16))]
+    penumbra_sparse_step: u32,
     #[arg(long, default_value_t = 512)]
     width: u32,
     /// Image height [default: the width over the scene camera's aspect ratio (a glTF camera's
@@ -155,6 +166,8 @@ pub(crate) fn run(a: RenderArgs) -> Result<()> {
                 penumbra: bspvt_client::penumbra::Params {
                     split: a.penumbra_split as usize,
                     grow: f64::from(a.penumbra_grow),
+                    wide_split: a.penumbra_wide_split as usize,
+                    sparse_step: a.penumbra_sparse_step as usize,
                     ..Default::default()
                 },
                 ..Settings::default()

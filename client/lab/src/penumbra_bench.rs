@@ -630,6 +630,23 @@ fn markdown(report: &Report) -> String {
 mod tests {
     use super::*;
 
+    /// A scene's frame at `w` × `h` for the tests: its renderer, occluder, light, guide,
+    /// covered pixels and the `ltc-exact` reference at `spp`.
+    fn frame_and_reference(
+        s: &Scene,
+        (w, h): (u32, u32),
+        spp: u32,
+    ) -> (Renderer<'_>, Occluder, Light, Guide, Vec<bool>, Image) {
+        let r = Renderer::new(s, w, h);
+        let occ = Occluder::of_surfaces(&s.mesh, &s.materials);
+        let l = Light::load(&s.lights[0]).expect("light");
+        let g = Guide::new(&r);
+        let covered = covered_pixels(&r.gbuffer);
+        let reference =
+            render_ltc_exact_visibility(s, &r.view, &r.gbuffer, &l, &occ, &builtin_lookup, spp, 1);
+        (r, occ, l, g, covered, reference)
+    }
+
     /// The light split where the shadow is soft ([`Params::split`], `rt::split_light`): closer
     /// to LTC with ray-traced visibility than paper 003's one ray toward the centroid, on the
     /// built-in scene and, by far, under the `big-light` case's light (its slab shadow has no
@@ -650,21 +667,7 @@ mod tests {
             ("base", base.clone(), 0.9),
             ("big light", big_light(&base), 0.7),
         ] {
-            let r = Renderer::new(&s, 128, 80);
-            let occ = Occluder::of_surfaces(&s.mesh, &s.materials);
-            let l = Light::load(&s.lights[0]).expect("light");
-            let g = Guide::new(&r);
-            let covered = covered_pixels(&r.gbuffer);
-            let reference = render_ltc_exact_visibility(
-                &s,
-                &r.view,
-                &r.gbuffer,
-                &l,
-                &occ,
-                &builtin_lookup,
-                256,
-                1,
-            );
+            let (r, occ, l, g, covered, reference) = frame_and_reference(&s, (128, 80), 256);
             let mae = |p: &Params| {
                 let img = penumbra::render(&r, &g, &l, Technique::RtPenumbra, Some(&occ), p)
                     .expect("frame");
@@ -699,6 +702,64 @@ mod tests {
                 b.hard
                     .iter()
                     .all(|v| v.is_finite() && (0.0..=1.0).contains(v))
+            );
+        }
+    }
+
+    /// A CPU caster that counts the segments it is asked about.
+    struct Counting<'a>(&'a Occluder, std::sync::atomic::AtomicUsize);
+
+    impl penumbra::rt::ShadowCaster for Counting<'_> {
+        fn first_hits(&self, segments: &[bspvt_raytrace::Segment]) -> Result<Vec<Option<f32>>> {
+            self.1
+                .fetch_add(segments.len(), std::sync::atomic::Ordering::Relaxed);
+            self.0.first_hits(segments)
+        }
+    }
+
+    /// The wide split ([`Params::wide_split`]: 4 × 4 parts on every third pixel where the
+    /// penumbra is wide, interpolated between): under the `big-light` case's light (penumbrae
+    /// tens of pixels wide) far closer to the area light's shadow than 2 × 2 at every pixel of
+    /// the region, for about as many rays; on the built-in scene, whose penumbrae at this size
+    /// are a few pixels wide (only the grown region is split wide), no worse.
+    #[test]
+    fn the_wide_split_is_closer_for_about_as_many_rays() {
+        let base = bspvt_proto::builtin::scene("plate-small").expect("built-in scene");
+        let wide = Params::default();
+        assert_eq!(
+            (wide.wide_split, wide.sparse_step, wide.wide_reach),
+            (4, 3, 8.0)
+        );
+        let dense = Params {
+            wide_split: wide.split,
+            ..wide
+        };
+        // (case, most error, most rays: × 2 × 2 at every pixel's)
+        for (name, s, most, most_rays) in [
+            ("big light", big_light(&base), 0.5, 1.2),
+            ("base", base.clone(), 1.05, 1.2),
+        ] {
+            let (r, occ, l, g, covered, reference) = frame_and_reference(&s, (192, 120), 512);
+            let run = |p: &Params| {
+                let caster = Counting(&occ, Default::default());
+                let img = penumbra::render(&r, &g, &l, Technique::RtPenumbra, Some(&caster), p)
+                    .expect("frame");
+                assert!(img.pixels.iter().flatten().all(|v| v.is_finite()));
+                (errors(&img, &reference, &covered).1, caster.1.into_inner())
+            };
+            let ((e_wide, n_wide), (e_dense, n_dense)) = (run(&wide), run(&dense));
+            eprintln!(
+                "{name}: mean abs. error vs ltc-exact (512 spp): 2 × 2 at every pixel \
+                 {e_dense:.5} ({n_dense} rays), 4 × 4 sparse where wide {e_wide:.5} \
+                 ({n_wide} rays)"
+            );
+            assert!(
+                e_wide < most * e_dense,
+                "{name}: wide split {e_wide} not below {most} × 2 × 2's {e_dense}"
+            );
+            assert!(
+                (n_wide as f64) < most_rays * n_dense as f64,
+                "{name}: the wide split cast {n_wide} rays, 2 × 2 {n_dense}"
             );
         }
     }

@@ -181,6 +181,14 @@ pub(crate) fn point_caster(
 /// rt-penumbra's default light split ([`Params::split`]): 2 × 2 parts where the blur reaches.
 pub const DEFAULT_SPLIT: usize = 2;
 
+/// rt-penumbra's default split where the penumbra is wide ([`Params::wide_split`]): 4 × 4
+/// parts, cast on every [`DEFAULT_SPARSE_STEP`]-th pixel.
+pub const DEFAULT_WIDE_SPLIT: usize = 4;
+
+/// rt-penumbra's default grid spacing, in pixels, of the wide split's rays
+/// ([`Params::sparse_step`]).
+pub const DEFAULT_SPARSE_STEP: usize = 3;
+
 /// Settings shared by the methods.
 #[derive(Clone, Copy, Debug)]
 pub struct Params {
@@ -209,6 +217,15 @@ pub struct Params {
     /// fractions still differ from the one ray's 0 or 1 at its edge ([`rt::split_light`]); 0:
     /// the region is the one ray's blur's reach.
     pub grow: f64,
+    /// Where the penumbra is wide (the one ray's blur reaches `wide_reach` pixels or more
+    /// along both axes, and where the split region grows), `wide_split` × `wide_split` rays toward the
+    /// light's parts, cast on a grid of every `sparse_step`-th pixel and interpolated between
+    /// ([`rt::split_light`]); `wide_split` ≤ `split`: `split` everywhere, every pixel cast.
+    pub wide_split: usize,
+    /// The wide split's grid spacing in pixels (1: every pixel casts).
+    pub sparse_step: usize,
+    /// The one ray's blur reach, in pixels, from which the wide split is cast.
+    pub wide_reach: f64,
 }
 
 /// The shape of rt-penumbra's blur.
@@ -233,6 +250,9 @@ impl Default for Params {
             kernel: Kernel::Box,
             split: DEFAULT_SPLIT,
             grow: 32.0,
+            wide_split: DEFAULT_WIDE_SPLIT,
+            sparse_step: DEFAULT_SPARSE_STEP,
+            wide_reach: 8.0,
         }
     }
 }

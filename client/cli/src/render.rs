@@ -57,7 +57,7 @@ pub(crate) struct RenderArgs {
     #[arg(long, default_value_t = bspvt_client::penumbra::Params::default().grow as u32,
           value_parser = clap::value_parser!(u32).range(0..=4096))]
     penumbra_grow: u32,
-    /// `--method rt-penumbra`: where the penumbra is wide (the one ray's blur reaches 4 pixels
+    /// `--method rt-penumbra`: where the penumbra is wide (the one ray's blur reaches 8 pixels
     /// or more, and where the split region grows), cast N × N rays toward the light's parts on
     /// every `--penumbra-sparse-step`-th pixel and interpolate between (docs/penumbra.md, "The
     /// wide split"); N ≤ `--penumbra-split`: the split everywhere, every pixel cast.

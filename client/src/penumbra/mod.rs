@@ -218,9 +218,10 @@ pub struct Params {
     /// the region is the one ray's blur's reach.
     pub grow: f64,
     /// Where the penumbra is wide (the one ray's blur reaches `wide_reach` pixels or more
-    /// along both axes, and where the split region grows), `wide_split` × `wide_split` rays toward the
-    /// light's parts, cast on a grid of every `sparse_step`-th pixel and interpolated between
-    /// ([`rt::split_light`]); `wide_split` ≤ `split`: `split` everywhere, every pixel cast.
+    /// along both axes, and where the split region grows), `wide_split` × `wide_split` rays
+    /// toward the light's parts, cast on a grid of every `sparse_step`-th pixel and
+    /// interpolated between ([`rt::split_light`]); `wide_split` ≤ `split`: `split`
+    /// everywhere, every pixel cast.
     pub wide_split: usize,
     /// The wide split's grid spacing in pixels (1: every pixel casts).
     pub sparse_step: usize,
